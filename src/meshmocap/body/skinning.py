@@ -1,0 +1,59 @@
+"""Linear-blend skinning, vectorised over vertices and frames.
+
+A skinning transform per joint maps rest positions to posed positions:
+``A_j = [G_j | P_j − G_j P0_j]`` (3 × 4), where ``G_j``/``P_j`` are the joint's global
+rotation and world position and ``P0_j`` its rest position. A vertex moves by the
+weight-blended transform ``Σ_j w_ij A_j``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def skinning_transforms(G: np.ndarray, P: np.ndarray, P0: np.ndarray) -> np.ndarray:
+    """Return per-joint skinning transforms.
+
+    Parameters
+    ----------
+    G : (..., J, 3, 3) float64
+        Global joint rotations (from :func:`~meshmocap.body.skeleton.forward_kinematics`).
+    P : (..., J, 3) float64
+        Posed world joint positions, metres.
+    P0 : (J, 3) float64
+        Rest world joint positions, metres.
+
+    Returns
+    -------
+    (..., J, 3, 4) float64
+        ``[G_j | P_j − G_j P0_j]``.
+    """
+    t = P - np.einsum("...jab,jb->...ja", G, P0)
+    return np.concatenate([G, t[..., None]], axis=-1)
+
+
+def linear_blend_skinning(V0: np.ndarray, W: sp.csr_matrix, A: np.ndarray) -> np.ndarray:
+    """Return skinned vertex positions.
+
+    Parameters
+    ----------
+    V0 : (n, 3) float64
+        Rest vertex positions, metres.
+    W : (n, J) scipy.sparse CSR matrix
+        Skinning weights, rows summing to 1.
+    A : (J, 3, 4) or (T, J, 3, 4) float64
+        Skinning transforms (:func:`skinning_transforms`).
+
+    Returns
+    -------
+    (n, 3) or (T, n, 3) float64
+        Posed positions (one set per frame when ``A`` has a frame axis).
+    """
+    single = A.ndim == 3
+    A = A[None] if single else A
+    T, J = A.shape[:2]
+    # Blend the 3×4 matrices of all frames in one sparse product: (n, J) @ (J, T·12).
+    B = (W @ A.transpose(1, 0, 2, 3).reshape(J, T * 12)).reshape(len(V0), T, 3, 4)
+    out = np.einsum("ntab,nb->tna", B[..., :3], V0) + B[..., 3].transpose(1, 0, 2)
+    return out[0] if single else out

@@ -1,0 +1,42 @@
+"""Every exception and warning meshmocap raises, in one place.
+
+Each error subclasses both :class:`MeshmocapError` (so callers can catch everything the
+library raises on purpose) and the matching built-in (so generic ``except ValueError``
+code keeps working). Messages are one line: the file or argument, what was expected,
+what was found.
+"""
+
+from __future__ import annotations
+
+
+class MeshmocapError(Exception):
+    """Base class of every error meshmocap raises on purpose."""
+
+
+class InputError(MeshmocapError, ValueError):
+    """An argument has the wrong shape, dtype, value or option name."""
+
+
+class MeshError(MeshmocapError, ValueError):
+    """A mesh or template is malformed (NaN vertices, bad faces, non-manifold, ...)."""
+
+
+class SkeletonError(MeshmocapError, ValueError):
+    """A skeleton is malformed (bad parents, duplicate names, unknown joint)."""
+
+
+class FormatError(MeshmocapError, ValueError):
+    """A file does not follow its format (truncated BVH, channel mismatch, bad AMC, ...)."""
+
+
+class MeshmocapFileNotFoundError(MeshmocapError, FileNotFoundError):
+    """A file or folder the user named does not exist."""
+
+
+class MeshmocapWarning(UserWarning):
+    """Base class of the warnings meshmocap emits."""
+
+
+def where(path: object, line: int | None = None) -> str:
+    """Return ``"path"`` or ``"path:line"`` for error messages."""
+    return f"{path}:{line}" if line is not None else f"{path}"

@@ -1,0 +1,87 @@
+"""Mesh checks and basic quantities as pure array functions.
+
+``V`` : (n, 3) float64 vertex positions, metres. ``F`` : (m, 3) int triangle indices,
+counter-clockwise seen from outside.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def edges_unique(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the undirected edges of ``F`` and how many faces use each.
+
+    Returns
+    -------
+    E : (k, 2) int64
+        Unique edges, smaller index first.
+    counts : (k,) int64
+        Number of faces each edge belongs to (2 everywhere for a closed 2-manifold).
+    """
+    F = np.asarray(F, dtype=np.int64)
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    E, counts = np.unique(E, axis=0, return_counts=True)
+    return E, counts
+
+
+def face_normals(V: np.ndarray, F: np.ndarray, *, normalize: bool = True) -> np.ndarray:
+    """Return (m, 3) face normals (unit, or area-weighted ×2 if ``normalize`` is False)."""
+    V = np.asarray(V, dtype=float)
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if normalize:
+        n = np.linalg.norm(N, axis=1, keepdims=True)
+        N = np.divide(N, n, out=np.zeros_like(N), where=n > 0)
+    return N
+
+
+def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Return (n, 3) unit vertex normals, area-weighted averages of the face normals."""
+    V = np.asarray(V, dtype=float)
+    N = face_normals(V, F, normalize=False)
+    idx = np.asarray(F).ravel()
+    rep = np.repeat(N, 3, axis=0)  # one row per (face, corner), matching idx
+    out = np.stack([np.bincount(idx, rep[:, c], minlength=len(V)) for c in range(3)], axis=1)
+    n = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, n, out=np.zeros_like(out), where=n > 0)
+
+
+def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    """Return the signed volume (m³) enclosed by a closed mesh (positive if normals point out)."""
+    V = np.asarray(V, dtype=float)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def mesh_problems(V: np.ndarray, F: np.ndarray) -> list[str]:
+    """Return human-readable problems of a mesh meant to be a closed 2-manifold.
+
+    Checks: finite vertices, face indices in range, no degenerate (repeated-index) faces,
+    every edge shared by exactly two faces. An empty list means the mesh is usable.
+    """
+    V = np.asarray(V)
+    F = np.asarray(F)
+    problems: list[str] = []
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
+        return [f"vertices must have shape (n, 3) with n > 0, found {V.shape}"]
+    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        return [f"faces must have shape (m, 3) with m > 0, found {F.shape}"]
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        problems.append(
+            f"{int(bad.sum())} vertices are NaN or infinite (first: {int(np.flatnonzero(bad)[0])})"
+        )
+    if F.min() < 0 or F.max() >= len(V):
+        problems.append(f"face indices must lie in [0, {len(V) - 1}], found [{F.min()}, {F.max()}]")
+        return problems
+    degenerate = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    if degenerate.any():
+        problems.append(f"{int(degenerate.sum())} faces repeat a vertex")
+    _, counts = edges_unique(F)
+    if (counts > 2).any():
+        problems.append(
+            f"{int((counts > 2).sum())} edges are shared by more than two faces (non-manifold)"
+        )
+    if (counts == 1).any():
+        problems.append(f"{int((counts == 1).sum())} boundary edges (the mesh has holes)")
+    return problems
