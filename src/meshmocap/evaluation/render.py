@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from meshmocap._progress import progress
+from meshmocap.body.motion import Motion
+from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import intrinsics, look_at, project
 from meshmocap.geometry.mesh import face_normals
@@ -158,3 +161,88 @@ def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     Image.fromarray(image).save(tmp, format="PNG")
     os.replace(tmp, path)
     return path
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    """Files written by :func:`render_motion`: the frame PNGs and the contact sheet."""
+
+    frames: tuple[Path, ...]
+    sheet: Path | None
+
+
+def render_motion(
+    template: Template,
+    motion: Motion,
+    out_dir: str | os.PathLike,
+    *,
+    step: int = 1,
+    size: tuple[int, int] = (320, 400),
+    azimuth: float = 30.0,
+    frames: bool = True,
+    sheet: bool = True,
+    columns: int = 6,
+    sheet_frames: int = 12,
+    show_progress: bool | None = None,
+) -> RenderResult:
+    """Render ``motion`` played by ``template`` to PNG frames and a contact sheet.
+
+    Parameters
+    ----------
+    template : Template
+        Mesh and rig; ``motion`` must be on its skeleton (see
+        :func:`~meshmocap.body.retarget.retarget`).
+    motion : Motion
+    out_dir : path
+        Folder to write ``frame_NNNNN.png`` and ``contact_sheet.png`` into (created).
+    step : int
+        Render every ``step``-th frame.
+    size : (width, height)
+        Pixels per frame.
+    azimuth : float
+        Camera direction in degrees around Z (0 = from the front); the camera frames the
+        whole clip and does not move.
+    frames, sheet : bool
+        Write the individual frames / the contact sheet (``sheet_frames`` evenly spaced
+        frames in ``columns`` columns).
+    """
+    if (
+        motion.skeleton is not template.skeleton
+        and motion.skeleton.names != template.skeleton.names
+    ):
+        raise InputError("render: the motion is not on the template's skeleton; retarget it first")
+    if step < 1:
+        raise InputError(f"render: step must be ≥ 1, found {step}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    index = np.arange(0, motion.n_frames, step)
+    picks = set(
+        np.unique(np.linspace(0, len(index) - 1, min(sheet_frames, len(index))).round().astype(int))
+    )
+    posed = template.pose(motion.rotations[index], motion.root_positions[index])
+    view = framing_view(posed.V[:, ::7], size=size, azimuth=azimuth)
+    colors = PART_COLORS[template.part_labels[template.F[:, 0]]]
+    written: list[Path] = []
+    tiles: list[np.ndarray] = []
+    labels: list[str] = []
+    parents = template.eval_skeleton.parents
+    for k in progress(range(len(index)), label="render", enabled=show_progress):
+        img = render_mesh(
+            posed.V[k],
+            template.F,
+            view,
+            face_colors=colors,
+            joints=posed.eval_joints[k],
+            parents=parents,
+        )
+        if frames:
+            written.append(save_png(out / f"frame_{index[k]:05d}.png", img))
+        if k in picks:
+            tiles.append(img)
+            labels.append(f"frame {index[k]}  t={index[k] / motion.fps:.2f}s")
+    sheet_path = (
+        save_png(out / "contact_sheet.png", contact_sheet(tiles, columns=columns, labels=labels))
+        if sheet
+        else None
+    )
+    return RenderResult(tuple(written), sheet_path)
