@@ -45,10 +45,9 @@ def load_clip(
     fps : float, optional
         Resample to this frame rate.
     """
+    from meshmocap.body.template import load_template
     from meshmocap.io.asf_amc import read_amc, read_asf
     from meshmocap.io.bvh import read_bvh
-
-    from meshmocap.body.template import load_template
 
     name = os.fspath(source)
     if name in PROCEDURAL_MOTIONS:

@@ -1,0 +1,121 @@
+"""Linear-blend skinning and the template file format."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from meshmocap.body.skinning import linear_blend_skinning, skinning_transforms
+from meshmocap.body.template import Template, load_template, save_template, template_problems
+from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
+from meshmocap.geometry.mesh import mesh_problems, signed_volume, vertex_normals
+from meshmocap.geometry.rotations import axis_rotation, so3_exp
+from toys import octahedron, toy_template
+
+RNG = np.random.default_rng(11)
+
+
+def _rest(t):
+    return np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
+
+
+def test_rest_pose_reproduces_rest_vertices():
+    t = toy_template()
+    posed = t.pose(_rest(t), t.skeleton.rest_positions[0])
+    assert np.allclose(posed.V, t.V, atol=1e-14)
+    assert np.allclose(posed.eval_joints, t.eval_skeleton.rest_positions, atol=1e-14)
+
+
+def test_rigidly_weighted_vertices_move_with_their_joint():
+    t = toy_template()
+    sk = t.skeleton
+    R = _rest(t)
+    elbow = sk.index("LeftForeArm")
+    R[elbow] = axis_rotation(np.pi / 2, "X")
+    posed = t.pose(R, sk.rest_positions[0])
+    rows = t.weights[:, elbow].nonzero()[0]
+    p = sk.rest_positions[elbow]
+    expect = (t.V[rows] - p) @ axis_rotation(np.pi / 2, "X").T + p
+    assert np.allclose(posed.V[rows], expect, atol=1e-14)
+    # bones upstream of the elbow do not move
+    still = t.weights[:, sk.index("LeftArm")].nonzero()[0]
+    assert np.allclose(posed.V[still], t.V[still], atol=1e-14)
+
+
+def test_blended_weights_average_the_transforms_and_frames_batch():
+    J, n = 3, 40
+    V0 = RNG.normal(size=(n, 3))
+    Wd = RNG.uniform(size=(n, J)) * (RNG.uniform(size=(n, J)) < 0.6)
+    Wd[:, 0] += 0.1  # every row has a weight
+    Wd /= Wd.sum(axis=1, keepdims=True)
+    W = sp.csr_matrix(Wd)
+    G = so3_exp(RNG.normal(size=(4, J, 3)))
+    P = RNG.normal(size=(4, J, 3))
+    P0 = RNG.normal(size=(J, 3))
+    A = skinning_transforms(G, P, P0)
+    out = linear_blend_skinning(V0, W, A)
+    for f in range(4):  # reference: dense blend of the transformed points
+        ref = sum(Wd[:, [j]] * ((V0 - P0[j]) @ G[f, j].T + P[f, j]) for j in range(J))
+        assert np.allclose(out[f], ref, atol=1e-12)
+    assert np.allclose(linear_blend_skinning(V0, W, A[2]), out[2], atol=1e-14)
+
+
+def test_mesh_checks_name_the_fault():
+    V, F = octahedron(np.zeros(3), 1.0)
+    assert mesh_problems(V, F) == []
+    assert signed_volume(V, F) == pytest.approx(4 / 3)  # octahedron of radius 1
+    N = vertex_normals(V, F)
+    assert np.allclose(N, V, atol=1e-12)  # unit radius: the normal is the position
+    bad = V.copy()
+    bad[2] = np.nan
+    assert any("NaN" in p for p in mesh_problems(bad, F))
+    assert any("holes" in p for p in mesh_problems(V, F[:-1]))
+    fin = np.concatenate([F, [[0, 2, 4]]])  # a third face on existing edges
+    assert any("non-manifold" in p for p in mesh_problems(V, fin))
+
+
+def _closed_template() -> Template:
+    """The toy rig with a single closed octahedron mesh, every vertex on the Hips."""
+    t = toy_template()
+    V, F = octahedron(np.array([0, 0, 1.0]), 0.3)
+    W = sp.csr_matrix((np.ones(6), (np.arange(6), np.zeros(6, int))), shape=(6, 31))
+    return Template("closed", V, F, t.skeleton, W, np.zeros(6, int), t.eval_skeleton)
+
+
+def test_save_and_load_round_trip(tmp_path):
+    t = _closed_template()
+    path = save_template(tmp_path / "mine.npz", t)
+    u = load_template(path)
+    assert u.name == "closed" and u.skeleton.names == t.skeleton.names
+    assert np.array_equal(u.V, t.V) and np.array_equal(u.F, t.F)
+    assert np.allclose(u.skeleton.rest_positions, t.skeleton.rest_positions, atol=1e-15)
+    assert np.allclose(u.weights.toarray(), t.weights.toarray())
+    assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
+
+
+def test_invalid_templates_fail_with_one_line(tmp_path):
+    t = _closed_template()
+    V = t.V.copy()
+    V[0, 0] = np.nan
+    bad = Template("bad", V, t.F, t.skeleton, t.weights, t.part_labels, t.eval_skeleton)
+    assert template_problems(bad)
+    with pytest.raises(MeshError, match="NaN"):
+        save_template(tmp_path / "bad.npz", bad)
+    # a file written by hand with NaN vertices is rejected at load, naming the file
+    path = save_template(tmp_path / "ok.npz", t)
+    with np.load(path) as z:
+        d = dict(z)
+    d["V"] = V
+    np.savez(tmp_path / "nan.npz", **d)
+    with pytest.raises(MeshError, match=r"nan\.npz.*NaN"):
+        load_template(tmp_path / "nan.npz")
+    del d["F"]
+    np.savez(tmp_path / "nof.npz", **d)
+    with pytest.raises(MeshError, match=r"nof\.npz: template is missing key 'F'"):
+        load_template(tmp_path / "nof.npz")
+    (tmp_path / "junk.npz").write_text("not a zip")
+    with pytest.raises(MeshError, match=r"junk\.npz"):
+        load_template(tmp_path / "junk.npz")
+    with pytest.raises(MeshmocapFileNotFoundError, match="neither a bundled template"):
+        load_template(tmp_path / "missing.npz")
+    with pytest.raises(InputError, match=r"\.npz"):
+        save_template(tmp_path / "x.obj", t)
