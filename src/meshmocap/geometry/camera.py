@@ -7,7 +7,11 @@ the centre of the top-left pixel at (0, 0).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+
+from meshmocap.errors import InputError
 
 
 def intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
@@ -65,3 +69,88 @@ def project(
     safe = np.where(np.abs(depth) < 1e-12, 1e-12, depth)
     uvw = Xc @ K.T
     return uvw[..., :2] / safe[..., None], depth
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated pinhole camera in the OpenCV convention.
+
+    Parameters
+    ----------
+    K : (3, 3) float64
+        Intrinsics (focal lengths and principal point in pixels).
+    R : (3, 3) float64
+        World → camera rotation.
+    t : (3,) float64
+        Translation, metres: ``X_cam = R X + t``.
+    width, height : int
+        Image size in pixels.
+    dist : (5,) float64
+        OpenCV radial/tangential distortion ``(k1, k2, p1, p2, k3)``; zeros for none.
+    name : str
+        Identifier (e.g. ``"cam0"``).
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        K = np.asarray(self.K, dtype=np.float64)
+        R = np.asarray(self.R, dtype=np.float64)
+        t = np.asarray(self.t, dtype=np.float64).reshape(-1)
+        dist = np.zeros(5) if self.dist is None else np.asarray(self.dist, dtype=np.float64).ravel()
+        dist = np.concatenate([dist, np.zeros(5 - len(dist))]) if len(dist) < 5 else dist
+        problems = []
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            problems.append(f"K must be a finite (3, 3) matrix, found shape {K.shape}")
+        if R.shape != (3, 3) or np.abs(R @ R.T - np.eye(3)).max(initial=0) > 1e-6:
+            problems.append("R must be a (3, 3) rotation matrix")
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            problems.append(f"t must be 3 finite numbers, found shape {t.shape}")
+        if len(dist) != 5 or not np.all(np.isfinite(dist)):
+            problems.append(f"dist must be up to 5 finite coefficients, found {len(dist)}")
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            problems.append(f"image size must be positive, found {self.width}×{self.height}")
+        if problems:
+            raise InputError(f"camera {self.name!r}: {'; '.join(problems)}")
+        for k, v in (("K", K), ("R", R), ("t", t), ("dist", dist)):
+            v.setflags(write=False)
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image shape ``(height, width)`` as numpy arrays use it."""
+        return (self.height, self.width)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """(3,) float64: the camera centre in the world frame, metres."""
+        return -self.R.T @ self.t
+
+    def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points ``X`` (..., 3) to pixels ``uv`` (..., 2) and depths (...,).
+
+        Applies the distortion model when ``dist`` is not zero.
+        """
+        Xc = np.asarray(X, dtype=float) @ self.R.T + self.t
+        depth = Xc[..., 2]
+        safe = np.where(np.abs(depth) < 1e-12, 1e-12, depth)
+        x, y = Xc[..., 0] / safe, Xc[..., 1] / safe
+        if np.any(self.dist):
+            k1, k2, p1, p2, k3 = self.dist
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            x, y = (
+                x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y,
+            )
+        K = self.K
+        uv = np.stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]], axis=-1)
+        return uv, depth
