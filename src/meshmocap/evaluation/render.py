@@ -114,9 +114,10 @@ def render_mesh(
         draw = ImageDraw.Draw(img)
         for j, p in enumerate(parents):
             if p >= 0 and jd[j] > 0 and jd[p] > 0:
-                draw.line([tuple(juv[p]), tuple(juv[j])], fill=(20, 20, 20), width=3)
+                draw.line([tuple(juv[p]), tuple(juv[j])], fill=(20, 20, 20), width=max(1, w // 250))
+        r = max(1.5, w / 250)
         for x, y in juv[jd > 0]:
-            draw.ellipse([x - 3, y - 3, x + 3, y + 3], fill=(220, 30, 30))
+            draw.ellipse([x - r, y - r, x + r, y + r], fill=(220, 30, 30))
     return np.asarray(img)
 
 
@@ -216,17 +217,25 @@ def render_motion(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     index = np.arange(0, motion.n_frames, step)
-    picks = set(
-        np.unique(np.linspace(0, len(index) - 1, min(sheet_frames, len(index))).round().astype(int))
-    )
+    picks = np.linspace(0, len(index) - 1, min(sheet_frames, len(index))).round().astype(int)
     posed = template.pose(motion.rotations[index], motion.root_positions[index])
-    view = framing_view(posed.V[:, ::7], size=size, azimuth=azimuth)
+    # The camera follows the subject horizontally at a fixed distance that frames the
+    # largest per-frame extent, so the body stays large and the floor grid shows motion.
+    centred = (
+        posed.V[:, ::7]
+        - np.concatenate([motion.root_positions[index, :2], np.zeros((len(index), 1))], axis=1)[
+            :, None
+        ]
+    )
+    base_view = framing_view(centred, size=size, azimuth=azimuth)
     colors = PART_COLORS[template.part_labels[template.F[:, 0]]]
     written: list[Path] = []
     tiles: list[np.ndarray] = []
     labels: list[str] = []
     parents = template.eval_skeleton.parents
     for k in progress(range(len(index)), label="render", enabled=show_progress):
+        shift = np.array([*motion.root_positions[index[k], :2], 0.0])
+        view = View(base_view.K, base_view.R, base_view.t - base_view.R @ shift, base_view.size)
         img = render_mesh(
             posed.V[k],
             template.F,

@@ -50,7 +50,9 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     )
 
 
-def euler_matrix(angles: np.ndarray, order: str, *, degrees: bool = False) -> np.ndarray:
+def euler_matrix(
+    angles: np.ndarray, order: str, *, degrees: bool = False, start: np.ndarray | None = None
+) -> np.ndarray:
     """Return rotation matrices (..., 3, 3) from intrinsic Euler angles.
 
     Parameters
@@ -62,14 +64,25 @@ def euler_matrix(angles: np.ndarray, order: str, *, degrees: bool = False) -> np
         BVH/ASF convention (the first named rotation is outermost).
     degrees : bool
         Angles in degrees instead of radians.
+    start : (..., 3, 3) float, optional
+        Left factor: returns ``start @ R`` (default identity).
+
+    Each factor rotates two columns of the running product in place instead of multiplying
+    3×3 matrices, which is several times faster on large stacks (every joint of a clip).
     """
     angles = np.asarray(angles, dtype=float)
     if degrees:
         angles = np.deg2rad(angles)
-    lead = angles.shape[:-1]
-    R = np.broadcast_to(np.eye(3), (*lead, 3, 3)).copy()
+    R = np.empty((*angles.shape[:-1], 3, 3))
+    R[...] = np.eye(3) if start is None else start
     for k, axis in enumerate(order):
-        R = R @ axis_rotation(angles[..., k], axis)
+        i = "XYZ".index(axis)
+        j, l = (i + 1) % 3, (i + 2) % 3
+        c = np.cos(angles[..., k])[..., None]
+        s = np.sin(angles[..., k])[..., None]
+        a, b = R[..., :, j].copy(), R[..., :, l].copy()
+        R[..., :, j] = a * c + b * s
+        R[..., :, l] = b * c - a * s
     return R
 
 
