@@ -61,8 +61,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     else:
         motion = clip_on(template, args.clip, fps=args.fps)
     if args.frames:
-        start, _, stop = args.frames.partition(":")
-        motion = motion.frames(slice(int(start or 0), int(stop) if stop else None))
+        motion = motion.frames(args.frames)
     res = render_motion(
         template,
         motion,
@@ -113,6 +112,23 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _frame_range(text: str) -> slice:
+    """Parse ``START:STOP[:STEP]`` (any part optional) into a slice."""
+    parts = text.split(":")
+    try:
+        if len(parts) > 3:
+            raise ValueError
+        return (
+            slice(*(int(p) if p else None for p in parts))
+            if len(parts) > 1
+            else slice(int(text), int(text) + 1)
+        )
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected START:STOP[:STEP] with integers, found {text!r}"
+        ) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of the ``meshmocap`` command."""
     p = argparse.ArgumentParser(
@@ -150,7 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--template", default="neutral", help="bundled template name or .npz path")
     v.add_argument("--out", required=True, help="output folder")
     v.add_argument("--fps", type=float, help="resample the clip to this frame rate first")
-    v.add_argument("--frames", help="frame range START:STOP (after resampling)")
+    v.add_argument(
+        "--frames", type=_frame_range, help="frame range START:STOP[:STEP] (after resampling)"
+    )
     v.add_argument("--step", type=int, default=1, help="render every STEP-th frame")
     v.add_argument("--width", type=int, default=320)
     v.add_argument("--height", type=int, default=400)

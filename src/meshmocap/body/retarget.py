@@ -11,30 +11,36 @@ lengths or intermediate joints:
    points. Unmapped target joints keep their rest orientation relative to their parent.
 3. **Root-height scaling:** the root trajectory is scaled by the ratio of leg lengths, so
    strides fit the target's legs (no foot sliding beyond the source's).
-4. **Floor contact:** a constant vertical shift puts the feet on the floor (z = 0) at their
-   lowest points.
+4. **Floor contact:** a vertical shift puts the feet on the floor (z = 0) at their lowest
+   points: constant over the clip, or following slow drifts of the source's floor height
+   (a rolling low percentile of the feet's height, smoothed over a few seconds).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
+from scipy.ndimage import percentile_filter, uniform_filter1d
 
+from meshmocap._validate import check_choice
 from meshmocap.body.contact import canonical_indices, lowest_foot_heights
 from meshmocap.body.motion import Motion
 from meshmocap.body.names import canonical_name_map
 from meshmocap.body.skeleton import Skeleton, local_rotations
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError, SkeletonError
+from meshmocap.errors import SkeletonError
 from meshmocap.geometry.rotations import rotation_between
 
-Floor = Literal["feet", "none"]
+Floor = Literal["feet", "constant", "none"]
 _LEG = ("LeftUpLeg", "LeftLeg", "LeftFoot")
 #: Percentile of the per-frame lowest foot point that is put on the floor: robust to a few
-#: frames of foot-through-floor noise, and to flight phases (jumps) that cover < 95 % of a clip.
-FLOOR_PERCENTILE = 5.0
+#: frames of foot-through-floor noise, and to flight phases (jumps) that cover < 90 % of the
+#: window.
+FLOOR_PERCENTILE = 10.0
+#: Seconds over which ``floor="feet"`` follows drifts of the source's floor height.
+FLOOR_WINDOW = 2.0
 
 
 def retarget(
@@ -57,9 +63,11 @@ def retarget(
     joint_map : mapping, optional
         ``{target joint name: source joint name}``. Default: the known CMU flavours
         (ASF/AMC, MotionBuilder BVH, Daz BVH) mapped onto the MotionBuilder names.
-    floor : {"feet", "none"}
-        ``"feet"`` shifts the clip vertically so the feet touch z = 0 at their lowest
-        points; ``"none"`` keeps the scaled source height.
+    floor : {"feet", "constant", "none"}
+        ``"feet"`` shifts the clip vertically so the feet touch z = 0 at their lowest points,
+        following slow drifts of the source floor (over :data:`FLOOR_WINDOW` seconds);
+        ``"constant"`` uses one shift for the whole clip; ``"none"`` keeps the scaled source
+        height.
 
     Returns
     -------
@@ -71,8 +79,7 @@ def retarget(
     SkeletonError
         The mapping names unknown joints or leaves the root or a leg unmapped.
     """
-    if floor not in ("feet", "none"):
-        raise InputError(f"retarget: floor must be one of ['feet', 'none'], found {floor!r}")
+    check_choice("retarget", "floor", floor, get_args(Floor))
     tsk = target.skeleton if isinstance(target, Template) else target
     ssk = motion.skeleton
     pairs = _resolve_map(ssk, tsk, joint_map)
@@ -101,11 +108,27 @@ def retarget(
     scale = _leg_length(tsk) / _leg_length(ssk)
     root = scale * motion.root_positions
     out = Motion(tsk, R_t, root, motion.fps)
-    if floor == "feet":
-        low = lowest_foot_heights(out, target)
-        root = root - np.array([0.0, 0.0, np.percentile(low, FLOOR_PERCENTILE)])
+    if floor != "none":
+        root = root.copy()
+        root[:, 2] -= floor_offsets(
+            lowest_foot_heights(out, target), motion.fps, constant=floor == "constant"
+        )
         out = Motion(tsk, R_t, root, motion.fps)
     return out
+
+
+def floor_offsets(low: np.ndarray, fps: float, *, constant: bool = False) -> np.ndarray:
+    """Return (T,) heights to subtract so that the lowest foot points ``low`` (T,) touch z = 0.
+
+    A rolling :data:`FLOOR_PERCENTILE` percentile over :data:`FLOOR_WINDOW` seconds, smoothed by
+    a moving average of the same length; one value for the whole clip when ``constant`` or
+    when the clip is shorter than the window.
+    """
+    w = round(FLOOR_WINDOW * fps)
+    if constant or len(low) <= w:
+        return np.full(len(low), np.percentile(low, FLOOR_PERCENTILE))
+    rolled = percentile_filter(low, FLOOR_PERCENTILE, size=w, mode="nearest")
+    return uniform_filter1d(rolled, size=w, mode="nearest")
 
 
 def _resolve_map(

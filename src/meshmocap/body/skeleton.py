@@ -124,16 +124,21 @@ class Skeleton:
     def bone_directions(self) -> np.ndarray:
         """(J, 3) float64: rest direction of each joint's bone (unit, or zero if unknown).
 
-        The direction points to the mean of the joint's children, or along ``end_offsets``
-        for leaves.
+        The direction points to the mean of the joint's children; when every child sits on
+        the joint (a zero-length bone, as converters produce), it is the mean of the
+        children's own directions; for leaves it follows ``end_offsets``.
         """
         P = self.rest_positions
-        D = self.end_offsets.copy()
-        for j, kids in enumerate(self.children):
-            if kids:
-                D[j] = P[list(kids)].mean(axis=0) - P[j]
-        n = np.linalg.norm(D, axis=1, keepdims=True)
-        return np.divide(D, n, out=np.zeros_like(D), where=n > 1e-9)
+        D = np.zeros((self.n_joints, 3))
+        for j in range(self.n_joints - 1, -1, -1):  # children before parents
+            kids = list(self.children[j])
+            d = P[kids].mean(axis=0) - P[j] if kids else self.end_offsets[j]
+            if kids and np.linalg.norm(d) < 1e-9:
+                d = D[kids].mean(axis=0)
+            n = np.linalg.norm(d)
+            D[j] = d / n if n > 1e-9 else 0.0
+        D.setflags(write=False)
+        return D
 
     def scaled(self, factor: float) -> Skeleton:
         """Return this skeleton with offsets scaled by ``factor`` (e.g. a unit change)."""

@@ -226,6 +226,9 @@ def _read(path: Path) -> Template:
             (d["weights_data"].astype(np.float64), d["weights_indices"], d["weights_indptr"]),
             shape=(len(V), len(names)),
         )
+        rows = np.asarray(W.sum(axis=1)).ravel()
+        if np.all(rows > 0):  # exact partition of unity in float64 (files may store float32)
+            W = sp.csr_matrix(sp.diags(1.0 / rows) @ W)
         ev = EvalSkeleton(
             tuple(str(s) for s in d["eval_names"]),
             d["eval_parents"].astype(np.int64),

@@ -233,7 +233,8 @@ def render_motion(
     tiles: list[np.ndarray] = []
     labels: list[str] = []
     parents = template.eval_skeleton.parents
-    for k in progress(range(len(index)), label="render", enabled=show_progress):
+    todo = range(len(index)) if frames else picks  # a sheet alone needs only its tiles
+    for k in progress(todo, label="render", enabled=show_progress):
         shift = np.array([*motion.root_positions[index[k], :2], 0.0])
         view = View(base_view.K, base_view.R, base_view.t - base_view.R @ shift, base_view.size)
         img = render_mesh(

@@ -1,0 +1,76 @@
+"""The command line, run in-process."""
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+from meshmocap.io.bvh import read_bvh
+
+
+def test_templates_lists_the_bundled_bodies(capsys):
+    assert main(["templates"]) == 0
+    out = capsys.readouterr().out
+    for name in ("neutral", "neutral_5k", "heavy_male", "small_female"):
+        assert name in out
+
+
+def test_retarget_writes_a_bvh_on_the_template_skeleton(tmp_path, capsys):
+    out = tmp_path / "walk.bvh"
+    assert (
+        main(["retarget", "walk", "--template", "small_female", "--fps", "30", "--out", str(out)])
+        == 0
+    )
+    m = read_bvh(out)
+    assert m.skeleton.n_joints == 31 and m.fps == 30.0 and m.n_frames == 121
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_retarget_a_cmu_clip(cmu, tmp_path):
+    out = tmp_path / "35_01.bvh"
+    assert main(["retarget", str(cmu / "35_01.amc"), "--out", str(out)]) == 0
+    m = read_bvh(out)
+    assert m.n_frames == 358 and np.isfinite(m.joint_positions).all()
+
+
+def test_render_rest_pose_and_clip(tmp_path):
+    assert main(["render", "--template", "neutral_5k", "--out", str(tmp_path / "rest"),
+                 "--width", "60", "--height", "80"]) == 0  # fmt: skip
+    assert (tmp_path / "rest" / "frame_00000.png").is_file()
+    args = ["render", "squat", "--template", "neutral_5k", "--fps", "10", "--frames", "0:12:3"]
+    assert main([*args, "--out", str(tmp_path / "sq"), "--width", "60", "--height", "80"]) == 0
+    assert len(list((tmp_path / "sq").glob("frame_*.png"))) == 4
+    assert (tmp_path / "sq" / "contact_sheet.png").is_file()
+
+
+def test_demo_runs_on_bundled_defaults(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--seconds", "1"]) == 0
+    assert (tmp_path / "walk.bvh").is_file()
+    assert (tmp_path / "walk_heavy_male" / "contact_sheet.png").is_file()
+    assert "meshmocap demo" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
+         "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n", "bad.bvh"),
+        ("", "bad.bvh"),
+    ],
+)  # fmt: skip
+def test_user_mistakes_give_one_line_and_status_2(tmp_path, capsys, text, message):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text(text)
+    assert main(["retarget", str(bad), "--out", str(tmp_path / "o.bvh")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("meshmocap: error:") and message in err and "\n" not in err
+    assert not (tmp_path / "o.bvh").exists()  # nothing half-written
+
+
+def test_missing_files_and_bad_options(tmp_path, capsys):
+    assert main(["retarget", str(tmp_path / "nope.amc"), "--out", str(tmp_path / "o.bvh")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["render", "walk", "--template", "nobody", "--out", str(tmp_path)]) == 2
+    assert "neither a bundled template" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["render", "walk", "--frames", "a:b", "--out", str(tmp_path)])
+    assert "START:STOP" in capsys.readouterr().err
