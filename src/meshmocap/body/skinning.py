@@ -33,6 +33,40 @@ def skinning_transforms(G: np.ndarray, P: np.ndarray, P0: np.ndarray) -> np.ndar
     return np.concatenate([G, t[..., None]], axis=-1)
 
 
+def skinning_operator(V0: np.ndarray, W: sp.spmatrix) -> sp.csc_matrix:
+    """Return the sparse operator ``S`` (n, 4J) with ``V = S @ A4`` for any pose.
+
+    Linear-blend skinning is linear in the transforms: ``V_i = Σ_j w_ij A_j [v_i; 1]``, so
+    ``S[i, 4j + b] = w_ij ṽ_ib`` with ``ṽ = [v, 1]`` and ``A4[4j + b, a] = A_j[a, b]``.
+    Precompute it once per template; each pose is then one sparse product.
+
+    Parameters
+    ----------
+    V0 : (n, 3) float64
+        Rest vertex positions, metres.
+    W : (n, J) scipy.sparse matrix
+        Skinning weights.
+    """
+    Wc = sp.coo_matrix(W)
+    J = W.shape[1]
+    Vt = np.concatenate([V0, np.ones((len(V0), 1))], axis=1)
+    rows = np.repeat(Wc.row, 4)
+    cols = (Wc.col[:, None] * 4 + np.arange(4)).ravel()
+    vals = (Wc.data[:, None] * Vt[Wc.row]).ravel()
+    return sp.csc_matrix((vals, (rows, cols)), shape=(len(V0), 4 * J))
+
+
+def apply_skinning(S: sp.csc_matrix, A: np.ndarray) -> np.ndarray:
+    """Return skinned positions ``(n, 3)`` or ``(T, n, 3)`` from :func:`skinning_operator`
+    ``S`` and transforms ``A`` ``(J, 3, 4)`` or ``(T, J, 3, 4)``."""
+    single = A.ndim == 3
+    A = A[None] if single else A
+    T, J = A.shape[:2]
+    A4 = A.transpose(1, 3, 0, 2).reshape(4 * J, T * 3)  # rows (j, b), columns (t, a)
+    out = (S @ A4).reshape(S.shape[0], T, 3).transpose(1, 0, 2)
+    return out[0] if single else out
+
+
 def linear_blend_skinning(V0: np.ndarray, W: sp.csr_matrix, A: np.ndarray) -> np.ndarray:
     """Return skinned vertex positions.
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 import tempfile
 from dataclasses import dataclass
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 
@@ -40,7 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
-from meshmocap.body.skinning import linear_blend_skinning, skinning_transforms
+from meshmocap.body.skinning import apply_skinning, skinning_operator, skinning_transforms
 from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.geometry.mesh import mesh_problems
 
@@ -120,6 +121,10 @@ class Template:
     part_labels: np.ndarray
     eval_skeleton: EvalSkeleton
 
+    @cached_property
+    def _skinning(self) -> sp.csc_matrix:
+        return skinning_operator(self.V, self.weights)
+
     @property
     def n_vertices(self) -> int:
         """Number of vertices ``n``."""
@@ -137,7 +142,7 @@ class Template:
         """
         G, P = forward_kinematics(self.skeleton, R, root_position)
         A = skinning_transforms(G, P, self.skeleton.rest_positions)
-        V = linear_blend_skinning(self.V, self.weights, A)
+        V = apply_skinning(self._skinning, A)
         ev = self.eval_skeleton
         Ae = np.einsum("kj,...jab->...kab", ev.weights, A)
         E = np.einsum("...kab,kb->...ka", Ae[..., :3], ev.rest_positions) + Ae[..., 3]
