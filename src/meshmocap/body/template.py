@@ -31,7 +31,6 @@ eval_weights           (K, J) float rig weights carrying each evaluation joint
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
@@ -40,6 +39,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from meshmocap._atomic import atomic_open
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import apply_skinning, skinning_operator, skinning_transforms
 from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
@@ -276,12 +276,6 @@ def save_template(path: str | os.PathLike, t: Template) -> Path:
         eval_names=np.array(ev.names), eval_parents=ev.parents.astype(np.int32),
         eval_rest_positions=ev.rest_positions, eval_weights=ev.weights,
     )  # fmt: skip
-    fd, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_open(path) as f:
+        np.savez_compressed(f, **arrays)
     return path

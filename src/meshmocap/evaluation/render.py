@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from meshmocap._atomic import atomic_open
 from meshmocap._progress import progress
 from meshmocap.body.motion import Motion
 from meshmocap.body.template import Template
@@ -157,11 +158,9 @@ def contact_sheet(
 
 def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write an (h, w) or (h, w, 3) uint8 image to ``path`` atomically; return the path."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    Image.fromarray(image).save(tmp, format="PNG")
-    os.replace(tmp, path)
-    return path
+    with atomic_open(path) as f:
+        Image.fromarray(image).save(f, format="PNG")
+    return Path(path)
 
 
 @dataclass(frozen=True)

@@ -108,8 +108,13 @@ class Camera:
         problems = []
         if K.shape != (3, 3) or not np.all(np.isfinite(K)):
             problems.append(f"K must be a finite (3, 3) matrix, found shape {K.shape}")
-        if R.shape != (3, 3) or np.abs(R @ R.T - np.eye(3)).max(initial=0) > 1e-6:
-            problems.append("R must be a (3, 3) rotation matrix")
+        if (
+            R.shape != (3, 3)
+            or not np.all(np.isfinite(R))
+            or np.abs(R @ R.T - np.eye(3)).max() > 1e-6
+            or np.linalg.det(R) < 0
+        ):
+            problems.append("R must be a (3, 3) rotation matrix (orthonormal, det +1)")
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             problems.append(f"t must be 3 finite numbers, found shape {t.shape}")
         if len(dist) != 5 or not np.all(np.isfinite(dist)):
@@ -137,9 +142,15 @@ class Camera:
     def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points ``X`` (..., 3) to pixels ``uv`` (..., 2) and depths (...,).
 
-        Applies the distortion model when ``dist`` is not zero.
+        Applies the distortion model when ``dist`` is not zero. Points at depth ≈ 0 get
+        huge (finite or infinite) pixel coordinates without a warning; use ``depth`` to
+        reject points on or behind the camera plane.
         """
-        Xc = np.asarray(X, dtype=float) @ self.R.T + self.t
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            return self._project(np.asarray(X, dtype=float))
+
+    def _project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Xc = X @ self.R.T + self.t
         depth = Xc[..., 2]
         safe = np.where(np.abs(depth) < 1e-12, 1e-12, depth)
         x, y = Xc[..., 0] / safe, Xc[..., 1] / safe

@@ -33,6 +33,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from meshmocap._atomic import write_text_atomic
 from meshmocap._validate import check_choice
 from meshmocap.body.motion import Y_UP_TO_Z_UP, Motion
 from meshmocap.body.skeleton import Skeleton
@@ -44,7 +45,6 @@ from meshmocap.io._text import (
     parse_floats,
     read_bytes,
     scan_tokens,
-    write_text_atomic,
 )
 
 #: Length units of mocap files.

@@ -1,0 +1,45 @@
+"""Atomic file writes: a result is either complete or absent, never half-written."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Literal
+
+from meshmocap.errors import MeshmocapFileNotFoundError
+
+
+@contextmanager
+def atomic_open(path: str | os.PathLike, mode: Literal["w", "wb"] = "wb") -> Iterator[IO]:
+    """Open a temporary file beside ``path`` for writing; on success it replaces ``path``.
+
+    On any exception the temporary file is removed and ``path`` is left untouched. Text mode
+    writes UTF-8 with ``\\n`` line endings. An existing file keeps its permissions.
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError
+        The destination folder does not exist.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise MeshmocapFileNotFoundError(f"{path}: folder {path.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        kwargs = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
+        with os.fdopen(fd, mode, **kwargs) as f:
+            yield f
+        os.chmod(tmp, path.stat().st_mode & 0o777 if path.exists() else 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_open`)."""
+    with atomic_open(path, "w") as f:
+        f.write(text)

@@ -1,0 +1,198 @@
+"""Silhouette rasterisation and PNG mask files."""
+
+import re
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.raster import coverage, rasterize
+from meshmocap.geometry.silhouette import fill_triangles, silhouette
+from meshmocap.io.silhouettes import read_mask, write_mask
+from meshmocap.studio.rigs import camera_rig
+
+
+def _camera(eye, target=(0, 0, 0.9), *, dist=None, fov=50.0) -> Camera:
+    R, t = look_at(eye, target)
+    return Camera(intrinsics(640, 480, fov), R, t, 640, 480, dist)
+
+
+def _lumpy_sphere(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A closed, consistently oriented random mesh: an icosphere with random radii."""
+    m = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    r = np.random.default_rng(seed).uniform(0.25, 0.45, len(m.vertices))
+    V = np.asarray(m.vertices) * r[:, None] * [1.0, 1.0, 2.2] + [0, 0, 0.9]
+    return V, np.asarray(m.faces)
+
+
+def test_sphere_silhouette_area_matches_the_analytic_disc():
+    # A sphere of radius r at distance d on the optical axis images to a disc of radius
+    # f·tan(asin(r/d)). Tolerance 1 %: counting pixel centres misses ~±perimeter/√N pixels
+    # (≈0.1 % here), and the subdivision-5 icosphere is inscribed in the sphere
+    # (its silhouette is ≤ 0.02 % smaller).
+    m = trimesh.creation.icosphere(subdivisions=5, radius=0.5)
+    cam = _camera([0, -4.0, 0.9])
+    mask = silhouette(np.asarray(m.vertices) + [0, 0, 0.9], np.asarray(m.faces), cam)
+    disc = np.pi * (cam.K[0, 0] * np.tan(np.arcsin(0.5 / 4.0))) ** 2
+    assert mask.sum() == pytest.approx(disc, rel=0.01)
+    rows, cols = np.nonzero(mask)  # centred on the principal point, to a tenth of a pixel
+    np.testing.assert_allclose([cols.mean(), rows.mean()], cam.K[:2, 2], atol=0.1)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_equals_coverage_of_raster_exactly(seed):
+    # Same rule (pixel centre inside or on a triangle ⇒ set): the masks are identical,
+    # except for centres within rounding (1e-12 px) of an edge, which random vertices avoid.
+    V, F = _lumpy_sphere(seed)
+    cams = [
+        *camera_rig("humaneva4"),
+        _camera([0, -2.0, 1.0], fov=40.0),  # close: the body leaves the image
+        _camera([0.3, 0.2, 6.0], [0.1, 0.0, 0.9]),  # from above
+    ]
+    for cam in cams:
+        uv, _ = cam.project(V)
+        expect = coverage(uv, F, cam.shape)
+        assert expect.any()
+        assert np.array_equal(silhouette(V, F, cam), expect)
+        # A closed mesh: its positive-area triangles alone cover the silhouette.
+        assert np.array_equal(silhouette(V, F, cam, assume_closed=True), expect)
+        assert np.array_equal(silhouette(V, F[:, ::-1], cam, assume_closed=True), expect)
+
+
+def test_triangle_soup_equals_coverage():
+    # Random small and large triangles, either orientation, partly outside the image.
+    rng = np.random.default_rng(3)
+    centre = rng.uniform(-40, 680, (400, 1, 2))
+    uv = (centre + rng.normal(0, 1, (400, 3, 2)) * rng.uniform(0.5, 40, (400, 1, 1))).reshape(-1, 2)
+    F = np.arange(1200).reshape(400, 3)
+    assert np.array_equal(fill_triangles(uv, F, (480, 640)), coverage(uv, F, (480, 640)))
+    # Exact pixel centres on edges and vertices count as covered (closed triangles).
+    uv = np.array([[2.0, 1.0], [6.0, 1.0], [2.0, 5.0]])
+    mask = fill_triangles(uv, np.array([[0, 1, 2]]), (8, 8))
+    rows, cols = np.nonzero(mask)
+    assert ((cols >= 2) & (rows >= 1) & (cols - 2 + rows - 1 <= 4)).all() and mask.sum() == 15
+
+
+def test_triangles_behind_the_camera_are_skipped():
+    # The camera sits inside the lumpy sphere's bounding box: some triangles straddle the
+    # camera plane; like rasterize(), silhouette skips any triangle with a vertex at depth ≤ 0.
+    V, F = _lumpy_sphere(2)
+    cam = _camera([0.0, -0.3, 0.9], [0.0, 1.0, 0.9], fov=90.0)
+    uv, depth = cam.project(V)
+    assert (depth <= 0).any() and (depth > 0).any()
+    face, _ = rasterize(uv, depth, F, cam.shape)
+    assert np.array_equal(silhouette(V, F, cam), face >= 0)
+
+
+def test_distortion_moves_the_silhouette_like_its_centre():
+    # A small sphere (≈11 px radius) near a corner under barrel distortion (a ≈15 px shift):
+    # the mask's centroid moves by the displacement of the sphere's image centre. The
+    # first-order change of the displacement across the blob (a −8 % scaling here) leaves
+    # the centroid in place; the second-order one moves it by ~0.1 px. Tolerance 0.3 px.
+    m = trimesh.creation.icosphere(subdivisions=4, radius=0.06)
+    V = np.asarray(m.vertices) + [1.6, 0.0, 2.0]
+    plain = _camera([0, -4.0, 0.9])
+    bent = Camera(plain.K, plain.R, plain.t, 640, 480, [-0.2, 0.05, 0.001, -0.001, 0.0])
+    a, b = silhouette(V, m.faces, plain), silhouette(V, m.faces, bent)
+    shift = np.subtract(bent.project(V.mean(0))[0], plain.project(V.mean(0))[0])
+    assert np.linalg.norm(shift) > 10  # the test is meaningful
+    ca = np.array(np.nonzero(a)).mean(1)[::-1]
+    cb = np.array(np.nonzero(b)).mean(1)[::-1]
+    np.testing.assert_allclose(cb - ca, shift, atol=0.3)
+    uv, _ = bent.project(V)
+    assert np.array_equal(b, coverage(uv, m.faces, (480, 640)))  # straight-edged triangles
+
+
+def test_chunking_and_vertices_at_the_camera_plane(monkeypatch):
+    # Results do not depend on how the (triangle, row) pairs are chunked.
+    import meshmocap.geometry.silhouette as module
+
+    V, F = _lumpy_sphere(0)
+    cam = _camera([0, -2.0, 1.0], fov=40.0)
+    whole = silhouette(V, F, cam)
+    monkeypatch.setattr(module, "_CHUNK", 97)
+    assert np.array_equal(silhouette(V, F, cam), whole)
+    # A vertex 1e-300 m in front of the camera plane projects to inf: its triangles are
+    # skipped without warnings (pytest turns warnings into errors).
+    cam = Camera(intrinsics(640, 480, 50.0), np.eye(3), np.zeros(3), 640, 480)
+    V = V - [0, 0, 0.9] + [0, 0, 3.0]  # in front of the camera, on its axis
+    whole = silhouette(V, F, cam)
+    W = np.concatenate([V, [[1e300, 0.0, 1e-300]]])
+    G = np.concatenate([F, [[len(V), 0, 1]]])
+    assert whole.any() and np.array_equal(silhouette(W, G, cam), whole)
+
+
+def test_empty_and_off_image_meshes():
+    V, F = _lumpy_sphere(0)
+    cam = _camera([0, -4.0, 0.9])
+    assert not silhouette(V + [10.0, 0, 0], F, cam).any()  # beside the image
+    assert not silhouette(V, F[:0], cam).any()  # no faces
+    assert silhouette(V, F, cam).shape == (480, 640)
+
+
+def test_bad_inputs_are_rejected():
+    V, F = _lumpy_sphere(0)
+    cam = _camera([0, -4.0, 0.9])
+    with pytest.raises(InputError, match=r"V must be an \(n, 3\)"):
+        silhouette(V[:, :2], F, cam)
+    with pytest.raises(InputError, match="F must index V"):
+        silhouette(V, F + len(V), cam)
+    with pytest.raises(InputError, match="F must be an"):
+        silhouette(V, F.astype(float), cam)
+    with pytest.raises(InputError, match="finite"):
+        silhouette(np.full_like(V, np.nan), F, cam)
+    with pytest.raises(InputError, match="camera must be a Camera"):
+        silhouette(V, F, "C1")
+
+
+# ----------------------------------------------------------------------------- PNG files
+@pytest.mark.parametrize("bits", [1, 8])
+def test_mask_round_trip(tmp_path, bits):
+    mask = np.random.default_rng(0).random((48, 64)) > 0.5
+    path = tmp_path / "m.png"
+    write_mask(path, mask, bits=bits)
+    with Image.open(path) as img:
+        assert img.mode == ("1" if bits == 1 else "L") and img.format == "PNG"
+    back = read_mask(path, shape=(48, 64))
+    assert back.dtype == bool and np.array_equal(back, mask)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.png"]  # atomic: no temporary left
+
+
+def test_reads_any_png_at_half_scale(tmp_path):
+    grey = np.array([[0, 127, 128, 255]], dtype=np.uint8)  # 50 % of 255 is 127.5
+    expect = np.array([[False, False, True, True]])
+    Image.fromarray(grey, "L").save(tmp_path / "l.png")
+    Image.fromarray(np.repeat(grey[..., None], 3, axis=2), "RGB").save(tmp_path / "rgb.png")
+    Image.fromarray(grey.astype(np.uint16) * 257).save(tmp_path / "i16.png")  # 16-bit
+    Image.fromarray(grey, "L").convert("P").save(tmp_path / "p.png")
+    rgba = np.zeros((1, 4, 4), np.uint8)
+    rgba[..., :3], rgba[..., 3] = 255, grey  # white cut-out on transparency
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "rgba.png")
+    for name in ("l", "rgb", "i16", "p", "rgba"):
+        assert np.array_equal(read_mask(tmp_path / f"{name}.png"), expect), name
+
+
+def test_unreadable_masks_raise_one_line_errors(tmp_path):
+    good = tmp_path / "good.png"
+    write_mask(good, np.eye(8, dtype=bool), bits=8)
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(good.read_bytes()[:50])
+    text = tmp_path / "text.png"
+    text.write_text("not an image")
+    for path in (cut, text):
+        with pytest.raises(FormatError, match=re.escape(str(path))) as info:
+            read_mask(path)
+        assert "\n" not in str(info.value)
+    with pytest.raises(FormatError, match=r"8×8 pixels, expected 10×8"):
+        read_mask(good, shape=(8, 10))
+    with pytest.raises(MeshmocapFileNotFoundError, match="no such file"):
+        read_mask(tmp_path / "absent.png")
+    with pytest.raises(MeshmocapFileNotFoundError, match="does not exist"):
+        write_mask(tmp_path / "nowhere" / "m.png", np.eye(4, dtype=bool))
+    with pytest.raises(InputError, match=r"bits must be one of \[1, 8\]"):
+        write_mask(good, np.eye(4, dtype=bool), bits=16)
+    with pytest.raises(InputError, match="booleans or 0/1"):
+        write_mask(good, np.full((4, 4), 0.5))
