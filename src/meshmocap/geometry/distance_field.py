@@ -1,0 +1,271 @@
+"""Signed-distance fields on regular grids: trilinear lookups with exact gradients.
+
+:class:`DistanceGrid` is the precomputed field a tracker minimises: the sum of the field
+over the model's vertices measures how far the model is from the target mesh
+(cage-manifold-tracking §5.1, Eq. 4). Values live on a regular grid; a lookup is the
+trilinear interpolant and its exact (piecewise) gradient, finite everywhere in space.
+
+Fields come from a voxel occupancy (:func:`signed_distance`, one Euclidean distance
+transform) — a visual hull (:func:`meshmocap.geometry.carving.distance_grid`) or a closed
+triangle mesh scan-converted into voxels (:func:`distance_grid_from_mesh`).
+
+Frames: world, metres, Z up. Grid point ``(i, j, k)`` is at ``origin + (i, j, k) * spacing``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from meshmocap.errors import InputError
+
+_MAX_VOXELS = 1 << 27  # refuse grids above ~134 M points (memory)
+_CHUNK = 4_000_000  # (triangle, column) pairs per chunk when voxelising a mesh
+
+
+class DistanceGrid:
+    """Signed distances on a regular grid, queried by trilinear interpolation.
+
+    A precomputed solver: build once per target, query many times. Inside the grid's box
+    the value is the trilinear interpolant of the grid values and the gradient its exact
+    (piecewise) derivative. Outside the box the value is that at the nearest point of the
+    box plus the distance to it, so it stays finite, continuous and grows away from the
+    box; the gradient's clamped components are those of the direction away from the box.
+
+    Parameters
+    ----------
+    values : (nx, ny, nz) float64
+        Values at the grid points, metres; each dimension ≥ 2.
+    origin : (3,) float64
+        Position of grid point ``(0, 0, 0)``, metres, world frame.
+    spacing : float or (3,) float64
+        Distance between grid points along x, y, z, metres.
+    """
+
+    def __init__(self, values: np.ndarray, origin: np.ndarray, spacing: float | np.ndarray) -> None:
+        values = np.array(values, dtype=np.float64, order="C")  # own copy, made read-only
+        origin = np.array(origin, dtype=np.float64).reshape(-1)
+        spacing = np.broadcast_to(np.asarray(spacing, dtype=np.float64), (3,)).copy()
+        if values.ndim != 3 or min(values.shape) < 2 or not np.all(np.isfinite(values)):
+            raise InputError(
+                f"values: expected a finite (nx, ny, nz) grid, each ≥ 2, found {values.shape}"
+            )
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise InputError(f"origin: expected 3 finite numbers, found {origin!r}")
+        if not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
+            raise InputError(f"spacing: expected positive metres, found {spacing!r}")
+        for v in (values, origin, spacing):
+            v.setflags(write=False)
+        self.values, self.origin, self.spacing = values, origin, spacing
+        self.shape = values.shape
+        self.upper = origin + (np.array(values.shape) - 1) * spacing
+        self._flat = values.ravel()
+        self._strides = np.array([values.shape[1] * values.shape[2], values.shape[2], 1])
+
+    def __repr__(self) -> str:
+        return f"DistanceGrid(shape={self.shape}, origin={self.origin}, spacing={self.spacing})"
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """Return the values (...,) at ``points`` (..., 3), metres."""
+        return self._lookup(points, gradient=False)[0]
+
+    def value_and_gradient(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return values (...,) and gradients (..., 3) at ``points`` (..., 3)."""
+        return self._lookup(points, gradient=True)
+
+    def _lookup(self, points, *, gradient: bool):
+        P = np.asarray(points, dtype=np.float64)
+        if P.shape[-1:] != (3,):
+            raise InputError(f"points: expected shape (..., 3), found {P.shape}")
+        if not np.all(np.isfinite(P)):
+            raise InputError("points: expected finite coordinates, found NaN or infinity")
+        lead = P.shape[:-1]
+        P = P.reshape(-1, 3)
+        n = np.array(self.shape)
+        g = (P - self.origin) / self.spacing
+        gc = np.clip(g, 0, n - 1)
+        i0 = np.minimum(gc.astype(np.intp), n - 2)  # gc ≥ 0: truncation is floor
+        f = gc - i0
+        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        sx, sy, _ = self._strides
+        base = i0 @ self._strides
+        v = self._flat
+        c00 = v[base], v[base + 1]
+        c01 = v[base + sy], v[base + sy + 1]
+        c10 = v[base + sx], v[base + sx + 1]
+        c11 = v[base + sx + sy], v[base + sx + sy + 1]
+        # along z
+        e00 = c00[0] + fz * (c00[1] - c00[0])
+        e01 = c01[0] + fz * (c01[1] - c01[0])
+        e10 = c10[0] + fz * (c10[1] - c10[0])
+        e11 = c11[0] + fz * (c11[1] - c11[0])
+        # along y, then x
+        e0 = e00 + fy * (e01 - e00)
+        e1 = e10 + fy * (e11 - e10)
+        value = e0 + fx * (e1 - e0)
+        off = P - (self.origin + gc * self.spacing)  # zero inside the box
+        outside = g != gc
+        dist = np.sqrt(np.einsum("ij,ij->i", off, off))
+        value = value + dist
+        if not gradient:
+            return value.reshape(lead), None
+        dz = [c[1] - c[0] for c in (c00, c01, c10, c11)]
+        gx = e1 - e0
+        gy = (1 - fx) * (e01 - e00) + fx * (e11 - e10)
+        gz0 = dz[0] + fy * (dz[1] - dz[0])
+        gz1 = dz[2] + fy * (dz[3] - dz[2])
+        gz = gz0 + fx * (gz1 - gz0)
+        grad = np.stack([gx, gy, gz], axis=1) / self.spacing
+        away = np.divide(off, dist[:, None], out=np.zeros_like(off), where=dist[:, None] > 0)
+        grad = np.where(outside, away, grad)
+        return value.reshape(lead), grad.reshape(*lead, 3)
+
+
+# ---------------------------------------------------------------------------------------
+# Occupancy → distance, mesh → occupancy
+
+
+def signed_distance(occupancy: np.ndarray, spacing: float) -> np.ndarray:
+    """Return the signed distance (metres, negative inside) of a voxel occupancy.
+
+    Parameters
+    ----------
+    occupancy : (nx, ny, nz) bool
+        True inside; its border layer should be empty (pad it otherwise).
+    spacing : float
+        Voxel edge, metres.
+
+    Returns
+    -------
+    values : (nx, ny, nz) float64
+        At the voxel centres, metres.
+
+    Notes
+    -----
+    One Euclidean distance transform to the inner boundary (occupied voxels with an empty
+    6-neighbour): exact for outside voxels (their nearest occupied voxel is always on the
+    inner boundary), and within one voxel of the distance to the nearest empty voxel
+    inside. The zero level lies halfway between inside and outside voxel centres.
+    """
+    occ = np.asarray(occupancy, dtype=bool)
+    inner = np.zeros_like(occ)
+    for axis in range(3):
+        for sl_a, sl_b in ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))):
+            a = [slice(None)] * 3
+            b = [slice(None)] * 3
+            a[axis], b[axis] = sl_a, sl_b
+            inner[tuple(a)] |= ~occ[tuple(b)]
+    inner &= occ
+    e = ndimage.distance_transform_edt(~inner)
+    return np.where(occ, -0.5 - e, e - 0.5) * spacing
+
+
+def _voxelize(V: np.ndarray, F: np.ndarray, origin: np.ndarray, h: float, n) -> np.ndarray:
+    """Occupancy (nx, ny, nz) of voxel centres by the non-zero winding rule along +z.
+
+    Each vertical line through a column of voxel centres is crossed with the triangles
+    covering it in the xy-plane (edge functions made exactly antisymmetric by evaluating
+    every edge from its lower vertex index, and a top-left ownership rule for lines
+    through edges or vertices, so that each crossing of a closed surface counts once);
+    each crossing adds ±1 (by the triangle's facing) to the voxels above it, and a
+    cumulative sum gives the winding number.
+    """
+    nx, ny, nz = (int(k) for k in n)
+    G = (V - origin) / h  # grid units; same value for a vertex in every triangle
+    F = np.asarray(F, dtype=np.int64)
+    xy = G[:, :2]
+    e = xy[F[:, [1, 2, 0]]] - xy[F]  # (m, 3, 2) edge vectors
+    area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]  # twice the signed xy area
+    ccw = area2 > 0
+    F = np.where(ccw[:, None], F, F[:, [0, 2, 1]])
+    weight = np.where(ccw, -1, 1)[area2 != 0]  # entering through a down-facing triangle: +1
+    F = F[area2 != 0]
+    T = G[F]
+    lo = np.maximum(np.ceil(T[:, :, :2].min(axis=1)), 0).astype(np.int64)
+    hi = np.minimum(np.floor(T[:, :, :2].max(axis=1)), [nx - 1, ny - 1]).astype(np.int64)
+    size = np.clip(hi - lo + 1, 0, None)
+    count = size[:, 0] * size[:, 1]
+    acc = np.zeros(nx * ny * (nz + 1), dtype=np.int64)
+    ids = np.flatnonzero(count)
+    splits = np.searchsorted(np.cumsum(count[ids]), np.arange(_CHUNK, count[ids].sum(), _CHUNK))
+    for chunk in np.split(ids, splits + 1):
+        if chunk.size == 0:
+            continue
+        c = count[chunk]
+        t = np.repeat(chunk, c)
+        k = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)
+        px = lo[t, 0] + k % size[t, 0]
+        py = lo[t, 1] + k // size[t, 0]
+        Et = []
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            ia, ib = F[t, a], F[t, b]
+            swap = ia > ib
+            p = np.where(swap[:, None], xy[ib], xy[ia])
+            q = np.where(swap[:, None], xy[ia], xy[ib])
+            val = (q[:, 0] - p[:, 0]) * (py - p[:, 1]) - (q[:, 1] - p[:, 1]) * (px - p[:, 0])
+            val = np.where(swap, -val, val)
+            d = xy[ib] - xy[ia]
+            owns = (d[:, 1] < 0) | ((d[:, 1] == 0) & (d[:, 0] < 0))
+            Et.append((val, (val > 0) | ((val == 0) & owns)))
+        hit = Et[0][1] & Et[1][1] & Et[2][1]
+        w0, w1, w2 = Et[1][0][hit], Et[2][0][hit], Et[0][0][hit]  # opposite vertices 0, 1, 2
+        th = t[hit]
+        zc = (w0 * T[th, 0, 2] + w1 * T[th, 1, 2] + w2 * T[th, 2, 2]) / (w0 + w1 + w2)
+        kz = np.clip(np.floor(zc) + 1, 0, nz).astype(np.int64)
+        flat = (px[hit] * ny + py[hit]) * (nz + 1) + kz
+        acc += np.bincount(flat, weights=weight[th], minlength=acc.size).astype(np.int64)
+    winding = np.cumsum(acc.reshape(nx, ny, nz + 1)[:, :, :nz], axis=2)
+    return winding != 0
+
+
+def distance_grid_from_mesh(
+    V: np.ndarray, F: np.ndarray, *, spacing: float = 0.01, margin: float = 0.05
+) -> DistanceGrid:
+    """Return the signed distance field of a closed triangle mesh (negative inside).
+
+    The mesh is scan-converted into voxel occupancy (non-zero winding number along
+    vertical lines, so overlapping parts are united and either orientation works), then
+    :func:`signed_distance` is applied. Accuracy: the surface is represented by voxel
+    centres, so values are within about one voxel of the true signed distance (1.2 voxels
+    at worst on the bundled template's vertices at 1 cm); parts thinner than a voxel may
+    vanish, and voxel centres exactly on the surface may fall either side.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Vertices, metres, world frame (Z up).
+    F : (m, 3) int
+        Triangles of a closed mesh (consistently oriented).
+    spacing : float
+        Grid spacing, metres.
+    margin : float
+        Space around the mesh's bounding box, metres (at least one voxel is used).
+
+    Returns
+    -------
+    DistanceGrid
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0 or not np.all(np.isfinite(V)):
+        raise InputError(f"V: expected finite (n, 3) vertices with n > 0, found {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0 or not np.issubdtype(F.dtype, np.integer):
+        raise InputError(f"F: expected (m, 3) integer faces with m > 0, found {F.shape}")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InputError(f"F: indices must lie in [0, {len(V) - 1}], found [{F.min()}, {F.max()}]")
+    h = float(spacing)
+    if not np.isfinite(h) or h <= 0:
+        raise InputError(f"spacing: expected a positive number of metres, found {spacing!r}")
+    if not np.isfinite(margin) or margin < 0:
+        raise InputError(f"margin: expected a non-negative number of metres, found {margin!r}")
+    m = max(float(margin), h)
+    origin = V.min(axis=0) - m
+    n = np.ceil((V.max(axis=0) + m - origin) / h).astype(np.int64) + 1
+    if np.prod(n) > _MAX_VOXELS:
+        raise InputError(
+            f"spacing: {n[0]}×{n[1]}×{n[2]} grid points is too many; use a coarser one"
+        )
+    occ = _voxelize(V, F, origin, h, n)
+    if not occ.any():
+        raise InputError("F: the mesh encloses no grid point (open, flat or too thin)")
+    return DistanceGrid(signed_distance(occ, h), origin, h)
