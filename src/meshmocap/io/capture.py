@@ -1,0 +1,233 @@
+"""Capture folders: cameras, silhouettes, visual hulls and ground truth, frame by frame.
+
+Layout (``capture.json`` holds ``"format": "meshmocap-capture-1"``)::
+
+    CAPTURE/
+      capture.json                     metadata: fps, frame count, how it was made
+      cameras.json                     the rig (see meshmocap.io.cameras)
+      silhouettes/<camera>/NNNNN.png   one binary mask per camera and frame
+      hulls/NNNNN.ply                  visual-hull mesh, metres, Z up
+      hulls/NNNNN.npz                  its voxel occupancy (bit-packed), origin, voxel size
+      truth/NNNNN.npz                  ground truth of synthetic captures: evaluation joints
+                                       (K, 3), posed vertices (n, 3), local rotations
+                                       (J, 3, 3), root position (3,)
+
+Every file is written atomically; a synthetic frame is complete when its truth file exists,
+so an interrupted run keeps every finished frame and resumes where it stopped. Real
+captures need only ``cameras.json`` and ``silhouettes/`` (``meshmocap hull`` adds
+``hulls/``), or only meshes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap._atomic import atomic_open, write_text_atomic
+from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.geometry.camera import Camera
+from meshmocap.geometry.carving import VoxelHull
+from meshmocap.io.cameras import read_cameras
+from meshmocap.io.meshes import read_mesh
+from meshmocap.io.silhouettes import read_mask
+
+FORMAT = "meshmocap-capture-1"
+
+
+def frame_name(index: int) -> str:
+    """Return the file stem of frame ``index`` (``00042``)."""
+    return f"{index:05d}"
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """Ground truth of one synthetic frame.
+
+    Attributes
+    ----------
+    joints : (K, 3) float64, evaluation joints, metres, world frame (Z up)
+    vertices : (n, 3) float64, the subject's posed vertices
+    rotations : (J, 3, 3) float64, local joint rotations of the subject's rig
+    root : (3,) float64, root joint position
+    """
+
+    joints: np.ndarray
+    vertices: np.ndarray
+    rotations: np.ndarray
+    root: np.ndarray
+
+
+def write_truth(path: str | os.PathLike, truth: Truth) -> None:
+    """Write ``truth`` to ``path`` (``.npz``) atomically."""
+    with atomic_open(path) as f:
+        np.savez_compressed(
+            f, joints=truth.joints, vertices=truth.vertices.astype(np.float32),
+            rotations=truth.rotations, root=truth.root,
+        )  # fmt: skip
+
+
+def read_truth(path: str | os.PathLike) -> Truth:
+    """Read a truth file written by :func:`write_truth`."""
+    d = _load_npz(path, ("joints", "vertices", "rotations", "root"))
+    return Truth(d["joints"], d["vertices"].astype(np.float64), d["rotations"], d["root"])
+
+
+def write_hull(path: str | os.PathLike, hull: VoxelHull) -> None:
+    """Write a hull's occupancy (bit-packed), origin and voxel size to ``path`` (``.npz``)."""
+    with atomic_open(path) as f:
+        np.savez_compressed(
+            f, bits=np.packbits(hull.occupancy.ravel()), shape=np.array(hull.occupancy.shape),
+            origin=hull.origin, voxel_size=np.float64(hull.voxel_size),
+        )  # fmt: skip
+
+
+def read_hull(path: str | os.PathLike) -> VoxelHull:
+    """Read a voxel hull written by :func:`write_hull`."""
+    d = _load_npz(path, ("bits", "shape", "origin", "voxel_size"))
+    shape = tuple(int(s) for s in d["shape"])
+    occ = np.unpackbits(d["bits"], count=int(np.prod(shape))).astype(bool).reshape(shape)
+    return VoxelHull(occ, d["origin"], float(d["voxel_size"]))
+
+
+def _load_npz(path: str | os.PathLike, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in keys}
+    except FileNotFoundError:
+        raise MeshmocapFileNotFoundError(f"{path}: no such file") from None
+    except KeyError as exc:
+        raise FormatError(f"{path}: missing key {exc}") from None
+    except (OSError, ValueError) as exc:
+        raise FormatError(f"{path}: not a readable .npz file ({exc})") from None
+
+
+@dataclass(frozen=True, eq=False)
+class CaptureFrame:
+    """One frame of a capture folder; heavy parts are read on access.
+
+    Attributes
+    ----------
+    index : int, frame number
+    capture : Capture, the folder it belongs to
+    """
+
+    index: int
+    capture: Capture
+
+    @cached_property
+    def hull_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(V (n, 3), F (m, 3))`` of the visual hull, metres, Z up."""
+        return read_mesh(self.capture.path / "hulls" / f"{frame_name(self.index)}.ply")
+
+    @cached_property
+    def hull(self) -> VoxelHull:
+        """The visual hull's voxel occupancy (a distance field without re-carving)."""
+        return read_hull(self.capture.path / "hulls" / f"{frame_name(self.index)}.npz")
+
+    @cached_property
+    def silhouettes(self) -> list[np.ndarray]:
+        """One (height, width) bool mask per camera, in camera order."""
+        return [read_mask(p) for p in self.capture.silhouette_paths(self.index)]
+
+    @cached_property
+    def truth(self) -> Truth | None:
+        """Ground truth, or None for a capture without it."""
+        path = self.capture.path / "truth" / f"{frame_name(self.index)}.npz"
+        return read_truth(path) if path.is_file() else None
+
+
+class Capture:
+    """A capture folder (see the module docstring), read lazily frame by frame.
+
+    Parameters
+    ----------
+    path : path
+        The folder. ``capture.json`` is optional for real captures: the frame count then
+        comes from the silhouettes of the first camera or from ``hulls/``.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise MeshmocapFileNotFoundError(f"capture: {self.path} is not a folder")
+        meta_path = self.path / "capture.json"
+        self.meta: dict = {}
+        if meta_path.is_file():
+            try:
+                self.meta = json.loads(meta_path.read_text())
+            except json.JSONDecodeError as exc:
+                raise FormatError(
+                    f"{meta_path}: not valid JSON ({exc.msg}, line {exc.lineno})"
+                ) from None
+            if self.meta.get("format") != FORMAT:
+                raise FormatError(
+                    f"{meta_path}: expected format {FORMAT!r}, found {self.meta.get('format')!r}"
+                )
+        self.indices = self._frames()
+
+    def _frames(self) -> list[int]:
+        if "frames" in self.meta:
+            return [int(i) for i in self.meta["frames"]]
+        for folder, suffix in (("truth", ".npz"), ("hulls", ".npz")):
+            found = sorted(
+                int(p.stem) for p in (self.path / folder).glob(f"*{suffix}") if p.stem.isdigit()
+            )
+            if found:
+                return found
+        if self.cameras:
+            first = self.path / "silhouettes" / self.cameras[0].name
+            found = sorted(int(p.stem) for p in first.glob("*.png") if p.stem.isdigit())
+            if found:
+                return found
+        raise MeshmocapFileNotFoundError(
+            f"capture: {self.path} holds no frames (no hulls/, truth/ or silhouettes/)"
+        )
+
+    @cached_property
+    def cameras(self) -> list[Camera]:
+        """The rig, or an empty list when the folder has no ``cameras.json``."""
+        path = self.path / "cameras.json"
+        return read_cameras(path) if path.is_file() else []
+
+    @property
+    def fps(self) -> float:
+        """Frames per second (``capture.json``; 30 when unknown)."""
+        return float(self.meta.get("fps", 30.0))
+
+    def silhouette_paths(self, index: int) -> list[Path]:
+        """Mask files of frame ``index``, one per camera; raises if one is missing."""
+        paths = [
+            self.path / "silhouettes" / c.name / f"{frame_name(index)}.png" for c in self.cameras
+        ]
+        missing = [p for p in paths if not p.is_file()]
+        if missing:
+            raise MeshmocapFileNotFoundError(
+                f"capture: frame {index} has no silhouette {missing[0]}"
+            )
+        return paths
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, k: int) -> CaptureFrame:
+        if not -len(self) <= k < len(self):
+            raise InputError(f"capture: frame position {k} out of range for {len(self)} frames")
+        return CaptureFrame(self.indices[k], self)
+
+    def __iter__(self) -> Iterator[CaptureFrame]:
+        for i in self.indices:
+            yield CaptureFrame(i, self)
+
+    def __repr__(self) -> str:
+        return f"Capture({str(self.path)!r}, {len(self)} frames, {len(self.cameras)} cameras)"
+
+
+def write_meta(path: str | os.PathLike, meta: dict) -> None:
+    """Write ``capture.json`` (adds the format tag)."""
+    write_text_atomic(path, json.dumps({"format": FORMAT, **meta}, indent=2) + "\n")

@@ -1,0 +1,162 @@
+"""Tracking results, written frame by frame so a long run can stop and resume.
+
+Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
+
+    TRACK/
+      track.json        method, template, capture, evaluation-joint names and parents, options
+      frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
+                        terms, iterations, seconds, health flag and message
+
+A frame file is written atomically once the frame is done: the folder always holds whole
+frames, and :func:`done_frames` tells a resumed run where to continue.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap._atomic import atomic_open, write_text_atomic
+from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
+
+FORMAT = "meshmocap-track-1"
+
+
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """What a tracker returns for one frame.
+
+    Attributes
+    ----------
+    index : int, frame number in the capture
+    joints : (K, 3) float64, evaluation joints, metres, world frame (Z up)
+    vertices : (n, 3) float64, the deformed template's vertices
+    energies : dict of str → float, final value of each energy term
+    n_iter : int, iterations used
+    seconds : float, wall time of the frame
+    healthy : bool, False when the frame failed and the state was carried over
+    message : str, why a frame is unhealthy (empty otherwise)
+    state : dict of str → array, the tracker's state after the frame (to resume a run)
+    """
+
+    index: int
+    joints: np.ndarray
+    vertices: np.ndarray
+    energies: dict[str, float] = field(default_factory=dict)
+    n_iter: int = 0
+    seconds: float = 0.0
+    healthy: bool = True
+    message: str = ""
+    state: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """A whole tracking result, frames stacked.
+
+    Attributes
+    ----------
+    meta : dict, the contents of ``track.json``
+    frames : (T,) int64, frame numbers
+    joints : (T, K, 3) float64; vertices : (T, n, 3) float64
+    energies : dict of str → (T,) float64
+    n_iter : (T,) int64; seconds : (T,) float64; healthy : (T,) bool
+    """
+
+    meta: dict
+    frames: np.ndarray
+    joints: np.ndarray
+    vertices: np.ndarray
+    energies: dict[str, np.ndarray]
+    n_iter: np.ndarray
+    seconds: np.ndarray
+    healthy: np.ndarray
+
+
+def frame_path(track: str | os.PathLike, index: int) -> Path:
+    """Path of frame ``index``'s result file."""
+    return Path(track) / "frames" / f"{index:05d}.npz"
+
+
+def start_track(path: str | os.PathLike, meta: dict, *, resume: bool = True) -> list[int]:
+    """Create (or reopen) a track folder and return the frames already done.
+
+    Raises :class:`FormatError` when resuming a folder written with other metadata.
+    """
+    path = Path(path)
+    (path / "frames").mkdir(parents=True, exist_ok=True)
+    meta_path = path / "track.json"
+    full = {"format": FORMAT, **meta}
+    if meta_path.is_file() and resume:
+        old = json.loads(meta_path.read_text())
+        if old != json.loads(json.dumps(full)):
+            raise FormatError(
+                f"{meta_path}: holds a track made with other settings; use another folder"
+            )
+    else:
+        for p in (path / "frames").glob("*.npz"):
+            p.unlink()
+    write_text_atomic(meta_path, json.dumps(full, indent=2) + "\n")
+    return done_frames(path)
+
+
+def done_frames(path: str | os.PathLike) -> list[int]:
+    """Frame numbers whose results exist in the track folder ``path``."""
+    return sorted(int(p.stem) for p in (Path(path) / "frames").glob("*.npz") if p.stem.isdigit())
+
+
+def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
+    """Write one frame's result atomically."""
+    extra = {f"energy_{k}": np.float64(v) for k, v in r.energies.items()}
+    extra.update({f"state_{k}": np.asarray(v) for k, v in r.state.items()})
+    with atomic_open(frame_path(path, r.index)) as f:
+        np.savez_compressed(
+            f, index=r.index, joints=r.joints, vertices=r.vertices.astype(np.float32),
+            n_iter=r.n_iter, seconds=r.seconds, healthy=r.healthy, message=np.str_(r.message),
+            **extra,
+        )  # fmt: skip
+
+
+def read_state(path: str | os.PathLike, index: int) -> dict[str, np.ndarray]:
+    """The tracker state stored with frame ``index`` (empty if the tracker stored none)."""
+    try:
+        with np.load(frame_path(path, index), allow_pickle=False) as z:
+            return {k[6:]: z[k] for k in z.files if k.startswith("state_")}
+    except (OSError, ValueError) as exc:
+        raise FormatError(f"{frame_path(path, index)}: unreadable frame result ({exc})") from None
+
+
+def read_track(path: str | os.PathLike) -> Track:
+    """Read every frame of a track folder, stacked in frame order."""
+    path = Path(path)
+    meta_path = path / "track.json"
+    if not meta_path.is_file():
+        raise MeshmocapFileNotFoundError(f"track: {path} has no track.json")
+    meta = json.loads(meta_path.read_text())
+    if meta.get("format") != FORMAT:
+        raise FormatError(f"{meta_path}: expected format {FORMAT!r}, found {meta.get('format')!r}")
+    frames = done_frames(path)
+    if not frames:
+        raise MeshmocapFileNotFoundError(f"track: {path / 'frames'} holds no frame results")
+    rows = []
+    for i in frames:
+        try:
+            with np.load(frame_path(path, i), allow_pickle=False) as z:
+                rows.append({k: z[k] for k in z.files})
+        except (OSError, ValueError, KeyError) as exc:
+            raise FormatError(f"{frame_path(path, i)}: unreadable frame result ({exc})") from None
+    keys = sorted(set.intersection(*({k for k in r if k.startswith("energy_")} for r in rows)))
+    return Track(
+        meta=meta,
+        frames=np.array(frames),
+        joints=np.stack([r["joints"] for r in rows]).astype(np.float64),
+        vertices=np.stack([r["vertices"] for r in rows]).astype(np.float64),
+        energies={k[7:]: np.array([float(r[k]) for r in rows]) for k in keys},
+        n_iter=np.array([int(r["n_iter"]) for r in rows]),
+        seconds=np.array([float(r["seconds"]) for r in rows]),
+        healthy=np.array([bool(r["healthy"]) for r in rows]),
+    )

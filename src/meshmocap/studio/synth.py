@@ -1,0 +1,153 @@
+"""Synthetic captures with ground truth: a template plays a motion in front of virtual
+cameras; silhouettes are rendered (optionally degraded), visual hulls carved, and the
+truth (joints, posed vertices, pose parameters) stored beside them, frame by frame.
+
+The result is a capture folder (:mod:`meshmocap.io.capture`) that trackers read like a
+real one and that :mod:`meshmocap.evaluation` scores against the truth.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap._progress import progress
+from meshmocap.body.clips import clip_on
+from meshmocap.body.template import Template, load_template
+from meshmocap.errors import InputError
+from meshmocap.geometry.camera import Camera
+from meshmocap.geometry.carving import carve, hull_mesh
+from meshmocap.geometry.silhouette import silhouette
+from meshmocap.io.cameras import read_cameras, write_cameras
+from meshmocap.io.capture import Capture, Truth, frame_name, write_hull, write_meta, write_truth
+from meshmocap.io.meshes import write_mesh
+from meshmocap.io.silhouettes import write_mask
+from meshmocap.studio.degrade import Degradation, degrade
+from meshmocap.studio.rigs import camera_rig
+
+
+@dataclass(frozen=True)
+class SynthSpec:
+    """What a synthetic capture is made of (stored in ``capture.json``).
+
+    Parameters
+    ----------
+    motion : str
+        A procedural motion name or a ``.bvh``/``.amc`` file.
+    template : str
+        The tracking template (name or ``.npz`` path) the capture is meant for.
+    subject : str or None
+        The body that performs (default: the tracking template); another body shape makes
+        the subject differ from the template.
+    rig : str
+        ``"humaneva4"``, ``"ring8"`` or a camera file (JSON or OpenCV YAML).
+    fps : float
+        Frame rate the motion is resampled to.
+    start, stop, step : int or None
+        Frame range after resampling (Python slice semantics).
+    degradation : Degradation
+        Silhouette degradations (none by default).
+    seed : int
+        Seed of the degradations.
+    voxel_size : float
+        Visual-hull voxel edge, metres.
+    """
+
+    motion: str = "walk"
+    template: str = "neutral"
+    subject: str | None = None
+    rig: str = "humaneva4"
+    fps: float = 60.0
+    start: int | None = None
+    stop: int | None = None
+    step: int | None = None
+    degradation: Degradation = field(default_factory=Degradation)
+    seed: int = 0
+    voxel_size: float = 0.01
+
+    def as_dict(self) -> dict:
+        """JSON-ready parameters."""
+        d = dataclasses.asdict(self)
+        d["motion"] = os.fspath(self.motion)
+        return d
+
+
+def _cameras(rig: str) -> list[Camera]:
+    if Path(rig).suffix.lower() in (".json", ".yml", ".yaml"):
+        return read_cameras(rig)
+    return camera_rig(rig)  # validates the preset name
+
+
+def synthesize(
+    out: str | os.PathLike, spec: SynthSpec = SynthSpec(), *, show_progress: bool | None = None
+) -> Capture:
+    """Write a synthetic capture of ``spec`` to the folder ``out`` and return it.
+
+    Frames already complete in ``out`` (from an interrupted run with the same ``spec``)
+    are kept; a folder holding a capture of another ``spec`` is refused.
+
+    Raises
+    ------
+    InputError
+        ``out`` holds a capture made with other parameters, or the frame range is empty.
+    """
+    out = Path(out)
+    subject = load_template(spec.subject or spec.template)
+    motion = clip_on(subject, spec.motion, fps=spec.fps)
+    frames = list(range(motion.n_frames))[slice(spec.start, spec.stop, spec.step)]
+    if not frames:
+        raise InputError(
+            f"synth: frame range {spec.start}:{spec.stop}:{spec.step} selects none of the "
+            f"{motion.n_frames} frames"
+        )
+    cameras = _cameras(spec.rig)
+    meta = {"fps": motion.fps / (spec.step or 1), "frames": frames, "spec": spec.as_dict(),
+            "cameras": [c.name for c in cameras], "eval_names": list(subject.eval_skeleton.names),
+            "subject_vertices": subject.n_vertices}  # fmt: skip
+    meta_path = out / "capture.json"
+    if meta_path.is_file():
+        old = json.loads(meta_path.read_text())
+        if old.get("spec") != json.loads(json.dumps(meta["spec"])):
+            raise InputError(
+                f"synth: {out} holds a capture made with other parameters; use a new folder"
+            )
+    for sub in ["hulls", "truth", *(f"silhouettes/{c.name}" for c in cameras)]:
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    write_cameras(out / "cameras.json", cameras)
+    write_meta(meta_path, meta)
+    todo = [f for f in frames if not (out / "truth" / f"{frame_name(f)}.npz").is_file()]
+    for f in progress(todo, label="synth", enabled=show_progress):
+        synth_frame(out, subject, motion.rotations[f], motion.root_positions[f], cameras, f, spec)
+    return Capture(out)
+
+
+def synth_frame(
+    out: Path,
+    subject: Template,
+    R: np.ndarray,
+    root: np.ndarray,
+    cameras: list[Camera],
+    index: int,
+    spec: SynthSpec,
+) -> None:
+    """Render, carve and store one frame; the truth file is written last (frame complete)."""
+    posed = subject.pose(R, root)
+    masks = []
+    for c, cam in enumerate(cameras):
+        mask = silhouette(posed.V, subject.F, cam, assume_closed=True)
+        if spec.degradation != Degradation():
+            mask = degrade(
+                mask, spec.degradation, seed=np.random.SeedSequence([spec.seed, index, c])
+            )
+        write_mask(out / "silhouettes" / cam.name / f"{frame_name(index)}.png", mask)
+        masks.append(mask)
+    hull = carve(masks, cameras, voxel_size=spec.voxel_size)
+    name = frame_name(index)
+    write_mesh(out / "hulls" / f"{name}.ply", *hull_mesh(hull))
+    write_hull(out / "hulls" / f"{name}.npz", hull)
+    write_truth(out / "truth" / f"{name}.npz", Truth(posed.eval_joints, posed.V, R, root))
