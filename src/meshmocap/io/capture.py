@@ -51,31 +51,34 @@ class Truth:
 
     Attributes
     ----------
-    joints : (K, 3) float64, evaluation joints, metres, world frame (Z up)
-    vertices : (n, 3) float64, the subject's posed vertices
-    rotations : (J, 3, 3) float64, local joint rotations of the subject's rig
-    root : (3,) float64, root joint position
+    vertices : (n, 3) float64, the subject's surface (fixed connectivity over the capture)
+    joints : (K, 3) float64 or None, evaluation joints, metres, world frame (Z up)
+    rotations : (J, 3, 3) float64 or None, local joint rotations of the subject's rig
+    root : (3,) float64 or None, root joint position
+
+    Captures made from a mesh sequence (e.g. the crane) have vertices only.
     """
 
-    joints: np.ndarray
     vertices: np.ndarray
-    rotations: np.ndarray
-    root: np.ndarray
+    joints: np.ndarray | None = None
+    rotations: np.ndarray | None = None
+    root: np.ndarray | None = None
 
 
 def write_truth(path: str | os.PathLike, truth: Truth) -> None:
     """Write ``truth`` to ``path`` (``.npz``) atomically."""
+    arrays = {"vertices": truth.vertices.astype(np.float32)}
+    for key in ("joints", "rotations", "root"):
+        if getattr(truth, key) is not None:
+            arrays[key] = getattr(truth, key)
     with atomic_open(path) as f:
-        np.savez_compressed(
-            f, joints=truth.joints, vertices=truth.vertices.astype(np.float32),
-            rotations=truth.rotations, root=truth.root,
-        )  # fmt: skip
+        np.savez_compressed(f, **arrays)
 
 
 def read_truth(path: str | os.PathLike) -> Truth:
     """Read a truth file written by :func:`write_truth`."""
-    d = _load_npz(path, ("joints", "vertices", "rotations", "root"))
-    return Truth(d["joints"], d["vertices"].astype(np.float64), d["rotations"], d["root"])
+    d = _load_npz(path, ("vertices",), optional=("joints", "rotations", "root"))
+    return Truth(d["vertices"].astype(np.float64), d.get("joints"), d.get("rotations"), d.get("root"))
 
 
 def write_hull(path: str | os.PathLike, hull: VoxelHull) -> None:
@@ -95,10 +98,12 @@ def read_hull(path: str | os.PathLike) -> VoxelHull:
     return VoxelHull(occ, d["origin"], float(d["voxel_size"]))
 
 
-def _load_npz(path: str | os.PathLike, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+def _load_npz(
+    path: str | os.PathLike, keys: tuple[str, ...], optional: tuple[str, ...] = ()
+) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in keys}
+            return {k: z[k] for k in keys} | {k: z[k] for k in optional if k in z.files}
     except FileNotFoundError:
         raise MeshmocapFileNotFoundError(f"{path}: no such file") from None
     except KeyError as exc:

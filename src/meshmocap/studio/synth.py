@@ -106,9 +106,14 @@ def synthesize(
             f"{motion.n_frames} frames"
         )
     cameras = _cameras(spec.rig)
-    meta = {"fps": motion.fps / (spec.step or 1), "frames": frames, "spec": spec.as_dict(),
-            "cameras": [c.name for c in cameras], "eval_names": list(subject.eval_skeleton.names),
-            "subject_vertices": subject.n_vertices}  # fmt: skip
+    meta = {
+        "fps": motion.fps / (spec.step or 1),
+        "frames": frames,
+        "spec": spec.as_dict(),
+        "cameras": [c.name for c in cameras],
+        "eval_names": list(subject.eval_skeleton.names),
+        "subject_vertices": subject.n_vertices,
+    }
     meta_path = out / "capture.json"
     if meta_path.is_file():
         old = json.loads(meta_path.read_text())
@@ -135,19 +140,128 @@ def synth_frame(
     index: int,
     spec: SynthSpec,
 ) -> None:
-    """Render, carve and store one frame; the truth file is written last (frame complete)."""
+    """Pose the subject for one frame and write it (see :func:`write_frame`)."""
     posed = subject.pose(R, root)
+    truth = Truth(posed.V, posed.eval_joints, R, root)
+    write_frame(
+        out,
+        posed.V,
+        subject.F,
+        cameras,
+        index,
+        truth,
+        degradation=spec.degradation,
+        seed=spec.seed,
+        voxel_size=spec.voxel_size,
+    )
+
+
+def write_frame(
+    out: Path,
+    V: np.ndarray,
+    F: np.ndarray,
+    cameras: list[Camera],
+    index: int,
+    truth: Truth,
+    *,
+    degradation: Degradation,
+    seed: int,
+    voxel_size: float,
+) -> None:
+    """Render the silhouettes of mesh ``(V, F)``, degrade them, carve the hull and write the
+    frame; the truth file is written last (it marks the frame complete)."""
     masks = []
     for c, cam in enumerate(cameras):
-        mask = silhouette(posed.V, subject.F, cam, assume_closed=True)
-        if spec.degradation != Degradation():
-            mask = degrade(
-                mask, spec.degradation, seed=np.random.SeedSequence([spec.seed, index, c])
-            )
+        mask = silhouette(V, F, cam, assume_closed=True)
+        if degradation != Degradation():
+            mask = degrade(mask, degradation, seed=np.random.SeedSequence([seed, index, c]))
         write_mask(out / "silhouettes" / cam.name / f"{frame_name(index)}.png", mask)
         masks.append(mask)
-    hull = carve(masks, cameras, voxel_size=spec.voxel_size)
+    hull = carve(masks, cameras, voxel_size=voxel_size)
     name = frame_name(index)
     write_mesh(out / "hulls" / f"{name}.ply", *hull_mesh(hull))
     write_hull(out / "hulls" / f"{name}.npz", hull)
-    write_truth(out / "truth" / f"{name}.npz", Truth(posed.eval_joints, posed.V, R, root))
+    write_truth(out / "truth" / f"{name}.npz", truth)
+
+
+def synthesize_from_meshes(
+    source: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    rig: str = "ring8",
+    frames: range | slice | None = None,
+    up: str = "y",
+    degradation: Degradation | None = None,
+    seed: int = 0,
+    voxel_size: float = 0.01,
+    show_progress: bool | None = None,
+) -> Capture:
+    """Make a capture of a real mesh sequence (e.g. the MIT crane): each frame is rendered
+    into the rig's silhouettes and carved into a visual hull, so no coherence between frames
+    is left; the original vertices are kept as truth (per-vertex correspondences when the
+    sequence has fixed connectivity).
+
+    The sequence is moved (one translation for all frames, stored as ``offset`` in
+    ``capture.json``) so that frame 0 stands on z = 0 centred at x = y = 0, inside the rig.
+
+    Parameters
+    ----------
+    source : path
+        Folder, glob or archive of meshes (:class:`~meshmocap.io.meshes.MeshSequence`).
+    up : {"y", "z"}
+        Up axis of the files (the crane is Y up).
+    """
+    from meshmocap.io.meshes import MeshSequence
+
+    degradation = degradation or Degradation()
+    seq = MeshSequence(source, frames=frames, kind="mesh", up=up)
+    out = Path(out)
+    cameras = _cameras(rig)
+    first = seq[0]
+    offset = -np.array([*first.V[:, :2].mean(axis=0), first.V[:, 2].min()])
+    meta = {
+        "fps": 30.0,
+        "frames": [int(i) for i in seq.indices],
+        "offset": offset.tolist(),
+        "spec": {
+            "source": os.fspath(source),
+            "rig": rig,
+            "up": up,
+            "seed": seed,
+            "voxel_size": voxel_size,
+            "degradation": dataclasses.asdict(degradation),
+        },
+        "cameras": [c.name for c in cameras],
+        "subject_vertices": len(first.V),
+    }
+    meta_path = out / "capture.json"
+    if meta_path.is_file() and json.loads(meta_path.read_text()).get("spec") != json.loads(
+        json.dumps(meta["spec"])
+    ):
+        raise InputError(
+            f"synth: {out} holds a capture made with other parameters; use a new folder"
+        )
+    for sub in ["hulls", "truth", *(f"silhouettes/{c.name}" for c in cameras)]:
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    write_cameras(out / "cameras.json", cameras)
+    write_meta(meta_path, meta)
+    todo = [
+        k
+        for k, i in enumerate(seq.indices)
+        if not (out / "truth" / f"{frame_name(int(i))}.npz").is_file()
+    ]
+    for k in progress(todo, label="synth", enabled=show_progress):
+        fr = seq[k]
+        V = fr.V + offset
+        write_frame(
+            out,
+            V,
+            fr.F,
+            cameras,
+            fr.index,
+            Truth(V),
+            degradation=degradation,
+            seed=seed,
+            voxel_size=voxel_size,
+        )
+    return Capture(out)
