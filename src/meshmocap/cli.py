@@ -140,6 +140,22 @@ def _cmd_hull(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from meshmocap.evaluation.evaluate import evaluate, summary, write_evaluation
+    from meshmocap.io.capture import Capture
+    from meshmocap.io.results import read_track
+
+    track, capture = read_track(args.track), Capture(args.capture)
+    ev = evaluate(
+        track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
+    )
+    print(summary(ev))
+    if args.out:
+        files = write_evaluation(ev, args.out)
+        print(f"\nwrote {len(files)} files to {args.out}")
+    return 0
+
+
 def _frame_range(text: str) -> slice:
     """Parse ``START:STOP[:STEP]`` (any part optional) into a slice."""
     parts = text.split(":")
@@ -206,6 +222,14 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--voxel-size", type=float, default=0.01, help="voxel edge, metres")
     h.add_argument("--overwrite", action="store_true", help="recompute existing hulls")
     h.set_defaults(func=_cmd_hull)
+
+    e = sub.add_parser("eval", help="score a track against its capture's ground truth")
+    e.add_argument("capture", help="capture folder")
+    e.add_argument("track", help="track folder written by 'meshmocap track'")
+    e.add_argument("--out", help="folder for CSV tables and PNG plots")
+    e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
+    e.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
+    e.set_defaults(func=_cmd_eval)
 
     v = sub.add_parser(
         "render", help="render a posed template or a clip to PNG frames and a contact sheet"

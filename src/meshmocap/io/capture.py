@@ -8,9 +8,10 @@ Layout (``capture.json`` holds ``"format": "meshmocap-capture-1"``)::
       silhouettes/<camera>/NNNNN.png   one binary mask per camera and frame
       hulls/NNNNN.ply                  visual-hull mesh, metres, Z up
       hulls/NNNNN.npz                  its voxel occupancy (bit-packed), origin, voxel size
-      truth/NNNNN.npz                  ground truth of synthetic captures: evaluation joints
-                                       (K, 3), posed vertices (n, 3), local rotations
+      truth/NNNNN.npz                  ground truth of synthetic captures: posed vertices
+                                       (n, 3), evaluation joints (K, 3), local rotations
                                        (J, 3, 3), root position (3,)
+      truth/faces.npy                  triangles (m, 3) of the true surface
 
 Every file is written atomically; a synthetic frame is complete when its truth file exists,
 so an interrupted run keeps every finished frame and resumes where it stopped. Real
@@ -78,7 +79,9 @@ def write_truth(path: str | os.PathLike, truth: Truth) -> None:
 def read_truth(path: str | os.PathLike) -> Truth:
     """Read a truth file written by :func:`write_truth`."""
     d = _load_npz(path, ("vertices",), optional=("joints", "rotations", "root"))
-    return Truth(d["vertices"].astype(np.float64), d.get("joints"), d.get("rotations"), d.get("root"))
+    return Truth(
+        d["vertices"].astype(np.float64), d.get("joints"), d.get("rotations"), d.get("root")
+    )
 
 
 def write_hull(path: str | os.PathLike, hull: VoxelHull) -> None:
@@ -200,6 +203,12 @@ class Capture:
         path = self.path / "cameras.json"
         return read_cameras(path) if path.is_file() else []
 
+    @cached_property
+    def truth_faces(self) -> np.ndarray | None:
+        """(m, 3) int64 triangles of the true surface, or None without truth."""
+        path = self.path / "truth" / "faces.npy"
+        return np.load(path).astype(np.int64) if path.is_file() else None
+
     @property
     def fps(self) -> float:
         """Frames per second (``capture.json``; 30 when unknown)."""
@@ -231,6 +240,12 @@ class Capture:
 
     def __repr__(self) -> str:
         return f"Capture({str(self.path)!r}, {len(self)} frames, {len(self.cameras)} cameras)"
+
+
+def write_truth_faces(capture: str | os.PathLike, F: np.ndarray) -> None:
+    """Write the true surface's triangles (``truth/faces.npy``)."""
+    with atomic_open(Path(capture) / "truth" / "faces.npy") as f:
+        np.save(f, np.asarray(F, dtype=np.int32))
 
 
 def write_meta(path: str | os.PathLike, meta: dict) -> None:

@@ -4,6 +4,7 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
 
     TRACK/
       track.json        method, template, capture, evaluation-joint names and parents, options
+      faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
                         terms, iterations, seconds, health flag and message
 
@@ -61,6 +62,7 @@ class Track:
     Attributes
     ----------
     meta : dict, the contents of ``track.json``
+    faces : (m, 3) int64, the template's triangles
     frames : (T,) int64, frame numbers
     joints : (T, K, 3) float64; vertices : (T, n, 3) float64
     energies : dict of str → (T,) float64
@@ -68,6 +70,7 @@ class Track:
     """
 
     meta: dict
+    faces: np.ndarray
     frames: np.ndarray
     joints: np.ndarray
     vertices: np.ndarray
@@ -82,8 +85,12 @@ def frame_path(track: str | os.PathLike, index: int) -> Path:
     return Path(track) / "frames" / f"{index:05d}.npz"
 
 
-def start_track(path: str | os.PathLike, meta: dict, *, resume: bool = True) -> list[int]:
+def start_track(
+    path: str | os.PathLike, meta: dict, faces: np.ndarray, *, resume: bool = True
+) -> list[int]:
     """Create (or reopen) a track folder and return the frames already done.
+
+    ``faces`` (m, 3) are the template's triangles (stored as ``faces.npy``).
 
     Raises :class:`FormatError` when resuming a folder written with other metadata.
     """
@@ -101,6 +108,8 @@ def start_track(path: str | os.PathLike, meta: dict, *, resume: bool = True) -> 
         for p in (path / "frames").glob("*.npz"):
             p.unlink()
     write_text_atomic(meta_path, json.dumps(full, indent=2) + "\n")
+    with atomic_open(path / "faces.npy") as f:
+        np.save(f, np.asarray(faces, dtype=np.int32))
     return done_frames(path)
 
 
@@ -150,8 +159,12 @@ def read_track(path: str | os.PathLike) -> Track:
         except (OSError, ValueError, KeyError) as exc:
             raise FormatError(f"{frame_path(path, i)}: unreadable frame result ({exc})") from None
     keys = sorted(set.intersection(*({k for k in r if k.startswith("energy_")} for r in rows)))
+    faces_path = path / "faces.npy"
+    if not faces_path.is_file():
+        raise MeshmocapFileNotFoundError(f"track: {path} has no faces.npy")
     return Track(
         meta=meta,
+        faces=np.load(faces_path).astype(np.int64),
         frames=np.array(frames),
         joints=np.stack([r["joints"] for r in rows]).astype(np.float64),
         vertices=np.stack([r["vertices"] for r in rows]).astype(np.float64),

@@ -24,7 +24,15 @@ from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import carve, hull_mesh
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.io.cameras import read_cameras, write_cameras
-from meshmocap.io.capture import Capture, Truth, frame_name, write_hull, write_meta, write_truth
+from meshmocap.io.capture import (
+    Capture,
+    Truth,
+    frame_name,
+    write_hull,
+    write_meta,
+    write_truth,
+    write_truth_faces,
+)
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.silhouettes import write_mask
 from meshmocap.studio.degrade import Degradation, degrade
@@ -125,6 +133,7 @@ def synthesize(
         (out / sub).mkdir(parents=True, exist_ok=True)
     write_cameras(out / "cameras.json", cameras)
     write_meta(meta_path, meta)
+    write_truth_faces(out, subject.F)
     todo = [f for f in frames if not (out / "truth" / f"{frame_name(f)}.npz").is_file()]
     for f in progress(todo, label="synth", enabled=show_progress):
         synth_frame(out, subject, motion.rotations[f], motion.root_positions[f], cameras, f, spec)

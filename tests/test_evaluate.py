@@ -1,0 +1,69 @@
+"""Evaluating a track against a capture: known perturbations give known errors."""
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+from meshmocap.errors import InputError
+from meshmocap.evaluation.evaluate import evaluate, write_evaluation
+from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
+from meshmocap.studio.synth import SynthSpec, synthesize
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cap")
+    return synthesize(
+        out, SynthSpec(motion="walk", template="neutral_5k", stop=4), show_progress=False
+    )
+
+
+def _track(capture, out, shift):
+    """A 'track' that is the truth moved by ``shift`` metres."""
+    from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
+
+    meta = {"method": "truth+shift", "template": "neutral_5k", "eval_names": list(EVAL_NAMES),
+            "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    start_track(out, meta, capture.truth_faces, resume=False)
+    for f in capture:
+        t = f.truth
+        write_frame(out, FrameResult(f.index, t.joints + shift, t.vertices + shift, seconds=0.01))
+    return read_track(out)
+
+
+def test_a_shifted_truth_scores_its_shift(capture, tmp_path):
+    shift = np.array([0.003, 0.004, 0.0])  # 5 mm
+    ev = evaluate(_track(capture, tmp_path / "tr", shift), capture, surface_frames=2)
+    assert ev.joints.overall.mean == pytest.approx(5.0, abs=1e-6)  # mm, exact up to rounding
+    assert ev.joints14.overall.max == pytest.approx(5.0, abs=1e-6)
+    assert ev.correspondence.overall.mean == pytest.approx(5.0, abs=1e-3)  # float32 vertices
+    # bone lengths: the truth's own (the spine bends, so pelvis–thorax varies by ~1 µm here)
+    assert ev.bones.std.max() < 1e-3
+    # surface distance of a 5 mm shift: between 0 and 5 mm (tangential shifts cost nothing)
+    assert 0.5 < ev.surface.mean.mean() < 5.0 and ev.surface.against == "truth"
+    # silhouettes: a 5 mm shift of a ~200 px tall body moves the outline by < 1 px
+    assert 0.0 < ev.silhouettes.overall < 0.05
+    files = write_evaluation(ev, tmp_path / "report")
+    assert all(p.is_file() and p.stat().st_size > 0 for p in files)
+
+
+def test_exact_truth_scores_zero(capture, tmp_path):
+    ev = evaluate(
+        _track(capture, tmp_path / "tr", 0.0), capture, silhouettes=False, surface_frames=0
+    )
+    assert ev.joints.overall.max == 0.0 and ev.silhouettes is None and ev.surface is None
+
+
+def test_eval_command(capture, tmp_path, capsys):
+    _track(capture, tmp_path / "tr", np.array([0.0, 0.0, 0.01]))
+    assert main(["eval", str(capture.path), str(tmp_path / "tr"), "--out", str(tmp_path / "r"),
+                 "--surface-frames", "1"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "3D joint error" in out and (tmp_path / "r" / "joint_errors.csv").is_file()
+
+
+def test_track_frames_missing_from_the_capture(capture, tmp_path):
+    tr = _track(capture, tmp_path / "tr", 0.0)
+    write_frame(tmp_path / "tr", FrameResult(99, tr.joints[0], tr.vertices[0]))
+    with pytest.raises(InputError, match=r"\[99\]"):
+        evaluate(read_track(tmp_path / "tr"), capture)
