@@ -148,3 +148,17 @@ def test_crane_hulls_contain_the_real_surface(shared_data, tmp_path):
             F = read_mesh(src / "mesh_0000.obj")[1]
             ratios[rig].append(f.hull.volume / signed_volume(V, F))
     assert 1.0 < np.mean(ratios["ring8"]) < np.mean(ratios["humaneva4"])
+
+
+def test_any_mesh_folder_opens_as_a_capture(tmp_path, walk_capture):
+    import trimesh
+
+    from meshmocap.io.capture import SequenceCapture, open_capture
+
+    for i in (2, 10, 1):
+        trimesh.creation.icosphere(radius=0.1 * i).export(tmp_path / f"frame_{i}.ply")
+    cap = open_capture(tmp_path)
+    assert isinstance(cap, SequenceCapture) and cap.indices == [0, 1, 2]
+    radii = [np.linalg.norm(f.hull_mesh[0], axis=1).mean() for f in cap]
+    assert np.allclose(radii, [0.1, 0.2, 1.0], rtol=1e-3)  # natural order: 1, 2, 10
+    assert isinstance(open_capture(walk_capture.path), Capture)

@@ -251,3 +251,69 @@ def write_truth_faces(capture: str | os.PathLike, F: np.ndarray) -> None:
 def write_meta(path: str | os.PathLike, meta: dict) -> None:
     """Write ``capture.json`` (adds the format tag)."""
     write_text_atomic(path, json.dumps({"format": FORMAT, **meta}, indent=2) + "\n")
+
+
+@dataclass(frozen=True, eq=False)
+class SequenceFrame:
+    """A frame of a plain mesh or point-cloud sequence, with the same attributes as
+    :class:`CaptureFrame` (``hull_mesh`` holds the frame's geometry; ``F`` is None for a
+    point cloud)."""
+
+    index: int
+    hull_mesh: tuple[np.ndarray, np.ndarray | None]
+    normals: np.ndarray | None
+    silhouettes: list[np.ndarray] | None = None
+    truth: Truth | None = None
+
+
+class SequenceCapture:
+    """Any folder, glob or archive of meshes or point clouds, read as a capture, frame by frame.
+
+    Parameters
+    ----------
+    source : path or glob
+        See :class:`~meshmocap.io.meshes.MeshSequence`.
+    cameras : path, optional
+        A camera file; with ``silhouettes`` (a folder of ``<camera>/NNNNN.png``) the frames
+        also carry their masks (for the silhouette overlap error).
+    up : {"z", "y"}
+        The files' up axis.
+    """
+
+    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None):
+        from meshmocap.io.meshes import MeshSequence
+
+        self.seq = MeshSequence(source, up=up, frames=frames)
+        self.path = Path(os.fspath(source))
+        self.meta: dict = {}
+        self.cameras = read_cameras(cameras) if cameras else []
+        self.silhouette_dir = Path(silhouettes) if silhouettes else None
+        self.indices = [int(i) for i in self.seq.indices]
+        self.truth_faces = None
+        self.fps = 30.0
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+    def __getitem__(self, k: int) -> SequenceFrame:
+        f = self.seq[k]
+        masks = None
+        if self.silhouette_dir is not None and self.cameras:
+            masks = [
+                read_mask(self.silhouette_dir / c.name / f"{frame_name(f.index)}.png")
+                for c in self.cameras
+            ]
+        return SequenceFrame(f.index, (f.V, f.F), f.normals, masks)
+
+    def __iter__(self) -> Iterator[SequenceFrame]:
+        for k in range(len(self)):
+            yield self[k]
+
+
+def open_capture(source: str | os.PathLike, **kwargs) -> Capture | SequenceCapture:
+    """Open a capture folder (``capture.json``, ``hulls/`` or ``silhouettes/``) or, for any
+    other folder, glob or archive of meshes/point clouds, a :class:`SequenceCapture`."""
+    path = Path(os.fspath(source))
+    if path.is_dir() and any((path / n).exists() for n in ("capture.json", "hulls", "truth")):
+        return Capture(path)
+    return SequenceCapture(source, **kwargs)
