@@ -158,7 +158,7 @@ def read_track(path: str | os.PathLike) -> Track:
                 rows.append({k: z[k] for k in z.files})
         except (OSError, ValueError, KeyError) as exc:
             raise FormatError(f"{frame_path(path, i)}: unreadable frame result ({exc})") from None
-    keys = sorted(set.intersection(*({k for k in r if k.startswith("energy_")} for r in rows)))
+    keys = sorted({k for r in rows for k in r if k.startswith("energy_")})
     faces_path = path / "faces.npy"
     if not faces_path.is_file():
         raise MeshmocapFileNotFoundError(f"track: {path} has no faces.npy")
@@ -168,7 +168,8 @@ def read_track(path: str | os.PathLike) -> Track:
         frames=np.array(frames),
         joints=np.stack([r["joints"] for r in rows]).astype(np.float64),
         vertices=np.stack([r["vertices"] for r in rows]).astype(np.float64),
-        energies={k[7:]: np.array([float(r[k]) for r in rows]) for k in keys},
+        # 0 where a frame has no such term (the initial frame, a baseline without it)
+        energies={k[7:]: np.array([float(r.get(k, 0.0)) for r in rows]) for k in keys},
         n_iter=np.array([int(r["n_iter"]) for r in rows]),
         seconds=np.array([float(r["seconds"]) for r in rows]),
         healthy=np.array([bool(r["healthy"]) for r in rows]),

@@ -1,0 +1,44 @@
+"""What every tracker provides, and how a tracking run starts.
+
+A tracker is a small stateful object: ``init`` places the template on the first frame
+(from a known pose), ``step`` fits the next frame and returns a
+:class:`~meshmocap.io.results.FrameResult`. The state it needs to continue is returned
+with each result (``FrameResult.state``) and restored by ``set_state``, so the sequence
+driver can resume an interrupted run and recover from a failed frame.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from meshmocap.body.template import Template
+from meshmocap.io.capture import CaptureFrame
+from meshmocap.io.results import FrameResult
+
+
+class Tracker(Protocol):
+    """The interface of the trackers (``cage``, ``patch``, baselines)."""
+
+    #: Short method name written in ``track.json``.
+    name: str
+
+    def init(
+        self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
+    ) -> FrameResult:
+        """Start on ``frame`` with the template posed by local rotations ``R`` (J, 3, 3) and
+        root position ``root`` (3,) (e.g. the first frame's ground truth)."""
+        ...
+
+    def step(self, frame: CaptureFrame) -> FrameResult:
+        """Fit the next frame, warm-started from the current state."""
+        ...
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a state returned in an earlier :class:`FrameResult`."""
+        ...
+
+    def options(self) -> dict:
+        """JSON-ready settings (written to ``track.json``; a resumed run must match)."""
+        ...

@@ -1,0 +1,316 @@
+"""The patch tracker of patch-skeleton-tracking.txt (Huang, Boyer, Ilic, 3DV 2013).
+
+Per frame: a body-part classifier trained on the previous fitted mesh sorts the observed
+points into on-bone, near-joint and outlier points (§III-B, Eq. 4–6); an EM loop then
+alternates soft assignments of the kept points to patches plus an outlier class (E-step,
+correspondences by distance and normal compatibility) with one Gauss–Newton step on every
+patch rotation/centre and joint position of
+
+    E(Θ, J) = λr Er(Θ) + λd Edata(Θ) + λb Ebone(Θ, J)                              # Eq. (1)
+
+(M-step; :mod:`meshmocap.trackers.patch_solver`), warm-started from the previous frame.
+Each term is normalised by its total weight, so the λs weigh mean squared residuals
+(metres²) whatever the number of points, patches or vertices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+
+from meshmocap._validate import check_choice
+from meshmocap.body.template import Template
+from meshmocap.errors import InputError
+from meshmocap.geometry.mesh import vertex_normals
+from meshmocap.geometry.rotations import so3_exp
+from meshmocap.io.capture import CaptureFrame
+from meshmocap.io.results import FrameResult
+from meshmocap.models.bodyparts import BodyPartClassifier, partition
+from meshmocap.trackers.patch_model import PatchModel, build_patch_model
+from meshmocap.trackers.patch_solver import (
+    System,
+    add_bone,
+    add_point_terms,
+    add_rigidity,
+    rigidity_moments,
+)
+
+Classifier = Literal["logistic", "svc", "none"]
+
+#: Scale of the rigidity and bone terms relative to the data term after each is normalised
+#: by its total weight (mean squared residuals). Neighbouring patches' predictions and the
+#: bone points stay within millimetres, the data within centimetres: without this factor the
+#: paper's λr = λb = 1 against λd = 10 lets patches drift apart (tuned on synthetic walks;
+#: see benchmarks/bench_patch.py).
+RIGIDITY_SCALE = 30.0
+BONE_SCALE = 30.0
+
+
+@dataclass(frozen=True)
+class PatchOptions:
+    """Settings of the patch tracker (defaults from the paper where it gives them).
+
+    Parameters
+    ----------
+    n_patches : int
+        Number of surface patches (the paper uses 150–250).
+    lambda_data, lambda_rigid, lambda_bone : float
+        λd, λr, λb of Eq. (1) (the paper's 10, 1, 1).
+    classifier : {"logistic", "svc", "none"}
+        Body-part classifier sorting the observed points (§III-B); "svc" is the paper's
+        linear SVM with Platt scaling, "none" the tracker without classification.
+    keep_fraction : float
+        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8).
+    on_bone, outlier : float
+        Probability thresholds of Eq. (6).
+    max_distance : float or None
+        Points farther than this (metres) from the previous fitted mesh are outliers too (a
+        linear classifier is confident far from the body, where phantom volumes lie).
+    max_points : int
+        Observed points sampled from each hull before classification.
+    max_iter : int
+        EM iterations per frame; ``tol`` (metres): stop when no vertex moves more.
+    sigma0, sigma_min, sigma_max : float
+        Initial, smallest and largest standard deviation (metres) of the EM Gaussians.
+    outlier_sigmas : float
+        A point as far as this many σ from its best candidate is as likely an outlier.
+    k_neighbours : int
+        Candidate vertices per observed point.
+    damping : float
+        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
+    predict : bool
+        Warm-start each frame by constant-velocity extrapolation of the last two frames'
+        patch transforms and joints (else: from the last frame).
+    normal_cos : float
+        Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
+    seed : int
+        Patches and subsampling seed.
+    """
+
+    n_patches: int = 200
+    lambda_data: float = 10.0
+    lambda_rigid: float = 1.0
+    lambda_bone: float = 1.0
+    classifier: Classifier = "logistic"
+    keep_fraction: float = 0.5
+    on_bone: float = 0.9
+    outlier: float = 0.5
+    max_distance: float | None = 0.1
+    max_points: int = 6000
+    max_iter: int = 10
+    tol: float = 2e-4
+    sigma0: float = 0.03
+    sigma_min: float = 0.005
+    sigma_max: float = 0.05
+    outlier_sigmas: float = 3.0
+    k_neighbours: int = 8
+    normal_cos: float = 0.0
+    damping: float = 1e-4
+    predict: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
+        if self.n_patches < 1:
+            raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
+        if not 0 < self.keep_fraction <= 1:
+            raise InputError(
+                f"PatchOptions: keep_fraction must be in (0, 1], found {self.keep_fraction}"
+            )
+
+
+class PatchTracker:
+    """Patch-based shape and skeleton tracker (see the module docstring).
+
+    Parameters
+    ----------
+    options : PatchOptions
+    """
+
+    name = "patch"
+
+    def __init__(self, options: PatchOptions = PatchOptions()):
+        self.opts = options
+        self.model: PatchModel | None = None
+        self.template: Template | None = None
+
+    def options(self) -> dict:
+        """JSON-ready settings."""
+        from dataclasses import asdict
+
+        return asdict(self.opts)
+
+    # ------------------------------------------------------------------ state
+    def setup(self, template: Template) -> None:
+        """Cut ``template`` into patches and precompute the solver's constant parts."""
+        o = self.opts
+        self.template = template
+        self.model = build_patch_model(template, n_patches=o.n_patches, seed=o.seed)
+        self.moments = rigidity_moments(self.model)
+
+    def init(
+        self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
+    ) -> FrameResult:
+        """Place the patches on the template posed by ``R``, ``root`` (ground truth)."""
+        o = self.opts
+        if self.template is not template:
+            self.setup(template)
+        m = self.model
+        posed = template.pose(R, root)
+        self.R, self.c = _fit_patches(m, posed.V)
+        self.X = posed.eval_joints.copy()
+        self.sigma = o.sigma0
+        self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
+        return self._result(frame.index, {}, 0)
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore patch transforms, joints and σ saved with a frame."""
+        self.R, self.c, self.X = state["R"].copy(), state["c"].copy(), state["X"].copy()
+        self.sigma = float(state["sigma"])
+        self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
+
+    def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
+        Rp, cp, Xp = self.prev
+        state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
+                 "R_prev": Rp, "c_prev": cp, "X_prev": Xp}  # fmt: skip
+        return FrameResult(index=index, joints=self.X.copy(), vertices=self.vertices(),
+                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+
+    # ------------------------------------------------------------------ geometry
+    def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each vertex as predicted by its own patch, and its normal: (n, 3), (n, 3)."""
+        m = self.model
+        Rl = self.R[m.labels]
+        V = np.einsum("nij,nj->ni", Rl, m.V0 - m.centres0[m.labels]) + self.c[m.labels]
+        return V, np.einsum("nij,nj->ni", Rl, m.N0)
+
+    def vertices(self) -> np.ndarray:
+        """The output mesh: patch predictions blended over neighbouring patches (n, 3)."""
+        m = self.model
+        B = m.blend.tocoo()
+        pred = (
+            np.einsum("nij,nj->ni", self.R[B.col], m.V0[B.row] - m.centres0[B.col]) + self.c[B.col]
+        )
+        return np.stack(
+            [np.bincount(B.row, B.data * pred[:, a], minlength=len(m.V0)) for a in range(3)], 1
+        )
+
+    # ------------------------------------------------------------------ tracking
+    def observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Observed points, their normals and (with a classifier) predicted classes."""
+        o = self.opts
+        rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
+        V, F = frame.hull_mesh
+        N = vertex_normals(V, F)
+        if len(V) > o.max_points:
+            pick = rng.choice(len(V), o.max_points, replace=False)
+            V, N = V[pick], N[pick]
+        if o.classifier == "none":
+            return V, N, None
+        clf = BodyPartClassifier(o.classifier, random_state=o.seed)
+        clf.fit(self.vertices(), self.model.vertex_class)  # trained on the previous fit (§III-B)
+        part = partition(
+            clf, V, on_bone=o.on_bone, outlier=o.outlier, keep_fraction=o.keep_fraction,
+            max_distance=o.max_distance, random_state=rng.integers(1 << 31),
+        )  # fmt: skip
+        keep = part.keep
+        return V[keep], N[keep], part.labels[keep]
+
+    def step(self, frame: CaptureFrame) -> FrameResult:
+        """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
+        o, m = self.opts, self.model
+        Y, NY, ycls = self.observations(frame)
+        last = (self.R.copy(), self.c.copy(), self.X.copy())
+        if o.predict:  # constant velocity: R ← (R R_prevᵀ) R, c ← 2c − c_prev, X ← 2X − X_prev
+            Rp, cp, Xp = self.prev
+            self.R = self.R @ np.swapaxes(Rp, 1, 2) @ self.R
+            self.c, self.X = 2 * self.c - cp, 2 * self.X - Xp
+        self.prev = last
+        if len(Y) < 10:
+            raise FloatingPointError(f"only {len(Y)} observed points kept")
+        n_unknowns = 6 * m.P + 3 * len(self.X)
+        energies: dict[str, float] = {}
+        n_iter = 0
+        while n_iter < o.max_iter:
+            n_iter += 1
+            Vc, Nc = self.own_vertices()
+            patch, v, w, y = self._assign(Y, NY, ycls, Vc, Nc)
+            sys = System.empty(n_unknowns)
+            q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
+            r = q + self.c[patch] - y
+            wd = max(float(w.sum()), 1e-12)
+            e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
+            w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
+            e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
+            w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
+            e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
+            delta = sys.solve(o.damping)
+            if not np.all(np.isfinite(delta)):
+                raise FloatingPointError("singular normal equations")
+            self._apply(delta)
+            # EM update of σ from the weighted residuals (one Gaussian per correspondence)
+            self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
+            energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
+                        "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma}  # fmt: skip
+            d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
+            move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
+            if move < o.tol:
+                break
+        energies["total"] = (
+            o.lambda_data * energies["data"]
+            + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
+            + o.lambda_bone * BONE_SCALE * energies["bone"]
+        )
+        return self._result(frame.index, energies, n_iter)
+
+    def _assign(self, Y, NY, ycls, Vc, Nc):
+        """E-step: soft assignments of observed points to patches (+ an outlier class).
+
+        Returns, per (point, patch) correspondence, the patch, the chosen vertex, the
+        posterior weight and the observed point.
+        """
+        o, m = self.opts, self.model
+        K = min(o.k_neighbours, len(Vc))
+        d, idx = KDTree(Vc).query(Y, k=K)
+        d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
+        ok = np.sum(Nc[idx] * NY[:, None, :], axis=2) > o.normal_cos  # normal compatibility
+        if ycls is not None:  # only patches of the point's body part (§III-B)
+            ok &= m.bone_of_patch[m.labels[idx]] == ycls[:, None]
+        i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
+        patch = m.labels[idx[i, j]]
+        key = i * m.P + patch
+        _, first = np.unique(key, return_index=True)  # nearest compatible vertex per patch
+        i, j, patch = i[first], j[first], patch[first]
+        d2 = d[i, j].astype(np.float64) ** 2
+        p = np.exp(-0.5 * d2 / self.sigma**2)
+        p_out = np.exp(-0.5 * o.outlier_sigmas**2)
+        denom = np.bincount(i, p, minlength=len(Y)) + p_out
+        w = p / denom[i]
+        return patch, idx[i, j], w, Y[i]
+
+    def _apply(self, delta: np.ndarray) -> None:
+        P = self.model.P
+        d = delta[: 6 * P].reshape(P, 6)
+        self.R = so3_exp(d[:, :3]) @ self.R
+        self.c = self.c + d[:, 3:]
+        self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _fit_patches(m: PatchModel, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Best rigid transform of every patch from rest to the vertex positions ``V`` (Kabsch)."""
+    P, lab = m.P, m.labels
+    n = np.bincount(lab, minlength=P)
+    c = np.stack([np.bincount(lab, V[:, a], minlength=P) for a in range(3)], 1) / n[:, None]
+    A = m.V0 - m.centres0[lab]
+    B = V - c[lab]
+    H = np.stack(
+        [np.bincount(lab, A[:, a] * B[:, b], minlength=P) for a in range(3) for b in range(3)], 1
+    )
+    U, _, Vt = np.linalg.svd(H.reshape(P, 3, 3))
+    D = np.ones((P, 3))
+    D[:, 2] = np.sign(np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)))
+    R = np.swapaxes(Vt, 1, 2) @ (D[:, :, None] * np.swapaxes(U, 1, 2))
+    return R, c

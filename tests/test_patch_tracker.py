@@ -1,0 +1,85 @@
+"""The patch tracker and the sequence driver on a short synthetic walk."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from meshmocap.body.template import load_template
+from meshmocap.errors import InputError
+from meshmocap.io.results import done_frames, read_track
+from meshmocap.studio.synth import SynthSpec, synthesize
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.patch import PatchOptions, PatchTracker
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    out = tmp_path_factory.mktemp("walk")
+    cap = synthesize(
+        out, SynthSpec(motion="walk", template="neutral_5k", stop=7), show_progress=False
+    )
+    return cap, load_template("neutral_5k")
+
+
+@pytest.fixture(scope="module")
+def tracked(walk, tmp_path_factory):
+    cap, t = walk
+    out = tmp_path_factory.mktemp("track")
+    opts = PatchOptions(n_patches=120, max_iter=6)
+    return track_sequence(PatchTracker(opts), t, cap, out, show_progress=False), out, opts
+
+
+def test_patch_tracker_follows_a_walk(walk, tracked):
+    cap, _ = walk
+    track, _, _ = tracked
+    true = np.stack([f.truth.joints for f in cap])
+    err = np.linalg.norm(track.joints - true, axis=2).mean(axis=1) * 1000  # mm per frame
+    # 4-camera hulls are fat (phantom volume); over 7 frames the tracker stays within the
+    # issue's 35 mm budget (the benchmark measures whole clips)
+    assert err[0] < 1e-6 and err.max() < 35.0
+    assert track.healthy.all() and np.isfinite(track.vertices).all()
+    assert set(track.energies) >= {"data", "rigidity", "bone", "total"}
+
+
+def test_interrupted_run_resumes_to_the_same_result(walk, tracked, tmp_path):
+    cap, t = walk
+    track, out, opts = tracked
+    part = tmp_path / "track"
+    shutil.copytree(out, part)
+    for i in (5, 6):
+        (part / "frames" / f"{i:05d}.npz").unlink()
+    assert done_frames(part) == [0, 1, 2, 3, 4]
+    again = track_sequence(PatchTracker(opts), t, cap, part, show_progress=False)
+    assert np.allclose(again.joints, track.joints, atol=1e-9)  # seeded per frame: identical
+    with pytest.raises(Exception, match="other settings"):
+        track_sequence(PatchTracker(PatchOptions(n_patches=90)), t, cap, part, show_progress=False)
+
+
+class _Flaky(PatchTracker):
+    """Fails on frame 3 like a singular system would."""
+
+    def step(self, frame):
+        if frame.index == 3:
+            raise np.linalg.LinAlgError("singular matrix")
+        return super().step(frame)
+
+
+def test_failed_frame_is_flagged_and_tracking_continues(walk, tmp_path):
+    cap, t = walk
+    opts = PatchOptions(n_patches=120, max_iter=4)
+    track = track_sequence(
+        _Flaky(opts), t, cap, tmp_path / "tr", frames=range(5), show_progress=False
+    )
+    assert track.healthy.tolist() == [True, True, True, False, True]
+    assert np.array_equal(track.joints[3], track.joints[2])  # the last good result repeated
+    assert np.isfinite(track.joints).all()
+    flagged = read_track(tmp_path / "tr")
+    assert not flagged.healthy[3]
+
+
+def test_options_are_validated():
+    with pytest.raises(InputError, match="classifier must be one of"):
+        PatchOptions(classifier="forest")
+    with pytest.raises(InputError, match="keep_fraction"):
+        PatchOptions(keep_fraction=0.0)
