@@ -83,3 +83,17 @@ def test_options_are_validated():
         PatchOptions(classifier="forest")
     with pytest.raises(InputError, match="keep_fraction"):
         PatchOptions(keep_fraction=0.0)
+
+
+def test_track_and_eval_commands(walk, tmp_path, capsys):
+    from meshmocap.cli import main
+
+    cap, _ = walk
+    out = tmp_path / "tr"
+    args = ["track", str(cap.path), "--template", "neutral_5k", "--out", str(out)]
+    assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4"]) == 0
+    assert "tracked 4 frames with patch" in capsys.readouterr().out
+    assert main(["eval", str(cap.path), str(out), "--surface-frames", "1"]) == 0
+    assert "3D joint error" in capsys.readouterr().out
+    assert main(["track", str(cap.path), "--method", "nope", "--out", str(out)]) == 2
+    assert "method must be one of" in capsys.readouterr().err

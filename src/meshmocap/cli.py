@@ -156,6 +156,33 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap.body.template import load_template
+    from meshmocap.io.capture import open_capture
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    options = {}
+    for name in ("n_patches", "classifier", "keep_fraction", "max_iter"):
+        value = getattr(args, name)
+        if value is not None:
+            options[name] = value
+    tracker = make_tracker(args.method, **options)
+    template = load_template(args.template)
+    capture = open_capture(args.capture)
+    frames = range(len(capture))[args.frames] if args.frames else None
+    t0 = time.perf_counter()
+    track = track_sequence(
+        tracker, template, capture, args.out, frames=frames, resume=not args.restart
+    )
+    dt = time.perf_counter() - t0
+    bad = int((~track.healthy).sum())
+    print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
+          f"({track.seconds[1:].mean() if len(track.seconds) > 1 else 0:.3f} s per frame); "
+          f"{bad} flagged unhealthy; results in {args.out}")  # fmt: skip
+    return 0
+
+
 def _frame_range(text: str) -> slice:
     """Parse ``START:STOP[:STEP]`` (any part optional) into a slice."""
     parts = text.split(":")
@@ -222,6 +249,21 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--voxel-size", type=float, default=0.01, help="voxel edge, metres")
     h.add_argument("--overwrite", action="store_true", help="recompute existing hulls")
     h.set_defaults(func=_cmd_hull)
+
+    k = sub.add_parser(
+        "track", help="track a capture: skeleton joints and template shape per frame"
+    )
+    k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
+    k.add_argument("--method", default="patch", help="patch, patch_noclf, articulated_icp")
+    k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
+    k.add_argument("--frames", type=_frame_range, help="frame range START:STOP[:STEP]")
+    k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")
+    k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
+    k.add_argument("--keep-fraction", type=float, help="patch tracker: on-bone points kept")
+    k.add_argument("--max-iter", type=int, help="iterations per frame")
+    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    k.set_defaults(func=_cmd_track)
 
     e = sub.add_parser("eval", help="score a track against its capture's ground truth")
     e.add_argument("capture", help="capture folder")

@@ -56,8 +56,9 @@ def track_sequence(
     template : Template
         The tracking template.
     capture : Capture
-        Frames to track; the first one (of ``frames``) must have ground truth, which
-        initialises the template's pose.
+        Frames to track. The first one (of ``frames``) initialises the template's pose from
+        its ground truth when it has one (the protocol of the papers' evaluations), else the
+        template starts in its rest pose (right for a template made from that frame).
     out : path
         Track folder (:mod:`meshmocap.io.results`).
     frames : sequence of int, optional
@@ -87,12 +88,13 @@ def track_sequence(
     first = capture[positions[0]]
     if indices[0] not in done:
         truth = first.truth
-        if truth is None:
-            raise InputError(
-                f"track: frame {first.index} has no ground truth to initialise the pose"
-            )
+        if truth is not None and truth.rotations is not None:
+            R, root = truth.rotations, truth.root
+        else:  # no known pose: the template's rest pose (e.g. a template cut from frame 0)
+            R = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
+            root = template.skeleton.rest_positions[0]
         t0 = time.perf_counter()
-        r = tracker.init(template, first, truth.rotations, truth.root)
+        r = tracker.init(template, first, R, root)
         write_frame(out, replace(r, index=first.index, seconds=time.perf_counter() - t0))
         done.add(first.index)
     todo = [k for k in positions[1:] if capture[k].index not in done]
