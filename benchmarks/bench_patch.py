@@ -52,11 +52,8 @@ def main() -> None:
         if not (CMU / name).is_file():
             print(f"skipped {clip}: {CMU / name} is absent")
             continue
-        stop = (
-            min(x for x in (stop, args.max_frames) if x is not None)
-            if (stop or args.max_frames)
-            else None
-        )
+        limits = [x for x in (stop, args.max_frames) if x]
+        stop = min(limits) if limits else None
         spec = SynthSpec(
             motion=str(CMU / name),
             template=args.template,
