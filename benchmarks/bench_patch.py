@@ -29,7 +29,12 @@ from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
 CMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mocap" / "cmu"
-CLIPS = {"05_01": ("05_01.amc", None), "09_01": ("09_01.bvh", None), "01_01": ("01_01.amc", 600)}
+#: clip → (file, first frame, last frame) at 60 fps; the Daz BVHs start with a T-pose frame.
+CLIPS = {
+    "05_01": ("05_01.amc", None, None),
+    "09_01": ("09_01.bvh", 1, None),
+    "01_01": ("01_01.amc", None, 600),
+}
 
 
 def main() -> None:
@@ -48,7 +53,7 @@ def main() -> None:
     tag = f"{args.rig}-{args.subject or args.template}{'-degraded' if args.degrade else ''}"
     rows = []
     for clip in args.clips:
-        name, stop = CLIPS[clip]
+        name, start, stop = CLIPS[clip]
         if not (CMU / name).is_file():
             print(f"skipped {clip}: {CMU / name} is absent")
             continue
@@ -60,6 +65,7 @@ def main() -> None:
             subject=args.subject,
             rig=args.rig,
             fps=60.0,
+            start=start,
             stop=stop,
             degradation=deg,
         )
