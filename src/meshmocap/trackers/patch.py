@@ -15,7 +15,7 @@ Each term is normalised by its total weight, so the λs weigh mean squared resid
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal, get_args
 
 import numpy as np
@@ -29,7 +29,7 @@ from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import BodyPartClassifier, partition
-from meshmocap.trackers.patch_model import PatchModel, build_patch_model
+from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind_bones
 from meshmocap.trackers.patch_solver import (
     System,
     add_bone,
@@ -45,8 +45,8 @@ Classifier = Literal["logistic", "svc", "none"]
 #: bone points stay within millimetres, the data within centimetres: without this factor the
 #: paper's λr = λb = 1 against λd = 10 lets patches drift apart (tuned on synthetic walks;
 #: see benchmarks/bench_patch.py).
-RIGIDITY_SCALE = 30.0
-BONE_SCALE = 30.0
+RIGIDITY_SCALE = 10.0
+BONE_SCALE = 100.0
 
 
 @dataclass(frozen=True)
@@ -162,6 +162,7 @@ class PatchTracker:
         posed = template.pose(R, root)
         self.R, self.c = _fit_patches(m, posed.V)
         self.X = posed.eval_joints.copy()
+        self.model = rebind_bones(m, self.R, self.c, self.X)
         self.sigma = o.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
         return self._result(frame.index, {}, 0)
@@ -171,11 +172,15 @@ class PatchTracker:
         self.R, self.c, self.X = state["R"].copy(), state["c"].copy(), state["X"].copy()
         self.sigma = float(state["sigma"])
         self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
+        self.model = replace(
+            self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
+        )
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         Rp, cp, Xp = self.prev
         state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
-                 "R_prev": Rp, "c_prev": cp, "X_prev": Xp}  # fmt: skip
+                 "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
+                 "delta0": self.model.delta0, "bone_w": self.model.bone_w}  # fmt: skip
         return FrameResult(index=index, joints=self.X.copy(), vertices=self.vertices(),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 

@@ -9,7 +9,7 @@ current rotation and centre (Cagniart et al. 2010, the paper's ref. [5]).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -167,3 +167,25 @@ def _nearest_child_bone(
         idx = np.flatnonzero(m)[better]
         child[idx], best[idx] = ch, dist[better]
     return child
+
+
+def rebind_bones(model: PatchModel, R: np.ndarray, c: np.ndarray, X: np.ndarray) -> PatchModel:
+    """Bind every patch to its bone in a posed configuration (the first tracked frame).
+
+    The paper keeps each patch's bone coordinate ``β`` constant "after transformation"
+    (Eq. 9–11): here ``β`` is measured where tracking starts, so ``Ebone`` is exactly zero
+    there. Measuring it on the rest pose instead would leave residuals of several
+    centimetres wherever skinning bends the surface (buttocks, shoulders), which the solver
+    would then 'correct' by moving the joints.
+
+    Parameters
+    ----------
+    R : (P, 3, 3), c : (P, 3) patch rotations and centres; X : (K, 3) joint positions.
+    """
+    j, child = model.bone_j, model.bone_child
+    d = X[child] - X[j]
+    s = np.sum((c - X[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-12)
+    delta = X[j] + s[:, None] * d  # Eq. (8): foot of the perpendicular from the patch centre
+    delta0 = np.einsum("kji,kj->ki", R, delta - c) + model.centres0  # T_k(Δ0_k) = Δ_k
+    bone_w = np.maximum(4.0 * s * (1.0 - s), MIN_BONE_WEIGHT)
+    return replace(model, gamma=1.0 - s, delta0=delta0, bone_w=bone_w)

@@ -1,0 +1,497 @@
+"""Articulated ICP: the skeleton-based baseline of patch-skeleton-tracking.txt §IV-B.
+
+The paper compares its patch tracker with "a standard articulated ICP approach similar to
+[7]": the template is driven by its skeleton through linear-blend skinning, and every
+frame alternates closest-point correspondences with a pose update. Here, per frame:
+
+1. warm start from the previous pose, extrapolated at constant velocity (``predict``);
+2. iterate (at most ``max_iter`` times):
+
+   * pose a fixed subset of ``n_model_points`` template vertices (area-weighted sample) and
+     their normals;
+   * correspondences with the observed hull points (pykdtree): each model point's nearest
+     *compatible* observed point (model→data) and, with ``correspondences="both"``, each
+     observed point's nearest compatible model point (data→model). Compatible: closer than
+     ``max_distance`` and normals agreeing (``n_model · n_data > normal_cos``), the nearest
+     such among ``k_neighbours`` candidates;
+   * one damped Gauss–Newton step on the pose Θ = (root translation t, a rotation increment
+     ω_j per joint) for
+
+         E(Θ) = E_md + w_dm E_dm + λ_pose Σ_j |log(R_j R̂_jᵀ)|² + λ_root |root − root̂|²
+
+     where E_md, E_dm are the mean squared residuals of the model→data and data→model
+     pairs, (R̂, root̂) the warm start (the predicted pose), residuals point-to-plane
+     ``n_y · (v_i − y)`` with the observed point's normal or point-to-point ``v_i − y``.
+
+**Parametrisation** (documented choice): ω_j is a *world-frame* rotation increment
+left-multiplying joint j's global rotation and rotating its whole subtree about the joint's
+world position p_j, i.e. the local rotation is updated as ``R_j ← exp(G_parentᵀ ω_j) R_j``
+(``G_parent = I`` for the root, which turns about its own position; t moves it). The
+derivative of a skinned vertex ``v_i = Σ_k w_ik A_k ṽ_i`` is then exactly
+
+    ∂v_i/∂t = I,   ∂v_i/∂ω_j · ω = ω × a_ij,   a_ij = Σ_{k ∈ subtree(j)} w_ik (A_k ṽ_i − p_j)
+
+a "subtree-accumulated" blend: with ``D[k, j] = 1`` when j is an ancestor-or-self of k,
+``a_ij = ((W ∘ Y) D)_ij − (W D)_ij p_j`` where ``Y_ik = A_k ṽ_i`` (only over the sparse
+weights). The shortcut ``(W D)_ij (v_i − p_j)`` is exact only for vertices whose weights all
+lie inside or all outside subtree(j); the exact form costs the same (three sparse
+products per iteration) and is what the finite-difference test checks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Literal, get_args
+
+import numpy as np
+import scipy.sparse as sp
+from pykdtree.kdtree import KDTree
+
+from meshmocap._validate import check_choice
+from meshmocap.body.skeleton import Skeleton, forward_kinematics
+from meshmocap.body.skinning import skinning_transforms
+from meshmocap.body.template import Template
+from meshmocap.errors import InputError
+from meshmocap.geometry.mesh import vertex_normals
+from meshmocap.geometry.rotations import so3_exp, so3_log
+from meshmocap.io.capture import CaptureFrame
+from meshmocap.io.results import FrameResult
+
+Correspondences = Literal["model_to_data", "both"]
+Residual = Literal["point_to_plane", "point_to_point"]
+
+#: Rig joints held at their initial rotation by default: CMU-style structural joints that
+#: carry no degrees of freedom in motion capture (hip offsets, fingers, thumbs, toes). Free,
+#: they are barely observed by a visual hull and drift in the data term's near-null space
+#: (e.g. LHipJoint swings the whole leg sideways into the hull's phantom volume).
+FIXED_JOINTS = (
+    "LHipJoint", "RHipJoint", "LeftToeBase", "RightToeBase",
+    "LeftFingerBase", "LeftHandIndex1", "LThumb",
+    "RightFingerBase", "RightHandIndex1", "RThumb",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ICPOptions:
+    """Settings of the articulated ICP baseline.
+
+    Parameters
+    ----------
+    n_model_points : int
+        Template vertices used as model points (area-weighted sample, fixed per template).
+    max_points : int
+        Observed hull vertices sampled per frame.
+    correspondences : {"model_to_data", "both"}
+        Closest points from the model to the data only, or both ways.
+    residual : {"point_to_plane", "point_to_point"}
+        Point-to-plane residuals use the observed point's normal.
+    data_to_model_weight : float
+        Weight ``w_dm`` of the data→model mean squared residual (with ``"both"``).
+    max_distance : float
+        Pairs farther apart than this (metres) are rejected.
+    normal_cos : float
+        Pairs need ``n_model · n_data`` above this (in [−1, 1)).
+    k_neighbours : int
+        Candidates searched for the nearest compatible point.
+    max_iter : int
+        ICP iterations per frame; ``tol`` (metres): stop when no model point moves more.
+    lambda_pose : float
+        Weight (m²/rad²) of the squared rotation of every joint away from the warm start.
+    lambda_root : float
+        Weight (dimensionless) of the squared root displacement from the warm start.
+    damping : float
+        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
+    predict : bool
+        Warm-start by constant-velocity extrapolation of the last two poses (else: the last).
+    fixed_joints : tuple of str
+        Rig joints whose local rotation is not estimated (kept from the first frame); names
+        the template's skeleton lacks are ignored.
+    seed : int
+        Seed of the model-point sample and of the per-frame observation subsampling.
+    """
+
+    n_model_points: int = 1500
+    max_points: int = 5000
+    correspondences: Correspondences = "both"
+    residual: Residual = "point_to_plane"
+    data_to_model_weight: float = 1.0
+    max_distance: float = 0.1
+    normal_cos: float = 0.3
+    k_neighbours: int = 8
+    max_iter: int = 20
+    tol: float = 1e-4
+    lambda_pose: float = 1e-6
+    lambda_root: float = 1e-4
+    damping: float = 1e-3
+    predict: bool = True
+    fixed_joints: tuple[str, ...] = FIXED_JOINTS
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        name = "ICPOptions"
+        check_choice(name, "correspondences", self.correspondences, get_args(Correspondences))
+        check_choice(name, "residual", self.residual, get_args(Residual))
+        for key in ("n_model_points", "max_points", "k_neighbours", "max_iter"):
+            if int(getattr(self, key)) < 1:
+                raise InputError(f"{name}: {key} must be ≥ 1, found {getattr(self, key)}")
+        for key in ("max_distance", "tol"):
+            if not getattr(self, key) > 0:
+                raise InputError(f"{name}: {key} must be > 0, found {getattr(self, key)}")
+        for key in ("data_to_model_weight", "lambda_pose", "lambda_root", "damping"):
+            if not getattr(self, key) >= 0:
+                raise InputError(f"{name}: {key} must be ≥ 0, found {getattr(self, key)}")
+        if not -1 <= self.normal_cos < 1:
+            raise InputError(f"{name}: normal_cos must be in [-1, 1), found {self.normal_cos}")
+        fixed = self.fixed_joints
+        if isinstance(fixed, str) or not all(isinstance(j, str) for j in fixed):
+            raise InputError(
+                f"{name}: fixed_joints must be a sequence of joint names, found {fixed!r}"
+            )
+        object.__setattr__(self, "fixed_joints", tuple(fixed))
+
+
+# ---------------------------------------------------------------------- kinematic model
+def subtree_matrix(skeleton: Skeleton) -> np.ndarray:
+    """Return ``D`` (J, J) float64 with ``D[k, j] = 1`` when j is an ancestor-or-self of k."""
+    J = skeleton.n_joints
+    D = np.eye(J)
+    for k in range(1, J):  # parents precede children: copy the parent's row
+        D[k] += D[skeleton.parents[k]]
+    return D
+
+
+@dataclass(frozen=True, eq=False)
+class ICPModel:
+    """The model points of a template and the constant parts of their Jacobian.
+
+    Attributes
+    ----------
+    template : Template
+    sample : (m,) int64, template vertex index of each model point
+    W : (m, J) scipy.sparse.csr_matrix, their skinning weights (sorted indices)
+    rows, cols : (nnz,) int64, the nonzeros of ``W`` in storage order
+    X : (m, 3) float64, rest positions (metres); ``N0`` (m, 3) rest unit normals
+    W_acc : (m, J) float64, subtree-accumulated weights ``W @ D``
+    D : (J, J) float64, :func:`subtree_matrix`
+    """
+
+    template: Template
+    sample: np.ndarray
+    W: sp.csr_matrix
+    rows: np.ndarray
+    cols: np.ndarray
+    X: np.ndarray
+    N0: np.ndarray
+    W_acc: np.ndarray
+    D: np.ndarray
+
+
+def build_model(template: Template, *, n_points: int = 1500, seed: int = 0) -> ICPModel:
+    """Sample ``n_points`` template vertices (probability ∝ vertex area, no repeats; all
+    vertices when the template has fewer) and precompute their weights."""
+    V, F = template.V, template.F
+    tri = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = np.bincount(F.ravel(), np.repeat(tri / 6.0, 3), minlength=len(V)) + 1e-12
+    if n_points >= len(V):
+        sample = np.arange(len(V))
+    else:
+        rng = np.random.default_rng(seed)
+        sample = np.sort(rng.choice(len(V), n_points, replace=False, p=area / area.sum()))
+    W = sp.csr_matrix(template.weights[sample])
+    W.sort_indices()
+    coo = W.tocoo()
+    D = subtree_matrix(template.skeleton)
+    return ICPModel(
+        template=template, sample=sample, W=W, rows=coo.row.astype(np.int64),
+        cols=coo.col.astype(np.int64), X=V[sample], N0=vertex_normals(V, F)[sample],
+        W_acc=np.asarray(W @ D), D=D,
+    )  # fmt: skip
+
+
+def pose_points(
+    model: ICPModel, R: np.ndarray, root: np.ndarray, *, jacobian: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Skin the model points and return what the Gauss–Newton step needs.
+
+    Parameters
+    ----------
+    R : (J, 3, 3) float64, local joint rotations; ``root`` (3,) float64, metres.
+
+    Returns
+    -------
+    v : (m, 3) float64, posed model points, metres, world frame
+    n : (m, 3) float64, their unit normals (rest normals turned by the blended rotation)
+    a : (m, J, 3) float64 or None
+        Lever arms: ``∂v_i = t + Σ_j ω_j × a[i, j]`` for the increments of
+        :func:`apply_increment` (see the module docstring).
+    """
+    sk = model.template.skeleton
+    G, P = forward_kinematics(sk, R, root)
+    A = skinning_transforms(G, P, sk.rest_positions)  # (J, 3, 4)
+    rows, cols, w = model.rows, model.cols, model.W.data
+    Y = np.einsum("nab,nb->na", A[cols, :, :3], model.X[rows]) + A[cols, :, 3]  # (nnz, 3)
+    m = len(model.sample)
+    wY = w[:, None] * Y
+    v = np.stack([np.bincount(rows, wY[:, c], minlength=m) for c in range(3)], 1)
+    B = (model.W @ G.reshape(-1, 9)).reshape(m, 3, 3)  # blended linear parts
+    n = np.einsum("mab,mb->ma", B, model.N0)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    if not jacobian:
+        return v, n, None
+    S = model.W.copy()
+    U = np.empty((m, sk.n_joints, 3))
+    for c in range(3):  # U[i, j] = Σ_{k ∈ subtree(j)} w_ik Y_ik
+        S.data = wY[:, c]
+        U[:, :, c] = S @ model.D
+    a = U - model.W_acc[:, :, None] * P[None]
+    return v, n, a
+
+
+def apply_increment(
+    skeleton: Skeleton, R: np.ndarray, root: np.ndarray, delta: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the pose ``(R', root')`` after the increment ``delta`` = (t, ω_0 … ω_{J−1}).
+
+    Parameters
+    ----------
+    R : (J, 3, 3) float64, local rotations; ``root`` (3,) float64, metres
+    delta : (3 + 3J,) float64: root translation (metres), then world-frame rotation
+        vectors (radians) applied at each joint: ``R_j ← exp(G_parentᵀ ω_j) R_j``.
+    """
+    J = skeleton.n_joints
+    G, _ = forward_kinematics(skeleton, R, root)
+    Gp = np.concatenate([np.eye(3)[None], G[skeleton.parents[1:]]])
+    omega = delta[3:].reshape(J, 3)
+    local = np.einsum("jba,jb->ja", Gp, omega)  # G_parentᵀ ω_j
+    return so3_exp(local) @ R, root + delta[:3]
+
+
+def residual_jacobian(
+    v: np.ndarray,
+    a: np.ndarray,
+    i: np.ndarray,
+    y: np.ndarray,
+    ny: np.ndarray,
+    residual: Residual,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals and their Jacobian for pairs (model point ``i``, observed point ``y``).
+
+    Parameters
+    ----------
+    v : (m, 3) and a : (m, J, 3) float64 from :func:`pose_points`
+    i : (p,) int64, model point of each pair
+    y, ny : (p, 3) float64, observed point (metres) and its unit normal
+    residual : {"point_to_plane", "point_to_point"}
+
+    Returns
+    -------
+    r : (p,) or (3p,) float64, metres: ``ny · (v_i − y)`` or the coordinates of ``v_i − y``
+    Jr : (p, 3 + 3J) or (3p, 3 + 3J) float64, derivatives w.r.t. (t, ω_0 … ω_{J−1})
+    """
+    ai = a[i]  # (p, J, 3)
+    p, J = ai.shape[:2]
+    d = v[i] - y
+    if residual == "point_to_plane":  # ∂(n·v)/∂ω_j = n·(ω_j × a_ij) = ω_j·(a_ij × n)
+        r = np.sum(ny * d, axis=1)
+        Jr = np.concatenate([ny, np.cross(ai, ny[:, None, :]).reshape(p, 3 * J)], axis=1)
+        return r, Jr
+    # ∂v/∂ω_j = −[a_ij]× : row c of the cross-product matrix of −a_ij, for each axis c
+    Jw = np.zeros((p, 3, J, 3))
+    ax, ay, az = ai[..., 0], ai[..., 1], ai[..., 2]
+    Jw[:, 0, :, 1], Jw[:, 0, :, 2] = az, -ay
+    Jw[:, 1, :, 0], Jw[:, 1, :, 2] = -az, ax
+    Jw[:, 2, :, 0], Jw[:, 2, :, 1] = ay, -ax
+    It = np.broadcast_to(np.eye(3), (p, 3, 3))
+    Jr = np.concatenate([It, Jw.reshape(p, 3, 3 * J)], axis=2)
+    return d.reshape(-1), Jr.reshape(3 * p, 3 + 3 * J)
+
+
+def nearest_compatible(
+    tree: KDTree,
+    n_tree: np.ndarray,
+    q: np.ndarray,
+    n_q: np.ndarray,
+    *,
+    k: int,
+    max_distance: float,
+    normal_cos: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each query point, the nearest tree point within ``max_distance`` whose normal
+    agrees (``n_tree · n_q > normal_cos``), among the ``k`` nearest.
+
+    Returns the indices of the queries that found one (q,) and of their partners (q,).
+    """
+    k = min(k, tree.n)
+    d, idx = tree.query(q, k=k, distance_upper_bound=max_distance)
+    d, idx = d.reshape(len(q), k), idx.reshape(len(q), k).astype(np.int64)
+    found = idx < tree.n  # pykdtree marks "none within the bound" with index n
+    safe = np.where(found, idx, 0)
+    ok = found & (np.einsum("qkc,qc->qk", n_tree[safe], n_q) > normal_cos)
+    first = np.argmax(ok, axis=1)
+    has = ok[np.arange(len(q)), first]
+    queries = np.flatnonzero(has)
+    return queries, safe[queries, first[queries]]
+
+
+# ---------------------------------------------------------------------- the tracker
+class ArticulatedICP:
+    """Skeleton-driven articulated ICP tracker (see the module docstring).
+
+    Parameters
+    ----------
+    options : ICPOptions
+    """
+
+    name = "articulated_icp"
+
+    def __init__(self, options: ICPOptions = ICPOptions()):
+        if not isinstance(options, ICPOptions):
+            raise InputError(f"ArticulatedICP: options must be ICPOptions, found {options!r}")
+        self.opts = options
+        self.template: Template | None = None
+        self.model: ICPModel | None = None
+
+    def options(self) -> dict:
+        """JSON-ready settings."""
+        return asdict(self.opts)
+
+    # ------------------------------------------------------------------ state
+    def setup(self, template: Template) -> None:
+        """Sample the model points of ``template`` and precompute their weights."""
+        self.template = template
+        self.model = build_model(template, n_points=self.opts.n_model_points, seed=self.opts.seed)
+        sk = template.skeleton
+        free = [j for j, name in enumerate(sk.names) if name not in self.opts.fixed_joints]
+        #: estimated parameters: root translation, then the free joints' rotation increments
+        self.active = np.concatenate(
+            [np.arange(3), (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()]
+        )
+
+    def init(
+        self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
+    ) -> FrameResult:
+        """Start from local rotations ``R`` (J, 3, 3) and root position ``root`` (3,)."""
+        J = template.skeleton.n_joints
+        R = np.asarray(R, dtype=np.float64)
+        root = np.asarray(root, dtype=np.float64)
+        if R.shape != (J, 3, 3) or root.shape != (3,):
+            raise InputError(
+                f"ArticulatedICP.init: expected R ({J}, 3, 3) and root (3,), "
+                f"found {R.shape} and {root.shape}"
+            )
+        if self.template is not template:
+            self.setup(template)
+        self.R, self.root = R.copy(), root.copy()
+        self.prev = (R.copy(), root.copy())
+        return self._result(frame.index, {}, 0)
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore the pose (and the previous one, for prediction) saved with a frame."""
+        self.R, self.root = state["R"].astype(np.float64), state["root"].astype(np.float64)
+        self.prev = (state["R_prev"].astype(np.float64), state["root_prev"].astype(np.float64))
+
+    def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
+        posed = self.template.pose(self.R, self.root)
+        state = {"R": self.R.copy(), "root": self.root.copy(),
+                 "R_prev": self.prev[0].copy(), "root_prev": self.prev[1].copy()}  # fmt: skip
+        return FrameResult(index=index, joints=posed.eval_joints, vertices=posed.V,
+                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+
+    # ------------------------------------------------------------------ tracking
+    def observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Observed points (p, 3) and unit normals (p, 3), at most ``max_points`` of the
+        frame's hull vertices (seeded per frame, so a resumed run sees the same points)."""
+        o = self.opts
+        V, F = frame.hull_mesh
+        V = np.asarray(V, dtype=np.float64)
+        if F is not None:
+            N = vertex_normals(V, F)
+        elif getattr(frame, "normals", None) is not None:
+            N = np.asarray(frame.normals, dtype=np.float64)
+        else:
+            raise InputError(
+                f"ArticulatedICP: frame {frame.index} is a point cloud without normals"
+            )
+        if len(V) > o.max_points:
+            rng = np.random.default_rng([o.seed, frame.index])
+            pick = rng.choice(len(V), o.max_points, replace=False)
+            V, N = V[pick], N[pick]
+        return np.ascontiguousarray(V), N
+
+    def step(self, frame: CaptureFrame) -> FrameResult:
+        """Fit ``frame`` by articulated ICP (see the module docstring)."""
+        o, m = self.opts, self.model
+        sk = self.template.skeleton
+        Y, NY = self.observations(frame)
+        if len(Y) < 10:
+            raise FloatingPointError(f"only {len(Y)} observed points")
+        last = (self.R.copy(), self.root.copy())
+        if o.predict:  # constant velocity: R ← (R R_prevᵀ) R, root ← 2 root − root_prev
+            Rp, rp = self.prev
+            self.R = self.R @ np.swapaxes(Rp, 1, 2) @ self.R
+            self.root = 2 * self.root - rp
+        self.prev = last
+        R_ref, root_ref = last  # the regulariser pulls towards the previous pose
+        data_tree = KDTree(Y)
+        n = 3 + 3 * sk.n_joints
+        energies: dict[str, float] = {}
+        n_iter = 0
+        while n_iter < o.max_iter:
+            n_iter += 1
+            v, nv, a = pose_points(m, self.R, self.root)
+            H, g, energies = self._normal_equations(v, nv, a, data_tree, Y, NY, R_ref, root_ref)
+            act = self.active
+            H, g = H[np.ix_(act, act)], g[act]
+            H[np.diag_indices(len(act))] *= 1 + o.damping
+            H[np.diag_indices(len(act))] += 1e-12
+            delta = np.zeros(n)
+            delta[act] = -np.linalg.solve(H, g)
+            if not np.all(np.isfinite(delta)):
+                raise FloatingPointError("singular normal equations")
+            self.R, self.root = apply_increment(sk, self.R, self.root, delta)
+            move = delta[:3] + np.cross(delta[3:].reshape(1, -1, 3), a).sum(axis=1)
+            if np.max(np.linalg.norm(move, axis=1)) < o.tol:
+                break
+        return self._result(frame.index, energies, n_iter)
+
+    def _normal_equations(self, v, nv, a, data_tree, Y, NY, R_ref, root_ref):
+        """Gauss–Newton system ``H δ = −g`` at the current pose, and the energy terms."""
+        o = self.opts
+        J = self.template.skeleton.n_joints
+        cand = dict(k=o.k_neighbours, max_distance=o.max_distance, normal_cos=o.normal_cos)
+        i, k = nearest_compatible(data_tree, NY, v, nv, **cand)  # model → data
+        parts = [(i, k, 1.0, "model_to_data")]
+        if o.correspondences == "both":
+            k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
+            parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
+        H = np.zeros((3 + 3 * J, 3 + 3 * J))
+        g = np.zeros(3 + 3 * J)
+        energies: dict[str, float] = {}
+        total = 0.0
+        for i, k, weight, key in parts:
+            if len(i) == 0:
+                energies[key] = 0.0
+                continue
+            r, Jr = residual_jacobian(v, a, i, Y[k], NY[k], o.residual)
+            s = weight / len(i)  # mean over pairs: metres² whatever the sampling
+            H += s * (Jr.T @ Jr)
+            g += s * (Jr.T @ r)
+            energies[key] = float(r @ r) / len(i)
+            total += weight * energies[key]
+        if not any(len(p[0]) for p in parts):
+            raise FloatingPointError("no compatible correspondences")
+        # regularisers, linearised: world-frame rotation error e_j + ω_j, root error + t
+        sk = self.template.skeleton
+        G, _ = forward_kinematics(sk, self.R, self.root)
+        Gp = np.concatenate([np.eye(3)[None], G[sk.parents[1:]]])
+        e = np.einsum("jab,jb->ja", Gp, so3_log(self.R @ np.swapaxes(R_ref, 1, 2)))
+        H[np.arange(3, 3 + 3 * J), np.arange(3, 3 + 3 * J)] += o.lambda_pose
+        g[3:] += o.lambda_pose * e.ravel()
+        H[np.arange(3), np.arange(3)] += o.lambda_root
+        g[:3] += o.lambda_root * (self.root - root_ref)
+        energies["pose"] = float(np.sum(e * e))
+        energies["root"] = float(np.sum((self.root - root_ref) ** 2))
+        energies["total"] = (
+            total + o.lambda_pose * energies["pose"] + o.lambda_root * energies["root"]
+        )
+        return H, g, energies
