@@ -47,6 +47,12 @@ Classifier = Literal["logistic", "svc", "none"]
 #: see benchmarks/bench_patch.py).
 RIGIDITY_SCALE = 10.0
 BONE_SCALE = 100.0
+#: Divergence guards (metres): no joint moves this far in one frame (10 m/s at 60 fps) ...
+MAX_JOINT_JUMP = 0.5
+#: ... and the patch centres' mean stays this close to the observed points' mean.
+MAX_CENTRE_OFFSET = 0.3
+#: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
+REACQUIRE_OFFSET = 0.15
 
 
 @dataclass(frozen=True)
@@ -234,6 +240,12 @@ class PatchTracker:
             self.R = self.R @ np.swapaxes(Rp, 1, 2) @ self.R
             self.c, self.X = 2 * self.c - cp, 2 * self.X - Xp
         self.prev = last
+        # Re-acquisition after a lost frame: if the model stands far from the data (the
+        # driver restored an old state), move it horizontally onto the observations' centre.
+        shift = Y.mean(axis=0) - self.c.mean(axis=0)
+        shift[2] = 0.0
+        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
+            self.c, self.X = self.c + shift, self.X + shift
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept")
         n_unknowns = 6 * m.P + 3 * len(self.X)
@@ -269,7 +281,19 @@ class PatchTracker:
             + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
             + o.lambda_bone * BONE_SCALE * energies["bone"]
         )
+        self._check_divergence(Y, last[2])
         return self._result(frame.index, energies, n_iter)
+
+    def _check_divergence(self, Y: np.ndarray, X_last: np.ndarray) -> None:
+        """Raise (the driver flags the frame and restores the last good state) when the fit
+        has left the observations: joints jumping more than :data:`MAX_JOINT_JUMP` in a
+        frame, or the model's centre more than :data:`MAX_CENTRE_OFFSET` from the data's."""
+        jump = float(np.linalg.norm(self.X - X_last, axis=1).max())
+        offset = float(np.linalg.norm(self.c.mean(axis=0) - Y.mean(axis=0)))
+        if jump > MAX_JOINT_JUMP or offset > MAX_CENTRE_OFFSET:
+            raise FloatingPointError(
+                f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)"
+            )
 
     def _assign(self, Y, NY, ycls, Vc, Nc):
         """E-step: soft assignments of observed points to patches (+ an outlier class).
