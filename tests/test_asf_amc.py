@@ -11,7 +11,13 @@ import scipy.io
 from meshmocap.body.motion import Y_UP_TO_Z_UP, Motion
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.rotations import euler_matrix
-from meshmocap.io.asf_amc import AsfSkeleton, read_amc, read_amc_channels, read_asf
+from meshmocap.io.asf_amc import (
+    AsfSkeleton,
+    motion_from_channels,
+    read_amc,
+    read_amc_channels,
+    read_asf,
+)
 from meshmocap.io.bvh import read_bvh, write_bvh
 
 INCH = 0.0254
@@ -373,3 +379,16 @@ def test_amc_motion_through_bvh(
     back = read_bvh(tmp_path / "01.bvh")
     assert back.skeleton.names == amc.skeleton.names
     np.testing.assert_allclose(back.joint_positions, amc.joint_positions, atol=1e-6)
+
+
+def test_motion_from_channels_decodes_the_mat_rows(cmu):
+    """cmu35WalkJog.mat rows are raw AMC channels: decoding rows 0–89 gives exactly the
+    motion of 35_01.amc[0::4] (the same numbers through the same decoder)."""
+    asf = read_asf(cmu / "35.asf")
+    Y = scipy.io.loadmat(cmu / "cmu35WalkJog.mat")["Y"]
+    m = motion_from_channels(Y[:90], asf, fps=30.0)
+    a = read_amc(cmu / "35_01.amc", asf, frames=slice(0, None, 4))
+    assert m.fps == a.fps == 30.0
+    assert np.array_equal(m.joint_positions, a.joint_positions[:90])
+    with pytest.raises(InputError, match="expected"):
+        motion_from_channels(Y[:5, :10], asf)

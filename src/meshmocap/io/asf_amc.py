@@ -47,7 +47,7 @@ from meshmocap.io._text import (
     scan_tokens,
 )
 
-__all__ = ["AsfSkeleton", "read_amc", "read_amc_channels", "read_asf"]
+__all__ = ["AsfSkeleton", "motion_from_channels", "read_amc", "read_amc_channels", "read_asf"]
 
 _DOFS = ("tx", "ty", "tz", "rx", "ry", "rz", "l")
 _INCH = 0.0254
@@ -459,7 +459,39 @@ def read_amc(
         raise InputError(f"read_amc: fps must be a positive number, found {fps!r}")
     table, degrees = _read_table(path, asf)
     idx, step = frame_index(table.shape[0], frames, "read_amc")
-    table = table[idx]
+    return motion_from_channels(table[idx], asf, fps=fps / step, degrees=degrees, source=path)
+
+
+def motion_from_channels(
+    table: np.ndarray,
+    asf: AsfSkeleton,
+    *,
+    fps: float = 120.0,
+    degrees: bool = True,
+    source: object = "channels",
+) -> Motion:
+    """Decode raw AMC channel values into a :class:`Motion`.
+
+    Parameters
+    ----------
+    table : (T, C) float64
+        One row per frame, ``asf.channel_names`` order (as :func:`read_amc_channels`
+        returns them, or as stored in CMU-derived ``.mat`` files such as cmu35WalkJog).
+    asf : AsfSkeleton
+    fps : float
+        Frame rate of the rows.
+    degrees : bool
+        Angles in degrees (the ASF ``:units angle deg``).
+    source : object
+        Named in error messages.
+    """
+    table = np.asarray(table, dtype=np.float64)
+    if table.ndim != 2 or table.shape[1] != asf.n_channels:
+        raise InputError(
+            f"{source}: expected (T, {asf.n_channels}) channel values, found shape {table.shape}"
+        )
+    if not np.all(np.isfinite(table)):
+        raise InputError(f"{source}: channel values contain NaN or infinite values")
     T, J = table.shape[0], asf.skeleton.n_joints
     R = np.empty((T, J, 3, 3))
     R[...] = np.eye(3)
@@ -475,7 +507,7 @@ def read_amc(
                 t[:, "xyz".index(d[1])] += table[:, col]
             else:
                 raise FormatError(
-                    f"{path}: bone {asf.bones[b]!r} has a {d!r} dof (translation or length of a "
+                    f"{source}: bone {asf.bones[b]!r} has a {d!r} dof (translation or length of a "
                     "non-root bone), which a Motion cannot represent; use read_amc_channels"
                 )
             col += 1
@@ -490,4 +522,4 @@ def read_amc(
         RD = euler_matrix(angles, order, start=D[bs])
         R[:, asf.joints[bs]] = RD @ np.swapaxes(D[bs], -1, -2)
     root = asf.metres_per_unit * t @ Y_UP_TO_Z_UP.T
-    return Motion(asf.skeleton, R, root, fps / step)
+    return Motion(asf.skeleton, R, root, fps)
