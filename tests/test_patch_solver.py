@@ -102,3 +102,28 @@ def test_a_gauss_newton_step_lowers_the_energy(setup):
     delta = sys.solve(1e-6)
     e2 = _energies(m, *_perturbed(m, R, c, X, delta), obs)
     assert sum(e2) < 0.5 * sum(e)
+
+
+def test_point_to_plane_gradient(setup):
+    from meshmocap.trackers.patch_solver import add_plane_terms
+
+    m, _, R, c, X, (patch, v, y, w) = setup
+    n = RNG.normal(size=(len(y), 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+
+    def energy(R, c):
+        x = np.einsum("nij,nj->ni", R[patch], m.V0[v] - m.centres0[patch]) + c[patch]
+        return np.sum(w * np.sum(n * (x - y), axis=1) ** 2)
+
+    sys = System.empty(6 * m.P + 45)
+    q = np.einsum("nij,nj->ni", R[patch], m.V0[v] - m.centres0[patch])
+    s = np.sum(n * (q + c[patch] - y), axis=1)
+    assert add_plane_terms(sys, patch, q, n, s, w, 1.0) == pytest.approx(energy(R, c), rel=1e-12)
+    h = 1e-6
+    for i in RNG.choice(6 * m.P, 30, replace=False):
+        d = np.zeros(6 * m.P + 45)
+        d[i] = h
+        Rp, cp, _ = _perturbed(m, R, c, X, d)
+        Rm, cm, _ = _perturbed(m, R, c, X, -d)
+        fd = (energy(Rp, cp) - energy(Rm, cm)) / (2 * h)
+        assert fd == pytest.approx(2 * sys.g[i], rel=1e-5, abs=1e-7)

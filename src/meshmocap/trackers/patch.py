@@ -33,12 +33,16 @@ from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind
 from meshmocap.trackers.patch_solver import (
     System,
     add_bone,
+    add_plane_terms,
     add_point_terms,
     add_rigidity,
     rigidity_moments,
 )
 
 Classifier = Literal["logistic", "svc", "none"]
+Residual = Literal["point_to_point", "point_to_plane"]
+#: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
+PLANE_POINT_MIX = 0.1
 
 #: Scale of the rigidity and bone terms relative to the data term after each is normalised
 #: by its total weight (mean squared residuals). Neighbouring patches' predictions and the
@@ -92,6 +96,10 @@ class PatchOptions:
         patch transforms and joints (else: from the last frame).
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
+    residual : {"point_to_point", "point_to_plane"}
+        Data residuals: the paper's Euclidean distances (Eq. 7), or distances along the
+        observed normals (plus a tenth of the Euclidean pull), which lets patches slide along
+        the surface towards their place.
     seed : int
         Patches and subsampling seed.
     """
@@ -114,12 +122,14 @@ class PatchOptions:
     outlier_sigmas: float = 3.0
     k_neighbours: int = 8
     normal_cos: float = 0.0
+    residual: Residual = "point_to_point"
     damping: float = 1e-4
     predict: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
         check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
+        check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
         if not 0 < self.keep_fraction <= 1:
@@ -210,8 +220,11 @@ class PatchTracker:
         )
 
     # ------------------------------------------------------------------ tracking
-    def observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Observed points, their normals and (with a classifier) predicted classes."""
+    def observations(
+        self, frame: CaptureFrame
+    ) -> tuple[np.ndarray, np.ndarray, np.random.Generator]:
+        """Observed points (hull vertices, subsampled), their normals, and the frame's
+        random generator (seeded by frame, so resumed runs repeat exactly)."""
         o = self.opts
         rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
         V, F = frame.hull_mesh
@@ -219,6 +232,12 @@ class PatchTracker:
         if len(V) > o.max_points:
             pick = rng.choice(len(V), o.max_points, replace=False)
             V, N = V[pick], N[pick]
+        return V, N, rng
+
+    def classify(self, V: np.ndarray, N: np.ndarray, rng: np.random.Generator):
+        """Sort observed points by body part (§III-B, Eq. 4–6); returns the kept points,
+        their normals and classes (None without a classifier)."""
+        o = self.opts
         if o.classifier == "none":
             return V, N, None
         clf = BodyPartClassifier(o.classifier, random_state=o.seed)
@@ -233,7 +252,9 @@ class PatchTracker:
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
         o, m = self.opts, self.model
-        Y, NY, ycls = self.observations(frame)
+        Y, NY, rng = self.observations(frame)
+        if len(Y) < 10:
+            raise FloatingPointError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
         if o.predict:  # constant velocity: R ← (R R_prevᵀ) R, c ← 2c − c_prev, X ← 2X − X_prev
             Rp, cp, Xp = self.prev
@@ -246,20 +267,26 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
+        Y, NY, ycls = self.classify(Y, NY, rng)
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points kept")
+            raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         n_unknowns = 6 * m.P + 3 * len(self.X)
         energies: dict[str, float] = {}
         n_iter = 0
         while n_iter < o.max_iter:
             n_iter += 1
             Vc, Nc = self.own_vertices()
-            patch, v, w, y = self._assign(Y, NY, ycls, Vc, Nc)
+            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
             sys = System.empty(n_unknowns)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
             r = q + self.c[patch] - y
             wd = max(float(w.sum()), 1e-12)
-            e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
+            if o.residual == "point_to_plane":  # slide along the surface, with a little pull
+                s_n = np.sum(ny * r, axis=1)
+                e_data = add_plane_terms(sys, patch, q, ny, s_n, w, o.lambda_data / wd)
+                add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * o.lambda_data / wd)
+            else:  # Eq. (7) as printed
+                e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
             w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
             e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
             w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
@@ -318,7 +345,7 @@ class PatchTracker:
         p_out = np.exp(-0.5 * o.outlier_sigmas**2)
         denom = np.bincount(i, p, minlength=len(Y)) + p_out
         w = p / denom[i]
-        return patch, idx[i, j], w, Y[i]
+        return patch, idx[i, j], w, Y[i], NY[i]
 
     def _apply(self, delta: np.ndarray) -> None:
         P = self.model.P

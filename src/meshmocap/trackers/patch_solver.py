@@ -207,3 +207,35 @@ def add_bone(
         for j2, c2 in ((model.bone_j, g), (model.bone_child, 1 - g)):
             sys.add(base + 3 * j1, base + 3 * j2, weight * (w * c1 * c2)[:, None, None] * np.eye(3))
     return value
+
+
+def add_plane_terms(
+    sys: System,
+    patch: np.ndarray,
+    q: np.ndarray,
+    n: np.ndarray,
+    s: np.ndarray,
+    w: np.ndarray,
+    weight: float,
+) -> float:
+    """Add ``weight · Σ w s²`` for point-to-plane residuals ``s = n · (q + c_patch − y)``.
+
+    Parameters: ``patch`` (m,), ``q = R_k d`` (m, 3), unit normals ``n`` (m, 3) of the
+    observed points, residuals ``s`` (m,), weights ``w`` (m,). The Jacobian row of a
+    residual is ``nᵀ A(q) = [(q × n)ᵀ, nᵀ]``. Returns the weighted sum before ``weight``.
+    """
+    Jr = np.concatenate([np.cross(q, n), n], axis=1)  # (m, 6)
+    n_p = int(patch.max()) + 1 if len(patch) else 0
+    WJ = w[:, None] * Jr
+    blocks = np.stack(
+        [
+            np.bincount(patch, WJ[:, i] * Jr[:, j], minlength=n_p)
+            for i in range(6)
+            for j in range(6)
+        ],
+        1,
+    )
+    used = np.flatnonzero(np.bincount(patch, minlength=n_p))
+    sys.add(6 * used, 6 * used, weight * blocks[used].reshape(-1, 6, 6))
+    sys.add_g(6 * patch, weight * WJ * s[:, None])
+    return float(np.sum(w * s * s))
