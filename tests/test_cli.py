@@ -43,10 +43,12 @@ def test_render_rest_pose_and_clip(tmp_path):
 
 
 def test_demo_runs_on_bundled_defaults(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path), "--seconds", "1"]) == 0
+    assert main(["demo", "--out", str(tmp_path), "--seconds", "1", "--track-frames", "4"]) == 0
     assert (tmp_path / "walk.bvh").is_file()
     assert (tmp_path / "walk_heavy_male" / "contact_sheet.png").is_file()
-    assert "meshmocap demo" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "meshmocap demo" in out and "articulated_icp" in out and "mean joint error" in out
+    assert (tmp_path / "eval_patch" / "summary.txt").is_file()
 
 
 @pytest.mark.parametrize(

@@ -11,7 +11,6 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
 
 from meshmocap import __version__
 from meshmocap.errors import MeshmocapError
@@ -76,39 +75,16 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from meshmocap.body.clips import clip_on
-    from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
-    from meshmocap.body.retarget import retarget
-    from meshmocap.body.template import load_template
-    from meshmocap.evaluation.render import render_motion
-    from meshmocap.io.bvh import read_bvh, write_bvh
+    from meshmocap.evaluation.demo import run_demo
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    neutral = load_template("neutral")
-    rows = []
-    t0 = time.perf_counter()
-    walk = procedural_motion("walk", neutral, duration=args.seconds, fps=30.0)
-    bvh = write_bvh(out / "walk.bvh", walk)
-    rows.append(("walk.bvh (procedural walk, CMU MotionBuilder skeleton)", bvh))
-    # A CMU-style BVH retargeted onto another body shape, as a user's clip would be.
-    heavy = load_template("heavy_male")
-    moved = retarget(read_bvh(bvh), heavy)
-    res = render_motion(heavy, moved, out / "walk_heavy_male", step=2, frames=False)
-    rows.append(("walk retargeted onto heavy_male", res.sheet))
-    if args.clip:
-        clip = clip_on(neutral, args.clip, fps=30.0)
-        res = render_motion(
-            neutral, clip, out / "clip", step=max(1, clip.n_frames // 60), frames=False
-        )
-        rows.append((f"{args.clip} retargeted onto neutral", res.sheet))
-    for name in PROCEDURAL_MOTIONS:
-        m = procedural_motion(name, neutral, duration=3.0, fps=20.0)
-        res = render_motion(neutral, m, out / name, frames=False, sheet_frames=12)
-        rows.append((f"{name} on neutral", res.sheet))
-    print(f"meshmocap demo: wrote {out}/ in {time.perf_counter() - t0:.1f} s")
-    for what, path in rows:
-        print(f"  {what:<48} {path}")
+    res = run_demo(args.out, seconds=args.seconds, track_frames=args.track_frames, clip=args.clip)
+    print(f"meshmocap demo: wrote {args.out}/ in {res.seconds:.1f} s")
+    for what, path in res.files:
+        print(f"  {what:<56} {path}")
+    if res.scores:
+        print(f"\n{'tracker':<18} {'mean joint error':>17} {'worst frame':>12} {'s/frame':>8}")
+        for s in res.scores:
+            print(f"{s.method:<18} {s.mean_mm:>14.1f} mm {s.max_mm:>9.1f} mm {s.seconds:>8.2f}")
     return 0
 
 
@@ -212,6 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="meshmocap-demo", help="output folder (default: %(default)s)")
     d.add_argument("--seconds", type=float, default=4.0, help="length of the demo walk")
     d.add_argument("--clip", help="also retarget and render this BVH/AMC clip")
+    d.add_argument("--track-frames", type=int, default=60, help="frames tracked (0: skip)")
     d.set_defaults(func=_cmd_demo)
 
     t = sub.add_parser("templates", help="list the bundled templates")

@@ -55,6 +55,8 @@ BONE_SCALE = 100.0
 MAX_JOINT_JUMP = 0.5
 #: ... and the patch centres' mean stays this close to the observed points' mean.
 MAX_CENTRE_OFFSET = 0.3
+#: Largest rotation (radians) of a patch in one Gauss–Newton step.
+MAX_STEP_ANGLE = 0.3
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
 REACQUIRE_OFFSET = 0.15
 
@@ -349,7 +351,10 @@ class PatchTracker:
 
     def _apply(self, delta: np.ndarray) -> None:
         P = self.model.P
-        d = delta[: 6 * P].reshape(P, 6)
+        d = delta[: 6 * P].reshape(P, 6).copy()
+        # trust region: no patch turns more than MAX_STEP_ANGLE radians in one step
+        angle = np.linalg.norm(d[:, :3], axis=1, keepdims=True)
+        d[:, :3] *= np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(angle, 1e-12))
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)

@@ -93,13 +93,18 @@ class System:
         self.g += np.bincount(idx.ravel(), G.ravel(), minlength=self.n)
 
     def solve(self, damping: float) -> np.ndarray:
-        """Solve ``(H + μ diag(H) + ε I) δ = −g`` (Levenberg–Marquardt damping)."""
+        """Solve ``(H + μ diag(H) + ε I) δ = −g`` (Levenberg–Marquardt damping).
+
+        ``ε`` is a thousandth of the median diagonal entry: it keeps weakly observed
+        unknowns (the spin of a small patch about its own centre) from taking huge steps.
+        """
         H = sp.csc_matrix(
             (np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
             shape=(self.n, self.n),
         )
         d = H.diagonal()
-        H = H + sp.diags(damping * d + 1e-9 * max(d.max(), 1e-12))
+        floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
+        H = H + sp.diags(damping * d + floor)
         return spla.spsolve(H, -self.g)
 
 
