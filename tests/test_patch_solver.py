@@ -39,11 +39,9 @@ def _energies(m, R, c, X, obs):
     e_data = np.sum(w * np.sum((x(patch, v) - y) ** 2, axis=1))
     r = x(m.rig_k, m.rig_v) - x(m.rig_l, m.rig_v)
     e_rig = np.sum(m.rig_w * np.sum(r * r, axis=1))  # Eq. (2)
-    k = np.arange(m.P)
     T = np.einsum("kij,kj->ki", R, m.delta0 - m.centres0) + c
     D = m.gamma[:, None] * X[m.bone_j] + (1 - m.gamma)[:, None] * X[m.bone_child]
     e_bone = np.sum(m.bone_w * np.sum((T - D) ** 2, axis=1))  # Eq. (11)
-    del k
     return e_data, e_rig, e_bone
 
 
@@ -70,9 +68,6 @@ def test_energy_values_match_their_definitions(setup):
 @pytest.mark.parametrize("term", [0, 1, 2])
 def test_gradients_match_finite_differences(setup, term):
     m, mom, R, c, X, obs = setup
-    terms = [(add_point_terms, 0), (add_rigidity, 1), (add_bone, 2)]
-    del terms
-    sys, _ = _system(m, mom, R, c, X, obs)
     # gradient of one term alone
     only = System.empty(6 * m.P + 45)
     patch, v, y, w = obs
