@@ -25,7 +25,7 @@ from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.rotations import so3_exp
+from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import BodyPartClassifier, partition
@@ -55,6 +55,9 @@ BONE_SCALE = 100.0
 MAX_JOINT_JUMP = 0.5
 #: ... and the patch centres' mean stays this close to the observed points' mean.
 MAX_CENTRE_OFFSET = 0.3
+#: Largest predicted displacement (metres) and rotation (radians) of a patch or joint.
+MAX_PREDICTION = 0.06
+MAX_PREDICTION_ANGLE = 0.3
 #: Largest rotation (radians) of a patch in one Gauss–Newton step.
 MAX_STEP_ANGLE = 0.3
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
@@ -95,7 +98,7 @@ class PatchOptions:
         Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
     predict : bool
         Warm-start each frame by constant-velocity extrapolation of the last two frames'
-        patch transforms and joints (else: from the last frame).
+        patch transforms and joints, clipped (else: from the last frame).
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -258,10 +261,15 @@ class PatchTracker:
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
-        if o.predict:  # constant velocity: R ← (R R_prevᵀ) R, c ← 2c − c_prev, X ← 2X − X_prev
+        if o.predict:
+            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
+            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
+            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
             Rp, cp, Xp = self.prev
-            self.R = self.R @ np.swapaxes(Rp, 1, 2) @ self.R
-            self.c, self.X = 2 * self.c - cp, 2 * self.X - Xp
+            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
+            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
+            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
+            self.R = so3_exp(w) @ self.R
         self.prev = last
         # Re-acquisition after a lost frame: if the model stands far from the data (the
         # driver restored an old state), move it horizontally onto the observations' centre.
@@ -358,6 +366,12 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _clip_rows(A: np.ndarray, limit: float) -> np.ndarray:
+    """Rows of ``A`` (k, 3) scaled down to a norm of at most ``limit``."""
+    n = np.linalg.norm(A, axis=1, keepdims=True)
+    return A * np.minimum(1.0, limit / np.maximum(n, 1e-12))
 
 
 def _fit_patches(m: PatchModel, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
