@@ -70,7 +70,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
         azimuth=args.azimuth,
         frames=not args.sheet_only,
     )
-    print(f"wrote {len(res.frames)} frames and {res.sheet} ")
+    frames = f"{len(res.frames)} frames and " if res.frames else ""
+    print(f"wrote {frames}{res.sheet} ({motion.n_frames} frames at {motion.fps:g} fps)")
     return 0
 
 
