@@ -12,10 +12,9 @@ Run: ``python benchmarks/bench_hull.py`` (best of 5 runs per stage).
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
+from _timing import best_of
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
 from meshmocap.geometry.carving import VoxelHull, carve, distance_grid, hull_bounds, hull_mesh
 from meshmocap.geometry.mesh import signed_volume
@@ -85,26 +84,17 @@ def subject(cams: list[Camera]) -> tuple[str, list[np.ndarray], float | None]:
     return label, masks, signed_volume(t.V, t.F)
 
 
-def best(fn, repeat: int = REPEAT):
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
-
-
 def main() -> None:
     cams = studio()
     label, masks, true_volume = subject(cams)
     dist = np.linalg.norm(cams[0].centre - [0, 0, 0.95])
     print(f"subject: {label}; 4 cameras 640×480, {dist:.2f} m away; voxel {VOXEL * 100:.0f} cm")
-    t_bounds, bounds = best(lambda: hull_bounds(masks, cams, margin=2 * VOXEL))
-    t_carve, hull = best(lambda: carve(masks, cams, voxel_size=VOXEL, bounds=bounds))
-    t_all, _ = best(lambda: carve(masks, cams, voxel_size=VOXEL))
-    t_mesh, (V, F) = best(lambda: hull_mesh(hull))
+    t_bounds, bounds = best_of(lambda: hull_bounds(masks, cams, margin=2 * VOXEL))
+    t_carve, hull = best_of(lambda: carve(masks, cams, voxel_size=VOXEL, bounds=bounds))
+    t_all, _ = best_of(lambda: carve(masks, cams, voxel_size=VOXEL))
+    t_mesh, (V, F) = best_of(lambda: hull_mesh(hull))
     # distance_grid keeps its result on the hull: time it on fresh copies of the hull.
-    t_dist, grid = best(lambda: distance_grid(VoxelHull(hull.occupancy, hull.origin, VOXEL)))
+    t_dist, grid = best_of(lambda: distance_grid(VoxelHull(hull.occupancy, hull.origin, VOXEL)))
     n = hull.occupancy.shape
     ext = np.diff(bounds, axis=0)[0]
     rows = [

@@ -11,29 +11,18 @@ from __future__ import annotations
 
 import sys
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 from meshmocap._threads import limit_blas_threads
 
 limit_blas_threads()
 
+from _timing import best_of  # noqa: E402
 from meshmocap.io.asf_amc import read_amc, read_amc_channels, read_asf  # noqa: E402
 from meshmocap.io.bvh import read_bvh, write_bvh  # noqa: E402
 
 CMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mocap" / "cmu"
 AMC_TARGET_S = 1.0  # per 3,000 frames
-
-
-def best_of(fn: Callable[[], object], repeat: int = 5) -> tuple[float, object]:
-    """Return the best wall time in seconds over ``repeat`` calls, and the last result."""
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
 
 
 def main() -> int:

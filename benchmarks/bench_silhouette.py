@@ -13,11 +13,10 @@ Run: ``python benchmarks/bench_silhouette.py``
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import trimesh
 
+from _timing import best_of
 from meshmocap.geometry.raster import coverage
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.studio.rigs import camera_rig
@@ -65,15 +64,6 @@ def subjects() -> list[tuple[str, np.ndarray, np.ndarray]]:
     return out
 
 
-def best(fn, repeat: int = REPEAT) -> tuple[float, np.ndarray]:
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
-
-
 def main() -> None:
     cams = camera_rig("humaneva4")
     print(f"humaneva4, {cams[0].width}×{cams[0].height}, best of {REPEAT} (ms per view)")
@@ -82,11 +72,13 @@ def main() -> None:
     worst = 0.0
     for name, V, F in subjects():
         for cam in cams:
-            t_exact, mask = best(lambda cam=cam, V=V, F=F: silhouette(V, F, cam))
-            t_closed, closed = best(
+            t_exact, mask = best_of(lambda cam=cam, V=V, F=F: silhouette(V, F, cam))
+            t_closed, closed = best_of(
                 lambda cam=cam, V=V, F=F: silhouette(V, F, cam, assume_closed=True)
             )
-            t_ref, ref = best(lambda cam=cam, V=V, F=F: coverage(cam.project(V)[0], F, cam.shape))
+            t_ref, ref = best_of(
+                lambda cam=cam, V=V, F=F: coverage(cam.project(V)[0], F, cam.shape)
+            )
             same = np.array_equal(mask, ref) and np.array_equal(closed, ref)
             worst = max(worst, t_exact)
             print(

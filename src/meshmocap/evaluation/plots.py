@@ -17,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from meshmocap._atomic import write_bytes_atomic
 from meshmocap.errors import InputError
 from meshmocap.evaluation.metrics import (
     BoneLengths,
@@ -24,7 +25,6 @@ from meshmocap.evaluation.metrics import (
     JointErrors,
     SilhouetteErrors,
 )
-from meshmocap.evaluation.tables import write_atomic
 
 _DPI = 100
 
@@ -41,7 +41,7 @@ def _save(fig: Figure, path: str | os.PathLike) -> Path:
         raise InputError(f"plot path must end in .png, found {path.name!r}")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=_DPI)
-    return write_atomic(path, buf.getvalue())
+    return write_bytes_atomic(path, buf.getvalue())
 
 
 def _check(result: object, types: tuple[type, ...], func: str) -> None:

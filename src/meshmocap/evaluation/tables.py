@@ -12,13 +12,13 @@ import csv
 import io
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap._atomic import write_bytes_atomic
+from meshmocap.errors import InputError
 from meshmocap.evaluation.metrics import (
     BoneLengths,
     CorrespondenceErrors,
@@ -164,21 +164,4 @@ def write_csv(path: str | os.PathLike, result: Result, *, per_frame: bool = Fals
     writer.writerow(headers)
     writer.writerows([["" if isinstance(x, float) and math.isnan(x) else x for x in row]
                       for row in rows])  # fmt: skip
-    return write_atomic(path, buf.getvalue().encode())
-
-
-def write_atomic(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in its folder and ``os.replace``."""
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise MeshmocapFileNotFoundError(f"{path.parent}: folder does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600 files
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return write_bytes_atomic(path, buf.getvalue().encode())

@@ -25,7 +25,6 @@ import io
 import os
 import re
 import tarfile
-import tempfile
 import warnings
 import zlib
 from collections.abc import Iterator, Sequence
@@ -36,6 +35,7 @@ from typing import Literal, get_args
 import numpy as np
 import trimesh
 
+from meshmocap._atomic import write_bytes_atomic
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapWarning
 from meshmocap.errors import MeshmocapFileNotFoundError as NotFound
 
@@ -273,20 +273,8 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *, up: Up 
     mesh = trimesh.Trimesh(V, F.astype(np.int64), process=False)
     extra = {"digits": 10, "include_normals": False} if ext == ".obj" else {}
     data = mesh.export(file_type=ext[1:], **extra)
-    _atomic_write(path, data.encode() if isinstance(data, str) else data)
+    write_bytes_atomic(path, data.encode() if isinstance(data, str) else data)
     return path
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600 files
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 # --------------------------------------------------------------------------- sequences
