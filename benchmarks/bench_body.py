@@ -15,23 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from _timing import per_call
 from meshmocap.body.procedural import walk
 from meshmocap.body.retarget import Retargeter, retarget
 from meshmocap.body.template import load_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 
 CMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mocap" / "cmu"
-
-
-def best(fn, repeat: int = 7, number: int = 20) -> float:
-    """Best per-call time in seconds over ``repeat`` runs of ``number`` calls."""
-    out = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        out.append((time.perf_counter() - t0) / number)
-    return min(out)
 
 
 def main() -> None:
@@ -59,7 +49,7 @@ def main() -> None:
             m = rt(one, floor="none")
             return t.pose(m.rotations[0], m.root_positions[0]).V
 
-        per_frame = best(frame)
+        per_frame = min(per_call(frame))
         t0 = time.perf_counter()
         m = retarget(src, t)
         V = t.pose(m.rotations, m.root_positions).V

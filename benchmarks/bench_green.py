@@ -14,11 +14,10 @@ Run: ``python benchmarks/bench_green.py`` (one BLAS thread, the meshmocap defaul
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from _timing import per_call
 from meshmocap.geometry.green import GreenDeformer, green_coordinates
 
 N_POINTS = 12_411
@@ -49,12 +48,7 @@ def inside(V: np.ndarray, F: np.ndarray, n: int, seed: int = 1) -> np.ndarray:
 
 def best(fn, repeat: int = 7, number: int = 20) -> tuple[float, float]:
     """(best, median) per-call seconds over ``repeat`` runs of ``number`` calls."""
-    out = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        out.append((time.perf_counter() - t0) / number)
+    out = per_call(fn, repeat, number)
     return min(out), float(np.median(out))
 
 

@@ -32,18 +32,13 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from meshmocap.body.names import CMU_MB_NAMES
+from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
+
 FORMAT = "meshmocap-template-1"
 
 #: The 31 CMU MotionBuilder bones, parents before children.
-JOINT_NAMES = (
-    "Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-    "RHipJoint", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
-    "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head",
-    "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftFingerBase",
-    "LeftHandIndex1", "LThumb",
-    "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase",
-    "RightHandIndex1", "RThumb",
-)  # fmt: skip
+JOINT_NAMES = CMU_MB_NAMES
 #: Parent of each bone (the CMU MotionBuilder tree), in :data:`JOINT_NAMES` order.
 PARENT = {
     "Hips": None, "LHipJoint": "Hips", "LeftUpLeg": "LHipJoint", "LeftLeg": "LeftUpLeg",
@@ -63,14 +58,6 @@ assert tuple(PARENT) == JOINT_NAMES
 #: anny's labels where they differ from the BVH names.
 ANNY_LABELS = {"LeftHandIndex1": "LeftHandFinger1", "RightHandIndex1": "RightHandFinger1"}
 
-EVAL_NAMES = (
-    "pelvis", "thorax", "head",
-    "left_shoulder", "left_elbow", "left_wrist",
-    "right_shoulder", "right_elbow", "right_wrist",
-    "left_hip", "left_knee", "left_ankle",
-    "right_hip", "right_knee", "right_ankle",
-)  # fmt: skip
-EVAL_PARENTS = (-1, 0, 1, 1, 3, 4, 1, 6, 7, 0, 9, 10, 0, 12, 13)
 #: Body part (evaluation joint) of the vertices a bone carries most.
 PART_OF_BONE = {
     "Hips": "pelvis", "LowerBack": "pelvis",
@@ -330,7 +317,7 @@ def make_template(name: str, V, F, heads, tails, W_dense) -> dict:
         joint_positions=heads.astype(np.float32), end_positions=tails.astype(np.float32),
         weights_data=W.data.astype(np.float32), weights_indices=W.indices.astype(np.int32),
         weights_indptr=W.indptr.astype(np.int32), part_labels=part_labels(W),
-        eval_names=np.array(EVAL_NAMES), eval_parents=np.array(EVAL_PARENTS, dtype=np.int32),
+        eval_names=np.array(EVAL_NAMES), eval_parents=EVAL_PARENTS.astype(np.int32),
         eval_rest_positions=eval_pos.astype(np.float32), eval_weights=eval_w.astype(np.float32),
     )  # fmt: skip
 
