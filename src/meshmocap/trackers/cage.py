@@ -204,9 +204,10 @@ class CageTracker:
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         cage = self._cage(self.local, self.pelvis_R, self.pelvis_c)
         joints = self.joint_deformer.deform(cage)
+        # "cage": this frame's cage vertices (85, 3), replayed by motion transfer
         state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
                  "pelvis_c": self.pelvis_c, "cage0": self.cage0,
-                 "joints0": self.joint_deformer.deform(self.cage0)}  # fmt: skip
+                 "joints0": self.joint_deformer.deform(self.cage0), "cage": cage}  # fmt: skip
         return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 

@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import importlib
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 from meshmocap.errors import InputError
 from meshmocap.trackers.base import Tracker
+
+if TYPE_CHECKING:
+    from meshmocap.body.template import Template
+    from meshmocap.models.gplvm import GPLVM
+    from meshmocap.trackers.manifold import PoseManifold
+
+_CAGE = ("meshmocap.trackers.cage", "CageTracker", "CageOptions")
 
 #: method name → (module, tracker class, options class, fixed options)
 METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
@@ -18,18 +26,62 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         {"classifier": "none"},
     ),
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
+    # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1)
+    "cage": (*_CAGE, {}),
+    "cage_quads": (*_CAGE, {"space": "quads"}),
+    "cage_noreg": (*_CAGE, {"variance_weight": 0.0}),
+    "cage_nolocal": (*_CAGE, {"local_iters": 0}),
 }
 
+#: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
+MANIFOLD_METHODS = tuple(m for m, spec in METHODS.items() if spec[:3] == _CAGE)
 
-def make_tracker(method: str, **options: Any) -> Tracker:
+
+def make_tracker(
+    method: str,
+    *,
+    manifold: GPLVM | PoseManifold | str | os.PathLike | None = None,
+    template: Template | None = None,
+    **options: Any,
+) -> Tracker:
     """Return the tracker ``method`` (see :data:`METHODS`) with ``options`` (fields of its
-    options dataclass; unknown names are rejected)."""
+    options dataclass; unknown names are rejected).
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`METHODS`.
+    manifold : GPLVM, PoseManifold, path or None
+        Cage methods (:data:`MANIFOLD_METHODS`) only: the pose manifold, see
+        :func:`~meshmocap.trackers.manifold.resolve_manifold` (None: learn one from the
+        procedural walk and jog on ``template``, logged).
+    template : Template, optional
+        The tracking template. Cage methods need it unless ``manifold`` is a fitted GPLVM:
+        the tracker is set up for it and the manifold checked against it (one-line
+        :class:`InputError` when built for another template).
+    **options
+        Fields of the method's options dataclass.
+    """
     if method not in METHODS:
         raise InputError(f"track: method must be one of {sorted(METHODS)}, found {method!r}")
     module, cls, opts_cls, fixed = METHODS[method]
+    if manifold is not None and method not in MANIFOLD_METHODS:
+        raise InputError(f"track: a manifold is only used by {list(MANIFOLD_METHODS)}, "
+                         f"not {method!r}")  # fmt: skip
     mod = importlib.import_module(module)
     try:
         opts = getattr(mod, opts_cls)(**{**options, **fixed})
     except TypeError as exc:
         raise InputError(f"track: {exc}") from None
-    return getattr(mod, cls)(opts)
+    if method not in MANIFOLD_METHODS:
+        return getattr(mod, cls)(opts)
+    from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
+
+    pm = resolve_manifold(manifold, template)
+    tracker = getattr(mod, cls)(pm.gp if isinstance(pm, PoseManifold) else pm, opts)
+    if template is not None:
+        tracker.setup(template)  # builds the rigging once; the driver keeps it
+        if isinstance(pm, PoseManifold):
+            named = isinstance(manifold, str | os.PathLike)
+            pm.check(template, tracker.oqr, source=manifold if named else None)
+    return tracker

@@ -1,0 +1,124 @@
+"""Pose manifolds (saved with their template) and the cage methods of the tracker registry."""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from meshmocap.body.oqr import build_oqr
+from meshmocap.body.pose_data import load_pose_sources
+from meshmocap.body.template import load_template
+from meshmocap.errors import FormatError, InputError
+from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers import manifold as manifold_module
+from meshmocap.trackers.cage import CageTracker
+from meshmocap.trackers.manifold import (
+    PoseManifold,
+    fit_pose_manifold,
+    learn_pose_manifold,
+    resolve_manifold,
+    template_digest,
+)
+from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    """A 2-D manifold of 20 walk/jog poses of neutral_5k (fits in well under a second)."""
+    t = load_template("neutral_5k")
+    oqr = build_oqr(t)
+    poses = load_pose_sources(["walk", "jog"], t, oqr=oqr, duration=1.0, fps=15.0)
+    return t, oqr, fit_pose_manifold(poses, t, oqr=oqr, n_samples=20, max_iter=200)
+
+
+def test_fit_records_what_it_was_built_for(tiny):
+    t, oqr, pm = tiny
+    assert (pm.n_samples, pm.n_components, pm.n_poses) == (20, 2, 32)
+    assert pm.template_name == "neutral_5k" and pm.template_digest == template_digest(t)
+    assert template_digest(load_template("neutral_5k")) == pm.template_digest  # reloaded
+    assert template_digest(load_template("neutral")) != pm.template_digest
+    np.testing.assert_array_equal(pm.rest_cage, oqr.rest_vertices)
+    assert set(pm.groups) == {"walk", "jog"} and pm.fit_seconds > 0
+    pm.check(t, oqr)  # no error
+
+
+def test_save_load_round_trip_and_plain_gplvm_reader(tiny, tmp_path):
+    _, _, pm = tiny
+    path = pm.save(tmp_path / "m.npz")
+    back = PoseManifold.load(path)
+    X = np.random.default_rng(3).normal(size=(5, 2))
+    np.testing.assert_array_equal(back.gp.predict(X), pm.gp.predict(X))  # bit for bit
+    for key in ("template_name", "template_digest", "sources", "n_poses", "fit_seconds"):
+        assert getattr(back, key) == getattr(pm, key)
+    np.testing.assert_array_equal(back.groups, pm.groups)
+    np.testing.assert_array_equal(GPLVM.load(path).predict(X), pm.gp.predict(X))
+    pm.gp.save(tmp_path / "bare.npz")
+    with pytest.raises(FormatError, match="without the template it was built for"):
+        PoseManifold.load(tmp_path / "bare.npz")
+    with pytest.raises(InputError, match=r"must end in \.npz"):
+        pm.save(tmp_path / "m.json")
+
+
+def test_check_refuses_another_template_or_rigging_in_one_line(tiny):
+    t, oqr, pm = tiny
+    heavy = load_template("heavy_male")
+    with pytest.raises(InputError, match="built for template 'neutral_5k'") as info:
+        pm.check(heavy, source="m.npz")
+    msg = str(info.value)
+    assert msg.startswith("m.npz: manifold") and "'heavy_male'" in msg and "\n" not in msg
+    assert resolve_manifold(pm, t, oqr) is pm and resolve_manifold(pm.gp, None) is pm.gp
+    with pytest.raises(InputError, match="not the tracking template 'heavy_male'"):
+        resolve_manifold(pm, heavy)
+    moved = replace(pm, rest_cage=pm.rest_cage + 0.01)
+    with pytest.raises(InputError, match=r"another quad rigging .* 0\.01 m"):
+        moved.check(t, oqr)
+
+
+def test_registry_cage_methods_and_their_ablations(tiny, tmp_path):
+    t, _, pm = tiny
+    assert set(MANIFOLD_METHODS) == {"cage", "cage_quads", "cage_noreg", "cage_nolocal"}
+    assert set(MANIFOLD_METHODS) < set(METHODS)
+    path = pm.save(tmp_path / "m.npz")
+    fixed = {"cage": {}, "cage_quads": {"space": "quads"}, "cage_noreg": {"variance_weight": 0.0},
+             "cage_nolocal": {"local_iters": 0}}  # fmt: skip
+    for method in MANIFOLD_METHODS:
+        tr = make_tracker(method, manifold=pm.gp, n_sample=100)
+        assert isinstance(tr, CageTracker) and tr.gp is pm.gp and tr.opts.n_sample == 100
+        for key, value in fixed[method].items():
+            assert getattr(tr.opts, key) == value
+    # a saved manifold and the tracking template: checked, and the tracker set up for it
+    tr = make_tracker("cage", manifold=str(path), template=t)
+    assert tr.template is t and tr.gp.X_.shape == (20, 2)
+
+
+def test_registry_errors(tiny, tmp_path):
+    t, _, pm = tiny
+    path = pm.save(tmp_path / "m.npz")
+    heavy = load_template("heavy_male")
+    with pytest.raises(InputError, match=re.escape(f"{path}: manifold was built for")):
+        make_tracker("cage", manifold=path, template=heavy)
+    with pytest.raises(InputError, match="only used by"):
+        make_tracker("patch", manifold=path)
+    with pytest.raises(InputError, match="template= is needed"):
+        make_tracker("cage", manifold=path)
+    with pytest.raises(InputError, match="must be a fitted GPLVM"):
+        make_tracker("cage", manifold=GPLVM(2))
+    with pytest.raises(InputError, match="must be a GPLVM, PoseManifold, path or None"):
+        resolve_manifold(3, t)
+    with pytest.raises(InputError, match="unexpected keyword"):
+        make_tracker("cage", manifold=pm.gp, n_patches=3)
+
+
+def test_no_manifold_learns_one_from_the_procedural_motions(tiny, monkeypatch, caplog):
+    t, _, _ = tiny
+    monkeypatch.setattr(manifold_module, "ON_THE_FLY_MAX_ITER", 20)  # a quick fit suffices
+    with caplog.at_level(logging.INFO, logger="meshmocap.trackers.manifold"):
+        tr = make_tracker("cage_nolocal", template=t)
+    assert tr.gp.X_.shape == (120, 2) and tr.gp.n_iter_ <= 20
+    assert "learned a 2-D one from procedural walk+jog on 'neutral_5k'" in caplog.text
+    with pytest.raises(InputError, match="none given"):
+        learn_pose_manifold(t, [])
