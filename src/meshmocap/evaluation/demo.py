@@ -17,7 +17,9 @@ from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import load_template
 from meshmocap.evaluation.evaluate import evaluate, write_evaluation
+from meshmocap.evaluation.player import player_from_tracks
 from meshmocap.evaluation.render import render_motion
+from meshmocap.evaluation.report import Section, comparison_table, evaluation_section, write_report
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
@@ -88,6 +90,7 @@ def run_demo(
         res = render_motion(neutral, m, out / name, frames=False, show_progress=show_progress)
         files.append((f"{name} on neutral", res.sheet))
     scores: list[TrackerScore] = []
+    players, sections, evaluations, tracks = [], [], [], []
     if track_frames > 0:
         template = load_template("neutral_5k")
         spec = SynthSpec(motion="walk", template="neutral_5k", rig="humaneva4", stop=track_frames)
@@ -97,8 +100,22 @@ def run_demo(
             track = track_sequence(make_tracker(method), template, cap, out / f"track_{method}",
                                    show_progress=show_progress)  # fmt: skip
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
-            write_evaluation(ev, out / f"eval_{method}")
+            written = write_evaluation(ev, out / f"eval_{method}")
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
             worst = float(ev.joints.per_frame.max())
             scores.append(TrackerScore(method, ev.joints.overall.mean, worst, ev.seconds.mean))
+            tracks.append(track)
+            evaluations.append(ev)
+            plots = [p for p in written if p.suffix == ".png"]
+            sections.append(evaluation_section(ev, images=plots))
+        title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
+        players.append(player_from_tracks(cap, tracks, title=title))
+    sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
+    report = write_report(
+        out / "report.html", title="meshmocap demo", players=players,
+        tables=[comparison_table(evaluations)] if evaluations else [],
+        sections=[*sections, Section("Motions rendered (contact sheets)", images=sheets)],
+        intro="procedural motions, retargeting and a synthetic capture tracked and scored",
+    )  # fmt: skip
+    files.append(("report (tables, plots, 3D player; open in a browser)", report))
     return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0)

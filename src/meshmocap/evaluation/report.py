@@ -1,0 +1,403 @@
+"""Self-contained HTML reports: tables, embedded plots and a 3D player of tracked meshes.
+
+A report is one ``.html`` file that works offline: PNG/JPEG images are embedded as
+``data:`` URIs and the player (:mod:`meshmocap.evaluation.player`, a dependency-free
+canvas-2D viewer) is inlined with its data; the page refers to no URL at all. Its size is
+about the player's (≤ ``max_megabytes``, 30 MB by default) plus the images'.
+
+:func:`report_html` (pure) and :func:`write_report` assemble players, tables and images;
+:func:`build_report` evaluates tracks on their capture and writes the whole report (the
+``meshmocap report`` command).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap import __version__
+from meshmocap._atomic import write_text_atomic
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.evaluation.evaluate import Evaluation, evaluate, write_evaluation
+from meshmocap.evaluation.player import (
+    PALETTE,
+    Player,
+    player_from_tracks,
+    player_js,
+    player_payload,
+)
+from meshmocap.evaluation.tables import _summary
+from meshmocap.io.capture import Capture, SequenceCapture, open_capture
+from meshmocap.io.results import Track, read_track
+
+ImageSource = str | os.PathLike | bytes
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table of a report: ``rows`` of cells under ``headers``; floats get ``digits``
+    decimals (NaN prints as ``n/a``), numbers are right-aligned."""
+
+    title: str
+    headers: tuple[str, ...]
+    rows: tuple[tuple[object, ...], ...]
+    digits: int = 1
+
+
+@dataclass(frozen=True)
+class Section:
+    """A titled part of a report: tables, then ``(caption, image)`` pairs (a PNG/JPEG path
+    or its bytes), then preformatted ``text``."""
+
+    title: str
+    tables: tuple[Table, ...] = ()
+    images: tuple[tuple[str, ImageSource], ...] = ()
+    text: str = ""
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def table_of(result: object, *, digits: int = 1) -> Table:
+    """A metrics result (joint, vertex, silhouette, bone or surface) as a report table, in
+    the display units of :func:`meshmocap.evaluation.tables.table` (mm or %)."""
+    title, headers, rows, scale = _summary(result)
+    unit = "%" if scale == 100.0 else "mm"
+    heads = []
+    for h in headers:
+        base = h.rsplit("_", 1)[0] if h.endswith(("_mm", "_m", "_ratio")) else h
+        heads.append(f"{base} ({unit})" if base != h else h)
+    shown = tuple(tuple(x * scale if isinstance(x, float) else x for x in r) for r in rows)
+    return Table(title, tuple(heads), shown, digits)
+
+
+def evaluation_tables(ev: Evaluation) -> list[Table]:
+    """The tables of :func:`meshmocap.evaluation.evaluate.summary`, as report tables."""
+    out = [
+        Table(
+            "Overview",
+            ("method", "frames", "unhealthy", "s/frame mean", "s/frame median"),
+            ((ev.method, ev.n_frames, ev.unhealthy, ev.seconds.mean, ev.seconds.median),),
+            digits=3,
+        )
+    ]
+    for r in (ev.joints, ev.joints14, ev.bones, ev.silhouettes):
+        if r is not None:
+            out.append(table_of(r))
+    if ev.surface is not None:
+        s = ev.surface
+        rows = [
+            (int(f), float(m), float(h))
+            for f, m, h in zip(s.frames, s.mean, s.hausdorff, strict=True)
+        ]
+        rows.append(("mean", float(s.mean.mean()), float(s.hausdorff.mean())))
+        out.append(
+            Table(
+                f"Surface distance to the {s.against}, mm",
+                ("frame", "mean (mm)", "hausdorff (mm)"),
+                tuple(rows),
+            )
+        )
+    if ev.correspondence is not None:
+        out.append(table_of(ev.correspondence))
+    return out
+
+
+def comparison_table(
+    evaluations: Sequence[Evaluation], *, names: Sequence[str] | None = None
+) -> Table:
+    """One row per evaluation: frames, unhealthy frames, joint errors (mm; 14 joints without
+    the pelvis), silhouette error (%) and seconds per frame; ``n/a`` where not measured."""
+    nan = math.nan
+    rows = []
+    for k, ev in enumerate(evaluations):
+        j, j14 = ev.joints, ev.joints14
+        rows.append(
+            (
+                names[k] if names else ev.method,
+                ev.n_frames,
+                ev.unhealthy,
+                j.overall.mean if j else nan,
+                j.overall.median if j else nan,
+                float(j.per_frame.max()) if j and len(j.per_frame) else nan,
+                j14.overall.mean if j14 else nan,
+                ev.silhouettes.overall * 100 if ev.silhouettes else nan,
+                ev.seconds.mean,
+            )
+        )
+    heads = (
+        "method",
+        "frames",
+        "unhealthy",
+        "joint mean (mm)",
+        "joint median (mm)",
+        "worst frame (mm)",
+        "14 joints mean (mm)",
+        "silhouette (%)",
+        "s/frame",
+    )
+    return Table("Trackers compared", heads, tuple(rows), digits=2)
+
+
+def evaluation_section(
+    ev: Evaluation, *, images: Sequence[ImageSource] = (), title: str | None = None
+) -> Section:
+    """A report section of one evaluation: its tables and its plots (``.png`` paths or
+    bytes, captioned by file name)."""
+    pics = []
+    for im in images:
+        cap = "" if isinstance(im, bytes) else Path(im).stem.replace("_", " ")
+        pics.append((cap, im))
+    return Section(title or f"Evaluation: {ev.method}", tuple(evaluation_tables(ev)), tuple(pics))
+
+
+# --------------------------------------------------------------------------- HTML
+
+_CSS = """
+body{font:14px/1.45 system-ui,sans-serif;color:#222;margin:0 auto;padding:16px 24px;
+ max-width:1200px}
+h1{font-size:22px;margin:4px 0}h2{font-size:18px;margin:18px 0 8px}
+.mm-meta{color:#666;margin:0 0 12px}
+.mm-player{border:1px solid #d5dae0;border-radius:6px;padding:8px;margin:0 0 16px}
+.mm-player h2{margin:0 0 6px;font-size:16px}
+.mm-canvas{display:block;width:100%;height:560px;background:#f3f5f8;border-radius:4px;
+ touch-action:none;cursor:grab;outline:none}
+.mm-controls,.mm-layers{display:flex;gap:10px;align-items:center;flex-wrap:wrap;margin-top:6px}
+.mm-slider{flex:1;min-width:200px}.mm-label{font-variant-numeric:tabular-nums;color:#444}
+.mm-swatch{display:inline-block;width:12px;height:12px;border-radius:2px;margin-right:4px;
+ vertical-align:-1px}
+.mm-table{border-collapse:collapse;margin:8px 24px 16px 0;font-size:13px;display:inline-table;
+ vertical-align:top}
+.mm-table caption{text-align:left;font-weight:600;padding:4px 0}
+.mm-table th,.mm-table td{border-bottom:1px solid #e3e6ea;padding:3px 10px;text-align:left}
+.mm-table td.num{text-align:right;font-variant-numeric:tabular-nums}
+.mm-table th{background:#f3f5f8}
+figure{display:inline-block;margin:0 12px 12px 0;vertical-align:top}
+figure img{max-width:100%;border:1px solid #e3e6ea}figcaption{color:#555;font-size:12px}
+pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px}
+html.mm-shot body{margin:0;padding:0;max-width:none;overflow:hidden}
+html.mm-shot body>:not(.mm-players),html.mm-shot .mm-player~.mm-player,
+html.mm-shot .mm-player>:not(canvas){display:none}
+html.mm-shot .mm-players,html.mm-shot .mm-player{margin:0;padding:0;border:0;width:800px}
+html.mm-shot .mm-canvas{width:800px;height:600px;border-radius:0}
+"""
+
+#: The player's layer switches (all on at first): data-layer key, label.
+_LAYERS = (("mesh", "meshes"), ("skeleton", "skeletons"), ("truth", "truth joints"),
+           ("hull", "hull points"), ("side", "side by side"), ("follow", "follow"))  # fmt: skip
+
+
+def _esc(x: object) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _cell(x: object, digits: int) -> str:
+    if isinstance(x, float | np.floating):
+        text = "n/a" if math.isnan(x) else f"{x:.{digits}f}"
+        return f'<td class="num">{text}</td>'
+    if isinstance(x, int | np.integer):
+        return f'<td class="num">{x}</td>'
+    return f"<td>{_esc(x)}</td>"
+
+
+def table_html(t: Table) -> str:
+    """One ``<table>`` of a :class:`Table`."""
+    head = "".join(f"<th>{_esc(h)}</th>" for h in t.headers)
+    body = "".join("<tr>" + "".join(_cell(x, t.digits) for x in r) + "</tr>\n" for r in t.rows)
+    return (
+        f'<table class="mm-table"><caption>{_esc(t.title)}</caption>'
+        f"<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody></table>\n"
+    )
+
+
+def image_uri(image: ImageSource) -> str:
+    """A ``data:`` URI of a PNG or JPEG (a path or its bytes)."""
+    if isinstance(image, bytes):
+        data, where = image, "image bytes"
+    else:
+        path = Path(image)
+        if not path.is_file():
+            raise MeshmocapFileNotFoundError(f"report image: {path} does not exist")
+        data, where = path.read_bytes(), str(path)
+    if data.startswith(b"\x89PNG\r\n\x1a\n"):
+        mime = "image/png"
+    elif data.startswith(b"\xff\xd8\xff"):
+        mime = "image/jpeg"
+    else:
+        raise InputError(f"report image: {where}: expected a PNG or JPEG, found {data[:8]!r}")
+    return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+
+
+def _player_html(player: Player, k: int) -> str:
+    payload = json.dumps(player_payload(player), separators=(",", ":")).replace("</", "<\\/")
+    boxes = "".join(
+        f'<label><input type="checkbox" data-layer="{key}" checked> {label}</label>'
+        for key, label in _LAYERS
+        if not (
+            (key == "truth" and player.truth is None)
+            or (key == "hull" and player.hull is None)
+            or (key == "side" and len(player.tracks) < 2)
+        )
+    )
+    legend = "".join(
+        f'<span><span class="mm-swatch" style="background:rgb{PALETTE[i % len(PALETTE)]}">'
+        f"</span>{_esc(t.name)}</span>"
+        for i, t in enumerate(player.tracks)
+    )
+    if player.truth is not None:
+        legend += (
+            '<span><span class="mm-swatch" style="background:rgb(20,150,60)"></span>truth</span>'
+        )
+    if player.hull is not None:
+        legend += (
+            '<span><span class="mm-swatch" style="background:rgb(230,140,40)"></span>hull</span>'
+        )
+    speeds = "".join(
+        f'<option value="{s}"{" selected" if s == 1 else ""}>{s:g}×</option>'
+        for s in (0.1, 0.25, 0.5, 1, 2)
+    )
+    title = player.title or "3D player"
+    return (
+        f'<div class="mm-player" id="mm-player-{k}">\n<h2>{_esc(title)}</h2>\n'
+        f'<canvas class="mm-canvas" tabindex="0"></canvas>\n'
+        f'<div class="mm-controls"><button type="button" class="mm-play">▶ Play</button>'
+        f'<input type="range" class="mm-slider" min="0" max="{len(player.frames) - 1}" value="0">'
+        f'<span class="mm-label"></span><select class="mm-speed">{speeds}</select></div>\n'
+        f'<div class="mm-layers">{boxes}</div>\n<div class="mm-layers">{legend}</div>\n'
+        f'<script type="application/json" class="mm-data">{payload}</script>\n</div>\n'
+    )
+
+
+def report_html(
+    *,
+    title: str,
+    players: Sequence[Player] = (),
+    sections: Sequence[Section] = (),
+    tables: Sequence[Table] = (),
+    images: Sequence[tuple[str, ImageSource]] = (),
+    intro: str = "",
+) -> str:
+    """Return a self-contained HTML report: the players first, then ``tables`` and
+    ``images`` (as one section "Results"), then ``sections``.
+
+    ``images`` are ``(caption, PNG/JPEG path or bytes)`` pairs; ``intro`` is a line of text
+    under the title.
+    """
+    out = [
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n',
+        f"<title>{_esc(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n",
+        f'<header><h1>{_esc(title)}</h1><p class="mm-meta">{_esc(intro)}'
+        f"{' · ' if intro else ''}written by meshmocap {__version__}</p></header>\n",
+    ]
+    if players:
+        out.append('<section class="mm-players">\n')
+        out += [_player_html(p, k) for k, p in enumerate(players)]
+        out.append("</section>\n")
+    parts = list(sections)
+    if tables or images:
+        parts.insert(0, Section("Results", tuple(tables), tuple(images)))
+    for s in parts:
+        out.append(f'<section class="mm-section">\n<h2>{_esc(s.title)}</h2>\n')
+        out += [table_html(t) for t in s.tables]
+        for caption, im in s.images:
+            out.append(
+                f'<figure><img src="{image_uri(im)}" alt="{_esc(caption)}">'
+                f"<figcaption>{_esc(caption)}</figcaption></figure>\n"
+            )
+        if s.text:
+            out.append(f"<pre>{_esc(s.text)}</pre>\n")
+        out.append("</section>\n")
+    if players:
+        js = player_js()
+        if "</script" in js.lower():
+            raise InputError("report: player.js must not contain '</script'")
+        out.append(f"<script>\n{js}</script>\n")
+    out.append("</body>\n</html>\n")
+    return "".join(out)
+
+
+def write_report(path: str | os.PathLike, **content) -> Path:
+    """Write :func:`report_html` (``**content``: its keyword arguments) to ``path`` (an
+    ``.html`` file, folders created) atomically; return the path."""
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise InputError(f"report: the output must end in .html, found {path.name!r}")
+    text = report_html(**content)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, text)
+    return path
+
+
+def build_report(
+    out: str | os.PathLike,
+    capture: str | os.PathLike | Capture | SequenceCapture,
+    tracks: Sequence[str | os.PathLike | Track],
+    *,
+    eval_dirs: Sequence[str | os.PathLike] | None = None,
+    max_frames: int = 120,
+    silhouettes: bool = True,
+    surface_frames: int = 8,
+    title: str | None = None,
+) -> Path:
+    """Evaluate ``tracks`` on ``capture`` and write a report to ``out`` (``.html``): a
+    comparison table, a player of every track, and each evaluation's tables and plots.
+
+    Parameters
+    ----------
+    capture : a capture folder (or glob of meshes) or an opened capture
+    tracks : track folders (or read tracks), one or more
+    eval_dirs : folders, one per track, optional
+        Where each evaluation's CSV tables and PNG plots are written
+        (:func:`~meshmocap.evaluation.evaluate.write_evaluation`); default: a temporary
+        folder, removed once the plots are embedded.
+    max_frames : int, frames of the player (a regular stride over long tracks)
+    silhouettes, surface_frames : as in :func:`~meshmocap.evaluation.evaluate.evaluate`
+    """
+    cap = capture if isinstance(capture, Capture | SequenceCapture) else open_capture(capture)
+    trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]
+    if not trs:
+        raise InputError("report: expected at least one track, found none")
+    if eval_dirs is not None and len(eval_dirs) != len(trs):
+        raise InputError(
+            f"eval_dirs: expected {len(trs)} folders (one per track), found {len(eval_dirs)}"
+        )
+    names = [str(t.meta.get("method", "?")) for t in trs]
+    if len(set(names)) < len(names):
+        names = [
+            f"{n} ({Path(p).name if not isinstance(p, Track) else k})"
+            for k, (n, p) in enumerate(zip(names, tracks, strict=True))
+        ]
+    evs, sections = [], []
+    with tempfile.TemporaryDirectory(prefix="meshmocap-report-") as tmp:
+        for k, (name, t) in enumerate(zip(names, trs, strict=True)):
+            ev = evaluate(t, cap, silhouettes=silhouettes, surface_frames=surface_frames)
+            folder = Path(eval_dirs[k]) if eval_dirs is not None else Path(tmp) / str(k)
+            pngs = [p for p in write_evaluation(ev, folder) if p.suffix == ".png"]
+            pics = tuple((p.stem.replace("_", " "), p.read_bytes()) for p in pngs)
+            evs.append(ev)
+            sections.append(Section(f"Evaluation: {name}", tuple(evaluation_tables(ev)), pics))
+    player = player_from_tracks(
+        cap,
+        trs,
+        names=names,
+        max_frames=max_frames,
+        title=f"{', '.join(names)} on {Path(cap.path).name}",
+    )
+    return write_report(
+        out,
+        title=title or f"meshmocap report: {Path(cap.path).name}",
+        players=[player],
+        tables=[comparison_table(evs, names=names)],
+        sections=sections,
+        intro=f"capture {cap.path}, {len(cap)} frames; tracks: {', '.join(names)}",
+    )

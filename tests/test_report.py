@@ -1,0 +1,236 @@
+"""HTML reports: offline, self-contained, data round-trips, the player draws in a browser."""
+
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.evaluation.player import (
+    decode_array,
+    encode_array,
+    player_from_tracks,
+    player_js,
+    player_payload,
+    surface_voxels,
+)
+from meshmocap.evaluation.report import Section, Table, report_html, write_report
+from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
+from meshmocap.studio.synth import SynthSpec, synthesize
+
+# the smallest valid PNG (1 x 1 grey pixel)
+PNG = bytes.fromhex(
+    "89504e470d0a1a0a0000000d4948445200000001000000010800000000"
+    "3a7e9b550000000a4944415478da63680000008200816c8a35b30000000049454e44ae426082"
+)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cap")
+    spec = SynthSpec(motion="walk", template="neutral_5k", stop=3)
+    return synthesize(out, spec, show_progress=False)
+
+
+@pytest.fixture(scope="module")
+def tracked(capture, tmp_path_factory):
+    """A real articulated-ICP track of the capture: (folder, Track)."""
+    from meshmocap.body.template import load_template
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    out = tmp_path_factory.mktemp("icp")
+    tr = track_sequence(
+        make_tracker("articulated_icp"), load_template("neutral_5k"), capture, out,
+        show_progress=False,
+    )  # fmt: skip
+    return out, tr
+
+
+@pytest.fixture(scope="module")
+def shifted(capture, tmp_path_factory):
+    """The truth moved 5 cm along x, frames 1 and 2 only: (folder, Track)."""
+    from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
+
+    out = tmp_path_factory.mktemp("shift")
+    meta = {"method": "truth+5cm", "template": "neutral_5k", "eval_names": list(EVAL_NAMES),
+            "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    start_track(out, meta, capture.truth_faces, resume=False)
+    shift = np.array([0.05, 0.0, 0.0])
+    for f in list(capture)[1:]:
+        t = f.truth
+        write_frame(out, FrameResult(f.index, t.joints + shift, t.vertices + shift, seconds=0.01))
+    return out, read_track(out)
+
+
+@pytest.fixture(scope="module")
+def player(capture, tracked, shifted):
+    return player_from_tracks(capture, [tracked[1], shifted[1]], title="two tracks <&>")
+
+
+def _payloads(text: str) -> list[dict]:
+    found = re.findall(
+        r'<script type="application/json" class="mm-data">(.*?)</script>', text, re.S
+    )
+    return [json.loads(s) for s in found]
+
+
+def test_player_data_round_trips(player, capture, tracked, shifted):
+    tr, sh = tracked[1], shifted[1]
+    assert player.frames.tolist() == [0, 1, 2] and player.fps == capture.fps
+    assert player.tracks[1].rows.tolist() == [-1, 0, 1]  # the shifted track starts at frame 1
+    d = player_payload(player)
+    t0, t1 = d["tracks"]
+    step = t0["vertices"]["step"]
+    assert 0 < step < 1e-4  # 0.1 mm or better for a ~2 m scene
+    V = decode_array(t0["vertices"])
+    assert V.shape == tr.vertices.shape
+    np.testing.assert_allclose(V, tr.vertices, atol=step / 2 + 1e-6)
+    np.testing.assert_allclose(decode_array(t1["joints"]), sh.joints, atol=step / 2 + 1e-6)
+    faces = decode_array(t0["faces"])
+    assert faces.dtype == np.uint16 and faces.shape == tr.faces.shape
+    assert np.array_equal(np.sort(faces, axis=1), np.sort(tr.faces, axis=1))  # maybe reoriented
+    assert t0["cull"] is True and t0["parents"] == tr.meta["eval_parents"]
+    assert decode_array(t1["rows"]).tolist() == [-1, 0, 1]
+    truth = np.stack([f.truth.joints for f in capture])
+    np.testing.assert_allclose(decode_array(d["truth"]["joints"]), truth, atol=step / 2 + 1e-6)
+    offsets = decode_array(d["hull"]["offsets"])
+    assert offsets[0] == 0 and len(offsets) == 4 and 0 < np.diff(offsets).min() <= 2500
+    hull = decode_array(d["hull"]["points"])
+    assert hull.shape == (offsets[-1], 3)
+    # hull points lie around the true body of their frame
+    assert np.abs(hull[: offsets[1]].mean(axis=0) - truth[0].mean(axis=0)).max() < 0.15
+
+
+def test_surface_voxels_match_an_erosion():
+    from scipy.ndimage import binary_erosion
+
+    occ = np.random.default_rng(0).random((12, 15, 9)) > 0.3
+    assert np.array_equal(surface_voxels(occ), np.argwhere(occ & ~binary_erosion(occ)))
+    assert surface_voxels(np.zeros((3, 3, 3), bool)).shape == (0, 3)
+
+
+def test_encode_plain_arrays_little_endian():
+    a = np.arange(6, dtype=">u4").reshape(2, 3)
+    e = encode_array(a)
+    assert e["dtype"] == "uint32" and e["shape"] == [2, 3]
+    assert decode_array(e).tolist() == a.tolist()
+
+
+def test_report_is_offline_and_self_contained(player, tmp_path):
+    png = tmp_path / "plot.png"
+    png.write_bytes(PNG)
+    t = Table("errors <mm>", ("joint", "mean"), (("head", 1.25), ("all", float("nan"))))
+    more = Section("more", images=(("bytes", PNG),), text="x < y")
+    text = report_html(
+        title="report & co", players=[player], tables=[t], images=[("a plot", png)], sections=[more]
+    )
+    assert "http://" not in text and "https://" not in text and "//cdn" not in text
+    assert all(s.startswith("data:") for s in re.findall(r'src="([^"]*)"', text))
+    assert text.count("data:image/png;base64,") == 2
+    assert "<caption>errors &lt;mm&gt;</caption>" in text and '<td class="num">1.2' in text
+    assert ">n/a<" in text and "x &lt; y" in text and "two tracks &lt;&amp;&gt;" in text
+    assert _payloads(text) == [json.loads(json.dumps(player_payload(player)))]
+    js = player_js()
+    assert js in text and "Player.prototype.draw" in js and "atob(" in js
+    assert text.count("<script>") == 1  # the player's code, once for all players
+    # a page without players carries no script at all
+    assert "<script" not in report_html(title="plain", tables=[t])
+
+
+def test_player_js_syntax(tmp_path):
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not installed: cannot syntax-check player.js")
+    js = tmp_path / "player.js"
+    js.write_text(player_js())
+    res = subprocess.run([node, "--check", str(js)], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+
+
+def test_frame_cap_and_size_budget(capture, tracked):
+    tr = tracked[1]
+    assert player_from_tracks(capture, [tr], max_frames=2).frames.tolist() == [0, 2]
+    p = player_from_tracks(capture, [tr], max_frames=2, hull_points=0, truth=False)
+    assert p.fps == capture.fps / 2 and p.hull is None and p.truth is None
+    tiny = player_from_tracks(capture, [tr], max_megabytes=0.17)  # room for one frame
+    assert tiny.frames.tolist() == [0]
+    assert len(json.dumps(player_payload(tiny))) < 0.17e6
+
+
+def test_mistakes_are_reported(capture, tracked, tmp_path):
+    tr = tracked[1]
+    with pytest.raises(InputError, match="expected at least one track"):
+        player_from_tracks(capture, [])
+    with pytest.raises(InputError, match="names: expected 1"):
+        player_from_tracks(capture, [tr], names=["a", "b"])
+    with pytest.raises(InputError, match="expected a PNG or JPEG"):
+        report_html(title="x", images=[("bad", b"GIF89a....")])
+    with pytest.raises(MeshmocapFileNotFoundError, match=r"nope\.png"):
+        report_html(title="x", images=[("missing", tmp_path / "nope.png")])
+    with pytest.raises(InputError, match=r"must end in \.html"):
+        write_report(tmp_path / "r.txt", title="x")
+
+
+def test_track_frames_missing_from_the_capture(capture, tracked, tmp_path):
+    tr = tracked[1]
+    start_track(tmp_path / "t", tr.meta, tr.faces, resume=False)
+    write_frame(tmp_path / "t", FrameResult(99, tr.joints[0], tr.vertices[0]))
+    with pytest.raises(InputError, match=r"\[99\] are not in the capture"):
+        player_from_tracks(capture, [read_track(tmp_path / "t")])
+
+
+def test_report_command(capture, tracked, shifted, tmp_path, capsys):
+    out = tmp_path / "sub" / "report.html"
+    args = ["report", str(capture.path), str(tracked[0]), str(shifted[0]), "--out", str(out),
+            "--eval-dir", str(tmp_path / "e1"), "--eval-dir", str(tmp_path / "e2"),
+            "--max-frames", "2", "--no-silhouettes", "--surface-frames", "1"]  # fmt: skip
+    assert main(args) == 0
+    assert "wrote" in capsys.readouterr().out
+    text = out.read_text()
+    assert "Trackers compared" in text and "Evaluation: truth+5cm" in text
+    assert "Surface distance to the truth" in text and "data:image/png;base64," in text
+    assert (tmp_path / "e1" / "joint_errors.csv").is_file()
+    assert (tmp_path / "e2" / "joint_error_per_frame.png").is_file()
+    assert _payloads(text)[0]["frames"] == [0, 2]
+    assert main([*args[:6], "--eval-dir", str(tmp_path / "e1")]) == 2
+    assert "eval_dirs: expected 2 folders" in capsys.readouterr().err
+
+
+def _browser() -> str | None:
+    return next(
+        (p for n in ("chromium", "chromium-browser", "google-chrome") if (p := shutil.which(n))),
+        None,
+    )
+
+
+def test_player_draws_in_headless_chromium(player, tmp_path):
+    browser = _browser()
+    if browser is None:
+        pytest.skip("no chromium, chromium-browser or google-chrome on PATH")
+    page = write_report(tmp_path / "report.html", title="shot", players=[player])
+    shot = tmp_path / "shot.png"
+    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu",
+           "--disable-background-networking", "--disable-component-update",
+           "--disable-default-apps", "--no-first-run", "--hide-scrollbars",
+           f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1200,900",
+           "--virtual-time-budget=5000", f"--screenshot={shot}",
+           f"{page.resolve().as_uri()}?screenshot&frame=1"]  # fmt: skip
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    assert shot.is_file(), f"no screenshot (exit {res.returncode}): {res.stderr[-500:]}"
+    from PIL import Image
+
+    im = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    canvas, outside = im[:600, :800], im[:, 820:]
+    r, g, b = canvas[..., 0], canvas[..., 1], canvas[..., 2]
+    blue = (b > r + 40) & (b > g + 20)  # the first track's shaded mesh
+    purple = (r > g + 30) & (b > g + 40)  # the second track's mesh (side by side)
+    green = (g > r + 60) & (g > b + 30)  # ground-truth skeleton
+    assert blue.sum() > 3000, f"only {blue.sum()} mesh pixels in the canvas"
+    assert purple.sum() > 3000 and green.sum() > 50
+    assert (np.abs(canvas - [243, 245, 248]).sum(axis=2) < 6).mean() > 0.5  # background
+    assert (outside > 250).all()  # in ?screenshot mode only the canvas shows
