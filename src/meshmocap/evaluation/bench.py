@@ -1,0 +1,486 @@
+"""Both papers side by side in one reproducible run (``meshmocap bench``).
+
+Every method, ablation and baseline of :data:`~meshmocap.trackers.registry.METHODS` tracks
+every capture of a named set; each (capture, method) pair is scored by
+:func:`~meshmocap.evaluation.evaluate.evaluate` and written as ``results.csv``,
+``results.md`` and plots (:mod:`meshmocap.evaluation.bench_report`).
+
+Protocol: synthetic captures from the studio at 60 fps, tracking template ``neutral_5k``,
+subject = template unless a variant names another body, first frame initialised from
+ground truth, visual hulls carved at 1 cm; joint errors over the 15 evaluation joints,
+bone-length spread over the tracked evaluation skeleton, silhouette overlap error against
+the input silhouettes, seconds per frame as timed by the driver on this machine (frame 0,
+the initialisation, left out).
+
+Captures are named ``BASE[+VARIANT...]``, e.g. ``walk``, ``walk+ring8+degraded``,
+``05_01+heavy_male``:
+
+* BASE: a procedural motion (always available), a CMU clip of ``DATA/mocap/cmu``
+  (:data:`CMU_CLIPS`), or ``crane``: the MIT crane meshes of ``DATA/meshes/crane`` turned
+  into ``ring8`` visual hulls (real geometry; scored by per-vertex correspondence error);
+* VARIANT: a rig (``humaneva4``, the default, or ``ring8``), ``degraded`` silhouettes
+  (:data:`DEGRADED`) or another subject body (``heavy_male``, ``small_female``).
+
+Sets (:data:`CAPTURE_SETS`; captures needing ``data`` are left out without it):
+``quick`` (walk and jog, 40 frames; patch, patch_noclf, articulated_icp and cage: minutes,
+run it first), ``standard`` (procedural motions, each variant on the walk, two CMU clips,
+the crane; 120 frames; every method), ``full`` (everything, whole clips).
+
+The work folder caches everything and a re-run resumes: ``captures/<capture>-<N>f/``
+(:func:`~meshmocap.studio.synth.synthesize` resumes), ``tracks/<capture>-<N>f/
+<method>-<hash>/`` (:func:`~meshmocap.trackers.driver.track_sequence` resumes; the hash is
+of the tracker's options) with the scores cached beside the frames, and the cage
+trackers' pose manifold ``manifold-<template>.npz``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+import numpy as np
+
+from meshmocap._atomic import write_text_atomic
+from meshmocap._validate import check_choice
+from meshmocap.body.procedural import PROCEDURAL_MOTIONS
+from meshmocap.body.template import Template, bundled_templates, load_template
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.evaluation.bench_report import (
+    BenchRow,
+    TradeoffPoint,
+    not_applicable,
+    row_from_evaluation,
+    write_report,
+)
+from meshmocap.evaluation.evaluate import evaluate
+from meshmocap.io.capture import Capture
+from meshmocap.io.results import done_frames
+from meshmocap.studio.degrade import Degradation
+from meshmocap.studio.rigs import RigName
+from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
+
+SetName = Literal["quick", "standard", "full"]
+
+#: CMU clip → (file in DATA/mocap/cmu, first frame, last frame) at 60 fps. The Daz BVH
+#: 09_01 starts with a T-pose and blends out of it over its first 8 frames at 120 fps.
+CMU_CLIPS: dict[str, tuple[str, int | None, int | None]] = {
+    "05_01": ("05_01.amc", None, None),
+    "09_01": ("09_01.bvh", 4, None),
+    "01_01": ("01_01.amc", None, 600),
+}
+#: The MIT crane sequence in DATA (175 frames, fixed connectivity, Y up).
+CRANE = "meshes/crane/crane_mesh_0000-0174.tar.gz"
+#: Silhouette degradations of the ``degraded`` variant (pixels).
+DEGRADED = Degradation(jitter=1.5, holes=2, blobs=2)
+
+#: Kept fractions of the patch tracker's classifier swept for Fig. 8.
+DEFAULT_KEEP_FRACTIONS = (0.05, 0.1, 0.25, 0.5, 1.0)
+
+
+@dataclass(frozen=True)
+class CaptureSet:
+    """A named set of captures and what runs on it by default.
+
+    Attributes
+    ----------
+    captures : tuple of capture names (module docstring)
+    frames : int or None, frames per capture (None: whole clips)
+    methods : tuple of method names, or None for every registered method; names not
+        registered are left out
+    keep_fractions : tuple of float, the Fig. 8 sweep
+    """
+
+    captures: tuple[str, ...]
+    frames: int | None
+    methods: tuple[str, ...] | None = None
+    keep_fractions: tuple[float, ...] = DEFAULT_KEEP_FRACTIONS
+
+
+_STANDARD = ("walk", "jog", "squat", "walk+ring8", "walk+degraded", "walk+heavy_male", "05_01",
+             "09_01", "crane")  # fmt: skip
+_FULL = (*PROCEDURAL_MOTIONS, "walk+ring8", "walk+degraded", "walk+heavy_male",
+         "walk+small_female", "jog+ring8+degraded", *CMU_CLIPS, "05_01+ring8", "05_01+degraded",
+         "09_01+heavy_male", "crane")  # fmt: skip
+#: The named sets. ``quick`` runs in minutes: each paper's method and the baselines (the
+#: cage ablations are in the other sets) on 40 frames of a walk and a jog.
+CAPTURE_SETS: dict[str, CaptureSet] = {
+    "quick": CaptureSet(
+        ("walk", "jog"),
+        40,
+        methods=("patch", "patch_noclf", "articulated_icp", "cage"),
+        keep_fractions=(0.1, 0.25, 0.5, 1.0),  # 0.5: the patch tracker's default, reused
+    ),
+    "standard": CaptureSet(_STANDARD, 120),
+    "full": CaptureSet(_FULL, None),
+}
+_EVAL_CACHE = "bench_eval.json"
+_EVAL_VERSION = 1
+
+
+@dataclass(frozen=True)
+class BenchCapture:
+    """One capture of a benchmark, before it is made.
+
+    Attributes
+    ----------
+    name : str, e.g. ``"walk+ring8"``
+    kind : ``"synthetic"`` (a template plays a motion) or ``"meshes"`` (a real mesh
+        sequence, skeleton-less, truth = its vertices)
+    source : str, procedural motion name, absolute motion file, or mesh archive
+    rig : str; subject : str or None (default: the template); degraded : bool
+    start, stop : int or None, frame range at 60 fps (30 fps for the crane)
+    """
+
+    name: str
+    kind: Literal["synthetic", "meshes"]
+    source: str
+    rig: str = "humaneva4"
+    subject: str | None = None
+    degraded: bool = False
+    start: int | None = None
+    stop: int | None = None
+
+    @property
+    def folder(self) -> str:
+        """Folder name in the work folder (name and frame count)."""
+        n = "all" if self.stop is None else f"{self.stop - (self.start or 0)}f"
+        return f"{self.name}-{n}"
+
+
+def capture_set(name: str) -> CaptureSet:
+    """Return the set ``name`` (:data:`CAPTURE_SETS`)."""
+    check_choice("bench", "set", name, list(CAPTURE_SETS))
+    return CAPTURE_SETS[name]
+
+
+def parse_capture(
+    name: str, *, data: str | os.PathLike | None = None, frames: int | None = None
+) -> BenchCapture:
+    """Resolve a capture name ``BASE[+VARIANT...]`` (see the module docstring).
+
+    Parameters
+    ----------
+    data : path, optional
+        The shared data folder (``mocap/cmu``, ``meshes/crane``); needed by CMU clips and
+        the crane.
+    frames : int, optional
+        Frames kept from the clip's first frame (default: all).
+    """
+    base, *variants = name.split("+")
+    bases = [*PROCEDURAL_MOTIONS, *CMU_CLIPS, "crane"]
+    check_choice("bench", "capture", base, bases)
+    rigs, subjects = list(get_args(RigName)), [t for t in bundled_templates() if t != "neutral_5k"]
+    opts: dict[str, Any] = {}
+    for v in variants:
+        check_choice(f"bench: capture {name!r}", "variant", v, [*rigs, "degraded", *subjects])
+        key = "rig" if v in rigs else "degraded" if v == "degraded" else "subject"
+        if key in opts:
+            raise InputError(f"bench: capture {name!r} names two {key} variants")
+        opts[key] = True if key == "degraded" else v
+    if frames is not None and frames < 1:
+        raise InputError(f"bench: frames must be ≥ 1, found {frames}")
+    if base in PROCEDURAL_MOTIONS:
+        return BenchCapture(name, "synthetic", base, stop=frames, **opts)
+    if data is None:
+        raise InputError(f"bench: capture {name!r} needs the data folder (--data DIR)")
+    root = Path(data).resolve()
+    if base == "crane":
+        if "subject" in opts:
+            raise InputError(f"bench: capture {name!r}: the crane has no subject variant")
+        path = root / CRANE
+        stop = min(175, frames or 175)
+        kind, start = "meshes", None
+        opts.setdefault("rig", "ring8")
+    else:
+        file, start, last = CMU_CLIPS[base]
+        path = root / "mocap" / "cmu" / file
+        limits = [x for x in (last, frames + (start or 0) if frames else None) if x]
+        stop = min(limits) if limits else None
+        kind = "synthetic"
+    if not path.is_file():
+        raise MeshmocapFileNotFoundError(f"bench: capture {name!r} needs {path}")
+    return BenchCapture(name, kind, str(path), start=start, stop=stop, **opts)
+
+
+def make_capture(
+    spec: BenchCapture,
+    work: str | os.PathLike,
+    *,
+    template: str = "neutral_5k",
+    show_progress: bool | None = None,
+) -> Capture:
+    """Make (or resume) the capture ``spec`` in ``work/captures/`` and return it (folder
+    :attr:`BenchCapture.folder`, plus ``@<template>`` for a synthetic capture made for
+    another template than ``neutral_5k``)."""
+    other = spec.kind == "synthetic" and template != "neutral_5k"
+    out = Path(work) / "captures" / (f"{spec.folder}@{template}" if other else spec.folder)
+    deg = DEGRADED if spec.degraded else Degradation()
+    if spec.kind == "meshes":
+        return synthesize_from_meshes(
+            spec.source, out, rig=spec.rig, frames=range(spec.start or 0, spec.stop or 0),
+            up="y", degradation=deg, show_progress=show_progress,
+        )  # fmt: skip
+    synth = SynthSpec(
+        motion=spec.source, template=template, subject=spec.subject, rig=spec.rig, fps=60.0,
+        start=spec.start, stop=spec.stop, degradation=deg,
+    )  # fmt: skip
+    return synthesize(out, synth, show_progress=show_progress)
+
+
+def mesh_template(capture: Capture) -> Template:
+    """The tracking template of a skeleton-less capture (the crane): frame 0's true mesh
+    with a single rigid root joint. **Hook**: a method runs on such captures only when its
+    tracker sets ``skeletonless = True`` (none does yet); others are reported as not
+    applicable, never scored."""
+    import scipy.sparse as sp
+
+    from meshmocap.body.skeleton import Skeleton
+    from meshmocap.body.template import EvalSkeleton
+    from meshmocap.io.meshes import MeshSequence
+
+    spec = capture.meta["spec"]
+    F = MeshSequence(spec["source"], frames=[capture.indices[0]], up=spec["up"])[0].F
+    V = capture[0].truth.vertices.astype(np.float64)
+    root = V.mean(axis=0)
+    n = len(V)
+    weights = sp.csr_matrix(np.ones((n, 1)))
+    ev = EvalSkeleton(("root",), np.array([-1]), root[None], np.ones((1, 1)))
+    skeleton = Skeleton(("root",), np.array([-1]), root[None])
+    return Template("crane_frame0", V, F, skeleton, weights, np.zeros(n, np.int64), ev)
+
+
+def bench_manifold(manifold: Any, template: Template, work: str | os.PathLike) -> Any:
+    """The pose manifold shared by every cage method (:data:`MANIFOLD_METHODS`), resolved
+    once and checked against ``template``: ``manifold`` as given (GPLVM, PoseManifold or
+    path), or None: learned on the fly from the procedural motions
+    (:func:`~meshmocap.trackers.manifold.resolve_manifold`) and cached as
+    ``work/manifold-<template>.npz``. Returns the fitted GPLVM."""
+    from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
+
+    path = Path(work) / f"manifold-{template.name}.npz"
+    if manifold is None and path.is_file():
+        manifold = path
+    pm = resolve_manifold(manifold, template)
+    if manifold is None:
+        pm.save(path)
+    return pm.gp if isinstance(pm, PoseManifold) else pm
+
+
+@dataclass(frozen=True, eq=False)
+class BenchResult:
+    """What :func:`run_bench` measured and wrote.
+
+    Attributes
+    ----------
+    rows : one per (capture, method), in the order run (not applicable ones included)
+    tradeoff : Fig. 8 points (patch tracker, each kept fraction) on ``tradeoff_capture``
+    tradeoff_capture : str or None
+    files : written files (CSV, markdown, PNG)
+    skipped : (capture, reason) of set captures left out (e.g. no data folder)
+    tracked, evaluated : ``capture/track`` names tracked or scored by this run (empty when
+        everything was reused)
+    seconds : wall time of the run
+    """
+
+    rows: tuple[BenchRow, ...]
+    tradeoff: tuple[TradeoffPoint, ...]
+    tradeoff_capture: str | None
+    files: tuple[Path, ...]
+    skipped: tuple[tuple[str, str], ...]
+    tracked: tuple[str, ...]
+    evaluated: tuple[str, ...]
+    seconds: float
+
+
+@dataclass
+class _Run:
+    """Mutable state of one :func:`run_bench` call."""
+
+    work: Path
+    show_progress: bool | None
+    log: Callable[[str], None]
+    tracked: list[str] = field(default_factory=list)
+    evaluated: list[str] = field(default_factory=list)
+
+    def track_and_score(
+        self,
+        name: str,
+        label: str,
+        tracker: Any,
+        template: Template,
+        capture: Capture,
+        *,
+        salt: str = "",
+    ) -> BenchRow:
+        """Track (or resume) and score ``tracker`` on ``capture`` (named ``name``) as
+        method ``label``. The track folder is named by a digest of the tracker's options,
+        the template and ``salt`` (e.g. the manifold's); scores are cached beside it."""
+        opts = [tracker.name, tracker.options(), template.name, salt]
+        digest = hashlib.sha1(json.dumps(opts, sort_keys=True).encode()).hexdigest()[:8]
+        out = self.work / "tracks" / capture.path.name / f"{label.split('[')[0]}-{digest}"
+        key = f"{capture.path.name}/{out.name}"
+        before = len(done_frames(out)) if (out / "frames").is_dir() else 0
+        track = track_sequence(tracker, template, capture, out, show_progress=self.show_progress)
+        if len(track.frames) > before:
+            self.tracked.append(key)
+        cache = out / _EVAL_CACHE
+        stamp = _stamp(out)
+        if cache.is_file():
+            cached = json.loads(cache.read_text())
+            if cached.get("stamp") == stamp:
+                return BenchRow.from_json(cached["row"], capture=name, method=label)
+        ev = evaluate(track, capture, surface_frames=0, silhouettes=True)
+        row = row_from_evaluation(name, label, ev, track=out)
+        write_text_atomic(cache, json.dumps({"stamp": stamp, "row": row.to_json()}) + "\n")
+        self.evaluated.append(key)
+        return row
+
+
+def _stamp(track: Path) -> str:
+    """Fingerprint of a track's frame files (names, sizes, modification times)."""
+    files = sorted((track / "frames").glob("*.npz"))
+    parts = [f"{p.name}:{p.stat().st_size}:{p.stat().st_mtime_ns}" for p in files]
+    return hashlib.sha1(f"{_EVAL_VERSION}|{'|'.join(parts)}".encode()).hexdigest()
+
+
+def run_bench(
+    out: str | os.PathLike,
+    *,
+    captures: str | Sequence[str] = "quick",
+    methods: Sequence[str] | None = None,
+    data: str | os.PathLike | None = None,
+    work: str | os.PathLike | None = None,
+    max_frames: int | None = None,
+    keep_fractions: Sequence[float] | None = None,
+    tradeoff_capture: str | None = None,
+    template: str = "neutral_5k",
+    method_options: Mapping[str, Mapping[str, Any]] | None = None,
+    manifold: Any = None,
+    show_progress: bool | None = None,
+    log: Callable[[str], None] | None = None,
+) -> BenchResult:
+    """Run every method on every capture and write the report into the folder ``out``.
+
+    Parameters
+    ----------
+    out : path
+        Report folder: ``results.csv``, ``results.md``, ``frame_errors.csv``,
+        ``bone_lengths.csv``, ``keep_fraction.csv`` and PNG plots.
+    captures : str or sequence of str
+        A set name (:data:`CAPTURE_SETS`) or capture names (module docstring).
+    methods : sequence of str, optional
+        Names in :data:`~meshmocap.trackers.registry.METHODS` (default: the set's, else
+        every registered method, in order).
+    data : path, optional
+        The shared data folder (CMU clips, crane); captures of a set that need it are left
+        out without it.
+    work : path, optional
+        Cache of captures, tracks and scores (default ``out/work``); share it between runs.
+    max_frames : int, optional
+        At most this many frames per capture (a set's own count applies too).
+    keep_fractions : sequence of float, optional
+        Kept fractions of the patch tracker's classifier (Fig. 8; default: the set's, else
+        :data:`DEFAULT_KEEP_FRACTIONS`), run on
+        ``tradeoff_capture`` (default: the first synthetic capture) when ``"patch"`` is
+        among ``methods``; empty to skip.
+    template : str
+        Tracking template.
+    method_options : mapping of method → options, optional
+        Extra tracker options per method (e.g. ``{"patch": {"n_patches": 120}}``).
+    manifold : GPLVM, path or None
+        Pose manifold of the methods that take one (the cage trackers); None: learned once
+        from the procedural motions and cached in ``work`` (:func:`bench_manifold`).
+    show_progress : bool, optional
+        Progress bars on stderr (default: when stderr is a terminal).
+    log : callable, optional
+        Called with one line per stage (e.g. ``print``).
+    """
+    t0 = time.perf_counter()
+    cs = capture_set(captures) if isinstance(captures, str) else None
+    if methods is None:
+        methods = [m for m in (cs.methods if cs and cs.methods else METHODS) if m in METHODS]
+    methods = list(methods)
+    if not methods:
+        raise InputError(f"bench: no methods given; methods are {sorted(METHODS)}")
+    for m in methods:
+        check_choice("bench", "method", m, sorted(METHODS))
+    method_options = dict(method_options or {})
+    for m in method_options:
+        check_choice("bench: method_options", "method", m, sorted(METHODS))
+    if keep_fractions is None:
+        keep_fractions = cs.keep_fractions if cs else DEFAULT_KEEP_FRACTIONS
+    for f in keep_fractions:
+        if not 0 < f <= 1:
+            raise InputError(f"bench: keep fractions must lie in (0, 1], found {f}")
+    names, frames = (cs.captures, cs.frames) if cs else (tuple(captures), None)
+    if not names:
+        raise InputError(f"bench: no captures given; sets are {list(CAPTURE_SETS)}")
+    if max_frames is not None:
+        frames = max_frames if frames is None else min(frames, max_frames)
+    skipped, specs = [], []
+    for name in dict.fromkeys(names):
+        needs_data = name.split("+")[0] not in PROCEDURAL_MOTIONS
+        if cs and data is None and needs_data:
+            skipped.append((name, "needs --data"))
+            continue
+        specs.append(parse_capture(name, data=data, frames=frames))
+    if tradeoff_capture is not None:
+        check_choice("bench", "tradeoff_capture", tradeoff_capture, [s.name for s in specs])
+    synthetic = [s for s in specs if s.kind == "synthetic"]
+    sweep = keep_fractions and "patch" in methods and synthetic
+    sweep_on = tradeoff_capture or (synthetic[0].name if sweep else None)
+    out, work = Path(out), Path(work) if work is not None else Path(out) / "work"
+    work.mkdir(parents=True, exist_ok=True)
+    run = _Run(work, show_progress, log or (lambda _: None))
+    tmpl = load_template(template)
+    salt = {}  # method → what else makes its track (the manifold's digest)
+    if any(m in MANIFOLD_METHODS for m in methods):
+        run.log(f"pose manifold of {', '.join(m for m in methods if m in MANIFOLD_METHODS)}")
+        manifold = bench_manifold(manifold, tmpl, work)
+        gp_digest = hashlib.sha1(np.ascontiguousarray(manifold.X_).tobytes()).hexdigest()[:8]
+        salt = {m: f"manifold {gp_digest}" for m in MANIFOLD_METHODS}
+
+    def tracker(m: str, **extra: Any) -> Any:
+        opts = {**method_options.get(m, {}), **extra}
+        if m in MANIFOLD_METHODS:  # the GPLVM, checked; the driver sets the tracker up
+            opts["manifold"] = manifold
+        return make_tracker(m, **opts)
+
+    rows: list[BenchRow] = []
+    tradeoff: list[TradeoffPoint] = []
+    for c, spec in enumerate(specs, start=1):
+        run.log(f"[{c}/{len(specs)}] capture {spec.name} ({spec.folder})")
+        trackers = {m: tracker(m) for m in methods}
+        if spec.kind == "meshes":  # skeleton-less: only trackers that say they can (hook)
+            why = "needs a skeleton; the capture has none"
+            runs = {m: t for m, t in trackers.items() if getattr(t, "skeletonless", False)}
+            rows += [not_applicable(spec.name, m, why) for m in trackers if m not in runs]
+            trackers = runs
+            if not runs:
+                continue
+        capture = make_capture(spec, work, template=template, show_progress=show_progress)
+        track_template = tmpl if spec.kind == "synthetic" else mesh_template(capture)
+        for m, t in trackers.items():
+            run.log(f"  {m}")
+            rows.append(
+                run.track_and_score(spec.name, m, t, track_template, capture, salt=salt.get(m, ""))
+            )
+        if spec.name == sweep_on:
+            for f in keep_fractions:
+                run.log(f"  patch, kept fraction {f:g} (Fig. 8)")
+                t = tracker("patch", keep_fraction=f)
+                r = run.track_and_score(spec.name, f"patch[keep={f:g}]", t, tmpl, capture)
+                tradeoff.append(TradeoffPoint(float(f), r))
+    files = write_report(out, rows, tradeoff, sweep_on, skipped=skipped, template=template)
+    return BenchResult(
+        tuple(rows), tuple(tradeoff), sweep_on, tuple(files), tuple(skipped),
+        tuple(run.tracked), tuple(run.evaluated), time.perf_counter() - t0,
+    )  # fmt: skip

@@ -1,0 +1,267 @@
+"""Rows and report files of ``meshmocap bench`` (:mod:`meshmocap.evaluation.bench`):
+``results.csv``, ``results.md``, ``frame_errors.csv``, ``bone_lengths.csv``,
+``keep_fraction.csv`` and the plots of :mod:`meshmocap.evaluation.bench_plots`.
+
+CSV values are unrounded in the units named by each header (``_mm``, ``_ratio``,
+``_s``); not-applicable rows leave their values empty and say why in ``note``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap._atomic import write_bytes_atomic, write_text_atomic
+from meshmocap.evaluation.bench_plots import (
+    plot_bone_spread,
+    plot_frame_curves,
+    plot_mean_errors,
+    plot_tradeoff,
+)
+from meshmocap.evaluation.evaluate import Evaluation
+
+_NAN = math.nan
+
+
+@dataclass(frozen=True, eq=False)
+class BenchRow:
+    """One (capture, method) result; numbers are NaN where not applicable.
+
+    Attributes
+    ----------
+    capture, method : str
+    status : ``"ok"`` or ``"n/a"``; note : why not applicable (empty when ok)
+    metric : ``"joints"`` (mean over the evaluation joints) or ``"vertices"`` (per-vertex
+        correspondence error, skeleton-less captures)
+    frames : int, frames tracked
+    mean_mm, median_mm, std_mm : float, over all (frame, joint or vertex) pairs, mm
+    worst_frame_mm : float, largest per-frame mean error, mm
+    silhouette_error : float, pixel overlap error (ratio, 0.05 = 5 %)
+    bone_std_max_mm : float, largest standard deviation of a bone's length, mm
+    seconds_per_frame : float, mean tracking time after the first frame, s
+    flagged : int, frames the driver flagged unhealthy
+    frame_numbers : (T,) int, frames of ``per_frame_mm``; per_frame_mm : (T,) float, mm
+    bone_names : tuple of B str; bone_mean_mm, bone_std_mm : (B,) float, mm
+    track : str, the track folder
+    """
+
+    capture: str
+    method: str
+    status: str = "ok"
+    note: str = ""
+    metric: str = ""
+    frames: int = 0
+    mean_mm: float = _NAN
+    median_mm: float = _NAN
+    std_mm: float = _NAN
+    worst_frame_mm: float = _NAN
+    silhouette_error: float = _NAN
+    bone_std_max_mm: float = _NAN
+    seconds_per_frame: float = _NAN
+    flagged: int = 0
+    frame_numbers: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    per_frame_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bone_names: tuple[str, ...] = ()
+    bone_mean_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bone_std_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    track: str = ""
+
+    def to_json(self) -> dict:
+        """JSON-ready fields (NaN as None)."""
+        d = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray | tuple):
+                v = v.tolist() if isinstance(v, np.ndarray) else list(v)
+            d[f.name] = None if isinstance(v, float) and math.isnan(v) else v
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict, **override: str) -> BenchRow:
+        """Inverse of :meth:`to_json`; ``override`` replaces fields (e.g. ``method``)."""
+        d = {**d, **override}
+        for k in ("frame_numbers", "per_frame_mm", "bone_mean_mm", "bone_std_mm"):
+            d[k] = np.asarray(d[k], dtype=np.int64 if k == "frame_numbers" else np.float64)
+        d["bone_names"] = tuple(d["bone_names"])
+        floats = [f.name for f in fields(cls) if f.type == "float"]
+        return cls(**{k: (_NAN if k in floats and v is None else v) for k, v in d.items()})
+
+
+@dataclass(frozen=True, eq=False)
+class TradeoffPoint:
+    """One point of Fig. 8: the patch tracker with a kept fraction ``keep_fraction``."""
+
+    keep_fraction: float
+    row: BenchRow
+
+
+def not_applicable(capture: str, method: str, why: str) -> BenchRow:
+    """A row for a method that cannot run on a capture (no numbers are made up)."""
+    return BenchRow(capture, method, status="n/a", note=why)
+
+
+def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Path) -> BenchRow:
+    """Summarise an evaluation: joint errors where the capture has joints, else the
+    per-vertex correspondence error."""
+    errs, metric = (ev.joints, "joints") if ev.joints is not None else (ev.correspondence, "")
+    metric = metric or ("vertices" if errs is not None else "")
+    if errs is None:
+        return not_applicable(capture, method, "the capture has no ground truth")
+    o, per_frame = errs.overall, errs.per_frame
+    bones = ev.bones if ev.bones is not None and ev.bones.lengths.size else None
+    return BenchRow(
+        capture, method, metric=metric, frames=ev.n_frames, mean_mm=o.mean,
+        median_mm=o.median, std_mm=o.std,
+        worst_frame_mm=float(per_frame.max()) if per_frame.size else _NAN,
+        silhouette_error=ev.silhouettes.overall if ev.silhouettes is not None else _NAN,
+        bone_std_max_mm=float(bones.std.max()) if bones is not None else _NAN,
+        seconds_per_frame=ev.seconds.mean, flagged=ev.unhealthy,
+        frame_numbers=np.asarray(errs.frames, dtype=np.int64), per_frame_mm=per_frame,
+        bone_names=bones.names if bones is not None else (),
+        bone_mean_mm=bones.mean if bones is not None else np.zeros(0),
+        bone_std_mm=bones.std if bones is not None else np.zeros(0),
+        track=str(track),
+    )  # fmt: skip
+
+
+#: results.csv columns: (header, row attribute)
+COLUMNS = (
+    ("capture", "capture"), ("method", "method"), ("status", "status"), ("metric", "metric"),
+    ("frames", "frames"), ("mean_mm", "mean_mm"), ("median_mm", "median_mm"),
+    ("std_mm", "std_mm"), ("worst_frame_mm", "worst_frame_mm"),
+    ("silhouette_error_ratio", "silhouette_error"), ("bone_std_max_mm", "bone_std_max_mm"),
+    ("seconds_per_frame_s", "seconds_per_frame"), ("flagged", "flagged"), ("note", "note"),
+)  # fmt: skip
+
+
+def _csv(path: Path, headers: Sequence[str], rows: Sequence[Sequence[object]]) -> Path:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(headers)
+    w.writerows([["" if isinstance(x, float) and math.isnan(x) else x for x in r] for r in rows])
+    return write_bytes_atomic(path, buf.getvalue().encode())
+
+
+def _num(x: float, digits: int, scale: float = 1.0) -> str:
+    return "n/a" if math.isnan(x) else f"{x * scale:.{digits}f}"
+
+
+def markdown_table(rows: Sequence[BenchRow]) -> str:
+    """The results as a markdown table (errors in mm, silhouette error in %)."""
+    head = ["capture", "method", "frames", "mean mm", "median", "std", "worst frame",
+            "silhouette %", "bone std max", "s/frame", "flagged"]  # fmt: skip
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "--:|" * (len(head) - 2)]
+    for r in rows:
+        if r.status != "ok":
+            cells = [r.capture, r.method, "n/a", f"not applicable: {r.note}"] + [""] * 7
+        else:
+            unit = " (vertices)" if r.metric == "vertices" else ""
+            cells = [
+                r.capture, r.method + unit, str(r.frames), _num(r.mean_mm, 1),
+                _num(r.median_mm, 1), _num(r.std_mm, 1), _num(r.worst_frame_mm, 1),
+                _num(r.silhouette_error, 2, 100), _num(r.bone_std_max_mm, 1),
+                _num(r.seconds_per_frame, 2), str(r.flagged),
+            ]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def tradeoff_table(points: Sequence[TradeoffPoint]) -> str:
+    """Fig. 8's numbers as a markdown table."""
+    lines = ["| kept fraction | s/frame | mean mm | silhouette % | flagged |"]
+    lines.append("|--:|--:|--:|--:|--:|")
+    for p in points:
+        r = p.row
+        cells = [f"{p.keep_fraction:g}", _num(r.seconds_per_frame, 2), _num(r.mean_mm, 1),
+                 _num(r.silhouette_error, 2, 100), str(r.flagged)]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "_-" else "_" for c in name)
+
+
+def write_report(
+    out: str | os.PathLike,
+    rows: Sequence[BenchRow],
+    tradeoff: Sequence[TradeoffPoint],
+    tradeoff_capture: str | None,
+    *,
+    skipped: Sequence[tuple[str, str]] = (),
+    template: str = "neutral_5k",
+) -> list[Path]:
+    """Write the CSV tables, plots and ``results.md`` into the folder ``out``; return the
+    files written."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ok = [r for r in rows if r.status == "ok"]
+    files = [_csv(out / "results.csv", [h for h, _ in COLUMNS],
+                  [[getattr(r, a) for _, a in COLUMNS] for r in rows])]  # fmt: skip
+    frame_rows = [[r.capture, r.method, r.metric, int(f), float(e)] for r in ok
+                  for f, e in zip(r.frame_numbers, r.per_frame_mm, strict=True)]  # fmt: skip
+    heads = ["capture", "method", "metric", "frame", "error_mm"]
+    files.append(_csv(out / "frame_errors.csv", heads, frame_rows))
+    bone_rows = [
+        [r.capture, r.method, b, m, s]
+        for r in ok
+        for b, m, s in zip(
+            r.bone_names, r.bone_mean_mm.tolist(), r.bone_std_mm.tolist(), strict=True
+        )
+    ]
+    heads = ["capture", "method", "bone", "mean_mm", "std_mm"]
+    files.append(_csv(out / "bone_lengths.csv", heads, bone_rows))
+    captures = list(dict.fromkeys(r.capture for r in rows))
+    plots: list[tuple[str, Path]] = []
+    if ok:
+        plots.append(("Mean error per method and capture",
+                      plot_mean_errors(ok, out / "mean_error.png")))  # fmt: skip
+    for c in captures:
+        mine = [r for r in ok if r.capture == c]
+        if any(r.bone_names for r in mine):
+            p = plot_bone_spread(mine, out / f"bone_std_{_slug(c)}.png", capture=c)
+            plots.append((f"Fig. 6: bone-length spread, {c}", p))
+        if mine:
+            p = plot_frame_curves(mine, out / f"frame_errors_{_slug(c)}.png", capture=c)
+            plots.append((f"Error per frame, {c}", p))
+    if tradeoff:
+        files.append(_csv(out / "keep_fraction.csv",
+                          ["capture", "keep_fraction", "seconds_per_frame_s", "mean_mm",
+                           "silhouette_error_ratio", "flagged"],
+                          [[tradeoff_capture, p.keep_fraction, p.row.seconds_per_frame,
+                            p.row.mean_mm, p.row.silhouette_error, p.row.flagged]
+                           for p in tradeoff]))  # fmt: skip
+        ref = [r for r in ok if r.capture == tradeoff_capture and r.method == "patch_noclf"]
+        p = plot_tradeoff(tradeoff, out / "keep_fraction.png", capture=tradeoff_capture,
+                          reference=ref[0] if ref else None)  # fmt: skip
+        plots.append((f"Fig. 8: kept fraction of the body-part classifier, {tradeoff_capture}", p))
+    files += [p for _, p in plots]
+    md = [
+        "# meshmocap bench",
+        "",
+        f"Protocol: tracking template `{template}`; synthetic captures at 60 fps from the "
+        "studio (humaneva4 rig unless the capture names another), first frame initialised "
+        "from ground truth, visual hulls carved at 1 cm. Errors in mm over all (frame, "
+        "joint) pairs of the 15 evaluation joints (crane: per-vertex correspondence error); "
+        "silhouette overlap error = XOR pixels / input silhouette pixels, mean over frames "
+        "and cameras; bone std max = largest standard deviation of a tracked bone length; "
+        "s/frame = tracking time per frame after the first, on the machine that ran it.",
+        "",
+        markdown_table(rows),
+    ]
+    if skipped:
+        md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
+    if tradeoff:
+        md += ["", f"## Fig. 8: kept fraction of on-bone points (patch, `{tradeoff_capture}`)",
+               "", tradeoff_table(tradeoff)]  # fmt: skip
+    md += ["", "## Plots", ""] + [f"- {what}: ![{p.name}]({p.name})" for what, p in plots]
+    write_text_atomic(out / "results.md", "\n".join(md) + "\n")
+    files.insert(1, out / "results.md")
+    return files

@@ -1,0 +1,159 @@
+"""meshmocap bench: both papers' methods side by side on tiny captures, resumable."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.evaluation.bench import CAPTURE_SETS, parse_capture, run_bench
+from meshmocap.evaluation.bench_report import COLUMNS
+
+FRAMES = 4
+PATCH = {"n_patches": 60, "max_iter": 3}
+
+
+def _bench(out, work, **kw):
+    kw = {"captures": ["walk"], "methods": ["articulated_icp", "patch"], "max_frames": FRAMES,
+          "keep_fractions": (0.25, 1.0), "method_options": {"patch": PATCH}, **kw}  # fmt: skip
+    return run_bench(out, work=work, show_progress=False, **kw)
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bench")
+    return _bench(root / "out", root / "work"), root
+
+
+def _csv(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_writes_table_markdown_and_plots(bench):
+    res, root = bench
+    out = root / "out"
+    rows = _csv(out / "results.csv")
+    assert list(rows[0]) == [h for h, _ in COLUMNS]
+    assert [(r["capture"], r["method"]) for r in rows] == [
+        ("walk", "articulated_icp"),
+        ("walk", "patch"),
+    ]
+    numeric = ["mean_mm", "median_mm", "std_mm", "worst_frame_mm", "silhouette_error_ratio",
+               "bone_std_max_mm", "seconds_per_frame_s"]  # fmt: skip
+    for r in rows:
+        assert r["status"] == "ok" and r["metric"] == "joints" and int(r["frames"]) == FRAMES
+        assert all(math.isfinite(float(r[k])) and float(r[k]) >= 0 for k in numeric)
+        assert float(r["mean_mm"]) < 60 and int(r["flagged"]) == 0
+    md = (out / "results.md").read_text()
+    assert f"| walk | articulated_icp | {FRAMES} |" in md and f"| walk | patch | {FRAMES} |" in md
+    assert "## Fig. 8" in md
+    sweep = _csv(out / "keep_fraction.csv")
+    assert [float(r["keep_fraction"]) for r in sweep] == [0.25, 1.0]
+    assert all(math.isfinite(float(r["mean_mm"])) for r in sweep)
+    assert len(_csv(out / "frame_errors.csv")) == 2 * FRAMES
+    assert len(_csv(out / "bone_lengths.csv")) == 2 * 14  # 14 bones of the 15 joints
+    for name in ("mean_error", "bone_std_walk", "frame_errors_walk", "keep_fraction"):
+        png = out / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"]({name}.png)" in md
+    assert set(res.files) >= {out / "results.csv", out / "results.md"}
+    assert res.tradeoff_capture == "walk" and len(res.tradeoff) == 2
+
+
+def test_rerun_reuses_captures_tracks_and_scores(bench):
+    res, root = bench
+    work = root / "work"
+    frames = sorted(work.glob("tracks/*/*/frames/*.npz")) + sorted(
+        work.glob("captures/*/truth/*.npz")
+    )
+    before = {p: p.stat().st_mtime_ns for p in frames}
+    again = _bench(root / "out2", work)
+    assert again.tracked == () and again.evaluated == ()
+    assert res.tracked and res.evaluated  # the first run did the work
+    assert {p: p.stat().st_mtime_ns for p in frames} == before
+    for a, b in zip(res.rows, again.rows, strict=True):
+        assert (a.capture, a.method, a.frames) == (b.capture, b.method, b.frames)
+        assert a.mean_mm == b.mean_mm and a.seconds_per_frame == b.seconds_per_frame
+        assert np.array_equal(a.per_frame_mm, b.per_frame_mm)
+
+
+def test_cli_prints_the_table_and_reuses_the_work_folder(bench, tmp_path, capsys):
+    _, root = bench
+    argv = ["bench", "--captures", "walk", "--methods", "articulated_icp", "--max-frames",
+            str(FRAMES), "--keep-fractions", "none", "--work", str(root / "work"),
+            "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert f"| walk | articulated_icp | {FRAMES} |" in text and "0 tracked by this run" in text
+    assert (tmp_path / "results.csv").is_file() and not (tmp_path / "keep_fraction.csv").exists()
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"methods": ["nope"]}, r"method must be one of \[.*'articulated_icp'.*'patch'"),
+        ({"captures": "huge"}, r"set must be one of \['quick', 'standard', 'full'\]"),
+        ({"captures": ["walk+fisheye"]}, r"variant must be one of \['humaneva4', 'ring8', 'deg"),
+        ({"captures": ["moonwalk"]}, r"capture must be one of \[.*'walk'.*'crane'\]"),
+        ({"captures": ["05_01"]}, r"needs the data folder"),
+        ({"keep_fractions": (0.0,)}, r"keep fractions must lie in \(0, 1\]"),
+    ],
+)
+def test_bad_choices_are_rejected_in_one_line(tmp_path, kw, match):
+    with pytest.raises(InputError, match=match) as exc:
+        _bench(tmp_path / "out", tmp_path / "work", **kw)
+    assert "\n" not in str(exc.value)
+    assert not (tmp_path / "work").exists()  # rejected before any work
+
+
+def test_cli_rejects_an_unknown_set_in_one_line(tmp_path, capsys):
+    assert main(["bench", "--set", "huge", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "'quick', 'standard', 'full'" in err
+
+
+def test_capture_names_resolve_against_the_data_folder(tmp_path):
+    cmu = tmp_path / "mocap" / "cmu"
+    cmu.mkdir(parents=True)
+    for f in ("05_01.amc", "09_01.bvh", "01_01.amc"):
+        (cmu / f).touch()
+    run = parse_capture("09_01+ring8+heavy_male", data=tmp_path, frames=100)
+    assert (run.start, run.stop, run.rig, run.subject) == (4, 104, "ring8", "heavy_male")
+    assert run.folder == "09_01+ring8+heavy_male-100f" and run.source.endswith("09_01.bvh")
+    assert parse_capture("01_01", data=tmp_path).stop == 600  # first 600 frames at 60 fps
+    assert parse_capture("walk+degraded", frames=60).degraded
+    with pytest.raises(MeshmocapFileNotFoundError, match="crane_mesh"):
+        parse_capture("crane", data=tmp_path)
+    with pytest.raises(InputError, match="two rig variants"):
+        parse_capture("walk+ring8+humaneva4")
+    assert CAPTURE_SETS["quick"].captures == ("walk", "jog")
+
+
+def test_skeleton_less_capture_is_not_applicable_without_being_made(tmp_path):
+    crane = tmp_path / "data" / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz"
+    crane.parent.mkdir(parents=True)
+    crane.touch()  # never read: no method can run skeleton-less, so no capture is made
+    res = run_bench(tmp_path / "out", captures=["crane"], data=tmp_path / "data",
+                    methods=["articulated_icp"], max_frames=2, show_progress=False)  # fmt: skip
+    (row,) = res.rows
+    assert row.status == "n/a" and "skeleton" in row.note and math.isnan(row.mean_mm)
+    assert not (tmp_path / "out" / "work" / "captures").exists() and res.tradeoff == ()
+    assert "not applicable" in (tmp_path / "out" / "results.md").read_text()
+
+
+def test_crane_hook_scores_vertices_for_a_skeleton_less_tracker(shared_data, tmp_path, monkeypatch):
+    from meshmocap.trackers.articulated_icp import ArticulatedICP
+
+    # stand-in for a skeleton-less tracker: ICP with the one-joint crane template is rigid
+    monkeypatch.setattr(ArticulatedICP, "skeletonless", True, raising=False)
+    res = run_bench(tmp_path / "out", captures=["crane+humaneva4"], data=shared_data,
+                    methods=["articulated_icp"], max_frames=2, show_progress=False)  # fmt: skip
+    (row,) = res.rows
+    assert row.status == "ok" and row.metric == "vertices" and row.frames == 2
+    assert row.per_frame_mm[0] < 1.0  # frame 0 is the template itself
+    assert row.mean_mm < 50.0
+    assert math.isnan(row.bone_std_max_mm)
