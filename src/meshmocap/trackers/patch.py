@@ -110,6 +110,7 @@ class PatchOptions:
     """
 
     n_patches: int = 200
+    joint_rigidity: float = 1.0
     lambda_data: float = 10.0
     lambda_rigid: float = 1.0
     lambda_bone: float = 1.0
@@ -169,7 +170,9 @@ class PatchTracker:
         """Cut ``template`` into patches and precompute the solver's constant parts."""
         o = self.opts
         self.template = template
-        self.model = build_patch_model(template, n_patches=o.n_patches, seed=o.seed)
+        self.model = build_patch_model(
+            template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
+        )
         self.moments = rigidity_moments(self.model)
 
     def init(
@@ -281,13 +284,14 @@ class PatchTracker:
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         n_unknowns = 6 * m.P + 3 * len(self.X)
+        self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         energies: dict[str, float] = {}
         n_iter = 0
         while n_iter < o.max_iter:
             n_iter += 1
             Vc, Nc = self.own_vertices()
             patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
-            sys = System.empty(n_unknowns)
+            sys = System.empty(n_unknowns, m.P)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
             r = q + self.c[patch] - y
             wd = max(float(w.sum()), 1e-12)

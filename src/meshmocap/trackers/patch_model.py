@@ -71,8 +71,16 @@ class PatchModel:
 MIN_BONE_WEIGHT = 0.1
 
 
-def build_patch_model(template: Template, *, n_patches: int = 200, seed: int = 0) -> PatchModel:
-    """Cut ``template`` into ``n_patches`` patches and precompute the tracker's structure."""
+def build_patch_model(
+    template: Template, *, n_patches: int = 200, joint_rigidity: float = 1.0, seed: int = 0
+) -> PatchModel:
+    """Cut ``template`` into ``n_patches`` patches and precompute the tracker's structure.
+
+    ``joint_rigidity`` scales the rigidity weights of neighbouring patches bound to
+    different bones (1: Eq. 2 as printed). Er measures bending away from the rest pose, so
+    across a joint it pulls every bent limb back towards the template's pose; the bone
+    binding already holds such patches together through their shared joint.
+    """
     V0, F = template.V, template.F
     labels = surface_patches(V0, F, n_patches=n_patches, seed=seed)
     P = int(labels.max()) + 1
@@ -124,13 +132,14 @@ def build_patch_model(template: Template, *, n_patches: int = 200, seed: int = 0
     vertex_class = lookup[vclass_joint]
     bone_of_patch = majority_labels(labels, vertex_class, len(classes))
     X0 = ev.rest_positions
-    j = classes[bone_of_patch]
-    child = _nearest_child_bone(X0, ev.parents, j, centres0)
+    j, child = _nearest_bone(X0, ev.parents, classes[bone_of_patch], centres0)
     d = X0[child] - X0[j]
     s = np.sum((centres0 - X0[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-12)
     gamma = 1.0 - s  # Δ = γ x_j + (1 − γ) x_child is the foot of the perpendicular (Eq. 8)
     delta0 = X0[j] + s[:, None] * d
     bone_w = np.maximum(4.0 * s * (1.0 - s), MIN_BONE_WEIGHT)  # mid-bone patches weigh more
+    cross = (j[rig_k] != j[rig_l]) | (child[rig_k] != child[rig_l])
+    rig_w = np.where(cross, joint_rigidity * rig_w, rig_w)
     return PatchModel(
         V0=V0, N0=vertex_normals(V0, F), F=F, labels=labels, P=P, centres0=centres0,
         pairs=pairs, rig_v=rig_v, rig_k=rig_k, rig_l=rig_l, rig_w=rig_w,
@@ -144,19 +153,27 @@ def _ranges(n: np.ndarray) -> np.ndarray:
     return np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
 
 
-def _nearest_child_bone(
-    X0: np.ndarray, parents: np.ndarray, j: np.ndarray, c: np.ndarray
-) -> np.ndarray:
-    """For patches bound to joint ``j`` (P,), the child joint whose bone segment is nearest to
-    the patch centre ``c`` (P, 3) at rest (the pelvis and thorax have several children)."""
-    K = len(X0)
-    child = np.full(len(j), -1)
-    best = np.full(len(j), np.inf)
-    for ch in range(K):  # 15 joints
+def _nearest_bone(
+    X0: np.ndarray, parents: np.ndarray, label: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For patches labelled with joint ``label`` (P,), the bone attached to that joint whose
+    segment is nearest to the patch centre ``c`` (P, 3) at rest: one of the joint's own
+    bones (joint → child; the pelvis and thorax have several) or the bone that ends at it
+    (parent → joint). Returns the bone's start and end joints, (P,) each.
+
+    The paper binds a patch to "the attached joints j(k)" (§III-C). A skinned template's
+    part boundaries do not follow the joints: the lower chest carries the ``thorax`` label
+    yet lies below the thorax joint, on the spine (pelvis → thorax). Binding it to a
+    thorax → shoulder bone, 25 cm above, would make the thorax follow the belly.
+    """
+    start = np.full(len(label), -1)
+    end = np.full(len(label), -1)
+    best = np.full(len(label), np.inf)
+    for ch in range(len(X0)):  # every bone (parent → ch) of the 15-joint skeleton
         p = parents[ch]
         if p < 0:
             continue
-        m = j == p
+        m = (label == p) | (label == ch)
         if not m.any():
             continue
         a, b = X0[p], X0[ch]
@@ -165,8 +182,8 @@ def _nearest_child_bone(
         dist = np.linalg.norm(c[m] - (a + s[:, None] * d), axis=1)
         better = dist < best[m]
         idx = np.flatnonzero(m)[better]
-        child[idx], best[idx] = ch, dist[better]
-    return child
+        start[idx], end[idx], best[idx] = p, ch, dist[better]
+    return start, end
 
 
 def rebind_bones(model: PatchModel, R: np.ndarray, c: np.ndarray, X: np.ndarray) -> PatchModel:

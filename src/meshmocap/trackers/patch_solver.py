@@ -70,10 +70,13 @@ class System:
     cols: list
     vals: list
     g: np.ndarray
+    n_patches: int = 0
 
     @classmethod
-    def empty(cls, n: int) -> System:
-        return cls(n, [], [], [], np.zeros(n))
+    def empty(cls, n: int, n_patches: int | None = None) -> System:
+        """An empty system of ``n`` unknowns: ``n_patches`` patches (6 each, default all)
+        then joints (3 each)."""
+        return cls(n, [], [], [], np.zeros(n), n // 6 if n_patches is None else n_patches)
 
     def add(self, ru: np.ndarray, cv: np.ndarray, B: np.ndarray) -> None:
         """Add blocks ``B`` (m, a, b) at rows ``ru`` (m,) and columns ``cv`` (m,) offsets."""
@@ -104,8 +107,48 @@ class System:
         )
         d = H.diagonal()
         floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
-        H = H + sp.diags(damping * d + floor)
-        return spla.spsolve(H, -self.g)
+        H = (H + sp.diags(damping * d + floor)).tocsr()
+        # Conjugate gradients preconditioned by the inverse 6×6 (patch) and 3×3 (joint)
+        # diagonal blocks: ~4× faster than a sparse LU here and accurate far below the
+        # Gauss–Newton step's own error (relative residual 1e-5).
+        inv = _block_jacobi(H, self.n_patch_unknowns)
+        x, info = spla.cg(H, -self.g, rtol=1e-5, maxiter=10 * self.n, M=inv)
+        return x if info == 0 else spla.spsolve(H.tocsc(), -self.g)
+
+    @property
+    def n_patch_unknowns(self) -> int:
+        """Unknowns of the patches (6 each); the joints' (3 each) follow."""
+        return self.n_patches * 6
+
+
+def _block_jacobi(H: sp.csr_matrix, n6: int) -> spla.LinearOperator:
+    """The inverse of ``H``'s diagonal blocks: 6×6 over the first ``n6`` unknowns, 3×3
+    over the rest, as a linear operator (the conjugate-gradient preconditioner)."""
+    n = H.shape[0]
+    coo = H.tocoo()
+    r, c, v = coo.row, coo.col, coo.data
+    size = np.where(r < n6, 6, 3)
+    base = np.where(r < n6, 0, n6)
+    blk_r, blk_c = (r - base) // size, (c - base) // size
+    same = (blk_r == blk_c) & ((r < n6) == (c < n6))
+    r, c, v = r[same], c[same], v[same]
+    p6 = r < n6
+    B6 = np.zeros((n6 // 6, 6, 6))
+    np.add.at(B6, (r[p6] // 6, r[p6] % 6, c[p6] % 6), v[p6])
+    nj = (n - n6) // 3
+    B3 = np.zeros((nj, 3, 3))
+    q = ~p6
+    np.add.at(B3, ((r[q] - n6) // 3, (r[q] - n6) % 3, (c[q] - n6) % 3), v[q])
+    I6 = np.linalg.inv(B6) if len(B6) else B6
+    I3 = np.linalg.inv(B3) if len(B3) else B3
+
+    def apply(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x).ravel()
+        y6 = np.einsum("kij,kj->ki", I6, x[:n6].reshape(-1, 6)).ravel()
+        y3 = np.einsum("kij,kj->ki", I3, x[n6:].reshape(-1, 3)).ravel()
+        return np.concatenate([y6, y3])
+
+    return spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
 
 
 def _ata_blocks(
