@@ -5,7 +5,7 @@ import pytest
 
 from meshmocap.cli import main
 from meshmocap.errors import InputError
-from meshmocap.evaluation.evaluate import evaluate, write_evaluation
+from meshmocap.evaluation.evaluate import evaluate, summary, write_evaluation
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 from meshmocap.studio.synth import SynthSpec, synthesize
 
@@ -67,3 +67,30 @@ def test_track_frames_missing_from_the_capture(capture, tmp_path):
     write_frame(tmp_path / "tr", FrameResult(99, tr.joints[0], tr.vertices[0]))
     with pytest.raises(InputError, match=r"\[99\]"):
         evaluate(read_track(tmp_path / "tr"), capture)
+
+
+def test_frames_out_of_the_cameras_view_are_not_scored(capture, tmp_path):
+    """A subject leaving a camera's image is not scored (its hull is truncated): a frame
+    whose true surface is moved 20 m sideways is listed as out of view and skipped; the
+    others still score their exact truth as zero."""
+    import shutil
+
+    from meshmocap.io.capture import open_capture
+
+    copy = tmp_path / "cap"
+    shutil.copytree(capture.path, copy)
+    track = _track(capture, tmp_path / "tr", 0.0)
+    truth = sorted((copy / "truth").glob("*.npz"))[1]
+    with np.load(truth) as z:
+        arrays = dict(z)
+    arrays["vertices"] = arrays["vertices"] + np.array([20.0, 0.0, 0.0], np.float32)
+    with open(truth, "wb") as f:
+        np.savez(f, **arrays)
+    moved = open_capture(copy)
+    ev = evaluate(track, moved, silhouettes=False, surface_frames=0)
+    assert ev.out_of_view.tolist() == [track.frames[1]]
+    assert track.frames[1] in ev.joints.skipped.tolist()
+    assert ev.joints.overall.max == 0.0 and len(ev.joints.frames) == len(track.frames) - 1
+    assert "not scored" in summary(ev)
+    everything = evaluate(track, moved, silhouettes=False, surface_frames=0, in_view_only=False)
+    assert len(everything.out_of_view) == 0 and everything.correspondence.overall.max > 1e4

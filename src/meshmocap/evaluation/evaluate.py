@@ -6,13 +6,16 @@ patch-tracking paper); bone lengths are over the tracked skeleton; the silhouett
 error re-projects the tracked mesh into every camera and compares it with the *input*
 silhouettes (Table II); surface distances compare the tracked mesh with the true surface
 (synthetic captures) or with the visual hull (real captures) on evenly spaced frames; the
-per-vertex error needs a template with the subject's connectivity.
+per-vertex error needs a template with the subject's connectivity. Joints and vertices are
+scored only on frames where the true surface lies inside every camera's image: a subject
+leaving the studio (a CMU walk or run crosses 4–5 m) leaves a truncated hull, and those
+frames are listed as out of view rather than blamed on the tracker.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +75,7 @@ class Evaluation:
     silhouettes: SilhouetteErrors | None
     surface: SurfaceErrors | None
     correspondence: CorrespondenceErrors | None
+    out_of_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def evaluate(
@@ -81,6 +85,7 @@ def evaluate(
     silhouettes: bool = True,
     surface_frames: int = 8,
     surface_samples: int = 5000,
+    in_view_only: bool = True,
 ) -> Evaluation:
     """Evaluate ``track`` on ``capture`` (see the module docstring for the protocol).
 
@@ -92,6 +97,10 @@ def evaluate(
         Frames (evenly spaced) on which surface distances are sampled; 0 to skip.
     surface_samples : int
         Samples per direction and frame.
+    in_view_only : bool
+        Score joints and correspondences only on frames whose true surface lies inside
+        every camera's image (a subject running out of the studio leaves a truncated hull);
+        the others are listed in ``Evaluation.out_of_view`` and counted as skipped.
     """
     frames = [capture[k] for k, i in enumerate(capture.indices) if i in set(track.frames.tolist())]
     if len(frames) != len(track.frames):
@@ -100,6 +109,11 @@ def evaluate(
             f"evaluate: track frames {missing[:5]} are not in the capture {capture.path}"
         )
     truths = [f.truth for f in frames]
+    hidden = _out_of_view(truths, capture.cameras) if in_view_only else np.zeros(0, np.int64)
+    for k in hidden:  # scored as skipped frames (truth NaN): the cameras did not see it all
+        truths[k] = replace(truths[k], vertices=np.full_like(truths[k].vertices, np.nan),
+                            joints=None if truths[k].joints is None
+                            else np.full_like(truths[k].joints, np.nan))  # fmt: skip
     have_joints = all(t is not None and t.joints is not None for t in truths)
     names = track.meta.get("eval_names")
     parents = track.meta.get("eval_parents")
@@ -143,13 +157,36 @@ def evaluate(
         silhouettes=sil,
         surface=surf,
         correspondence=corr,
+        out_of_view=track.frames[hidden] if len(hidden) else np.zeros(0, np.int64),
     )
+
+
+def _out_of_view(truths: list, cameras: list) -> np.ndarray:
+    """Positions in ``truths`` of frames whose true surface leaves an image of ``cameras``
+    (or passes behind one): a hull of a partly seen subject is not a fair test."""
+    if not cameras:
+        return np.zeros(0, np.int64)
+    out = []
+    for k, t in enumerate(truths):
+        if t is None:
+            continue
+        for cam in cameras:
+            uv, depth = cam.project(t.vertices)
+            inside = (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width) & (uv[:, 1] >= 0)
+            if not np.all(inside & (uv[:, 1] <= cam.height) & (depth > 0)):
+                out.append(k)
+                break
+    return np.asarray(out, dtype=np.int64)
 
 
 def summary(ev: Evaluation) -> str:
     """A short plain-text report of an evaluation."""
     out = [f"method {ev.method}: {ev.n_frames} frames, {ev.unhealthy} flagged unhealthy, "
            f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"]  # fmt: skip
+    if len(ev.out_of_view):
+        f = ev.out_of_view
+        out.append(f"{len(f)} frames not scored: the subject leaves a camera's view "
+                   f"(frames {f[0]}..{f[-1]})")  # fmt: skip
     if ev.joints is not None:
         out.append(table(ev.joints))
         if ev.joints14 is not None:
