@@ -33,6 +33,7 @@ from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind
 from meshmocap.trackers.patch_solver import (
     System,
     add_bone,
+    add_bone_lengths,
     add_plane_terms,
     add_point_terms,
     add_rigidity,
@@ -41,6 +42,7 @@ from meshmocap.trackers.patch_solver import (
 
 Classifier = Literal["logistic", "svc", "none"]
 Residual = Literal["point_to_point", "point_to_plane"]
+Prediction = Literal["bones", "patches", "none"]
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
 
@@ -58,6 +60,9 @@ MAX_CENTRE_OFFSET = 0.3
 #: Largest predicted displacement (metres) and rotation (radians) of a patch or joint.
 MAX_PREDICTION = 0.06
 MAX_PREDICTION_ANGLE = 0.3
+#: Largest predicted displacement (metres) of a joint when patches follow their bones
+#: (a running foot moves ~13 cm per frame at 60 fps).
+MAX_BONE_PREDICTION = 0.15
 #: Largest rotation (radians) of a patch in one Gauss–Newton step.
 MAX_STEP_ANGLE = 0.3
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
@@ -74,6 +79,9 @@ class PatchOptions:
         Number of surface patches (the paper uses 150–250).
     lambda_data, lambda_rigid, lambda_bone : float
         λd, λr, λb of Eq. (1) (the paper's 10, 1, 1).
+    lambda_length : float
+        Weight of an optional bone-length prior (not in the paper, 0: off): squared
+        changes of each bone's length from the first tracked frame, metres².
     classifier : {"logistic", "svc", "none"}
         Body-part classifier sorting the observed points (§III-B); "svc" is the paper's
         linear SVM with Platt scaling, "none" the tracker without classification.
@@ -96,9 +104,10 @@ class PatchOptions:
         Candidate vertices per observed point.
     damping : float
         Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
-    predict : bool
-        Warm-start each frame by constant-velocity extrapolation of the last two frames'
-        patch transforms and joints, clipped (else: from the last frame).
+    prediction : {"bones", "patches", "none"}
+        Warm start of each frame: constant-velocity extrapolation of the joints, each patch
+        carried rigidly by its bone ("bones"); of every patch transform and joint on its
+        own ("patches"); or the last frame as it is ("none"). Steps are clipped.
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -114,6 +123,7 @@ class PatchOptions:
     lambda_data: float = 10.0
     lambda_rigid: float = 1.0
     lambda_bone: float = 1.0
+    lambda_length: float = 0.0
     classifier: Classifier = "logistic"
     keep_fraction: float = 0.5
     on_bone: float = 0.9
@@ -130,12 +140,13 @@ class PatchOptions:
     normal_cos: float = 0.0
     residual: Residual = "point_to_point"
     damping: float = 1e-4
-    predict: bool = True
+    prediction: Prediction = "bones"
     seed: int = 0
 
     def __post_init__(self) -> None:
         check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
         check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
+        check_choice("PatchOptions", "prediction", self.prediction, get_args(Prediction))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
         if not 0 < self.keep_fraction <= 1:
@@ -186,6 +197,7 @@ class PatchTracker:
         posed = template.pose(R, root)
         self.R, self.c = _fit_patches(m, posed.V)
         self.X = posed.eval_joints.copy()
+        self.lengths = _bone_lengths(self.X, template.eval_skeleton.parents)
         self.model = rebind_bones(m, self.R, self.c, self.X)
         self.sigma = o.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
@@ -195,6 +207,7 @@ class PatchTracker:
         """Restore patch transforms, joints and σ saved with a frame."""
         self.R, self.c, self.X = state["R"].copy(), state["c"].copy(), state["X"].copy()
         self.sigma = float(state["sigma"])
+        self.lengths = state["lengths"].copy()
         self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
         self.model = replace(
             self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
@@ -204,7 +217,8 @@ class PatchTracker:
         Rp, cp, Xp = self.prev
         state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
                  "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
-                 "delta0": self.model.delta0, "bone_w": self.model.bone_w}  # fmt: skip
+                 "delta0": self.model.delta0, "bone_w": self.model.bone_w,
+                 "lengths": self.lengths}  # fmt: skip
         return FrameResult(index=index, joints=self.X.copy(), vertices=self.vertices(),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
@@ -264,7 +278,9 @@ class PatchTracker:
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
-        if o.predict:
+        if o.prediction == "bones":
+            self._predict_by_bones()
+        elif o.prediction == "patches":
             # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
             # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
             # slip (a patch that slipped 10 cm last frame would jump 20 cm).
@@ -305,6 +321,11 @@ class PatchTracker:
             e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
             w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
             e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
+            e_len = 0.0
+            if o.lambda_length > 0:
+                ev = self.template.eval_skeleton
+                e_len = add_bone_lengths(sys, self.X, ev.parents, self.lengths, m.P,
+                                         o.lambda_length / max(len(self.X) - 1, 1))  # fmt: skip
             delta = sys.solve(o.damping)
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
@@ -312,7 +333,8 @@ class PatchTracker:
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
             self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
             energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
-                        "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma}  # fmt: skip
+                        "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma,
+                        "length": e_len / max(len(self.X) - 1, 1)}  # fmt: skip
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
             if move < o.tol:
@@ -321,9 +343,27 @@ class PatchTracker:
             o.lambda_data * energies["data"]
             + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
             + o.lambda_bone * BONE_SCALE * energies["bone"]
+            + o.lambda_length * energies["length"]
         )
         self._check_divergence(Y, last[2])
         return self._result(frame.index, energies, n_iter)
+
+    def _predict_by_bones(self) -> None:
+        """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
+        every patch moved rigidly with its bone: the rotation turning the bone's old
+        direction into its new one, about the patch's bone point Δ (Eq. 8). Joints average
+        many patches, so a patch that slipped last frame is not thrown further."""
+        m = self.model
+        _, _, Xp = self.prev
+        X_new = self.X + _clip_rows(self.X - Xp, MAX_BONE_PREDICTION)
+        j, ch, g = m.bone_j, m.bone_child, m.gamma[:, None]
+        a, b = self.X[ch] - self.X[j], X_new[ch] - X_new[j]
+        R_b = _rotation_between(a, b)
+        D_old = g * self.X[j] + (1 - g) * self.X[ch]
+        D_new = g * X_new[j] + (1 - g) * X_new[ch]
+        self.c = np.einsum("kij,kj->ki", R_b, self.c - D_old) + D_new
+        self.R = R_b @ self.R
+        self.X = X_new
 
     def _check_divergence(self, Y: np.ndarray, X_last: np.ndarray) -> None:
         """Raise (the driver flags the frame and restores the last good state) when the fit
@@ -370,6 +410,24 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _bone_lengths(X: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Length (K,) of the bone ending at each joint of ``X`` (K, 3); 0 at the root."""
+    L = np.zeros(len(X))
+    b = np.flatnonzero(parents >= 0)
+    L[b] = np.linalg.norm(X[b] - X[parents[b]], axis=1)
+    return L
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotations (k, 3, 3) turning the directions of ``a`` (k, 3) into ``b``."""
+    a = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-12)
+    b = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = np.arctan2(s[:, 0], np.sum(a * b, axis=1))
+    return so3_exp(axis / np.maximum(s, 1e-12) * angle[:, None])
 
 
 def _clip_rows(A: np.ndarray, limit: float) -> np.ndarray:

@@ -287,3 +287,40 @@ def add_plane_terms(
     sys.add(6 * used, 6 * used, weight * blocks[used].reshape(-1, 6, 6))
     sys.add_g(6 * patch, weight * WJ * s[:, None])
     return float(np.sum(w * s * s))
+
+
+def add_bone_lengths(
+    sys: System,
+    X: np.ndarray,
+    parents: np.ndarray,
+    lengths: np.ndarray,
+    n_patches: int,
+    weight: float,
+) -> float:
+    """Add ``weight · Σ_b (|x_b − x_parent(b)| − L_b)²`` over the skeleton's bones.
+
+    Not in the paper, which leaves bone lengths free (§IV-A, Fig. 6): an optional prior
+    that keeps each bone at the length it had where tracking started. Gauss–Newton with
+    the unit bone direction ``u``: ``∂r/∂x_b = uᵀ``, ``∂r/∂x_parent = −uᵀ``.
+
+    Parameters
+    ----------
+    X : (K, 3) joint positions, metres; parents : (K,) parent of each joint (−1: root)
+    lengths : (K,) rest length of the bone ending at each joint (ignored at the root)
+    n_patches : the joints' unknowns start at ``6 · n_patches``
+    Returns the sum of squared length errors (before ``weight``).
+    """
+    b = np.flatnonzero(parents >= 0)
+    p = parents[b]
+    d = X[b] - X[p]
+    n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+    u = d / n[:, None]
+    r = n - lengths[b]
+    base = 6 * n_patches
+    uu = weight * u[:, :, None] * u[:, None, :]
+    sys.add(base + 3 * b, base + 3 * b, uu)
+    sys.add(base + 3 * p, base + 3 * p, uu)
+    sys.add_sym(base + 3 * b, base + 3 * p, -uu)
+    sys.add_g(base + 3 * b, weight * r[:, None] * u)
+    sys.add_g(base + 3 * p, -weight * r[:, None] * u)
+    return float(np.sum(r * r))
