@@ -131,29 +131,3 @@ def test_capture_names_resolve_against_the_data_folder(tmp_path):
     with pytest.raises(InputError, match="two rig variants"):
         parse_capture("walk+ring8+humaneva4")
     assert CAPTURE_SETS["quick"].captures == ("walk", "jog")
-
-
-def test_skeleton_less_capture_is_not_applicable_without_being_made(tmp_path):
-    crane = tmp_path / "data" / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz"
-    crane.parent.mkdir(parents=True)
-    crane.touch()  # never read: no method can run skeleton-less, so no capture is made
-    res = run_bench(tmp_path / "out", captures=["crane"], data=tmp_path / "data",
-                    methods=["articulated_icp"], max_frames=2, show_progress=False)  # fmt: skip
-    (row,) = res.rows
-    assert row.status == "n/a" and "skeleton" in row.note and math.isnan(row.mean_mm)
-    assert not (tmp_path / "out" / "work" / "captures").exists() and res.tradeoff == ()
-    assert "not applicable" in (tmp_path / "out" / "results.md").read_text()
-
-
-def test_crane_hook_scores_vertices_for_a_skeleton_less_tracker(shared_data, tmp_path, monkeypatch):
-    from meshmocap.trackers.articulated_icp import ArticulatedICP
-
-    # stand-in for a skeleton-less tracker: ICP with the one-joint crane template is rigid
-    monkeypatch.setattr(ArticulatedICP, "skeletonless", True, raising=False)
-    res = run_bench(tmp_path / "out", captures=["crane+humaneva4"], data=shared_data,
-                    methods=["articulated_icp"], max_frames=2, show_progress=False)  # fmt: skip
-    (row,) = res.rows
-    assert row.status == "ok" and row.metric == "vertices" and row.frames == 2
-    assert row.per_frame_mm[0] < 1.0  # frame 0 is the template itself
-    assert row.mean_mm < 50.0
-    assert math.isnan(row.bone_std_max_mm)

@@ -17,7 +17,11 @@ Captures are named ``BASE[+VARIANT...]``, e.g. ``walk``, ``walk+ring8+degraded``
 
 * BASE: a procedural motion (always available), a CMU clip of ``DATA/mocap/cmu``
   (:data:`CMU_CLIPS`), or ``crane``: the MIT crane meshes of ``DATA/meshes/crane`` turned
-  into ``ring8`` visual hulls (real geometry; scored by per-vertex correspondence error);
+  into ``ring8`` visual hulls (real geometry; scored by per-vertex correspondence error),
+  tracked with frame 0's true mesh rigged by :func:`~meshmocap.body.autorig.rig_mesh` as
+  template, started from that template's own pose, the cage methods with a manifold of 16
+  poses fitted to the sequence (:func:`mesh_manifold`; not applicable where
+  :func:`~meshmocap.body.oqr.build_oqr` fails on the rigged frame);
 * VARIANT: a rig (``humaneva4``, the default, or ``ring8``), ``degraded`` silhouettes
   (:data:`DEGRADED`) or another subject body (``heavy_male``, ``small_female``).
 
@@ -29,8 +33,9 @@ the crane; 120 frames; every method), ``full`` (everything, whole clips).
 The work folder caches everything and a re-run resumes: ``captures/<capture>-<N>f/``
 (:func:`~meshmocap.studio.synth.synthesize` resumes), ``tracks/<capture>-<N>f/
 <method>-<hash>/`` (:func:`~meshmocap.trackers.driver.track_sequence` resumes; the hash is
-of the tracker's options) with the scores cached beside the frames, and the cage
-trackers' pose manifold ``manifold-<template>.npz``.
+of the tracker's options) with the scores cached beside the frames, the cage
+trackers' pose manifold ``manifold-<template>.npz``, and for a mesh capture its rigged
+frame 0 ``templates/<capture>.npz`` and manifold ``manifold-crane_frame0-<digest>.npz``.
 """
 
 from __future__ import annotations
@@ -235,26 +240,68 @@ def make_capture(
     return synthesize(out, synth, show_progress=show_progress)
 
 
-def mesh_template(capture: Capture) -> Template:
+def mesh_template(capture: Capture, *, cache: str | os.PathLike | None = None) -> Template:
     """The tracking template of a skeleton-less capture (the crane): frame 0's true mesh
-    with a single rigid root joint. **Hook**: a method runs on such captures only when its
-    tracker sets ``skeletonless = True`` (none does yet); others are reported as not
-    applicable, never scored."""
-    import scipy.sparse as sp
-
-    from meshmocap.body.skeleton import Skeleton
-    from meshmocap.body.template import EvalSkeleton
+    rigged by :func:`~meshmocap.body.autorig.rig_mesh` (reference ``neutral``), so its rest
+    pose is frame 0 and every tracker starts there (identity rotations at the rest root).
+    Named ``crane_frame0``; read from / written to ``cache`` (a ``.npz``) when given."""
+    from meshmocap.body.autorig import rig_mesh
+    from meshmocap.body.template import save_template
     from meshmocap.io.meshes import MeshSequence
 
+    if cache is not None and Path(cache).is_file():
+        return load_template(cache)
     spec = capture.meta["spec"]
     F = MeshSequence(spec["source"], frames=[capture.indices[0]], up=spec["up"])[0].F
     V = capture[0].truth.vertices.astype(np.float64)
-    root = V.mean(axis=0)
-    n = len(V)
-    weights = sp.csr_matrix(np.ones((n, 1)))
-    ev = EvalSkeleton(("root",), np.array([-1]), root[None], np.ones((1, 1)))
-    skeleton = Skeleton(("root",), np.array([-1]), root[None])
-    return Template("crane_frame0", V, F, skeleton, weights, np.zeros(n, np.int64), ev)
+    t = rig_mesh(V, F, name="crane_frame0")
+    if cache is not None:
+        Path(cache).parent.mkdir(parents=True, exist_ok=True)
+        save_template(cache, t)
+    return t
+
+
+def mesh_manifold(
+    capture: Capture,
+    template: Template,
+    work: str | os.PathLike,
+    *,
+    n_poses: int = 16,
+    n_components: int = 10,
+) -> tuple[Any, str]:
+    """The cage trackers' pose manifold of a skeleton-less capture, as in
+    cage-manifold-tracking §6.1 but fitted automatically: ``template``'s skeleton fitted to
+    the true meshes of ``n_poses`` frames evenly spread over the capture
+    (:func:`~meshmocap.body.autorig.fit_sequence`), the quads mapped rigidly to each fitted
+    skeleton, an ``n_components``-D GPLVM learned; cached as ``work/manifold-<template>-
+    <digest>.npz``. Returns ``(GPLVM, "")``, or ``(None, why)`` when the template's quad
+    rigging cannot be built (:func:`~meshmocap.body.oqr.build_oqr` fails)."""
+    from meshmocap.body.autorig import fit_sequence
+    from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
+    from meshmocap.body.pose_data import PoseSet
+    from meshmocap.errors import MeshError
+    from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold, template_digest
+
+    try:
+        oqr = build_oqr(template)
+    except MeshError as exc:
+        return None, f"build_oqr fails on the rigged frame 0 ({exc})"
+    path = Path(work) / f"manifold-{template.name}-{template_digest(template)[:8]}.npz"
+    if path.is_file():
+        pm = PoseManifold.load(path)
+        pm.check(template, oqr, source=path)
+        return pm.gp, ""
+    pick = np.unique(np.linspace(0, len(capture) - 1, n_poses).round().astype(np.int64))
+    meshes = [(capture[int(k)].truth.vertices.astype(np.float64), template.F) for k in pick]
+    fits = fit_sequence(template, meshes)
+    R, root = np.stack([f.R for f in fits]), np.stack([f.root for f in fits])
+    Y = configuration_vector(*quads_from_pose(oqr, template, R, root))
+    trials = np.array([f"{capture.path.name}:{capture[int(k)].index}" for k in pick])
+    poses = PoseSet(Y, trials, np.full(len(pick), "fitted"), template.name, ("fitted poses",))
+    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=min(n_components, len(pick)),
+                           n_samples=len(pick))  # fmt: skip
+    pm.save(path)
+    return pm.gp, ""
 
 
 def bench_manifold(manifold: Any, template: Template, work: str | os.PathLike) -> Any:
@@ -458,21 +505,30 @@ def run_bench(
     tradeoff: list[TradeoffPoint] = []
     for c, spec in enumerate(specs, start=1):
         run.log(f"[{c}/{len(specs)}] capture {spec.name} ({spec.folder})")
-        trackers = {m: tracker(m) for m in methods}
-        if spec.kind == "meshes":  # skeleton-less: only trackers that say they can (hook)
-            why = "needs a skeleton; the capture has none"
-            runs = {m: t for m, t in trackers.items() if getattr(t, "skeletonless", False)}
-            rows += [not_applicable(spec.name, m, why) for m in trackers if m not in runs]
-            trackers = runs
-            if not runs:
-                continue
         capture = make_capture(spec, work, template=template, show_progress=show_progress)
-        track_template = tmpl if spec.kind == "synthetic" else mesh_template(capture)
-        for m, t in trackers.items():
+        track_template, track_salt, why = tmpl, salt, ""
+        if spec.kind == "synthetic":
+            trackers = {m: tracker(m) for m in methods}
+        else:  # skeleton-less (the crane): frame 0 rigged; cage methods get its own manifold
+            run.log(f"  rigging frame 0 of {spec.name}")
+            cached = work / "templates" / f"{capture.path.name}.npz"
+            track_template = mesh_template(capture, cache=cached)
+            trackers = {m: tracker(m) for m in methods if m not in MANIFOLD_METHODS}
+            cage = [m for m in methods if m in MANIFOLD_METHODS]
+            if cage:
+                run.log(f"  pose manifold of frame 0's rig for {', '.join(cage)}")
+                gp, why = mesh_manifold(capture, track_template, work)
+                for m in cage if gp is not None else ():
+                    trackers[m] = make_tracker(m, **method_options.get(m, {}), manifold=gp)
+                gp_digest = "" if gp is None else hashlib.sha1(gp.X_.tobytes()).hexdigest()[:8]
+                track_salt = {m: f"manifold {gp_digest}" for m in cage}
+        for m in methods:
+            if m not in trackers:  # a cage method without a quad rigging
+                rows.append(not_applicable(spec.name, m, why))
+                continue
             run.log(f"  {m}")
-            rows.append(
-                run.track_and_score(spec.name, m, t, track_template, capture, salt=salt.get(m, ""))
-            )
+            rows.append(run.track_and_score(spec.name, m, trackers[m], track_template, capture,
+                                            salt=track_salt.get(m, "")))  # fmt: skip
         if spec.name == sweep_on:
             for f in keep_fractions:
                 run.log(f"  patch, kept fraction {f:g} (Fig. 8)")
