@@ -309,7 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="meshmocap-demo", help="output folder (default: %(default)s)")
     d.add_argument("--seconds", type=float, default=4.0, help="length of the demo walk")
     d.add_argument("--clip", help="also retarget and render this BVH/AMC clip")
-    d.add_argument("--track-frames", type=int, default=60, help="frames tracked (0: skip)")
+    d.add_argument("--track-frames", type=int, default=120, help="frames tracked (0: skip)")
     d.set_defaults(func=_cmd_demo)
 
     t = sub.add_parser("templates", help="list the bundled templates")
