@@ -6,6 +6,7 @@ import pytest
 from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
+from meshmocap.geometry.rotations import so3_exp
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.cage import CageOptions, CageTracker, _gs_forward, learn_manifold
 from meshmocap.trackers.driver import track_sequence
@@ -56,3 +57,27 @@ def test_options_and_learning_errors(setup):
     with pytest.raises(InputError, match="no motions"):
         learn_manifold(t, [])
     assert CageTracker(gp).options()["n_components"] == 2
+
+
+def test_joints_ride_their_quads_when_asked(setup, tmp_path):
+    t, gp, cap = setup
+    opts = CageOptions(local_iters=1, alternations=2, joints="quads")
+    track = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", show_progress=False)
+    true = np.stack([f.truth.joints for f in cap])
+    err = np.linalg.norm(track.joints - true, axis=2).mean(axis=1) * 1000
+    assert err[0] < 1e-6 and err.max() < 35.0  # each evaluation joint is a quad's rig joint
+
+
+def test_a_folded_first_cage_falls_back_to_the_rest_cage(setup):
+    t, gp, cap = setup
+    R = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
+    R[t.skeleton.names.index("LeftArm")] = so3_exp(np.radians(60.0) * np.array([0.0, 1.0, 0.0]))
+    root = t.skeleton.rest_positions[0]
+    tr = CageTracker(gp)
+    r = tr.init(t, cap[0], R, root)  # the arm's tube folds into the chest: GC are metres off
+    assert np.array_equal(tr.cage0, tr.oqr.rest_vertices)
+    err = np.linalg.norm(r.joints - t.pose(R, root).eval_joints, axis=1)
+    legs = [t.eval_skeleton.names.index(n) for n in ("left_knee", "right_ankle")]
+    assert np.all(np.isfinite(r.joints)) and err[legs].max() < 1e-3
+    tr.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)  # a walk: its own cage
+    assert not np.array_equal(tr.cage0, tr.oqr.rest_vertices)

@@ -8,13 +8,19 @@ trilinear interpolant and its exact (piecewise) gradient, finite everywhere in s
 Fields come from a voxel occupancy (:func:`signed_distance`, one Euclidean distance
 transform) — a visual hull (:func:`meshmocap.geometry.carving.distance_grid`) or a closed
 triangle mesh scan-converted into voxels (:func:`distance_grid_from_mesh`).
+:class:`LazyDistanceGrid` is the same field as :func:`signed_distance` of an occupancy,
+computed grid point by grid point where lookups need it (a k-d tree to the inner-boundary
+voxels): what a tracker that queries a few hundred template points per frame should use.
 
 Frames: world, metres, Z up. Grid point ``(i, j, k)`` is at ``origin + (i, j, k) * spacing``.
 """
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
+from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
 from meshmocap.errors import InputError
@@ -60,7 +66,18 @@ class DistanceGrid:
         self.shape = values.shape
         self.upper = origin + (np.array(values.shape) - 1) * spacing
         self._flat = values.ravel()
-        self._strides = np.array([values.shape[1] * values.shape[2], values.shape[2], 1])
+        self._set_strides()
+
+    def _set_strides(self) -> None:
+        _, ny, nz = self.shape
+        self._strides = np.array([ny * nz, nz, 1])
+        sx, sy, _ = self._strides
+        # flat offsets of a cell's 8 corners: (x, y, z) = 000, 001, 010, 011, 100, ... 111
+        self._corners = np.array([0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1])
+
+    def _gather(self, idx: np.ndarray) -> np.ndarray:
+        """Values at flat grid indices ``idx`` (any shape)."""
+        return self._flat[idx]
 
     def __repr__(self) -> str:
         return f"DistanceGrid(shape={self.shape}, origin={self.origin}, spacing={self.spacing})"
@@ -87,13 +104,9 @@ class DistanceGrid:
         i0 = np.minimum(gc.astype(np.intp), n - 2)  # gc ≥ 0: truncation is floor
         f = gc - i0
         fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
-        sx, sy, _ = self._strides
         base = i0 @ self._strides
-        v = self._flat
-        c00 = v[base], v[base + 1]
-        c01 = v[base + sy], v[base + sy + 1]
-        c10 = v[base + sx], v[base + sx + 1]
-        c11 = v[base + sx + sy], v[base + sx + sy + 1]
+        c = self._gather(base[:, None] + self._corners).T  # (8, n) corner values
+        c00, c01, c10, c11 = (c[0], c[1]), (c[2], c[3]), (c[4], c[5]), (c[6], c[7])
         # along z
         e00 = c00[0] + fz * (c00[1] - c00[0])
         e01 = c01[0] + fz * (c01[1] - c01[0])
@@ -158,6 +171,110 @@ def signed_distance(occupancy: np.ndarray, spacing: float) -> np.ndarray:
     inner &= occ
     e = ndimage.distance_transform_edt(~inner)
     return np.where(occ, -0.5 - e, e - 0.5) * spacing
+
+
+def _inner_boundary(occ: np.ndarray) -> np.ndarray:
+    """Occupied voxels with an empty 6-neighbour (beyond the grid counts as empty)."""
+    inner = occ.copy()
+    c = occ[1:-1, 1:-1, 1:-1]
+    inner[1:-1, 1:-1, 1:-1] &= ~(c & occ[:-2, 1:-1, 1:-1] & occ[2:, 1:-1, 1:-1]
+                                 & occ[1:-1, :-2, 1:-1] & occ[1:-1, 2:, 1:-1]
+                                 & occ[1:-1, 1:-1, :-2] & occ[1:-1, 1:-1, 2:])  # fmt: skip
+    return inner
+
+
+class LazyDistanceGrid(DistanceGrid):
+    """:func:`signed_distance` of a padded occupancy, computed only where it is looked up.
+
+    The same field, value for value, as
+    ``DistanceGrid(signed_distance(np.pad(occupancy, pad), spacing), origin - pad *
+    spacing, spacing)``, but a grid point's value is computed the first time a lookup
+    needs it (one k-d tree query to the inner-boundary voxel centres, the point set the
+    distance transform measures to) and then kept. A tracker querying a few hundred
+    points near the surface touches a few thousand grid points instead of the whole box:
+    milliseconds instead of the ~0.2–0.4 s of a full Euclidean distance transform.
+
+    Parameters
+    ----------
+    occupancy : (nx, ny, nz) bool
+        True inside (e.g. :attr:`~meshmocap.geometry.carving.VoxelHull.occupancy`); not
+        empty.
+    origin : (3,) float64
+        Centre of voxel ``(0, 0, 0)`` of ``occupancy``, metres, world frame.
+    spacing : float
+        Voxel edge, metres.
+    pad : int
+        Empty voxel layers around ``occupancy`` (≥ 1); the grid is ``occupancy.shape +
+        2 pad`` points from ``origin - pad * spacing``.
+
+    Attributes
+    ----------
+    n_evaluated : int
+        Grid points computed so far.
+    seconds : float
+        Wall time spent building the tree and computing grid points, seconds.
+    values : (nx + 2 pad, ny + 2 pad, nz + 2 pad) float64
+        Every grid value (computing all of them: for inspection and tests).
+    """
+
+    def __init__(
+        self, occupancy: np.ndarray, origin: np.ndarray, spacing: float, *, pad: int = 1
+    ) -> None:
+        t0 = time.perf_counter()
+        occ = np.asarray(occupancy, dtype=bool)
+        origin = np.array(origin, dtype=np.float64).reshape(-1)
+        h = float(spacing)
+        if occ.ndim != 3 or not occ.any():
+            raise InputError(f"occupancy: expected a non-empty 3-D grid, found {occ.shape}")
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise InputError(f"origin: expected 3 finite numbers, found {origin!r}")
+        if not np.isfinite(h) or h <= 0:
+            raise InputError(f"spacing: expected positive metres, found {spacing!r}")
+        if int(pad) != pad or pad < 1:
+            raise InputError(f"pad: expected an integer ≥ 1, found {pad!r}")
+        k = int(pad)
+        self._occ, self._pad, self._h = occ, k, h
+        self.shape = tuple(int(n) + 2 * k for n in occ.shape)
+        self.origin = origin - k * h
+        self.spacing = np.full(3, h)
+        for v in (self.origin, self.spacing):
+            v.setflags(write=False)
+        self.upper = self.origin + (np.array(self.shape) - 1) * h
+        self._set_strides()
+        inner = np.unravel_index(np.flatnonzero(_inner_boundary(occ)), occ.shape)
+        self._tree = KDTree(np.stack(inner, axis=1).astype(np.float64))  # voxel units
+        size = int(np.prod(self.shape))
+        self._known = np.zeros(size, dtype=bool)
+        self._flat = np.empty(size)
+        self.n_evaluated = 0
+        self.seconds = time.perf_counter() - t0
+
+    def __repr__(self) -> str:
+        return (f"LazyDistanceGrid(shape={self.shape}, origin={self.origin}, "
+                f"spacing={self.spacing}, evaluated={self.n_evaluated})")  # fmt: skip
+
+    @property
+    def values(self) -> np.ndarray:  # type: ignore[override]
+        out = self._gather(np.arange(self._flat.size)).reshape(self.shape)
+        out.setflags(write=False)
+        return out
+
+    def _gather(self, idx: np.ndarray) -> np.ndarray:
+        new = idx[~self._known[idx]]
+        if new.size:
+            t0 = time.perf_counter()
+            new = np.unique(new)
+            ijk = np.stack(np.unravel_index(new, self.shape), axis=1) - self._pad  # voxel units
+            e = self._tree.query(ijk.astype(np.float64), k=1)[0]
+            n = np.array(self._occ.shape)
+            ok = np.all((ijk >= 0) & (ijk < n), axis=1)
+            inside = np.zeros(len(new), dtype=bool)
+            inside[ok] = self._occ[tuple(ijk[ok].T)]
+            self._flat[new] = np.where(inside, -0.5 - e, e - 0.5) * self._h  # as signed_distance
+            self._known[new] = True
+            self.n_evaluated += len(new)
+            self.seconds += time.perf_counter() - t0
+        return self._flat[idx]
 
 
 def _voxelize(V: np.ndarray, F: np.ndarray, origin: np.ndarray, h: float, n) -> np.ndarray:

@@ -63,6 +63,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
+from scipy import sparse
 
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError, MeshError
@@ -364,10 +365,10 @@ class GreenDeformer:
 
     Notes
     -----
-    Derivatives for trackers: :meth:`vjp` (gradient of a scalar energy of the points with
-    respect to the cage vertices, normals and stretch factors included — what Eq. (6)
-    of the cage paper needs), :meth:`jvp` (directional derivative) and :meth:`jacobian`
-    (dense ``(n, 3, nv, 3)``, for small point sets such as joints).
+    Derivatives for trackers (normals and stretch factors included): :meth:`vjp` (gradient
+    of a scalar energy of the points, what Eq. (6) of the cage paper needs),
+    :meth:`pointwise_vjp` (one per point: Gauss–Newton rows), :meth:`jvp` (directional,
+    batched) and :meth:`jacobian` (dense ``(n, 3, nv, 3)``, for small sets such as joints).
     """
 
     def __init__(
@@ -410,11 +411,13 @@ class GreenDeformer:
         return self.phi_.shape[0]
 
     def _apply(self, M: np.ndarray) -> np.ndarray:
-        """``phi_ @ M[:nv] + psi_ @ M[nv:]`` in float64, (n, 3), for M (nv + nf, 3)."""
-        if self._GT.dtype == np.float64:
-            return np.ascontiguousarray((M.T @ self._GT).T)
+        """``phi_ @ M[:nv] + psi_ @ M[nv:]`` in float64, (k, n, 3), for M (k, nv + nf, 3)."""
+        k, m, _ = M.shape
+        if self._GT.dtype == np.float64:  # (3k, m) @ (m, n): the fast layout
+            X = M.transpose(0, 2, 1).reshape(3 * k, m) @ self._GT
+            return X.reshape(k, 3, -1).transpose(0, 2, 1)
         nv = len(self.rest_V_)
-        return self.phi_ @ M[:nv] + self.psi_ @ M[nv:]
+        return self.phi_ @ M[:, :nv] + self.psi_ @ M[:, nv:]
 
     def _apply_t(self, G: np.ndarray) -> np.ndarray:
         """``[phi_ | psi_]ᵀ @ G`` in float64, (nv + nf, 3), for G (n, 3)."""
@@ -434,6 +437,13 @@ class GreenDeformer:
             raise InputError(f"GreenDeformer.{func}: cage_V_new contains NaN or infinite values")
         return V
 
+    def _grads(self, func: str, grad_points) -> np.ndarray:
+        G = _check_points(f"GreenDeformer.{func}", "grad_points", grad_points)
+        if len(G) != self.n_points:
+            raise InputError(f"GreenDeformer.{func}: grad_points must have shape "
+                             f"({self.n_points}, 3), found {G.shape}")  # fmt: skip
+        return G
+
     def _faces(self, V: np.ndarray) -> tuple[np.ndarray, ...]:
         """Deformed edges u', v', |u'×v'|, unit normals n', the 2D map columns J1, J2, s.
 
@@ -442,7 +452,7 @@ class GreenDeformer:
         F = self.cage_F_
         u = V[..., F[:, 1], :] - V[..., F[:, 0], :]
         v = V[..., F[:, 2], :] - V[..., F[:, 0], :]
-        c = np.cross(u, v)
+        c = u[..., [1, 2, 0]] * v[..., [2, 0, 1]] - u[..., [2, 0, 1]] * v[..., [1, 2, 0]]  # u × v
         cn = np.linalg.norm(c, axis=-1)
         n = np.divide(c, cn[..., None], out=np.zeros_like(c), where=cn[..., None] > 0)
         # GC08 stretch s = sqrt(|u'|²|v|² − 2(u'·v')(u·v) + |v'|²|u|²) / (sqrt(8) area),
@@ -500,32 +510,28 @@ class GreenDeformer:
     def jvp(self, cage_V_new: np.ndarray, dV: np.ndarray) -> np.ndarray:
         """Return d x' (n, 3), the derivative of :meth:`deform` at ``cage_V_new`` along ``dV``.
 
-        ``dV`` : (nv, 3) float64, a cage-vertex displacement (metres). Normals and stretch
-        factors are differentiated exactly.
+        ``dV`` : (nv, 3) float64, a cage-vertex displacement (metres), or (k, nv, 3): k
+        directions at once, result (k, n, 3). Normals and stretch factors are exact.
         """
         V = self._cage("jvp", cage_V_new)
-        dV = _check_points("GreenDeformer.jvp", "dV", dV)
-        if dV.shape != V.shape:
-            raise InputError(f"GreenDeformer.jvp: dV must have shape {V.shape}, found {dV.shape}")
+        dV = np.asarray(dV, dtype=np.float64)
+        if dV.shape[-2:] != V.shape or dV.ndim not in (2, 3) or not np.all(np.isfinite(dV)):
+            raise InputError(f"GreenDeformer.jvp: dV must be finite with shape {V.shape} or "
+                             f"(k, *that), found {dV.shape}")  # fmt: skip
         F = self.cage_F_
         Bu, Bv = self._face_blocks(V)
-        du = dV[F[:, 1]] - dV[F[:, 0]]
-        dv = dV[F[:, 2]] - dV[F[:, 0]]
-        df = np.einsum("fab,fb->fa", Bu, du) + np.einsum("fab,fb->fa", Bv, dv)
-        return self._apply(np.vstack([dV, df]))
+        D = dV.reshape(-1, *V.shape)
+        du, dv = (D[:, F[:, i]] - D[:, F[:, 0]] for i in (1, 2))
+        df = np.einsum("fab,kfb->kfa", Bu, du) + np.einsum("fab,kfb->kfa", Bv, dv)
+        X = self._apply(np.concatenate([D, df], axis=1))
+        return X[0] if dV.ndim == 2 else X
 
     def vjp(self, cage_V_new: np.ndarray, grad_points: np.ndarray) -> np.ndarray:
         """Return dE/dV' (nv, 3) given dE/dx' (n, 3) at ``cage_V_new`` (chain rule, Eq. (6)).
 
         Exact: includes the derivatives of the normals and stretch factors.
         """
-        V = self._cage("vjp", cage_V_new)
-        G = _check_points("GreenDeformer.vjp", "grad_points", grad_points)
-        if len(G) != self.n_points:
-            raise InputError(
-                f"GreenDeformer.vjp: grad_points must have shape ({self.n_points}, 3), "
-                f"found {G.shape}"
-            )
+        V, G = self._cage("vjp", cage_V_new), self._grads("vjp", grad_points)
         F, nv = self.cage_F_, len(V)
         Bu, Bv = self._face_blocks(V)
         both = self._apply_t(G)
@@ -537,6 +543,28 @@ class GreenDeformer:
         for a in range(3):
             out[:, a] += np.bincount(idx, corner[:, a], minlength=nv)
         return out
+
+    def pointwise_vjp(self, cage_V_new: np.ndarray, grad_points: np.ndarray) -> np.ndarray:
+        """Return ``W`` (n, nv, 3), ``W[p] = d(grad_points[p] · x'_p) / dV'``: each point's own
+        :meth:`vjp` (``W.sum(0) == vjp``; normals and stretch factors included), i.e. the
+        Jacobian of n residuals ``g_p · x'_p`` (Gauss–Newton, Eq. (6) of the cage paper)
+        without the dense :meth:`jacobian`; ~3 ms for 800 points in a 166-face cage."""
+        V = self._cage("pointwise_vjp", cage_V_new)
+        G = self._grads("pointwise_vjp", grad_points)
+        F, nv, nf = self.cage_F_, len(V), len(self.cage_F_)
+        GT = np.ascontiguousarray(G.T)
+        W = self.phi_.T[:, None, :] * GT  # (nv, 3, n): through φ
+        Pg = (self.psi_.T[:, None, :] * GT).reshape(3 * nf, -1)  # ψ_pj g_pa, rows (j, a)
+        # through f_j = s_j n'_j: corner k of face j gets Σ_a Pg[(j, a)] C_jk[a, b] (C_j0 =
+        # −(Bu + Bv), C_j1 = Bu, C_j2 = Bv), summed per vertex by one sparse product
+        Bu, Bv = self._face_blocks(V)
+        C = np.stack([-(Bu + Bv), Bu, Bv], axis=1)  # (nf, k, a, b)
+        rows = 3 * F[:, :, None, None] + np.arange(3)  # entry C[j, k, a, b] sits at
+        cols = 3 * np.arange(nf)[:, None, None, None] + np.arange(3)[:, None]  # (v, b), (j, a)
+        ij = tuple(a.ravel() for a in np.broadcast_arrays(rows, cols))
+        CT = sparse.csr_matrix((C.ravel(), ij), shape=(3 * nv, 3 * nf))
+        W += (CT @ Pg).reshape(nv, 3, -1)
+        return W.transpose(2, 0, 1)
 
     def jacobian(self, cage_V_new: np.ndarray) -> np.ndarray:
         """Return the dense Jacobian ``J[p, a, i, b] = d x'[p, a] / d v'[i, b]``, (n, 3, nv, 3).

@@ -4,7 +4,7 @@ The template sits in a cage built from 21 Oriented Quads (:mod:`meshmocap.body.o
 follows it through 3D Green coordinates (Eq. 1). Plausible quad configurations lie on a
 GPLVM manifold learned from motion capture (§4). Each frame minimises
 
-    E(x, Γ) = Σ_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)                         # Eq. (4)–(5)
+    E(x, Γ) = ½ Σ_i w_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)                   # Eq. (4)–(5)
 
 over the latent point ``x`` (shape, Eq. 6: chain rule through the GPLVM mean, the
 quads, the cage and the Green coordinates) and the pelvis transform ``Γ`` (pose, Eq. 11),
@@ -13,16 +13,42 @@ their own Green coordinates taken on the first frame (§6.2).
 
 Choices where the paper is silent or ambiguous (each stated where it is coded):
 - Eq. (4) sums distance-field values; we sum their squares (signed distance, so points
-  inside the hull are pulled out to its surface too, and Gauss–Newton applies).
+  inside the hull are pulled out to its surface too, and Gauss–Newton applies), with a
+  weight ``w_i = inside_weight`` (default 0.05) on points inside the hull: a visual hull
+  contains the body plus phantom volume (on the synthetic captures the true surface lies
+  5 mm inside it at the median, 2 cm or more for 10 % of it), and pulling every point out
+  to the hull inflates the fit and drags quads into phantom volume.
 - Eq. (5) as printed subtracts log σ², which would *reward* unlikely poses; we add it,
   penalising latent points where the manifold is uncertain (the paper's stated intent:
-  "this variance as a regularization term to ensure that the shape ... is likely").
-- Steps are Levenberg–Marquardt (Gauss–Newton) on the residuals d_DF, not plain gradient
-  descent: same energy, far fewer iterations.
+  "this variance as a regularization term to ensure that the shape ... is likely"). σ² is
+  Eq. (9) plus the manifold's noise variance: Eq. (9) alone vanishes at the training
+  points, where log σ² is a bottomless well of rounding noise that traps the latent point.
+- Steps are Levenberg–Marquardt on the residuals, each kept only if it lowers the energy
+  (a trust region), not plain gradient descent: same energy, far fewer iterations, no
+  blow-up where the Gauss–Newton model is poor (a quad seen by few points).
+- Each frame the shape steps start from the best (lowest energy) of: the previous latent
+  point, the back-constraint's image of the previous frame's adjusted quads, and the
+  ``restarts`` training poses nearest to those quads. A walk's two half-cycles can sit far
+  apart in the latent space; gradient steps alone cannot jump between them.
+- The local adjustment moves each quad by a centre and a rotation (6 numbers) instead of
+  the 9 numbers of the configuration vector, 3 of which (the lengths of ``u, v`` and
+  their dot product) do not change the quad: free directions Gauss–Newton would wander in.
+- If the first frame's cage folds over itself (Green coordinates taken in it do not give
+  the joints back), the joints' coordinates are taken in the rest cage instead.
+
+Cost per frame (template vertices ``N``, ``n_sample`` points ``n``, cage of 85 vertices):
+the distance field is evaluated lazily at the grid points the lookups touch
+(:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid`), pose Jacobians are the
+rigid motion of the points (no cage derivative), the latent shape's come from one batched
+:meth:`~meshmocap.geometry.green.GreenDeformer.jvp`, the local adjustment's from each
+point's gradient with respect to the cage vertices
+(:meth:`~meshmocap.geometry.green.GreenDeformer.pointwise_vjp`) and each quad's own
+vertices; the output deforms the N vertices once. ``stage_seconds`` keeps the breakdown.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 from typing import Literal, get_args
 
@@ -40,14 +66,24 @@ from meshmocap.body.oqr import (
 )
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.geometry.carving import distance_grid
+from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
-from meshmocap.geometry.rotations import so3_exp
+from meshmocap.geometry.rotations import skew, so3_exp
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
 
 Space = Literal["latent", "quads"]
+Joints = Literal["green", "quads"]
+#: Stages of :attr:`CageTracker.stage_seconds`.
+STAGES = ("distance", "pose", "shape", "local", "output")
+_PAD = 0.05  # empty space around the hull in the distance field, metres
+_REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the joints back
+_MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
+_CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
+_RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
+_DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
+_DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
 
 
 def learn_manifold(
@@ -76,7 +112,7 @@ def learn_manifold(
     return GPLVM(n_components, back_constraint="rbf", random_state=random_state).fit(Y)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CageOptions:
     """Settings of the cage tracker.
 
@@ -86,35 +122,55 @@ class CageOptions:
         Optimise in the learned latent space (the method) or directly on the quads (the
         ablation of Fig. 5a, which collapses without the manifold).
     variance_weight : float
-        λσ of the variance regulariser (0: the ablation of Fig. 5b).
+        λσ of the variance regulariser (0: the ablation of Fig. 5b), against the mean
+        half squared distance in m² (~1e-4 on a fitted frame).
     local_iters : int
-        Gauss–Newton iterations of the local adjustment in quad space (Eq. 12; 0: none).
+        Levenberg–Marquardt iterations of the local adjustment in quad space (Eq. 12; 0:
+        none).
     local_damping : float
-        Pull of the local adjustment towards the manifold's configuration.
+        Pull of the local adjustment towards the manifold's configuration (weight of half
+        its squared distance, metres and unit axis vectors).
     alternations, pose_iters, shape_iters : int
-        Pose/shape alternations (§5.3) and Gauss–Newton steps in each.
+        Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
+    restarts : int
+        Training poses, nearest to the previous frame's quads, tried as the latent
+        starting point (0: only the previous latent point and the back-constraint's).
+    inside_weight : float
+        Weight, in (0, 1], of the squared distance of points inside the hull (module
+        notes; 1: symmetric).
+    joints : {"green", "quads"}
+        Joints from the cage through Green coordinates (§6.2), or carried rigidly by the
+        quad that follows their rig joint (the quads sit at the joints, §3; joints of no
+        quad keep Green coordinates).
     n_sample : int
         Template vertices in the energy (the output deforms all of them).
     damping : float
-        Levenberg–Marquardt damping.
+        Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
     seed : int
+        Seeds the choice of the sampled vertices.
     """
 
     space: Space = "latent"
-    variance_weight: float = 1e-4
+    variance_weight: float = 1e-5
     local_iters: int = 3
     local_damping: float = 1e-2
     alternations: int = 3
     pose_iters: int = 2
     shape_iters: int = 3
+    restarts: int = 3
+    inside_weight: float = 0.05
+    joints: Joints = "green"
     n_sample: int = 800
     damping: float = 1e-3
     seed: int = 0
 
     def __post_init__(self) -> None:
         check_choice("CageOptions", "space", self.space, get_args(Space))
+        check_choice("CageOptions", "joints", self.joints, get_args(Joints))
         if self.variance_weight < 0 or self.n_sample < 10:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
+        if not 0 < self.inside_weight <= 1 or self.restarts < 0:
+            raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
 
 
 def _gs_forward(a, b, da, db):
@@ -133,7 +189,7 @@ def _gs_forward(a, b, da, db):
     nw = np.linalg.norm(w, axis=1, keepdims=True)
     v = w / nw
     dv = (dw - v * np.sum(v * dw, axis=1, keepdims=True)) / nw
-    n, dn = np.cross(u, v), np.cross(du, v) + np.cross(u, dv)
+    n, dn = _cross(u, v), _cross(du, v) + _cross(u, dv)
     return np.stack([u, v, n], axis=2), np.stack([du, dv, dn], axis=2)
 
 
@@ -145,6 +201,14 @@ class CageTracker:
     manifold : GPLVM
         A fitted pose manifold (:func:`learn_manifold`) of the tracking template.
     options : CageOptions
+
+    Attributes
+    ----------
+    stage_seconds : dict of str → float
+        Wall time spent in each of :data:`STAGES` over all :meth:`step` calls, seconds
+        (lazy distance-field evaluations count as ``"distance"``).
+    n_steps : int
+        :meth:`step` calls so far.
     """
 
     name = "cage"
@@ -153,6 +217,8 @@ class CageTracker:
         self.gp = manifold
         self.opts = options
         self.template: Template | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        self.n_steps = 0
 
     def options(self) -> dict:
         """JSON-ready settings."""
@@ -171,12 +237,28 @@ class CageTracker:
         )
         self.deform_sample = GreenDeformer(rest, self.oqr.faces, template.V[self.sample])
         self.joint_deformer: GreenDeformer | None = None
+        # each quad's cage vertices, padded to the largest count (mask 0 on the padding)
+        quad = self.oqr.vertex_quad
+        slots = [np.flatnonzero(quad == k) for k in range(1, quad.max() + 1)]
+        width = max(len(v) for v in slots)
+        self._slots = np.array([np.resize(v, width) for v in slots])  # (20, width)
+        self._slot_mask = np.array([np.arange(width) < len(v) for v in slots], dtype=float)
+        # joints="quads": the quad following each evaluation joint's rig joint, and the
+        # joint in that quad's frame (constant: quads follow their joints rigidly)
+        ev, jq = template.eval_skeleton, self.oqr.quads.joint_indices
+        one = [np.flatnonzero(w) for w in ev.weights]
+        self._joint_quad = np.array([np.r_[np.flatnonzero(jq == j[0]), -1][0] if len(j) == 1
+                                     else -1 for j in one])  # fmt: skip
+        q = np.maximum(self._joint_quad, 0)
+        rel = ev.rest_positions - self.oqr.quads.centres[q]
+        self._joint_offset = np.einsum("kji,kj->ki", self.oqr.quads.rotations[q], rel)
 
     # -------------------------------------------------------------- state
     def init(
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
     ) -> FrameResult:
-        """Start from the quads of a known pose; joints get Green coordinates in its cage."""
+        """Start from the quads of a known pose; joints get Green coordinates in its cage
+        (§6.2), or in the rest cage when that first cage folds over itself."""
         if self.template is not template:
             self.setup(template)
         c, Q = quads_from_pose(self.oqr, template, R, root)
@@ -186,148 +268,329 @@ class CageTracker:
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
         joints = template.pose(R, root).eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
-        self.joint_deformer = GreenDeformer(cage0, self.oqr.faces, joints)
-        self.cage0 = cage0
+        self._set_joints(cage0, joints)
+        if np.abs(self.joint_deformer.deform(cage0) - joints).max() > _REPRODUCED:
+            # The first frame's cage folds over itself (e.g. a thigh tube through the pelvis
+            # "pants" in a stride): Green coordinates taken in it do not encode the joints
+            # (metres off). Take them in the rest cage, which encloses the rest skeleton.
+            self._set_joints(self.oqr.rest_vertices.copy(), template.eval_skeleton.rest_positions)
         return self._result(frame.index, {}, 0)
+
+    def _set_joints(self, cage0: np.ndarray, joints0: np.ndarray) -> None:
+        self.cage0, self.joints0 = cage0, joints0
+        self.joint_deformer = GreenDeformer(cage0, self.oqr.faces, joints0)
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore latent point, pelvis transform, local quads and the joints' cage."""
         self.x, self.local = state["x"].copy(), state["local"].copy()
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
-        self.cage0 = state["cage0"].copy()
-        self.joint_deformer = GreenDeformer(self.cage0, self.oqr.faces, state["joints0"])
-
-    def _cage(self, y: np.ndarray, pelvis_R: np.ndarray, pelvis_c: np.ndarray) -> np.ndarray:
-        c, Q = configuration_from_vector(y, pelvis_c, pelvis_R)
-        return cage_vertices(self.oqr, c, Q)
+        self._set_joints(state["cage0"].copy(), state["joints0"].copy())
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
-        cage = self._cage(self.local, self.pelvis_R, self.pelvis_c)
+        cage = self._rig(self.local, self.pelvis_R, self.pelvis_c)[0]
         joints = self.joint_deformer.deform(cage)
+        on = self._joint_quad >= 0
+        if self.opts.joints == "quads" and on.any():
+            c, R = configuration_from_vector(self.local, self.pelvis_c, self.pelvis_R)
+            q = self._joint_quad[on]
+            joints[on] = np.einsum("kij,kj->ki", R[q], self._joint_offset[on]) + c[q]
         # "cage": this frame's cage vertices (85, 3), replayed by motion transfer
         state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
-                 "pelvis_c": self.pelvis_c, "cage0": self.cage0,
-                 "joints0": self.joint_deformer.deform(self.cage0), "cage": cage}  # fmt: skip
+                 "pelvis_c": self.pelvis_c, "cage0": self.cage0, "joints0": self.joints0,
+                 "cage": cage}  # fmt: skip
         return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
-    # -------------------------------------------------------------- derivatives
-    def _cage_directions(
-        self, y: np.ndarray, dys: np.ndarray, pose: bool
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Cage at ``y`` and its derivatives along config directions ``dys`` (k, D) and,
-        with ``pose``, along the 6 pelvis directions (rotation about the pelvis, translation)."""
+    # -------------------------------------------------------------- the model
+    def _rig(self, y, Rp, cp, *, derivatives=False):
+        """The cage (85, 3) at configuration ``y`` (180,) and pelvis transform ``Rp, cp``,
+        the quads' pelvis-relative rotations (20, 3, 3) and, with ``derivatives``, ``M``
+        (85, 3, 9): each cage vertex's derivative with respect to the 9 numbers ``(c, u,
+        v)`` of its own quad (zero on the pelvis quad). Each vertex is bound to one quad
+        only (§5.2: "dV/dy follows trivially"), so ``M`` is all of dV/dy."""
         Y = y.reshape(-1, 3, 3)
-        dY = dys.reshape(len(dys), len(Y), 3, 3)
-        Rp, cp = self.pelvis_R, self.pelvis_c
-        loc, quad = self.oqr.vertex_local, self.oqr.vertex_quad
-        c_rel = np.concatenate([np.zeros((1, 3)), Y[:, 0]])
-        R_all = np.concatenate(
-            [np.eye(3)[None], _gs_forward(Y[:, 1], Y[:, 2], Y[:, 1], Y[:, 2])[0]]
-        )
-        Rw = Rp @ R_all  # world quad rotations
-        cw = c_rel @ Rp.T + cp
+        quad, loc = self.oqr.vertex_quad, self.oqr.vertex_local
+        if derivatives:  # Gram–Schmidt along the 6 unit directions of (u, v) per quad
+            n = len(Y)
+            R6, dR = _gs_forward(np.repeat(Y[:, 1], 6, 0), np.repeat(Y[:, 2], 6, 0),
+                                 np.tile(_DU, (n, 1)), np.tile(_DV, (n, 1)))  # fmt: skip
+            R, dR = R6[::6], dR.reshape(n, 6, 3, 3)
+        else:
+            R = _gs(Y[:, 1], Y[:, 2])
+        Rw = Rp @ np.concatenate([np.eye(3)[None], R])  # world quad rotations
+        cw = np.concatenate([np.zeros((1, 3)), Y[:, 0]]) @ Rp.T + cp
         cage = np.einsum("vij,vj->vi", Rw[quad], loc) + cw[quad]
-        cols = []
-        for d in dY:
-            dR = _gs_forward(Y[:, 1], Y[:, 2], d[:, 1], d[:, 2])[1]
-            dc = np.concatenate([np.zeros((1, 3)), d[:, 0]]) @ Rp.T
-            dRw = Rp @ np.concatenate([np.zeros((1, 3, 3)), dR])
-            cols.append(np.einsum("vij,vj->vi", dRw[quad], loc) + dc[quad])
-        if pose:
-            arm = cage - cp
-            for a in range(3):
-                e = np.zeros(3)
-                e[a] = 1.0
-                cols.append(np.cross(e, arm))  # rotation about the pelvis centre
-            for a in range(3):
-                e = np.zeros(3)
-                e[a] = 1.0
-                cols.append(np.broadcast_to(e, cage.shape).copy())
-        return cage, np.array(cols)
+        if not derivatives:
+            return cage, None, R
+        M = np.zeros((len(quad), 3, 9))
+        on = quad > 0
+        M[on, :, :3] = Rp
+        M[on, :, 3:] = np.einsum("ij,vmjk,vk->vim", Rp, dR[quad[on] - 1], loc[on])
+        return cage, M, R
 
-    def _residuals(self, field, cage, dcages):
-        """Residuals d_DF at the sampled vertices and their Jacobian columns."""
+    def _residuals(self, field, cage):
+        """Weighted residuals √w d_DF (n,) at the sampled template vertices (Eq. 4), their
+        gradients (n, 3) and the points (n, 3)."""
         P = self.deform_sample.deform(cage)
-        r, g = field.value_and_gradient(P)
-        J = (
-            np.stack([np.sum(g * self.deform_sample.jvp(cage, d), axis=1) for d in dcages], 1)
-            if len(dcages)
-            else np.zeros((len(r), 0))
-        )
-        return r, J
+        return (*self._distance(field, P), P)
 
-    def _gn(self, r, J, extra_g=None, extra_H=None):
-        n = len(r)
-        H = J.T @ J / n
-        g = J.T @ r / n
-        if extra_g is not None:
-            g = g + extra_g
-            H = H + extra_H
-        H = H + np.diag(self.opts.damping * np.diag(H) + 1e-12)
-        return np.linalg.solve(H, -g)
+    def _distance(self, field, P):
+        r, g = field.value_and_gradient(P)
+        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0)  # module notes
+        return r * w, g * w[..., None]
+
+    @staticmethod
+    def _pose_jacobian(P: np.ndarray, g: np.ndarray, cp: np.ndarray) -> np.ndarray:
+        """(6, n) Jacobian of the residuals along the pelvis rotation (about its centre
+        ``cp``, world axes) and translation (Eq. 11). Green coordinates follow similarities
+        of the cage exactly (x' = R x + t), so a rigid motion of the cage moves the points
+        ``P`` rigidly: dx = ω × (x − cp) + dt, and dr = g·dx."""
+        return np.concatenate([_cross(P - cp, g), g], axis=1).T
+
+    def _config_directions(self, M: np.ndarray, dy: np.ndarray) -> np.ndarray:
+        """(k, 85, 3): cage derivatives along configuration directions ``dy`` (180, k)."""
+        quad = self.oqr.vertex_quad
+        on = quad > 0
+        D = np.zeros((len(quad), 3, dy.shape[1]))
+        D[on] = M[on] @ dy.reshape(-1, 9, dy.shape[1])[quad[on] - 1]
+        return D.transpose(2, 0, 1)
+
+    # -------------------------------------------------------------- optimisation
+    def _lm(self, state, n_iter, evaluate, linearise, update, key=None):
+        """Levenberg–Marquardt on ``E = ½ mean r² + priors``: ``evaluate(state) -> (E,
+        cache)``, ``linearise(state, cache) -> (gradient, Gauss–Newton Hessian)``,
+        ``update(state, d) -> state``. A step is kept only if it does not raise ``E``
+        (else λ × 10 and retry, at most ``_RETRIES`` times, then stop: a trust region);
+        λ starts at ``damping`` (or where the last call with the same ``key`` in this frame
+        left it) and ÷ 10 after each kept step; steps whose quadratic model
+        promises less than ``_CONVERGED`` relative decrease end it. Returns the state, its
+        energy and cache, and the number of linearisations."""
+        E, cache = evaluate(state)
+        lam, it = self._lam.get(key, self.opts.damping), 0
+        for _ in range(n_iter):
+            g, H = linearise(state, cache)
+            it += 1
+            Hd = np.diag(H) + 1e-6 * np.mean(np.diag(H)) + 1e-15
+            kept = None
+            for k in range(_RETRIES + 1):
+                d = np.linalg.solve(H + np.diag(lam * Hd), -g)
+                if k == 0 and -(g @ d + 0.5 * d @ H @ d) <= _CONVERGED * abs(E):
+                    break  # the model promises no real decrease: converged
+                if np.all(np.isfinite(d)) and np.abs(d).max() < _MAX_STEP:
+                    new = update(state, d)
+                    E_new, c_new = evaluate(new)
+                    if E_new <= E:
+                        kept = new, E_new, c_new
+                        break
+                lam *= 10.0
+            if kept is None:
+                break
+            state, E, cache = kept
+            lam = max(lam / 10.0, 1e-9)
+        self._lam[key] = lam
+        return state, E, cache, it
+
+    def _pose_problem(self, field, y):
+        """Eq. (11): the pelvis transform ``(R, c)`` with the quads at ``y``. Green
+        coordinates follow rigid motions of the cage exactly, so the points are deformed
+        once in the pelvis frame and then moved rigidly."""
+        P0 = self.deform_sample.deform(self._rig(y, np.eye(3), np.zeros(3))[0])
+
+        def evaluate(s):
+            P = P0 @ s[0].T + s[1]
+            r, g = self._distance(field, P)
+            return 0.5 * np.mean(r * r), (r, g, P)
+
+        def linearise(s, cache):
+            r, g, P = cache
+            J = self._pose_jacobian(P, g, s[1])
+            return J @ r / len(r), J @ J.T / len(r)
+
+        return evaluate, linearise, _move_pelvis
+
+    def _shape_problem(self, field):
+        """Eq. (5)–(6): the latent point ``x`` (quads at its mean pose), pelvis fixed."""
+        lam = self.opts.variance_weight
+        noise = self.gp.Y_scale_**2 / self.gp.beta_  # the manifold's noise variance
+
+        def evaluate(x):
+            mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
+            cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
+            r, g, _ = self._residuals(field, cage)
+            # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the noise
+            # variance: Eq. (9) alone vanishes at training points, where its log is a
+            # singular well of rounding noise (K is near singular) that traps the latent point
+            var = max(var, 0.0) + noise
+            return 0.5 * np.mean(r * r) + lam * np.log(var), (r, g, cage, M, dmean, var, dvar)
+
+        def linearise(x, cache):
+            r, g, cage, M, dmean, var, dvar = cache
+            dx = self.deform_sample.jvp(cage, self._config_directions(M, dmean))  # Eq. (6)
+            J = np.einsum("kpa,pa->kp", dx, g)
+            grad = J @ r / len(r) + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
+            return grad, J @ J.T / len(r) + lam * np.outer(dvar, dvar) / var**2
+
+        return evaluate, linearise, lambda x, d: x + d
+
+    def _local_problem(self, field, anchor):
+        """Eq. (12): every quad's centre and orientation (6 numbers: no Gram–Schmidt gauge)
+        and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration,
+        weight ``local_damping``; None: free, the quads ablation)."""
+        w = self.opts.local_damping if anchor is not None else 0.0
+        loc, slots = self.oqr.vertex_local, self._slots
+
+        def evaluate(s):
+            y, Rp, cp = s
+            cage, _, R = self._rig(y, Rp, cp)
+            r, g, P = self._residuals(field, cage)
+            e = y - anchor if w else 0.0
+            return 0.5 * (np.mean(r * r) + w * np.sum(e * e)), (r, g, P, cage, R, e)
+
+        def linearise(s, cache):
+            y, Rp, cp = s
+            r, g, P, cage, R, e = cache
+            n = len(r)
+            W = self.deform_sample.pointwise_vjp(cage, g).transpose(1, 2, 0)  # (85, 3, n)
+            # each vertex of quad q: dV = Rp (dc + ω × R_q l): columns Rp [I | −[R_q l]×]
+            arm = np.einsum("qij,qvj->qvi", R, loc[slots])  # (20, w, 3)
+            M6 = np.concatenate([np.broadcast_to(Rp, (*arm.shape[:2], 3, 3)), Rp @ -skew(arm)], 3)
+            M6 *= self._slot_mask[..., None, None]
+            nq, k = slots.shape
+            Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
+                           W[slots].reshape(nq, 3 * k, n))  # (20, 6, n)  # fmt: skip
+            J = np.concatenate([Jq.reshape(6 * nq, n), self._pose_jacobian(P, g, cp)])
+            grad, H = J @ r / n, J @ J.T / n
+            if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
+                Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
+                Hq = np.zeros((nq, 6, 6))
+                Hq[:, :3, :3] = np.eye(3)
+                Hq[:, 3:, 3:] = sum(
+                    skew(Y[:, i]).transpose(0, 2, 1) @ skew(Y[:, i]) for i in (1, 2)
+                )
+                gq = np.concatenate(
+                    [E[:, 0], sum(np.cross(Y[:, i], E[:, i]) for i in (1, 2))], axis=1
+                )
+                idx = np.arange(6 * nq).reshape(nq, 6)
+                H[idx[:, :, None], idx[:, None, :]] += w * Hq
+                grad[: 6 * nq] += w * gq.ravel()
+            return grad, H
+
+        def update(s, d):
+            y, Rp, cp = s
+            Y = y.reshape(-1, 3, 3)
+            dq = d[:-6].reshape(-1, 6)
+            R = so3_exp(dq[:, 3:]) @ _gs(Y[:, 1], Y[:, 2])
+            Yn = np.stack([Y[:, 0] + dq[:, :3], R[:, :, 0], R[:, :, 1]], axis=1)
+            return (Yn.reshape(-1), *_move_pelvis((Rp, cp), d[-6:]))
+
+        return evaluate, linearise, update
 
     # -------------------------------------------------------------- tracking
     def step(self, frame: CaptureFrame) -> FrameResult:
-        """Fit ``frame``: alternate pose and latent shape, then adjust the quads locally."""
+        """Fit ``frame``: alternate pose and latent shape (§5.3), then adjust the quads
+        locally (Eq. 12)."""
         o = self.opts
-        field = distance_grid(frame.hull, pad=0.05)
-        q = self.x.size
-        it = 0
+        clock = _Clock(self.stage_seconds)
+        hull = frame.hull
+        k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
+        field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size, pad=k)
+        clock.lap("distance")
+        it, anchor, self._lam = 0, None, {}  # _lam: LM damping per problem, this frame
+        pelvis = (self.pelvis_R, self.pelvis_c)
         if o.space == "latent":
-            y = self.gp.predict(self.x[None])[0]
+            self.x = self._restart(field)
             for _ in range(o.alternations):
-                for _ in range(o.pose_iters):  # Eq. (11): pelvis transform
-                    cage, dc = self._cage_directions(y, np.zeros((0, y.size)), pose=True)
-                    r, J = self._residuals(field, cage, dc)
-                    self._apply_pose(self._gn(r, J))
-                    it += 1
-                for _ in range(o.shape_iters):  # Eq. (6): latent shape
-                    mean, dmean, var, dvar = self.gp.predict_with_gradient(self.x)
-                    cage, dc = self._cage_directions(mean, dmean.T, pose=False)
-                    r, J = self._residuals(field, cage, dc)
-                    var = max(var, 1e-12)
-                    gv = (
-                        o.variance_weight * dvar / var
-                    )  # d(λ log σ²)/dx, Eq. (5) (sign: see module)
-                    Hv = o.variance_weight * np.outer(dvar, dvar) / var**2
-                    self.x = self.x + self._gn(r, J, gv, Hv)
-                    it += 1
                 y = self.gp.predict(self.x[None])[0]
-            self.local = y.copy()
-        for _ in range(
+                pelvis, _, _, n = self._lm(
+                    pelvis, o.pose_iters, *self._pose_problem(field, y), key=0
+                )
+                self.pelvis_R, self.pelvis_c = pelvis
+                it += n
+                clock.lap("pose")
+                self.x, _, _, n = self._lm(
+                    self.x, o.shape_iters, *self._shape_problem(field), key=1
+                )
+                it += n
+                clock.lap("shape")
+            anchor = _orthonormal(self.gp.predict(self.x[None])[0])
+            self.local = anchor.copy()
+        n_local = (
             o.local_iters
             if o.space == "latent"
             else o.alternations * (o.pose_iters + o.shape_iters)
-        ):
-            self._local_step(field, o.space == "latent")  # Eq. (12)
-            it += 1
-        r, _ = self._residuals(field, self._cage(self.local, self.pelvis_R, self.pelvis_c), [])
-        var = float(self.gp.predict(self.x[None], return_var=True)[1][0]) if q else 0.0
+        )
+        state = (_orthonormal(self.local), *pelvis)
+        (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
+            state, n_local, *self._local_problem(field, anchor)
+        )
+        it += n
+        r = cache[0]
+        var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
         energies = {"distance": float(np.mean(r**2)), "variance": var}
-        return self._result(frame.index, energies, it)
+        clock.lap("local")
+        out = self._result(frame.index, energies, it)
+        clock.lap("output")
+        self.n_steps += 1
+        return out
 
-    def _apply_pose(self, d: np.ndarray) -> None:
-        self.pelvis_R = so3_exp(d[:3]) @ self.pelvis_R
-        self.pelvis_c = self.pelvis_c + d[3:]
+    def _restart(self, field) -> np.ndarray:
+        """The latent starting point of a frame: the lowest shape energy among the previous
+        latent point, the back-constraint's image of the previous frame's quads and the
+        ``restarts`` training poses nearest to those quads (module notes)."""
+        gp = self.gp
+        cands = [self.x, gp.transform(self.local[None])[0]]
+        if self.opts.restarts:
+            if not hasattr(self, "_train_y"):
+                self._train_y = gp.Y_ * gp.Y_scale_ + gp.Y_mean_
+            d2 = np.sum((self._train_y - self.local) ** 2, axis=1)
+            cands += list(gp.X_[np.argsort(d2)[: self.opts.restarts]])
+        X = np.array(cands)
+        Y, var = gp.predict(X, return_var=True)
+        cages = np.stack([self._rig(y, self.pelvis_R, self.pelvis_c)[0] for y in Y])
+        P = self.deform_sample.deform(cages)  # one pass over the coordinates for all
+        r = self._distance(field, P)[0]
+        noise = gp.Y_scale_**2 / gp.beta_
+        E = 0.5 * np.mean(r * r, axis=1) + self.opts.variance_weight * np.log(var + noise)
+        return X[np.argmin(E)].copy()
 
-    def _local_step(self, field, anchored: bool) -> None:
-        """One Gauss–Newton step on every quad's centre and in-plane axes (Eq. 12) and the
-        pelvis, pulled towards the manifold's configuration when ``anchored``."""
-        y = self.local
-        D = y.size
-        eye = np.eye(D)
-        cage, dc = self._cage_directions(y, eye, pose=True)
-        r, J = self._residuals(field, cage, dc)
-        n = len(r)
-        H = J.T @ J / n
-        g = J.T @ r / n
-        if anchored:
-            anchor = self.gp.predict(self.x[None])[0]
-            w = self.opts.local_damping
-            H[:D, :D] += w * np.eye(D)
-            g[:D] += w * (y - anchor)
-        H += np.diag(self.opts.damping * np.diag(H) + 1e-9)
-        d = np.linalg.solve(H, -g)
-        self.local = y + d[:D]
-        self._apply_pose(d[D:])
+
+def _gs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Gram–Schmidt ``R = [u v u×v]`` (Q, 3, 3) of columns ``a, b`` (Q, 3)."""
+    u = a / np.sqrt(np.sum(a * a, axis=1, keepdims=True))
+    w = b - np.sum(u * b, axis=1, keepdims=True) * u
+    v = w / np.sqrt(np.sum(w * w, axis=1, keepdims=True))
+    return np.stack([u, v, _cross(u, v)], axis=2)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a × b`` along the last axis (numpy's cross costs ~0.1 ms a call in overhead)."""
+    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
+
+
+def _move_pelvis(s, d):
+    """Pelvis transform ``s = (R, c)`` moved by ``d = (ω, dt)`` (world axes, about c)."""
+    return so3_exp(d[:3]) @ s[0], s[1] + d[3:]
+
+
+def _orthonormal(y: np.ndarray) -> np.ndarray:
+    """Configuration ``y`` (180,) with each quad's ``u, v`` made orthonormal (Gram–Schmidt;
+    the same quads)."""
+    Y = y.reshape(-1, 3, 3)
+    R = _gs(Y[:, 1], Y[:, 2])
+    return np.stack([Y[:, 0], R[:, :, 0], R[:, :, 1]], axis=1).reshape(-1)
+
+
+class _Clock:
+    """Wall time per stage of :meth:`CageTracker.step`, added to ``totals``; lazy
+    distance-field evaluations (``field.seconds``) are booked to ``"distance"``."""
+
+    def __init__(self, totals: dict[str, float]) -> None:
+        self.totals, self.t, self.field, self.f0 = totals, time.perf_counter(), None, 0.0
+
+    def lap(self, stage: str) -> None:
+        t = time.perf_counter()
+        spent = self.field.seconds if self.field is not None else 0.0
+        fill, self.f0 = spent - self.f0, spent
+        self.totals[stage] += t - self.t - fill
+        self.totals["distance"] += fill
+        self.t = t

@@ -1,0 +1,98 @@
+"""The cage tracker's analytic gradients against float64 central differences.
+
+Each Levenberg–Marquardt problem of :class:`CageTracker` (pose, Eq. 11; latent shape,
+Eqs. 5–6; local adjustment, Eq. 12) returns its energy and, from ``linearise``, the
+gradient; both are checked along random directions on a smooth analytic field (a distance
+grid has kinks between cells, which would blur finite differences).
+"""
+
+import numpy as np
+import pytest
+
+from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
+from meshmocap.body.procedural import walk
+from meshmocap.body.template import load_template
+from meshmocap.geometry.rotations import so3_exp
+from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers.cage import CageOptions, CageTracker, _orthonormal
+
+
+class _Field:
+    """A smooth signed 'distance' around a point, with an exact gradient."""
+
+    def __init__(self, centre: np.ndarray) -> None:
+        self.c = centre
+
+    def value_and_gradient(self, P):
+        d = P - self.c
+        r = np.linalg.norm(d, axis=1)
+        wave = 0.1 * np.sin(5 * P[:, 0])
+        grad = d / r[:, None]
+        grad[:, 0] += 0.5 * np.cos(5 * P[:, 0])
+        return r - 0.3 + wave, grad
+
+
+@pytest.fixture(scope="module")
+def tracker():
+    t = load_template("neutral_5k")
+    oqr = build_oqr(t)
+    m = walk(t, duration=1.0, fps=30.0)
+    Y = configuration_vector(*quads_from_pose(oqr, t, m.rotations, m.root_positions))
+    # Poses with 2 cm of noise: a well-conditioned GP. On exactly low-dimensional poses K is
+    # near singular and σ²(x) carries ~1e-3 relative rounding noise, which would swamp the
+    # finite differences of log σ² (the analytic gradient is not the culprit).
+    Y = Y + 0.02 * np.random.default_rng(0).normal(size=Y.shape)
+    gp = GPLVM(2, max_iter=200, random_state=0).fit(Y)
+    tr = CageTracker(gp, CageOptions(n_sample=60, variance_weight=1e-3))
+    tr.setup(t)
+    tr.pelvis_R, tr.pelvis_c = m.rotations[0][0], m.root_positions[0]
+    tr.x = gp.X_[:2].mean(axis=0) + 0.3
+    tr.local = gp.predict(tr.x[None])[0]
+    return tr, _Field(tr.pelvis_c + np.array([0.05, -0.02, 0.1]))
+
+
+def _check(problem, state, dim, seed, h=1e-6):
+    evaluate, linearise, update = problem
+    _, cache = evaluate(state)
+    g, H = linearise(state, cache)
+    assert H.shape == (dim, dim) and np.all(np.linalg.eigvalsh(H) > -1e-12)  # Gauss–Newton
+    rng = np.random.default_rng(seed)
+    for _ in range(3):
+        d = rng.normal(size=dim)
+        fd = (evaluate(update(state, h * d))[0] - evaluate(update(state, -h * d))[0]) / (2 * h)
+        # central differences: O(h²) truncation, ~1e-16 |E| / h rounding
+        assert abs(g @ d - fd) <= 1e-6 * max(1.0, abs(fd)), (g @ d, fd)
+
+
+def test_pose_gradient(tracker):
+    tr, field = tracker
+    _check(tr._pose_problem(field, tr.local), (tr.pelvis_R, tr.pelvis_c), 6, seed=1)
+
+
+def test_latent_shape_gradient_with_the_variance_term(tracker):
+    tr, field = tracker
+    _check(tr._shape_problem(field), tr.x, tr.x.size, seed=2, h=1e-5)
+
+
+@pytest.mark.parametrize("anchored", [False, True])
+def test_local_adjustment_gradient(tracker, anchored):
+    tr, field = tracker
+    rng = np.random.default_rng(3)
+    y = _orthonormal(tr.local + 0.02 * rng.normal(size=tr.local.size))
+    anchor = _orthonormal(y + 0.05 * rng.normal(size=y.size)) if anchored else None
+    _check(tr._local_problem(field, anchor), (y, tr.pelvis_R, tr.pelvis_c), 126, seed=4)
+
+
+def test_pose_jacobian_is_the_rigid_motion_of_the_points(tracker):
+    tr, field = tracker
+    cage = tr._rig(tr.local, tr.pelvis_R, tr.pelvis_c)[0]
+    _, g, P = tr._residuals(field, cage)
+    J = tr._pose_jacobian(P, g, tr.pelvis_c)
+    rng = np.random.default_rng(5)
+    d, h = rng.normal(size=6), 1e-6
+
+    def moved(s):
+        R = so3_exp(s * d[:3])
+        return tr._residuals(field, (cage - tr.pelvis_c) @ R.T + tr.pelvis_c + s * d[3:])[0]
+
+    np.testing.assert_allclose(J.T @ d, (moved(h) - moved(-h)) / (2 * h), rtol=0, atol=1e-7)
