@@ -103,34 +103,26 @@ class DistanceGrid:
         gc = np.clip(g, 0, n - 1)
         i0 = np.minimum(gc.astype(np.intp), n - 2)  # gc ≥ 0: truncation is floor
         f = gc - i0
-        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        fx, fy, fz = (f[:, k, None] for k in range(3))
         base = i0 @ self._strides
-        c = self._gather(base[:, None] + self._corners).T  # (8, n) corner values
-        c00, c01, c10, c11 = (c[0], c[1]), (c[2], c[3]), (c[4], c[5]), (c[6], c[7])
-        # along z
-        e00 = c00[0] + fz * (c00[1] - c00[0])
-        e01 = c01[0] + fz * (c01[1] - c01[0])
-        e10 = c10[0] + fz * (c10[1] - c10[0])
-        e11 = c11[0] + fz * (c11[1] - c11[0])
-        # along y, then x
-        e0 = e00 + fy * (e01 - e00)
-        e1 = e10 + fy * (e11 - e10)
-        value = e0 + fx * (e1 - e0)
+        c = self._gather(base[:, None] + self._corners)  # (n, 8): corners xyz = 000 … 111
+        d = c[:, 1::2] - c[:, 0::2]  # (n, 4) differences along z, at (x, y) = 00 01 10 11
+        e = c[:, 0::2] + fz * d  # along z
+        ey = e[:, 1::2] - e[:, 0::2]  # (n, 2) differences along y, at x = 0, 1
+        e2 = e[:, 0::2] + fy * ey  # along y
+        gx = e2[:, 1] - e2[:, 0]
+        value = e2[:, 0] + fx[:, 0] * gx  # along x
         off = P - (self.origin + gc * self.spacing)  # zero inside the box
-        outside = g != gc
         dist = np.sqrt(np.einsum("ij,ij->i", off, off))
         value = value + dist
         if not gradient:
             return value.reshape(lead), None
-        dz = [c[1] - c[0] for c in (c00, c01, c10, c11)]
-        gx = e1 - e0
-        gy = (1 - fx) * (e01 - e00) + fx * (e11 - e10)
-        gz0 = dz[0] + fy * (dz[1] - dz[0])
-        gz1 = dz[2] + fy * (dz[3] - dz[2])
-        gz = gz0 + fx * (gz1 - gz0)
+        gy = ey[:, 0] + fx[:, 0] * (ey[:, 1] - ey[:, 0])
+        dz = d[:, 0::2] + fy * (d[:, 1::2] - d[:, 0::2])  # (n, 2) at x = 0, 1
+        gz = dz[:, 0] + fx[:, 0] * (dz[:, 1] - dz[:, 0])
         grad = np.stack([gx, gy, gz], axis=1) / self.spacing
         away = np.divide(off, dist[:, None], out=np.zeros_like(off), where=dist[:, None] > 0)
-        grad = np.where(outside, away, grad)
+        grad = np.where(g != gc, away, grad)  # outside the box: away from it
         return value.reshape(lead), grad.reshape(*lead, 3)
 
 

@@ -81,6 +81,7 @@ _PAD = 0.05  # empty space around the hull in the distance field, metres
 _REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the joints back
 _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
+_TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
 _DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
 _DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
@@ -374,7 +375,7 @@ class CageTracker:
             kept = None
             for k in range(_RETRIES + 1):
                 d = np.linalg.solve(H + np.diag(lam * Hd), -g)
-                if k == 0 and -(g @ d + 0.5 * d @ H @ d) <= _CONVERGED * abs(E):
+                if k == 0 and -(g @ d + 0.5 * d @ H @ d) <= _CONVERGED * abs(E) + _TINY:
                     break  # the model promises no real decrease: converged
                 if np.all(np.isfinite(d)) and np.abs(d).max() < _MAX_STEP:
                     new = update(state, d)
@@ -415,16 +416,16 @@ class CageTracker:
 
         def evaluate(x):
             mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
-            cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
-            r, g, _ = self._residuals(field, cage)
+            r, g, _ = self._residuals(field, self._rig(mean, self.pelvis_R, self.pelvis_c)[0])
             # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the noise
             # variance: Eq. (9) alone vanishes at training points, where its log is a
             # singular well of rounding noise (K is near singular) that traps the latent point
             var = max(var, 0.0) + noise
-            return 0.5 * np.mean(r * r) + lam * np.log(var), (r, g, cage, M, dmean, var, dvar)
+            return 0.5 * np.mean(r * r) + lam * np.log(var), (r, g, mean, dmean, var, dvar)
 
         def linearise(x, cache):
-            r, g, cage, M, dmean, var, dvar = cache
+            r, g, mean, dmean, var, dvar = cache
+            cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
             dx = self.deform_sample.jvp(cage, self._config_directions(M, dmean))  # Eq. (6)
             J = np.einsum("kpa,pa->kp", dx, g)
             grad = J @ r / len(r) + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
