@@ -519,8 +519,12 @@ class GPLVM:
         return mean, dmean, float(var), dvar
 
     # -- persistence --------------------------------------------------------------------------
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write the fitted model to an ``.npz`` file atomically; returns the path."""
+    def save(self, path: str | os.PathLike, *, extra: dict[str, np.ndarray] | None = None) -> Path:
+        """Write the fitted model to an ``.npz`` file atomically; returns the path.
+
+        ``extra`` arrays are stored beside the model under their own names (which must not
+        clash with the model's); :meth:`load` ignores them.
+        """
         self._fitted("save")
         path = Path(path)
         opts = self.get_params()
@@ -539,6 +543,10 @@ class GPLVM:
             arrays["A_"] = self.A_
         if self.mlp_weights_ is not None:
             arrays.update({f"mlp{i}": w for i, w in enumerate(self.mlp_weights_)})
+        clash = sorted(set(extra or {}) & set(arrays))
+        if clash:
+            raise InputError(f"GPLVM.save: extra arrays {clash} clash with the model's own")
+        arrays.update(extra or {})
         with atomic_open(path, "wb") as f:
             np.savez(f, **arrays)
         return path

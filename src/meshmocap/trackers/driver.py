@@ -23,6 +23,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
     Track,
+    frame_path,
     read_state,
     read_track,
     start_track,
@@ -128,7 +129,7 @@ def track_sequence(
 
 def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
     """One frame's result from a track folder."""
-    with np.load(Path(out) / "frames" / f"{index:05d}.npz", allow_pickle=False) as z:
+    with np.load(frame_path(out, index), allow_pickle=False) as z:
         return FrameResult(
             index=int(z["index"]), joints=z["joints"].astype(np.float64),
             vertices=z["vertices"].astype(np.float64),

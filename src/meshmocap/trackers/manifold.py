@@ -29,14 +29,12 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from meshmocap._atomic import atomic_open
 from meshmocap.body.oqr import OQR, build_oqr
 from meshmocap.body.pose_data import PoseSet, load_pose_sources
 from meshmocap.body.template import Template
@@ -150,24 +148,19 @@ class PoseManifold:
         path = Path(path)
         if path.suffix != ".npz":
             raise InputError(f"PoseManifold.save: path must end in .npz, found {path.name!r}")
-        with (
-            tempfile.TemporaryDirectory() as tmp,
-            np.load(self.gp.save(Path(tmp) / "gp.npz"), allow_pickle=False) as z,
-        ):
-            arrays = {k: z[k] for k in z.files}
-        arrays.update(
-            manifold_format=np.str_(MANIFOLD_FORMAT),
-            manifold_template=np.str_(self.template_name),
-            manifold_digest=np.str_(self.template_digest),
-            manifold_rest_cage=np.asarray(self.rest_cage, dtype=np.float64),
-            manifold_trials=np.asarray(self.trials, dtype=str),
-            manifold_groups=np.asarray(self.groups, dtype=str),
-            manifold_sources=np.asarray(self.sources, dtype=str),
-            manifold_stats=np.array([self.n_poses, self.fit_seconds], dtype=np.float64),
+        return self.gp.save(
+            path,
+            extra=dict(
+                manifold_format=np.str_(MANIFOLD_FORMAT),
+                manifold_template=np.str_(self.template_name),
+                manifold_digest=np.str_(self.template_digest),
+                manifold_rest_cage=np.asarray(self.rest_cage, dtype=np.float64),
+                manifold_trials=np.asarray(self.trials, dtype=str),
+                manifold_groups=np.asarray(self.groups, dtype=str),
+                manifold_sources=np.asarray(self.sources, dtype=str),
+                manifold_stats=np.array([self.n_poses, self.fit_seconds], dtype=np.float64),
+            ),
         )
-        with atomic_open(path) as f:
-            np.savez(f, **arrays)
-        return path
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> PoseManifold:
