@@ -73,10 +73,10 @@ class System:
     n_patches: int = 0
 
     @classmethod
-    def empty(cls, n: int, n_patches: int | None = None) -> System:
-        """An empty system of ``n`` unknowns: ``n_patches`` patches (6 each, default all)
-        then joints (3 each)."""
-        return cls(n, [], [], [], np.zeros(n), n // 6 if n_patches is None else n_patches)
+    def empty(cls, n: int, n_patches: int) -> System:
+        """An empty system of ``n`` unknowns: ``n_patches`` patches (6 each), then joints
+        (3 each)."""
+        return cls(n, [], [], [], np.zeros(n), n_patches)
 
     def add(self, ru: np.ndarray, cv: np.ndarray, B: np.ndarray) -> None:
         """Add blocks ``B`` (m, a, b) at rows ``ru`` (m,) and columns ``cv`` (m,) offsets."""
