@@ -5,7 +5,7 @@ import pytest
 
 from meshmocap.body.contact import foot_heights
 from meshmocap.body.motion import Motion
-from meshmocap.body.retarget import floor_offsets, retarget
+from meshmocap.body.retarget import KEEP_REST, floor_offsets, retarget
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError, SkeletonError
 from meshmocap.geometry.rotations import so3_exp
@@ -43,14 +43,36 @@ def test_random_poses_transfer_every_bone_direction(neutral):
     src_sk = toy_skeleton()  # T-pose, the template is in an A-pose
     R = so3_exp(RNG.normal(size=(6, src_sk.n_joints, 3)) * 0.6)
     src = Motion(src_sk, R, RNG.normal(size=(6, 3)), 30.0)
-    out = retarget(src, neutral, floor="none")
+    out = retarget(src, neutral, floor="none", keep_rest=())
     pairs = {n: n for n in src_sk.names if n != "Hips"}
     # exact by construction up to float rounding
     assert _bone_angles(src, out, pairs).max() < 1e-4  # degrees; arccos near 1 amplifies rounding
+    # by default the structural bones keep the template's shape; every other bone still
+    # follows its source bone exactly
+    default = retarget(src, neutral, floor="none")
+    free = {n: n for n in pairs if n not in KEEP_REST}
+    assert _bone_angles(src, default, free).max() < 1e-4
     # the root keeps its orientation and its (scaled) trajectory
     assert np.allclose(out.global_rotations[:, 0], src.global_rotations[:, 0], atol=1e-12)
     ratio = out.root_positions / src.root_positions
     assert np.allclose(ratio, ratio[0, 0], rtol=1e-12)
+
+
+def test_structural_bones_keep_the_templates_rest_shape(neutral):
+    """In the source's rest pose the hips, chest and clavicles of the template stay where
+    its rest skeleton has them (local rotation identity), though the toy's T-pose bones
+    point elsewhere; a source clavicle shrug still moves the template's clavicle."""
+    src_sk = toy_skeleton()
+    R = np.tile(np.eye(3), (2, src_sk.n_joints, 1, 1))
+    shrug = so3_exp(np.array([0.0, 0.3, 0.0]))
+    R[1, src_sk.index("LeftShoulder")] = shrug
+    out = retarget(Motion(src_sk, R, np.zeros((2, 3)), 30.0), neutral, floor="none")
+    keep = [neutral.skeleton.index(n) for n in KEEP_REST]
+    assert np.allclose(out.rotations[0, keep], np.eye(3), atol=1e-12)
+    j = neutral.skeleton.index("LeftShoulder")
+    # the same rotation, expressed in the frame the template's chest has in the rest pose
+    C = out.global_rotations[0, neutral.skeleton.parents[j]]
+    assert np.allclose(out.rotations[1, j], C.T @ shrug @ C, atol=1e-12)
 
 
 def test_bad_maps_and_options_are_rejected(neutral):

@@ -8,7 +8,15 @@ lengths or intermediate joints:
 2. **Rest-pose offset correction:** for each mapped joint ``j`` with source joint ``s``, the
    rotation ``Q_j`` turns the target's rest bone direction onto the source's. A posed frame
    then sets ``G_t[j] = G_s[s] Q_j`` so that every target bone points where its source bone
-   points. Unmapped target joints keep their rest orientation relative to their parent.
+   points (a T-pose source drives an A-pose template). The structural bones of
+   :data:`KEEP_REST` (pelvis→hip, clavicles) are the exception: they inherit their parent's
+   correction, ``G_t[j] = G_s[s] Q_parent``, i.e. keep the *target's* rest orientation
+   relative to their parent with the source's motion on top. Matching their directions
+   would reshape the target's body: CMU's pelvis→hip bones differ from a template's by
+   24–46° (82° for the bone-less BVH flavour) and its clavicles by 12–19°, which moved the
+   template's hip joints 4–8 cm and its shoulders 3–4 cm inside the skin in every frame.
+   Unmapped target joints also inherit, keeping the rest orientation of their nearest
+   mapped ancestor.
 3. **Root-height scaling:** the root trajectory is scaled by the ratio of leg lengths, so
    strides fit the target's legs (no foot sliding beyond the source's).
 4. **Floor contact:** a vertical shift puts the feet on the floor (z = 0) at their lowest
@@ -18,7 +26,7 @@ lengths or intermediate joints:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Literal, get_args
 
 import numpy as np
@@ -41,6 +49,9 @@ _LEG = ("LeftUpLeg", "LeftLeg", "LeftFoot")
 FLOOR_PERCENTILE = 10.0
 #: Seconds over which ``floor="feet"`` follows drifts of the source's floor height.
 FLOOR_WINDOW = 2.0
+#: Target joints that keep the target's rest orientation relative to their parent instead of
+#: turning onto the source's bone direction: bones that are body structure, not posture.
+KEEP_REST = ("LHipJoint", "RHipJoint", "Spine1", "LeftShoulder", "RightShoulder")
 
 
 class Retargeter:
@@ -55,6 +66,10 @@ class Retargeter:
         The skeleton to drive.
     joint_map : mapping, optional
         ``{target joint name: source joint name}`` (default: the known CMU flavours).
+    keep_rest : collection of str, optional
+        Target joints that keep the target's rest orientation relative to their parent
+        rather than turning onto their source bone's direction (default
+        :data:`KEEP_REST`); ``()`` matches every mapped bone.
 
     Attributes
     ----------
@@ -70,6 +85,7 @@ class Retargeter:
         target: Template | Skeleton,
         *,
         joint_map: Mapping[str, str] | None = None,
+        keep_rest: Collection[str] = KEEP_REST,
     ):
         self.source = source
         self.target = target
@@ -83,14 +99,20 @@ class Retargeter:
         Q = rotation_between(d_t, d_s)
         unknown = (np.linalg.norm(d_t, axis=1) < 0.5) | (np.linalg.norm(d_s, axis=1) < 0.5)
         Q[unknown | (t_idx == 0)] = np.eye(3)  # root: both face −Y, Z up by convention
-        # Unmapped joints keep their rest orientation relative to their parent, i.e. share the
-        # global rotation of their nearest mapped ancestor: one gather serves every joint.
+        own = np.array([tsk.names[j] not in keep_rest for j in t_idx], dtype=bool)
+        own[t_idx == 0] = True
+        # Joints in keep_rest inherit their parent's correction (target rest shape kept);
+        # unmapped ones also share their parent's source rotation. One gather per frame.
         src = np.full(tsk.n_joints, -1)
+        has = np.zeros(tsk.n_joints, dtype=bool)
         corr = np.empty((tsk.n_joints, 3, 3))
-        src[t_idx], corr[t_idx] = s_idx, Q
+        src[t_idx], corr[t_idx[own]], has[t_idx[own]] = s_idx, Q[own], True
         for j in range(1, tsk.n_joints):  # parents first
+            p = tsk.parents[j]
             if src[j] < 0:
-                src[j], corr[j] = src[tsk.parents[j]], corr[tsk.parents[j]]
+                src[j] = src[p]
+            if not has[j]:
+                corr[j] = corr[p]
         self._src, self._corr = src, corr
         self.scale = _leg_length(tsk) / _leg_length(source)
 
@@ -114,6 +136,7 @@ def retarget(
     target: Template | Skeleton,
     *,
     joint_map: Mapping[str, str] | None = None,
+    keep_rest: Collection[str] = KEEP_REST,
     floor: Floor = "feet",
 ) -> Motion:
     """Return ``motion`` replayed by ``target``'s skeleton.
@@ -129,6 +152,9 @@ def retarget(
     joint_map : mapping, optional
         ``{target joint name: source joint name}``. Default: the known CMU flavours
         (ASF/AMC, MotionBuilder BVH, Daz BVH) mapped onto the MotionBuilder names.
+    keep_rest : collection of str, optional
+        Target joints that keep the target's rest shape instead of following their source
+        bone's direction (default :data:`KEEP_REST`); see :class:`Retargeter`.
     floor : {"feet", "constant", "none"}
         ``"feet"`` shifts the clip vertically so the feet touch z = 0 at their lowest points,
         following slow drifts of the source floor (over :data:`FLOOR_WINDOW` seconds);
@@ -145,7 +171,9 @@ def retarget(
     SkeletonError
         The mapping names unknown joints or leaves the root or a leg unmapped.
     """
-    return Retargeter(motion.skeleton, target, joint_map=joint_map)(motion, floor=floor)
+    return Retargeter(motion.skeleton, target, joint_map=joint_map, keep_rest=keep_rest)(
+        motion, floor=floor
+    )
 
 
 def floor_offsets(low: np.ndarray, fps: float, *, constant: bool = False) -> np.ndarray:
