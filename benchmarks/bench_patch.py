@@ -9,21 +9,64 @@ skeleton). Clips (../shared/data/mocap/cmu, ``meshmocap.evaluation.bench.CMU_CLI
 05_01.amc (walk, whole), 09_01.bvh (run, whole from frame 4), 01_01.amc (jumps and a turn,
 first 600 frames at 60 fps).
 
+Speed (``--speed``): a 60-frame procedural walk (``humaneva4``) tracked by ``patch`` with
+the ~5k-vertex ``neutral_5k`` and the ~12k-vertex ``neutral`` templates, ``--repeats``
+runs each: seconds per frame of the tracker's ``step`` (the driver's timer; frame 0, the
+initialisation, left out; hull files are read inside ``step``) and the tracker's stage
+breakdown (:data:`meshmocap.trackers.patch.STAGES`) of the fastest run. Wall clock on a
+shared machine: the load average is printed with it.
+
 Run: ``python benchmarks/bench_patch.py [--clips 05_01 09_01 01_01] [--methods patch ...]
-[--rig humaneva4] [--subject heavy_male] [--degrade] [--max-frames N] [--out DIR]``.
-Captures and tracks are kept in ``--out``/work (default /tmp/meshmocap-bench) so runs
-resume; the table, plots and CSV files are written to ``--out``.
+[--rig humaneva4] [--subject heavy_male] [--degrade] [--max-frames N] [--out DIR]
+[--speed [--repeats 3]]``. Captures and tracks are kept in ``--out``/work (default
+/tmp/meshmocap-bench) so runs resume; the table, plots and CSV files are written to
+``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
-from meshmocap.evaluation.bench import CMU_CLIPS, run_bench
+import numpy as np
+
+from meshmocap.body.template import load_template
+from meshmocap.evaluation.bench import CMU_CLIPS, make_capture, parse_capture, run_bench
 from meshmocap.evaluation.bench_report import markdown_table
+from meshmocap.evaluation.evaluate import evaluate
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.patch import STAGES, PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def speed(out: Path, repeats: int) -> None:
+    """Print the speed table (module docstring)."""
+    print(f"speed: 60-frame procedural walk, humaneva4, patch (defaults); fastest of {repeats} "
+          f"runs; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")  # fmt: skip
+    head = "| template | vertices | s/frame min | s/frame max | " + " | ".join(STAGES)
+    head += " | mean mm |"
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    spec = parse_capture("walk", frames=60)
+    for name in ("neutral_5k", "neutral"):
+        template = load_template(name)
+        capture = make_capture(spec, out / "work", template=name, show_progress=False)
+        runs = []
+        for r in range(repeats):
+            tracker = PatchTracker(PatchOptions())
+            track = track_sequence(tracker, template, capture, out / "speed" / f"{name}-{r}",
+                                   resume=False, show_progress=False)  # fmt: skip
+            stages = {k: v / max(tracker.n_steps, 1) for k, v in tracker.stage_seconds.items()}
+            runs.append((float(np.mean(track.seconds[1:])), stages, track))
+        s_min, stages, track = min(runs, key=lambda r: r[0])
+        ev = evaluate(track, capture, surface_frames=0, silhouettes=False)
+        st = " | ".join(f"{stages[k]:.3f}" for k in STAGES)
+        print(f"| {name} | {template.n_vertices} | {s_min:.3f} | {max(r[0] for r in runs):.3f} "
+              f"| {st} | {ev.joints.overall.mean:.1f} |", flush=True)  # fmt: skip
+    print(f"(stages: seconds per frame of the fastest run; load average {os.getloadavg()[0]:.2f} "
+          "after)")  # fmt: skip
 
 
 def main() -> None:
@@ -36,7 +79,12 @@ def main() -> None:
     ap.add_argument("--degrade", action="store_true", help="jitter, holes, blobs in silhouettes")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--out", default="/tmp/meshmocap-bench")
+    ap.add_argument("--speed", action="store_true", help="only the speed table")
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
+    if args.speed:
+        speed(Path(args.out), args.repeats)
+        return
     variants = [args.rig, *([args.subject] if args.subject else []),
                 *(["degraded"] if args.degrade else [])]  # fmt: skip
     captures = ["+".join([clip, *variants]) for clip in args.clips]

@@ -163,23 +163,26 @@ def test_patches_bind_to_the_nearest_bone_at_their_joint():
 
 
 def test_bone_length_prior_gradient_and_hessian(setup):
-    """The optional bone-length prior: gradient against central differences (float64, h =
-    1e-6, accurate to ~1e-9), and its Gauss–Newton Hessian equals JᵀJ of the residuals."""
+    """The optional bone-length prior (bones and a hip-to-hip pair): gradient against
+    central differences (float64, h = 1e-6, accurate to ~1e-9), and a step of its
+    Gauss–Newton Hessian restores the lengths."""
     m, _, _, _, X, _ = setup
     t = load_template("neutral_5k")
     parents = t.eval_skeleton.parents
-    L = np.zeros(15)
-    b = parents >= 0
-    L[b] = np.linalg.norm(
-        t.eval_skeleton.rest_positions[b] - t.eval_skeleton.rest_positions[parents[b]], axis=1
+    b = np.flatnonzero(parents >= 0)
+    ev = t.eval_skeleton.names
+    pairs = np.vstack(
+        [np.stack([b, parents[b]], 1), [[ev.index("left_hip"), ev.index("right_hip")]]]
     )
+    P0 = t.eval_skeleton.rest_positions
+    L = np.linalg.norm(P0[pairs[:, 0]] - P0[pairs[:, 1]], axis=1)
 
     def energy(Xv):
-        d = np.linalg.norm(Xv[b] - Xv[parents[b]], axis=1)
-        return np.sum((d - L[b]) ** 2)
+        d = np.linalg.norm(Xv[pairs[:, 0]] - Xv[pairs[:, 1]], axis=1)
+        return np.sum((d - L) ** 2)
 
     sys = System.empty(6 * m.P + 45, m.P)
-    value = add_bone_lengths(sys, X, parents, L, m.P, 1.0)
+    value = add_bone_lengths(sys, X, pairs, L, m.P, 1.0)
     assert value == pytest.approx(energy(X), rel=1e-12)
     g = sys.g[6 * m.P :]
     h = 1e-6

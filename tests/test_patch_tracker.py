@@ -10,7 +10,7 @@ from meshmocap.errors import InputError
 from meshmocap.io.results import done_frames, read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.patch import PatchOptions, PatchTracker
+from meshmocap.trackers.patch import STAGES, PatchOptions, PatchTracker
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +40,34 @@ def test_patch_tracker_follows_a_walk(walk, tracked):
     assert err[0] < 1e-6 and err.max() < 35.0
     assert track.healthy.all() and np.isfinite(track.vertices).all()
     assert set(track.energies) >= {"data", "rigidity", "bone", "total"}
+
+
+def test_stage_breakdown_accounts_for_the_step_time(walk, tmp_path):
+    """Every stage is timed and together they are the step time the driver measured (to
+    5 ms per frame: the driver's clock also covers its call overhead)."""
+    cap, t = walk
+    tracker = PatchTracker(PatchOptions(n_patches=120, max_iter=3))
+    track = track_sequence(tracker, t, cap, tmp_path / "tr", frames=range(3), show_progress=False)
+    assert tracker.n_steps == 2 and set(tracker.stage_seconds) == set(STAGES)
+    assert all(v > 0 for v in tracker.stage_seconds.values())
+    assert sum(tracker.stage_seconds.values()) == pytest.approx(track.seconds[1:].sum(), abs=0.01)
+
+
+def test_part_matching_restricts_only_on_bone_points(walk):
+    """With ``part_matching="on_bone"`` near-joint points lose their label (−1: any patch);
+    with "none" no label reaches the E-step; "all" keeps every label."""
+    cap, t = walk
+    found = {}
+    for mode in ("all", "on_bone", "none"):
+        tracker = PatchTracker(PatchOptions(n_patches=120, part_matching=mode))
+        tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
+        Y, N, rng = tracker.observations(cap[1])
+        found[mode] = tracker.classify(Y, N, rng)[2]
+    assert found["none"] is None
+    assert (found["all"] >= 0).all()
+    free = found["on_bone"] < 0
+    assert 0 < free.sum() < len(free)  # some near-joint points, most on bone
+    assert np.array_equal(found["on_bone"][~free], found["all"][~free])
 
 
 def test_interrupted_run_resumes_to_the_same_result(walk, tracked, tmp_path):
@@ -83,6 +111,8 @@ def test_options_are_validated():
         PatchOptions(classifier="forest")
     with pytest.raises(InputError, match="keep_fraction"):
         PatchOptions(keep_fraction=0.0)
+    with pytest.raises(InputError, match="part_matching must be one of"):
+        PatchOptions(part_matching="some")
 
 
 def test_track_and_eval_commands(walk, tmp_path, capsys):

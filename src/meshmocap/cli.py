@@ -352,8 +352,8 @@ def build_parser() -> argparse.ArgumentParser:
         "track", help="track a capture: skeleton joints and template shape per frame"
     )
     k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
-    k.add_argument("--method", default="patch", help="patch, patch_noclf, articulated_icp, "
-                   "cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
+    k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
+                   "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
     k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=_frame_range, help="frame range START:STOP[:STEP]")

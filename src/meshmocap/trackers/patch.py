@@ -15,6 +15,7 @@ Each term is normalised by its total weight, so the λs weigh mean squared resid
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, replace
 from typing import Literal, get_args
 
@@ -22,13 +23,13 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 
 from meshmocap._validate import check_choice
-from meshmocap.body.template import Template
+from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
-from meshmocap.models.bodyparts import BodyPartClassifier, partition
+from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
 from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind_bones
 from meshmocap.trackers.patch_solver import (
     System,
@@ -43,6 +44,7 @@ from meshmocap.trackers.patch_solver import (
 Classifier = Literal["logistic", "svc", "none"]
 Residual = Literal["point_to_point", "point_to_plane"]
 Prediction = Literal["bones", "patches", "none"]
+PartMatching = Literal["all", "on_bone", "none"]
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
 
@@ -65,6 +67,13 @@ MAX_PREDICTION_ANGLE = 0.3
 MAX_BONE_PREDICTION = 0.15
 #: Largest rotation (radians) of a patch in one Gauss–Newton step.
 MAX_STEP_ANGLE = 0.3
+#: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
+#: classification (training and prediction), E-steps, building the normal equations,
+#: solving them, and the output mesh with the frame's result.
+STAGES = ("observations", "classify", "assign", "system", "solve", "output")
+#: Joint pairs of the evaluation skeleton held at their first-frame distance by the length
+#: prior besides the bones: the pelvis and the shoulder girdle move as rigid triangles.
+RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
 REACQUIRE_OFFSET = 0.15
 
@@ -86,7 +95,8 @@ class PatchOptions:
         λd, λr, λb of Eq. (1) (the paper's 10, 1, 1).
     lambda_length : float
         Weight of a bone-length prior (not in the paper; 0 turns it off): mean squared
-        change of each bone's length from the first tracked frame, metres². Without it the
+        change of each bone's length (and of the hip-to-hip and shoulder-to-shoulder
+        distances, :data:`RIGID_PAIRS`) from the first tracked frame, metres². Without it the
         joints drift with the patches over a long walk (bone-length std 29 mm on 120 frames
         of CMU 05_01; 0.1 mm with it, and a lower joint error).
     classifier : {"logistic", "svc", "none"}
@@ -94,6 +104,11 @@ class PatchOptions:
         linear SVM with Platt scaling, "none" the tracker without classification.
     keep_fraction : float
         Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8).
+    part_matching : {"all", "on_bone", "none"}
+        Which kept points may only correspond to patches of their predicted body part:
+        every one ("all"), the on-bone ones (near-joint points, whose label is uncertain by
+        Eq. 6, match any patch), or none (the classifier only selects points; Eq. 7 sums
+        over every patch).
     on_bone, outlier : float
         Probability thresholds of Eq. (6).
     max_distance : float or None
@@ -133,6 +148,7 @@ class PatchOptions:
     lambda_length: float = 100.0
     classifier: Classifier = "logistic"
     keep_fraction: float = 0.5
+    part_matching: PartMatching = "all"
     on_bone: float = 0.9
     outlier: float = 0.5
     max_distance: float | None = 0.1
@@ -154,6 +170,7 @@ class PatchOptions:
         check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
         check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
         check_choice("PatchOptions", "prediction", self.prediction, get_args(Prediction))
+        check_choice("PatchOptions", "part_matching", self.part_matching, get_args(PartMatching))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
         if not 0 < self.keep_fraction <= 1:
@@ -168,6 +185,13 @@ class PatchTracker:
     Parameters
     ----------
     options : PatchOptions
+
+    Attributes
+    ----------
+    stage_seconds : dict of str → float
+        Wall time spent in each of :data:`STAGES` over all :meth:`step` calls, seconds.
+    n_steps : int
+        Number of :meth:`step` calls.
     """
 
     name = "patch"
@@ -176,6 +200,13 @@ class PatchTracker:
         self.opts = options
         self.model: PatchModel | None = None
         self.template: Template | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        self.n_steps = 0
+
+    def _lap(self, stage: str) -> None:
+        t = time.perf_counter()
+        self.stage_seconds[stage] += t - self._t
+        self._t = t
 
     def options(self) -> dict:
         """JSON-ready settings."""
@@ -192,6 +223,7 @@ class PatchTracker:
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
         self.moments = rigidity_moments(self.model)
+        self.pairs = _held_pairs(template.eval_skeleton)
 
     def init(
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
@@ -204,7 +236,7 @@ class PatchTracker:
         posed = template.pose(R, root)
         self.R, self.c = _fit_patches(m, posed.V)
         self.X = posed.eval_joints.copy()
-        self.lengths = _bone_lengths(self.X, template.eval_skeleton.parents)
+        self.lengths = _pair_lengths(self.X, self.pairs)
         self.model = rebind_bones(m, self.R, self.c, self.X)
         self.sigma = o.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
@@ -276,11 +308,17 @@ class PatchTracker:
             max_distance=o.max_distance, random_state=rng.integers(1 << 31),
         )  # fmt: skip
         keep = part.keep
-        return V[keep], N[keep], part.labels[keep]
+        if o.part_matching == "none":
+            return V[keep], N[keep], None
+        labels = part.labels.copy()
+        if o.part_matching == "on_bone":
+            labels[part.kind != ON_BONE] = -1  # near-joint points: any patch
+        return V[keep], N[keep], labels[keep]
 
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
         o, m = self.opts, self.model
+        self._t = time.perf_counter()
         Y, NY, rng = self.observations(frame)
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
@@ -303,7 +341,9 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
+        self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
+        self._lap("classify")
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         n_unknowns = 6 * m.P + 3 * len(self.X)
@@ -314,6 +354,7 @@ class PatchTracker:
             n_iter += 1
             Vc, Nc = self.own_vertices()
             patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
+            self._lap("assign")
             sys = System.empty(n_unknowns, m.P)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
             r = q + self.c[patch] - y
@@ -330,10 +371,11 @@ class PatchTracker:
             e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
             e_len = 0.0
             if o.lambda_length > 0:
-                ev = self.template.eval_skeleton
-                e_len = add_bone_lengths(sys, self.X, ev.parents, self.lengths, m.P,
-                                         o.lambda_length / max(len(self.X) - 1, 1))  # fmt: skip
+                e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths, m.P,
+                                         o.lambda_length / len(self.pairs))  # fmt: skip
+            self._lap("system")
             delta = sys.solve(o.damping)
+            self._lap("solve")
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
             self._apply(delta)
@@ -341,7 +383,7 @@ class PatchTracker:
             self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
             energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
                         "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma,
-                        "length": e_len / max(len(self.X) - 1, 1)}  # fmt: skip
+                        "length": e_len / max(len(self.pairs), 1)}  # fmt: skip
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
             if move < o.tol:
@@ -353,7 +395,10 @@ class PatchTracker:
             + o.lambda_length * energies["length"]
         )
         self._check_divergence(Y, last[2])
-        return self._result(frame.index, energies, n_iter)
+        result = self._result(frame.index, energies, n_iter)
+        self._lap("output")
+        self.n_steps += 1
+        return result
 
     def _predict_by_bones(self) -> None:
         """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
@@ -395,7 +440,7 @@ class PatchTracker:
         d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
         ok = np.sum(Nc[idx] * NY[:, None, :], axis=2) > o.normal_cos  # normal compatibility
         if ycls is not None:  # only patches of the point's body part (§III-B)
-            ok &= m.bone_of_patch[m.labels[idx]] == ycls[:, None]
+            ok &= (m.bone_of_patch[m.labels[idx]] == ycls[:, None]) | (ycls[:, None] < 0)
         i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
         patch = m.labels[idx[i, j]]
         key = i * m.P + patch
@@ -419,12 +464,19 @@ class PatchTracker:
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
 
 
-def _bone_lengths(X: np.ndarray, parents: np.ndarray) -> np.ndarray:
-    """Length (K,) of the bone ending at each joint of ``X`` (K, 3); 0 at the root."""
-    L = np.zeros(len(X))
-    b = np.flatnonzero(parents >= 0)
-    L[b] = np.linalg.norm(X[b] - X[parents[b]], axis=1)
-    return L
+def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
+    """(m, 2) joint pairs whose distance the length prior holds: every bone (child, parent)
+    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: on
+    CMU 05_01 a right hip flipped to the left side, 19 cm off, for 20 frames)."""
+    b = np.flatnonzero(ev.parents >= 0)
+    extra = [(ev.names.index(a), ev.names.index(c)) for a, c in RIGID_PAIRS
+             if a in ev.names and c in ev.names]  # fmt: skip
+    return np.vstack([np.stack([b, ev.parents[b]], 1), np.reshape(extra, (-1, 2))]).astype(int)
+
+
+def _pair_lengths(X: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Distance (m,) between the joints of each pair of ``X`` (K, 3)."""
+    return np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1)
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

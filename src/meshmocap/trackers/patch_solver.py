@@ -292,30 +292,31 @@ def add_plane_terms(
 def add_bone_lengths(
     sys: System,
     X: np.ndarray,
-    parents: np.ndarray,
+    pairs: np.ndarray,
     lengths: np.ndarray,
     n_patches: int,
     weight: float,
 ) -> float:
-    """Add ``weight · Σ_b (|x_b − x_parent(b)| − L_b)²`` over the skeleton's bones.
+    """Add ``weight · Σ_(a,b) (|x_a − x_b| − L_ab)²`` over pairs of joints.
 
     Not in the paper, which leaves bone lengths free (§IV-A, Fig. 6): an optional prior
-    that keeps each bone at the length it had where tracking started. Gauss–Newton with
-    the unit bone direction ``u``: ``∂r/∂x_b = uᵀ``, ``∂r/∂x_parent = −uᵀ``.
+    that keeps each bone (and each rigid pair across the pelvis or shoulders) at the length
+    it had where tracking started. Gauss–Newton with the unit direction ``u`` of
+    ``x_a − x_b``: ``∂r/∂x_a = uᵀ``, ``∂r/∂x_b = −uᵀ``.
 
     Parameters
     ----------
-    X : (K, 3) joint positions, metres; parents : (K,) parent of each joint (−1: root)
-    lengths : (K,) rest length of the bone ending at each joint (ignored at the root)
+    X : (K, 3) joint positions, metres
+    pairs : (m, 2) int, joints whose distance is held (a bone: child, parent)
+    lengths : (m,) distance to hold for each pair, metres
     n_patches : the joints' unknowns start at ``6 · n_patches``
     Returns the sum of squared length errors (before ``weight``).
     """
-    b = np.flatnonzero(parents >= 0)
-    p = parents[b]
+    b, p = pairs[:, 0], pairs[:, 1]
     d = X[b] - X[p]
     n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
     u = d / n[:, None]
-    r = n - lengths[b]
+    r = n - lengths
     base = 6 * n_patches
     uu = weight * u[:, :, None] * u[:, None, :]
     sys.add(base + 3 * b, base + 3 * b, uu)

@@ -19,6 +19,13 @@ _CAGE = ("meshmocap.trackers.cage", "CageTracker", "CageOptions")
 #: method name → (module, tracker class, options class, fixed options)
 METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
     "patch": ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", {}),
+    # the paper's classifier (libsvm linear SVC, Platt probabilities) instead of the default
+    "patch_svc": (
+        "meshmocap.trackers.patch",
+        "PatchTracker",
+        "PatchOptions",
+        {"classifier": "svc"},
+    ),
     "patch_noclf": (
         "meshmocap.trackers.patch",
         "PatchTracker",
