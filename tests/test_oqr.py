@@ -6,7 +6,10 @@ products and sums of O(1) numbers (metres, rotation entries): exact to ~1e-15, c
 reproduce the rest template to ~1e-14 (test_green.py), checked at 1e-9. Green vs
 linear-blend skinning on a walk is a modelling difference, not a rounding one: measured
 on neutral_5k (31 frames, 1 s of walk) mean 4.3 mm, 99th percentile 26.5 mm, max 65 mm
-(at the back of the bent knee); asserted with margin at 1 cm, 4 cm and 8 cm.
+(at the back of the bent knee); asserted with margin at 1 cm, 4 cm and 8 cm. A template
+turned about Z gets its rig turned: measured to 5e-16 m and 5e-16 on the rotations (the
+placement is the same float64 arithmetic on coordinates that differ by rounding), checked
+at 1e-9.
 """
 
 from __future__ import annotations
@@ -30,11 +33,12 @@ from meshmocap.body.oqr import (
     cage_vertices,
     configuration_from_vector,
     configuration_vector,
+    heading,
     quads_from_pose,
 )
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
-from meshmocap.body.template import bundled_templates, load_template
+from meshmocap.body.template import EvalSkeleton, Template, bundled_templates, load_template
 from meshmocap.errors import InputError, MeshError, SkeletonError
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.mesh import edges_unique, mesh_problems, signed_volume
@@ -225,14 +229,75 @@ def test_self_intersection_and_enclosure_checks_catch_broken_cages(built):
     assert cage_problems(o.rest_vertices, F[1:])[0].startswith("manifold")
 
 
+def turned(t: Template, angle: float, shift=(0.0, 0.0, 0.0)) -> tuple[Template, np.ndarray]:
+    """``t`` turned by ``angle`` (radians) about +Z through the origin, then shifted; and
+    the rotation (3, 3)."""
+    C = so3_exp(np.array([0.0, 0.0, angle]))
+    sk, ev = t.skeleton, t.eval_skeleton
+    offsets = sk.offsets @ C.T
+    offsets[0] += shift
+    skel = Skeleton(sk.names, sk.parents, offsets, sk.end_offsets @ C.T)
+    evs = EvalSkeleton(ev.names, ev.parents, ev.rest_positions @ C.T + shift, ev.weights)
+    V = t.V @ C.T + shift
+    return Template(f"{t.name}_turned", V, t.F, skel, t.weights, t.part_labels, evs), C
+
+
+@pytest.mark.parametrize("degrees", [90.0, 180.0, 37.0])
+def test_a_turned_template_gets_its_rig_turned(built, degrees):
+    t, o = built["neutral_5k"]
+    shift = np.array([0.4, -1.1, 0.0])
+    t2, C = turned(t, np.radians(degrees), shift)
+    assert np.abs(heading(t2) - C).max() < 1e-12 and np.array_equal(heading(t), np.eye(3))
+    o2 = build_oqr(t2)
+    assert np.array_equal(o2.faces, o.faces) and np.array_equal(o2.vertex_quad, o.vertex_quad)
+    assert np.abs(o2.rest_vertices - (o.rest_vertices @ C.T + shift)).max() < 1e-9
+    assert np.abs(o2.quads.centres - (o.quads.centres @ C.T + shift)).max() < 1e-9
+    assert np.abs(o2.quads.rotations - C @ o.quads.rotations).max() < 1e-9
+    assert np.abs(o2.quads.half_sizes - o.quads.half_sizes).max() < 1e-9
+    assert np.abs(o2.vertex_local - o.vertex_local).max() < 1e-9
+    E, _ = edges_unique(o2.faces)
+    assert len(o2.rest_vertices) - len(E) + len(o2.faces) == 2  # closed genus 0
+    assert cage_problems(o2.rest_vertices, o2.faces, t2.V, clearance=0.004) == []
+
+
+def test_a_template_lying_down_is_refused_in_one_line(built):
+    t, _ = built["neutral_5k"]
+    sk = t.skeleton
+    R = so3_exp(np.array([0.0, np.pi / 2, 0.0]))  # its left (+X) now points down
+    lying = replace(t, skeleton=Skeleton(sk.names, sk.parents, sk.offsets @ R.T,
+                                         sk.end_offsets @ R.T))  # fmt: skip
+    with pytest.raises(SkeletonError, match="upright") as info:
+        build_oqr(lying)
+    assert "\n" not in str(info.value)
+
+
+def test_trunk_quads_fitted_into_the_arms_are_untangled_and_regrown(built):
+    # margin 1.6 makes the chest and abdomen quads cut into the upper arms' tubes: the cage
+    # starts self-intersecting (6 rounds of shrinking) and needs quads to slide to enclose
+    t, _ = built["neutral_5k"]
+    o = build_oqr(t, margin=1.6)
+    assert cage_problems(o.rest_vertices, o.faces, t.V, clearance=0.004) == []
+
+
 def test_build_oqr_names_the_failed_check_and_validates_its_inputs():
     t = load_template("neutral_5k")
     with pytest.raises(MeshError, match="enclosure"):
         build_oqr(t, clearance=0.05, max_grow=0)
-    with pytest.raises(InputError, match="margin"):
-        build_oqr(t, margin=0.5)
-    with pytest.raises(InputError, match="max_grow"):
-        build_oqr(t, max_grow=-1)
+    with pytest.raises(MeshError, match="cross-section holds no vertex"):
+        build_oqr(t, slab=1e-5)
+    for kw, what in [
+        (dict(margin=0.5), r"margin must be a number in \[1, 3\], found 0.5"),
+        (dict(pad=0), r"pad must be a number in \(0, 0.1\] metres, found 0"),
+        (dict(pad=float("nan")), "pad must be a number"),
+        (dict(slab=True), "slab must be a number"),
+        (dict(clearance="4 mm"), "clearance must be a number"),
+        (dict(grow_step=np.inf), "grow_step must be a number"),
+        (dict(max_grow=-1), "max_grow must be a non-negative integer, found -1"),
+        (dict(max_grow=True), "max_grow must be a non-negative integer, found True"),
+    ]:
+        with pytest.raises(InputError, match=what) as info:
+            build_oqr(t, **kw)
+        assert "\n" not in str(info.value) and str(info.value).startswith("build_oqr: ")
     sk = t.skeleton
     names = tuple("Elbow" if n == "LeftForeArm" else n for n in sk.names)
     renamed = replace(t, skeleton=Skeleton(names, sk.parents, sk.offsets, sk.end_offsets))
@@ -271,6 +336,17 @@ def test_winding_numbers_and_distances_on_a_cube():
     d, f = surface_distances(P, CUBE_V, CUBE_F)
     assert np.abs(d - [0.5, 0.1, 0.5, np.sqrt(3.0)]).max() < 1e-12
     assert set(CUBE_F[f[2]]) <= {4, 5, 6, 7}  # the x = 1 side
+    # nearest to an edge or a corner: the faces tie and the lowest index wins, whatever
+    # the rounding of the coordinates (here the cube turned by 90° about Z and back)
+    P = np.array([[1.5, 0.5, 1.5], [1.5, 1.5, 1.5], [0.5, -0.5, -0.5]])
+    C = so3_exp(np.array([0.0, 0.0, np.pi / 2]))
+    for X in (P, (P @ C.T) @ C):
+        d, f = surface_distances(X, CUBE_V, CUBE_F)
+        for x, dx, fx in zip(X, d, f, strict=True):
+            all_d = np.array([surface_distances(x[None], CUBE_V, CUBE_F[[k]])[0][0]
+                              for k in range(len(CUBE_F))])  # fmt: skip
+            assert fx == np.flatnonzero(all_d <= all_d.min() + 1e-12)[0]
+            assert abs(dx - all_d.min()) < 1e-12
 
 
 def test_self_intersections_on_small_examples():

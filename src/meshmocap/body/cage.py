@@ -4,10 +4,11 @@ cage-manifold-tracking §3: *the cage is built procedurally from the vertices de
 the quads; its topology is computed once by defining relations between quads*. Consecutive
 quads of a chain are joined by *tubes* (8 triangles: two per side of the quads), chain
 ends are *capped*, and the two torso branchings are closed by fixed *junction* patches
-(:func:`oqr_faces`). :class:`QuadRect` and :func:`enclose` grow the quads of a cage
-being built until it encloses the template; :func:`cage_problems` names the checks a
-cage fails (closed 2-manifold, consistent outward orientation, no self-intersection,
-enclosure of a point set).
+(:func:`oqr_faces`). :class:`QuadRect`, :func:`untangle` and :func:`enclose` shrink the
+quads of a cage being built until it has no self-intersection, then grow them until it
+encloses the template; :func:`cage_problems` names the checks a cage fails (closed
+2-manifold, consistent outward orientation, no self-intersection, enclosure of a point
+set).
 
 Conventions: ``V`` (nv, 3) float64 cage vertices, metres, world frame (Z up); ``F`` (nf, 3)
 int64 triangles, counter-clockwise seen from outside. A *ring* is the 4 corner indices
@@ -37,6 +38,7 @@ OQR_CAPS = (8, 12, 16, 20)
 OQR_HEAD = 4
 #: Index of the apex vertex (above the head quad, bound to it).
 OQR_APEX = 84
+_TIE = 1e-12  # metres: distances this close tie (surface_distances)
 
 
 # ------------------------------------------------------------------------------ topology
@@ -75,7 +77,8 @@ def oqr_faces(C: np.ndarray) -> np.ndarray:
         World corners of the rest quads (corner ``k`` of quad ``q`` is cage vertex
         ``4 q + k``; rings counter-clockwise about each quad's normal, which points up the
         spine and down the limbs). Only used to tell which corner of a junction quad is
-        front/back/left/right/top/bottom (subject facing −Y, left +X, Z up).
+        front/back/left/right/top/bottom (subject facing −Y, left +X, Z up: the canonical
+        frame, in which :func:`meshmocap.body.oqr.build_oqr` places any template).
 
     Returns
     -------
@@ -173,7 +176,12 @@ class QuadRect:
 
     def grow(self, axis: int, sign: int, step: float) -> bool:
         """Move the ``sign`` side along ``axis`` (0: u, 1: v) outward by ``step`` (inward if
-        negative); return whether it moved (the keep-out half-space may stop it)."""
+        negative), or with ``axis`` 2 slide the whole quad by ``sign · step`` along ``n``;
+        return whether it moved (the keep-out half-space may stop it)."""
+        if axis == 2:
+            self.anchor = self.anchor + sign * step * self.R[:, 2]
+            self.clamp()
+            return True
         old = (self.lo[axis], self.hi[axis])
         if sign > 0:
             self.hi[axis] += step
@@ -216,28 +224,52 @@ def enclose(
     """Grow quads in place until every point is inside the cage, ``clearance`` deep.
 
     Each iteration finds the points outside the cage (winding number ≠ 1) or closer than
-    ``clearance`` to it, and their nearest cage faces; the quad corners of each such face
-    move outward in their quad's plane, along the quad axis closest to the push direction
+    ``clearance`` to it, and their nearest cage faces; each quad with a corner in such a
+    face moves towards the point along the axis of its frame closest to the push direction
     ``g`` (from the nearest cage point to an outside point, the face normal for an inside
-    one) and only if the corner lies on that side, by the missing depth
-    (``1.25 clearance`` − signed distance) over ``|g·axis|``, clipped to ``[step, 4 step]``. Moves
-    are applied one by one; one that makes the faces around its quad intersect any other
-    face is undone and that side is not moved again. Points deeper than 3 cm at the start
-    are not watched (the caller checks all of them at the end).
+    one), by the missing depth (``1.25 clearance`` − signed distance) over ``|g·axis|``,
+    clipped to ``[step, 4 step]``. Moves are applied one by one; one that makes faces
+    around its quad intersect faces they did not intersect before is undone, and that
+    move is not tried again. Points deeper than 3 cm at the start of the first pass are not
+    watched in it (the caller checks all of them at the end).
 
-    Returns the number of iterations used.
+    A first pass (at most ``max_iter`` iterations) only moves sides: along ``u`` or ``v``
+    the side holding that corner moves outward in the quad's plane. When points are left
+    (no move left, or ``max_iter``), a second pass (as many iterations) also slides whole
+    quads along their normal ``n``, only the quad of the face whose plane is nearest the
+    point: by the push where it is mostly along ``n`` (a crotch between two thighs, a
+    cap), and away from the trunk (``+n``) where the side that should move cannot (undone
+    before), which deepens the crease of a junction (an armpit under a hanging arm, the
+    crotch of legs held together). Templates that the first pass encloses get exactly the
+    cage they got before the second pass existed. Returns the number of iterations used.
     """
-    band = np.ones(len(points), dtype=bool)
     frozen: set[tuple[int, int, int]] = set()
+    used = 0
+    for slide, size in ((False, step), (True, step), (True, step / 4)):
+        if size < step:
+            frozen = set()
+        it, done = _grow_pass(rects, F, points, apex_height, clearance, size, max_iter,
+                              slide, frozen)  # fmt: skip
+        used += it
+        if done:
+            break
+    return used
+
+
+def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, frozen):
+    """One pass of :func:`enclose`: ``(iterations, whether every point is enclosed)``."""
+    band = np.ones(len(points), dtype=bool)
     for it in range(max_iter + 1):
         V = rect_cage(rects, apex_height)
         outside = np.abs(winding_numbers(points, V, F) - 1.0) > 1e-6
         check = np.flatnonzero(band | outside)
         d, f = surface_distances(points[check], V, F)
-        if it == 0:
+        if it == 0 and not slide:  # a slide also moves faces inwards: watch every point
             band[check] = d < clearance + 0.03
         bad = outside[check] | (d < clearance)
-        if not bad.any() or it == max_iter:
+        if not bad.any():
+            return it, True
+        if it == max_iter:
             break
         X, out, f, d = points[check[bad]], outside[check[bad]], f[bad], d[bad]
         T = V[F[f]]
@@ -247,17 +279,30 @@ def enclose(
         need = 1.25 * clearance + np.where(out, d, -d)
         moves: dict[tuple[int, int, int], float] = {}
         corner = F[f] % 4
+        if slide:  # slides only move the quad of the face whose plane is nearest the point
+            qf = np.minimum(F[f] // 4, len(rects) - 1)  # the apex follows the head quad
+            A = np.stack([r.anchor for r in rects])[qf]
+            N = np.stack([r.R[:, 2] for r in rects])[qf]
+            height = np.abs(np.einsum("pki,pki->pk", X[:, None] - A, N))
+            nearest = qf[np.arange(len(qf)), np.argmin(height, axis=1)]
         for q, rect in enumerate(rects):  # loops over quads, vectorised over points
             rows, cols = np.nonzero(F[f] // 4 == q)
             if not len(rows):
                 continue
-            uv = g[rows] @ rect.R[:, :2]
-            axis = np.argmax(np.abs(uv), axis=1)
-            comp = uv[np.arange(len(rows)), axis]
+            uvn = g[rows] @ rect.R
+            axis = np.argmax(np.abs(uvn[:, : 3 if slide else 2]), axis=1)
+            comp = uvn[np.arange(len(rows)), axis]
             sign = np.sign(comp).astype(int)
-            ok = CORNER_SIGNS[corner[rows, cols], axis] == sign
+            ok = axis == 2  # a slide along n moves every corner
+            ok[~ok] = CORNER_SIGNS[corner[rows, cols], np.minimum(axis, 1)][~ok] == sign[~ok]
+            if slide:  # a side that cannot move: slide the quad away from the trunk
+                held = [(q, a, s) in frozen for a, s in zip(axis, sign, strict=True)]
+                stuck = ok & np.array(held, dtype=bool)
+                axis[stuck], sign[stuck] = 2, 1
+                comp[stuck] = uvn[stuck, 2]
+                ok &= (axis != 2) | (nearest[rows] == q)
             amount = need[rows] / np.maximum(np.abs(comp), 0.5)
-            for a in (0, 1):
+            for a in (0, 1, 2):
                 for s in (-1, 1):
                     sel = ok & (axis == a) & (sign == s)
                     if sel.any():
@@ -267,13 +312,54 @@ def enclose(
             break
         for (q, a, s), m in sorted(moves.items()):
             around = np.flatnonzero((q == F // 4).any(axis=1))
+            before = _pair_set(rect_cage(rects, apex_height), F, around)
             delta = min(max(m, step), 4 * step)
             if not rects[q].grow(a, s, delta):
                 frozen.add((q, a, s))
-            elif len(self_intersections(rect_cage(rects, apex_height), F, faces=around)):
+            elif not _pair_set(rect_cage(rects, apex_height), F, around) <= before:
                 rects[q].grow(a, s, -delta)
                 frozen.add((q, a, s))
-    return it
+    return it, False
+
+
+def untangle(
+    rects: list[QuadRect], F: np.ndarray, *, apex_height: float, step: float, max_iter: int
+) -> int:
+    """Shrink quads in place until the cage has no self-intersection.
+
+    Each iteration takes every pair of intersecting faces; each corner of one face moves
+    ``step`` inward along the axis (``u`` or ``v``) of its quad's frame closest to the
+    direction from that face's centroid to the other's, if the corner lies on that side
+    (the two faces retreat from each other: e.g. a trunk quad fitted with a margin into an
+    arm hanging close to the trunk, and the arm's quads). No side shrinks by more than
+    half its quad's initial extent. Returns the number of iterations used (``max_iter``
+    when intersections remain; the caller's checks name them).
+    """
+    size0 = [r.hi - r.lo for r in rects]
+    for it in range(max_iter):
+        V = rect_cage(rects, apex_height)
+        pairs = self_intersections(V, F)
+        if not len(pairs):
+            return it
+        centre = V[F].mean(axis=1)
+        moves: set[tuple[int, int, int]] = set()
+        for i, j in np.concatenate([pairs, pairs[:, ::-1]]):
+            for c in F[i][F[i] < 4 * len(rects)]:  # quad corners (not the apex)
+                q, k = divmod(int(c), 4)
+                uv = (centre[j] - centre[i]) @ rects[q].R[:, :2]
+                a = int(np.argmax(np.abs(uv)))
+                s = int(np.sign(uv[a]))
+                if CORNER_SIGNS[k, a] == s:
+                    moves.add((q, a, s))
+        for q, a, s in sorted(moves):
+            r = rects[q]
+            if (r.hi - r.lo)[a] - step >= 0.5 * size0[q][a]:
+                r.grow(a, s, -step)
+    return max_iter
+
+
+def _pair_set(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> set[tuple[int, int]]:
+    return set(map(tuple, self_intersections(V, F, faces=faces).tolist()))
 
 
 # ------------------------------------------------------------------------------ checks
@@ -311,6 +397,8 @@ def surface_distances(P: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.n
     Meant for cages (a few hundred faces): one vectorised pass per face, skipping the
     points whose lower bound for the face (distance to its plane or to its bounding ball)
     exceeds their best so far (initially the distance to the face of least lower bound).
+    Faces within 1e-12 m of the nearest (a point nearest to an edge or a vertex) tie: the
+    lowest index wins, so the choice does not depend on rounding (e.g. of a rotation).
     """
     P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
     V = np.asarray(V, dtype=np.float64)
@@ -327,14 +415,16 @@ def surface_distances(P: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.n
     t = T[face]
     dist = np.linalg.norm(P - closest_points_on_triangles(P, t[:, 0], t[:, 1], t[:, 2]), axis=1)
     for f in range(len(T)):
-        rows = np.flatnonzero(plane[:, f] < dist)
+        rows = np.flatnonzero(plane[:, f] <= dist + _TIE)
         if not len(rows):
             continue
         p = P[rows]
         A, B, C = (np.broadcast_to(v, p.shape) for v in T[f])
         d = np.linalg.norm(p - closest_points_on_triangles(p, A, B, C), axis=1)
-        closer = d < dist[rows]
-        dist[rows[closer]], face[rows[closer]] = d[closer], f
+        tie = np.abs(d - dist[rows]) <= _TIE
+        closer = np.where(tie, f < face[rows], d < dist[rows])
+        face[rows[closer]] = f
+        dist[rows] = np.minimum(dist[rows], d)
     return dist, face
 
 

@@ -11,9 +11,12 @@ configurations *with respect to the position and orientation of the quad at the 
 
 Quads (``QUAD_NAMES``, the rig joint each follows in ``QUAD_JOINTS``). A quad's frame
 ``R = [u | v | n]`` has ``n`` along the spine (up) or the limb (away from the trunk), so
-the quad is a cross-section of the body; ``u`` follows the subject's left (+X) on the
-trunk and legs and up (+Z) on the arms, ``v = n × u``. Placement, from the rest mesh,
-skeleton and skinning weights (:func:`build_oqr`):
+the quad is a cross-section of the body; ``u`` follows the subject's left on the trunk
+and legs and up (+Z) on the arms, ``v = n × u``. Placement, from the rest mesh, skeleton
+and skinning weights (:func:`build_oqr`), is done in the *canonical frame*: the template
+turned about Z to face −Y with its left along +X (:func:`heading`, from its hips and
+shoulders); the rig is turned back, so an upright template (Z up) with any heading gets
+its canonical rig turned with it:
 
 * pelvis (Hips) at the hip joint centre; chest (Spine) on the Hips→Neck axis half a
   shoulder quad below the shoulder quads' lowest corners (just under the armpits);
@@ -24,11 +27,11 @@ skeleton and skinning weights (:func:`build_oqr`):
   shoulder joint, whose rectangle holds no trunk vertex (the armpit section);
   elbow (ForeArm) and wrist (Hand) at their joints, normal bisecting the two bones (a
   mitre); hand tip (Hand) past the finger tips; wrist and hand tip box the hand;
-* hip (UpLeg): the thigh section ``2 pad`` below the crotch (the lowest vertex on the
-  mid-sagittal plane), kept ``pad`` off that plane; knee (Leg) and ankle (Foot)
-  mitred at their joints (the ankle quad cuts from the front of the ankle to behind the
-  heel); toe tip (ToeBase) past the toes; ankle and toe box the foot along its
-  principal axis.
+* hip (UpLeg): the thigh section ``2 pad`` below the crotch (the lowest point of the
+  surface on the mid-sagittal plane), kept ``pad`` off that plane; knee (Leg) and ankle
+  (Foot) mitred at their joints (the ankle quad cuts from the front of the ankle to
+  behind the heel); toe tip (ToeBase) past the toes; ankle and toe box the foot along
+  its principal axis.
 
 Each rectangle is the bounding box, in the quad frame, of the body part's vertices within
 ``slab`` of the quad plane (and of the boxed part projected along the box axis), its
@@ -42,7 +45,7 @@ mesh of genus 0, which has ``F = 2V − 4``). Tubes of 8 triangles join consecut
 (15 tubes: 120), flat caps close the hand and toe tips (4 × 2), a 4-triangle pyramid the
 head; the pelvis–hips "pants" take 14 triangles and the chest–shoulders–neck girdle 20.
 
-Frames and units: world frame (Z up, subject facing −Y, left towards +X), metres. A
+Frames and units: world frame (Z up, any heading), metres. A
 *configuration* is ``centres`` (…, 21, 3) and ``rotations`` (…, 21, 3, 3) (columns
 ``u, v, n`` in world coordinates).
 """
@@ -62,11 +65,13 @@ from meshmocap.body.cage import (
     enclose,
     oqr_faces,
     rect_cage,
+    untangle,
 )
 from meshmocap.body.names import canonical_name_map
+from meshmocap.body.oqr_placement import Placer, heading
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError, MeshError, SkeletonError
+from meshmocap.errors import InputError, MeshError
 
 #: The 21 quads, in this order everywhere (index ``q``; corners ``4 q … 4 q + 3``).
 QUAD_NAMES = (
@@ -88,138 +93,12 @@ N_QUADS = len(QUAD_NAMES)
 PELVIS = 0
 
 
-_TORSO = ("Hips", "LHipJoint", "RHipJoint", "LowerBack", "Spine", "Spine1",
-          "LeftShoulder", "RightShoulder")  # fmt: skip
-_HEAD = ("Neck", "Neck1", "Head")
-_SIDES = (("Left", "left", "LThumb"), ("Right", "right", "RThumb"))
-_X, _Z = np.eye(3)[0], np.eye(3)[2]
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    return x / np.linalg.norm(x, axis=-1, keepdims=True)
-
-
-def _frame(n: np.ndarray, u_ref: np.ndarray) -> np.ndarray:
-    """Rotation (3, 3): columns ``u`` (``u_ref`` projected on the plane ⟂ n), ``n × u``, ``n``."""
-    n = _unit(n)
-    u = _unit(u_ref - (u_ref @ n) * n)
-    return np.stack([u, np.cross(n, u), n], axis=1)
-
-
-def _principal_axis(X: np.ndarray, hint: np.ndarray) -> np.ndarray:
-    """First principal direction of points ``X`` (k, 3), signed to agree with ``hint``."""
-    _, _, Vt = np.linalg.svd(X - X.mean(axis=0), full_matrices=False)
-    return Vt[0] if Vt[0] @ hint >= 0 else -Vt[0]
-
-
-class _Placer:
-    """Places the 21 quads on a MotionBuilder-named template (module docstring)."""
-
-    def __init__(self, t: Template, margin: float, pad: float, slab: float) -> None:
-        sk = t.skeleton
-        canon = canonical_name_map(sk.names)
-        missing = sorted((set(QUAD_JOINTS) | set(_TORSO) | set(_HEAD)) - set(canon))
-        if missing:
-            raise SkeletonError(f"build_oqr: the template's skeleton lacks joints {missing}")
-        self.idx = {name: sk.index(canon[name]) for name in canon}
-        self.P = {name: sk.rest_positions[i] for name, i in self.idx.items()}
-        self.bone = {name: sk.bone_directions[i] for name, i in self.idx.items()}
-        self.t, self.V = t, t.V
-        self.owner = np.asarray(t.weights.argmax(axis=1)).ravel()  # rig joint of each vertex
-        self.margin, self.pad, self.slab = margin, pad, slab
-
-    def part(self, *names: str) -> np.ndarray:
-        return np.isin(self.owner, [self.idx[n] for n in names if n in self.idx])
-
-    def fit(self, anchor, n, u_ref, section, box=None, axis=None, keep_out=None) -> QuadRect:
-        """Quad through ``anchor`` ⟂ ``n`` covering the ``section`` vertices within the
-        slab and the ``box`` vertices projected along ``axis``, scaled by the margin."""
-        R = _frame(n, u_ref)
-        rel = self.V - anchor
-        pts = [rel[section & (np.abs(rel @ R[:, 2]) <= self.slab)]]
-        if box is not None:
-            r = rel[box]
-            pts.append(r - ((r @ R[:, 2]) / (axis @ R[:, 2]))[:, None] * axis)
-        uv = np.concatenate(pts) @ R[:, :2]
-        lo, hi = uv.min(axis=0), uv.max(axis=0)
-        mid, half = (lo + hi) / 2, (hi - lo) / 2 * self.margin + self.pad
-        q = QuadRect(np.asarray(anchor, float), R, mid - half, mid + half, keep_out)
-        q.clamp()
-        return q
-
-    def clear(self, quads: list[QuadRect], other: np.ndarray) -> QuadRect:
-        """The first quad whose rectangle (grown by ``pad``, within the slab) holds no
-        ``other`` vertex: the first cross-section of a limb clear of the trunk."""
-        X = self.V[other]
-        for q in quads:
-            rel = X - q.anchor
-            uv = rel @ q.R[:, :2]
-            inside = (np.abs(rel @ q.R[:, 2]) <= self.slab) & np.all(
-                (uv >= q.lo - self.pad) & (uv <= q.hi + self.pad), axis=1
-            )
-            if not inside.any():
-                return q
-        return quads[-1]
-
-    def place(self) -> list[QuadRect]:
-        P, bone, part = self.P, self.bone, self.part
-        torso, head = part(*_TORSO), part(*_HEAD)
-        out: dict[str, QuadRect] = {}
-        steps = np.arange(0.0, 0.5, 0.005)  # fraction of a bone's length scanned
-        lateral = _unit(P["LeftUpLeg"] - P["RightUpLeg"])
-        # the crotch: the lowest vertex on the mid-sagittal plane above the knees
-        mid = np.abs((self.V - P["Hips"]) @ lateral) < self.pad
-        mid &= self.V[:, 2] > max(P["LeftLeg"][2], P["RightLeg"][2])
-        crotch = self.V[mid][np.argmin(self.V[mid, 2])]
-        for s, side, thumb in _SIDES:
-            arm = part(f"{s}Arm", f"{s}ForeArm", f"{s}Hand", f"{s}FingerBase",
-                       f"{s}HandIndex1", thumb)  # fmt: skip
-            hand = part(f"{s}Hand", f"{s}FingerBase", f"{s}HandIndex1", thumb)
-            pa, pe, pw = P[f"{s}Arm"], P[f"{s}ForeArm"], P[f"{s}Hand"]
-            d1, d2 = _unit(pe - pa), _unit(pw - pe)
-            d3 = _unit(self.V[hand].mean(axis=0) - pw)
-            # shoulder: the first cross-section of the upper arm clear of the torso
-            L = np.linalg.norm(pe - pa)
-            cand = [self.fit(pa + f * L * d1, d1, _Z, arm) for f in steps]
-            out[f"{side}_shoulder"] = self.clear(cand, torso)
-            out[f"{side}_elbow"] = self.fit(pe, d1 + d2, _Z, arm)
-            out[f"{side}_wrist"] = self.fit(pw, d2 + d3, _Z, arm, hand, d3)
-            tip = pw + (((self.V[hand] - pw) @ d3).max() + self.pad) * d3
-            out[f"{side}_hand"] = self.fit(tip, d3, _Z, hand & False, hand, d3)
-            # leg: the first cross-section of the thigh below the crotch, not crossing
-            # the mid-sagittal plane; mitred knee and ankle; a foot box to the toe tips
-            leg = part(f"{s}UpLeg", f"{s}Leg", f"{s}Foot", f"{s}ToeBase")
-            foot = part(f"{s}Foot", f"{s}ToeBase")
-            ph, pk, pf = P[f"{s}UpLeg"], P[f"{s}Leg"], P[f"{s}Foot"]
-            e1, e2 = _unit(pk - ph), _unit(pf - pk)
-            e3 = _principal_axis(self.V[foot], bone[f"{s}Foot"])
-            m = lateral if s == "Left" else -lateral
-            keep = (m, m @ P["Hips"] + self.pad)
-            below = (crotch - ph) @ e1 + 2 * self.pad
-            out[f"{side}_hip"] = self.fit(ph + below * e1, e1, _X, leg, keep_out=keep)
-            out[f"{side}_knee"] = self.fit(pk, e1 + e2, _X, leg)
-            out[f"{side}_ankle"] = self.fit(pf, e2 + e3, _X, leg, foot, e3)
-            tip = pf + (((self.V[foot] - pf) @ e3).max() + self.pad) * e3
-            out[f"{side}_toe"] = self.fit(tip, e3, _X, foot & False, foot, e3)
-        # torso: the chest section just below the armpits (the shoulder quads' lowest
-        # corners), the pelvis at the hip joints, the abdomen halfway; parallel quads
-        low = np.concatenate([out[f"{s}_shoulder"].corners() for s in ("left", "right")])
-        base = P["Hips"]
-        axis = _unit(P["Neck"] - base)
-        drop = np.mean([(out[f"{s}_shoulder"].hi[0] - out[f"{s}_shoulder"].lo[0]) / 4
-                        for s in ("left", "right")])  # fmt: skip
-        chest = base + (((low - base) @ axis).min() - drop) * axis
-        axis = _unit(chest - base)
-        section = torso | part("LeftUpLeg", "RightUpLeg")
-        out["pelvis"] = self.fit(base, axis, _X, section)
-        out["abdomen"] = self.fit((base + chest) / 2, axis, _X, torso)
-        out["chest"] = self.fit(chest, axis, _X, torso)
-        # neck and head top: a box around the head along the head bone
-        h = bone["Head"]
-        out["neck"] = self.fit(P["Neck"], h, _X, head, head, h)
-        top = P["Head"] + (((self.V[head] - P["Head"]) @ h).max() + self.pad) * h
-        out["head"] = self.fit(top, h, _X, head & False, head, h)
-        return [out[name] for name in QUAD_NAMES]
+#: build_oqr's numeric options: name, (lower bound, inclusive), upper bound, unit.
+_RANGES = (
+    ("margin", (1.0, True), 3.0, ""), ("pad", (0.0, False), 0.1, " metres"),
+    ("clearance", (0.0, True), 0.05, " metres"), ("slab", (0.0, False), 0.2, " metres"),
+    ("grow_step", (0.0, False), 0.05, " metres"),
+)  # fmt: skip
 
 
 # ------------------------------------------------------------------------------ structures
@@ -312,25 +191,33 @@ def build_oqr(
 ) -> OQR:
     """Place the 21 quads on a template and build the cage they span (§3, Fig. 1).
 
-    Placement as in the module docstring; the cage topology from
-    :func:`meshmocap.body.cage.oqr_faces`; then quad sides grow
-    (:func:`meshmocap.body.cage.enclose`, steps of ``grow_step`` to ``4 grow_step``, at most
-    ``max_grow`` rounds, never into a self-intersection) until every template vertex is
-    inside the cage and at least ``clearance`` from it. On the four bundled templates
-    this takes 1–4 rounds and about a second.
+    Placement as in the module docstring, in the template's canonical frame
+    (:func:`heading`); the cage topology from :func:`meshmocap.body.cage.oqr_faces`; quads
+    whose cage faces intersect shrink (:func:`meshmocap.body.cage.untangle`: e.g. a trunk
+    quad fitted with its margin into an arm that hangs against the trunk); then quads grow
+    (:func:`meshmocap.body.cage.enclose`: sides in their planes, then where that is not
+    enough whole quads slide along their normals; steps of ``grow_step`` to
+    ``4 grow_step``, never into a new self-intersection) until every template vertex is
+    inside the cage and at least ``clearance`` from it; the rig is turned back to the
+    template's heading. On the four bundled templates this takes 1–4 rounds and about a
+    second (no shrinking, no sliding); on the MIT crane's frame 0 (arms hanging against
+    a jacket) 4 rounds of shrinking and 10 + 10 of growth, 5 s.
 
     Parameters
     ----------
     template : Template
         Rigged template in its rest pose, CMU MotionBuilder joint names (or a flavour
         :func:`~meshmocap.body.names.canonical_name_map` maps onto them).
-    margin : float, ≥ 1
+    margin : float, in [1, 3]
         Scale of the cross-section half-extents.
     pad, clearance, slab, grow_step : float, metres
-        Padding of every quad; minimum distance of every template vertex to the cage;
-        half-thickness of the cross-section slabs; corner growth per iteration.
-    max_grow : int
-        Maximum number of growth iterations.
+        Padding of every quad, in (0, 0.1]; minimum distance of every template vertex to
+        the cage, in [0, 0.05]; half-thickness of the cross-section slabs, in (0, 0.2];
+        corner growth per iteration, in (0, 0.05].
+    max_grow : int, ≥ 0
+        Maximum number of growth iterations (of each of the two passes of
+        :func:`~meshmocap.body.cage.enclose`, and of
+        :func:`~meshmocap.body.cage.untangle`).
 
     Returns
     -------
@@ -338,35 +225,47 @@ def build_oqr(
 
     Raises
     ------
+    InputError
+        An option out of its range (the message names it, the range and the value).
     SkeletonError
-        The skeleton lacks a joint the quads need.
+        The skeleton lacks a joint the quads need, or its hips and shoulders give no
+        horizontal left-right axis (not upright, Z up).
     MeshError
-        The cage fails a check; the message names it (``manifold``, ``orientation``,
-        ``outward``, ``self-intersection``, ``enclosure``).
+        A cross-section holds no vertex, or the cage fails a check; the message names it
+        (``manifold``, ``orientation``, ``outward``, ``self-intersection``, ``enclosure``).
     """
     func = "build_oqr"
     if not isinstance(template, Template):
         raise InputError(f"{func}: template must be a Template, found {type(template).__name__}")
-    for name, value, low in (("margin", margin, 1.0), ("pad", pad, 0.0),
-                             ("clearance", clearance, 0.0), ("slab", slab, 1e-6),
-                             ("grow_step", grow_step, 1e-6)):  # fmt: skip
+    given = dict(margin=margin, pad=pad, clearance=clearance, slab=slab, grow_step=grow_step)
+    for name, low, high, unit in _RANGES:
+        v = given[name]
         if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float | np.number)
-            or not (np.isfinite(value) and value >= low)
+            isinstance(v, bool)
+            or not isinstance(v, int | float | np.number)
+            or not (low[0] < v or (low[1] and low[0] == v))
+            or not v <= high
         ):
-            raise InputError(f"{func}: {name} must be a number ≥ {low:g}, found {value!r}")
-    if not (isinstance(max_grow, int | np.integer) and max_grow >= 0):
+            interval = f"{'[' if low[1] else '('}{low[0]:g}, {high:g}]"
+            raise InputError(f"{func}: {name} must be a number in {interval}{unit}, found {v!r}")
+    if isinstance(max_grow, bool) or not (isinstance(max_grow, int | np.integer) and max_grow >= 0):
         raise InputError(f"{func}: max_grow must be a non-negative integer, found {max_grow!r}")
-    rects = _Placer(template, float(margin), float(pad), float(slab)).place()
+    C = heading(template)  # canonical frame → world: the rig is built facing −Y
+    placed = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab)).place()
+    rects = [placed[name] for name in QUAD_NAMES]
     try:
         F = oqr_faces(np.stack([r.corners() for r in rects]))
     except ValueError as exc:
         raise MeshError(f"{func}: template {template.name!r}: {exc}") from None
     head = rects[OQR_HEAD]
     apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
-    enclose(rects, F, template.V, apex_height=apex, clearance=clearance, step=grow_step,
+    untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
+    enclose(rects, F, template.V @ C, apex_height=apex, clearance=clearance, step=grow_step,
             max_iter=int(max_grow))  # fmt: skip
+    for r in rects:  # back to the world frame (lo, hi are in the quad's own frame)
+        r.anchor, r.R = C @ r.anchor, C @ r.R
+        if r.keep_out is not None:
+            r.keep_out = (C @ r.keep_out[0], r.keep_out[1])
     V = rect_cage(rects, apex)
     problems = cage_problems(V, F, template.V, clearance=clearance)
     if problems:
