@@ -240,8 +240,10 @@ def enclose(
     point: by the push where it is mostly along ``n`` (a crotch between two thighs, a
     cap), and away from the trunk (``+n``) where the side that should move cannot (undone
     before), which deepens the crease of a junction (an armpit under a hanging arm, the
-    crotch of legs held together). Templates that the first pass encloses get exactly the
-    cage they got before the second pass existed. Returns the number of iterations used.
+    crotch of legs held together). A third pass does the same with steps of ``step / 4``,
+    every move allowed again (a finer move may fit where a coarse one intersected).
+    Templates that the first pass encloses (the bundled ones) get exactly the cage they got
+    before the later passes existed. Returns the number of iterations used.
     """
     frozen: set[tuple[int, int, int]] = set()
     used = 0
@@ -257,7 +259,8 @@ def enclose(
 
 
 def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, frozen):
-    """One pass of :func:`enclose`: ``(iterations, whether every point is enclosed)``."""
+    """One pass of :func:`enclose` (``slide``: whether quads may slide; ``frozen``: the
+    moves undone so far, updated): ``(iterations, whether every point is enclosed)``."""
     band = np.ones(len(points), dtype=bool)
     for it in range(max_iter + 1):
         V = rect_cage(rects, apex_height)
