@@ -33,14 +33,8 @@ mesh's pose, so a tracker started with identity rotations at the rest root start
 mesh (what :func:`~meshmocap.trackers.driver.track_sequence` does for a capture without a
 known pose). Code that assumes the canonical rest pose (an A-pose facing −Y, left +X)
 does not hold for such a template: retargeting and the procedural motions set world bone
-directions (they would play in the canonical heading), and
-:func:`~meshmocap.body.oqr.build_oqr` takes its quads' in-plane axes from world X/Z and
-tells the cage's junction corners apart by world axes (``oqr_faces``), so it fails on a
-mesh facing elsewhere (the crane faces −X).
-
-No decimation: the default install has no mesh simplification (trimesh's quadric
-decimation needs the optional ``fast-simplification``), so the mesh is rigged as given and
-its vertices stay the capture's, which keeps per-vertex correspondence errors measurable.
+directions (they would play in the canonical heading). ``decimate=`` fits the full mesh and
+rigs it decimated (cage-manifold-tracking §6.1: 4000 vertices; not the capture's vertices).
 """
 
 from __future__ import annotations
@@ -55,6 +49,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.template import EvalSkeleton, Template, load_template, template_problems
 from meshmocap.errors import InputError, MeshError
+from meshmocap.geometry.decimate import decimate_mesh
 from meshmocap.geometry.mesh import face_normals, mesh_problems, signed_volume, vertex_normals
 from meshmocap.geometry.proximity import closest_points_on_triangles, sample_surface
 from meshmocap.geometry.rotations import so3_exp, so3_log
@@ -383,6 +378,7 @@ def rig_mesh(
     *,
     reference: str | os.PathLike | Template = "neutral",
     name: str = "rigged",
+    decimate: int | None = None,
     n_yaws: int = 8,
     iterations: int = 40,
     max_weights: int = 4,
@@ -402,6 +398,8 @@ def rig_mesh(
         Template with CMU MotionBuilder joints, rest pose facing −Y).
     name : str
         Name of the new template.
+    decimate : int, optional
+        Vertices to decimate the mesh to after the fit (``geometry.decimate.decimate_mesh``).
     n_yaws : int
         Candidate headings of the global alignment (≥ 2; 8 covers any heading).
     iterations : int
@@ -414,7 +412,7 @@ def rig_mesh(
     Returns
     -------
     Template
-        ``V``, ``F`` (as given, faces oriented outwards), the fitted skeleton as rest
+        ``V``, ``F`` (as given or decimated, faces outwards), the fitted skeleton as rest
         skeleton, transferred weights and part labels, the fitted evaluation joints;
         passes :func:`~meshmocap.body.template.template_problems`.
 
@@ -428,6 +426,10 @@ def rig_mesh(
     """
     func = "rig_mesh"
     V, F = _check_mesh(func, V, F)
+    try:  # decimate_mesh validates the count and checks the result is a closed 2-manifold
+        out = (V, F) if decimate is None else decimate_mesh(V, F, n_vertices=decimate)
+    except InputError as exc:
+        raise InputError(f"{func}: decimate: {exc}") from None
     if not (isinstance(n_yaws, int | np.integer) and n_yaws >= 1):
         raise InputError(f"{func}: n_yaws must be an integer ≥ 1, found {n_yaws!r}")
     ref = reference if isinstance(reference, Template) else load_template(reference)
@@ -450,7 +452,7 @@ def rig_mesh(
                           max_distance=(0.1, 0.02), **opts) for f in best]  # fmt: skip
     fit = min(final, key=lambda f: f.rms)
     fitted = rest_in_pose(ref, fit.R, fit.root, scale=fit.scale, name=f"{ref.name}_fitted")
-    return transfer_rig(fitted, V, F, name=name, max_weights=max_weights)
+    return transfer_rig(fitted, *out, name=name, max_weights=max_weights)
 
 
 # ------------------------------------------------------------------------------ transfer
