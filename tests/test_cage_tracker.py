@@ -5,10 +5,12 @@ import pytest
 
 from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
-from meshmocap.errors import InputError
+from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import so3_exp
+from meshmocap.models.gplvm import GPLVM
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.cage import CageOptions, CageTracker, _gs_forward, learn_manifold
+from meshmocap.trackers.cage_options import manifold_digest
 from meshmocap.trackers.driver import track_sequence
 
 RNG = np.random.default_rng(2)
@@ -81,3 +83,23 @@ def test_a_folded_first_cage_falls_back_to_the_rest_cage(setup):
     assert np.all(np.isfinite(r.joints)) and err[legs].max() < 1e-3
     tr.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)  # a walk: its own cage
     assert not np.array_equal(tr.cage0, tr.oqr.rest_vertices)
+
+
+def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setup, tmp_path):
+    t, gp, cap = setup
+    digest = CageTracker(gp).options()["manifold"]
+    assert digest == manifold_digest(gp) and len(digest) == 16
+    assert manifold_digest(GPLVM.load(gp.save(tmp_path / "gp.npz"))) == digest  # saved as is
+    motions = [walk(t, duration=2.0, fps=30.0, cadence=c) for c in (100.0, 120.0)]
+    other = learn_manifold(t, motions, n_components=2, n_samples=50)
+    assert manifold_digest(other) != digest
+    opts = CageOptions(local_iters=0, alternations=1)
+    frames = [0, 1]
+    track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", frames=frames,
+                   show_progress=False)  # fmt: skip
+    with pytest.raises(FormatError, match="other settings") as info:
+        track_sequence(CageTracker(other, opts), t, cap, tmp_path / "tr", frames=frames,
+                       show_progress=False)  # fmt: skip
+    assert "\n" not in str(info.value)
+    with pytest.raises(InputError, match="manifold_digest: gp must be a fitted GPLVM"):
+        manifold_digest(GPLVM(2))

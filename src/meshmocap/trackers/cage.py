@@ -49,12 +49,10 @@ vertices; the output deforms the N vertices once. ``stage_seconds`` keeps the br
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
-from typing import Literal, get_args
+from dataclasses import asdict
 
 import numpy as np
 
-from meshmocap._validate import check_choice
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import (
     OQR,
@@ -72,9 +70,9 @@ from meshmocap.geometry.rotations import skew, so3_exp
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
 
-Space = Literal["latent", "quads"]
-Joints = Literal["green", "quads"]
+__all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
 #: Stages of :attr:`CageTracker.stage_seconds`.
 STAGES = ("distance", "pose", "shape", "local", "output")
 _PAD = 0.05  # empty space around the hull in the distance field, metres
@@ -113,67 +111,6 @@ def learn_manifold(
     return GPLVM(n_components, back_constraint="rbf", random_state=random_state).fit(Y)
 
 
-@dataclass(frozen=True, kw_only=True)
-class CageOptions:
-    """Settings of the cage tracker.
-
-    Parameters
-    ----------
-    space : {"latent", "quads"}
-        Optimise in the learned latent space (the method) or directly on the quads (the
-        ablation of Fig. 5a, which collapses without the manifold).
-    variance_weight : float
-        λσ of the variance regulariser (0: the ablation of Fig. 5b), against the mean
-        half squared distance in m² (~1e-4 on a fitted frame).
-    local_iters : int
-        Levenberg–Marquardt iterations of the local adjustment in quad space (Eq. 12; 0:
-        none).
-    local_damping : float
-        Pull of the local adjustment towards the manifold's configuration (weight of half
-        its squared distance, metres and unit axis vectors).
-    alternations, pose_iters, shape_iters : int
-        Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
-    restarts : int
-        Training poses, nearest to the previous frame's quads, tried as the latent
-        starting point (0: only the previous latent point and the back-constraint's).
-    inside_weight : float
-        Weight, in (0, 1], of the squared distance of points inside the hull (module
-        notes; 1: symmetric).
-    joints : {"green", "quads"}
-        Joints from the cage through Green coordinates (§6.2), or carried rigidly by the
-        quad that follows their rig joint (the quads sit at the joints, §3; joints of no
-        quad keep Green coordinates).
-    n_sample : int
-        Template vertices in the energy (the output deforms all of them).
-    damping : float
-        Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
-    seed : int
-        Seeds the choice of the sampled vertices.
-    """
-
-    space: Space = "latent"
-    variance_weight: float = 1e-5
-    local_iters: int = 3
-    local_damping: float = 1e-2
-    alternations: int = 3
-    pose_iters: int = 2
-    shape_iters: int = 3
-    restarts: int = 3
-    inside_weight: float = 0.05
-    joints: Joints = "green"
-    n_sample: int = 800
-    damping: float = 1e-3
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        check_choice("CageOptions", "space", self.space, get_args(Space))
-        check_choice("CageOptions", "joints", self.joints, get_args(Joints))
-        if self.variance_weight < 0 or self.n_sample < 10:
-            raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
-        if not 0 < self.inside_weight <= 1 or self.restarts < 0:
-            raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
-
-
 def _gs_forward(a, b, da, db):
     """Gram–Schmidt ``R = [u v u×v]`` of columns ``a, b`` (Q, 3) and its derivative along
     ``da, db`` (forward mode)."""
@@ -201,7 +138,8 @@ class CageTracker:
     ----------
     manifold : GPLVM
         A fitted pose manifold (:func:`learn_manifold`) of the tracking template.
-    options : CageOptions
+    options : CageOptions, optional
+        Default ``CageOptions()``.
 
     Attributes
     ----------
@@ -214,16 +152,19 @@ class CageTracker:
 
     name = "cage"
 
-    def __init__(self, manifold: GPLVM, options: CageOptions = CageOptions()):
+    def __init__(self, manifold: GPLVM, options: CageOptions | None = None):
         self.gp = manifold
-        self.opts = options
+        self.opts = options if options is not None else CageOptions()
         self.template: Template | None = None
         self.stage_seconds = dict.fromkeys(STAGES, 0.0)
         self.n_steps = 0
 
     def options(self) -> dict:
-        """JSON-ready settings."""
-        return {**asdict(self.opts), "n_components": int(self.gp.X_.shape[1])}
+        """JSON-ready settings, with the manifold's latent dimension and its
+        :func:`~meshmocap.trackers.cage_options.manifold_digest` (a run resumed with another
+        manifold is refused by the driver)."""
+        return {**asdict(self.opts), "n_components": int(self.gp.X_.shape[1]),
+                "manifold": manifold_digest(self.gp)}  # fmt: skip
 
     def setup(self, template: Template) -> None:
         """Build the rig and the Green coordinates of the template (all and sampled)."""

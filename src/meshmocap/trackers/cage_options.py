@@ -1,0 +1,104 @@
+"""Settings of the cage tracker (:mod:`meshmocap.trackers.cage`) and the digest that
+identifies its pose manifold in :meth:`~meshmocap.trackers.cage.CageTracker.options`."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+
+from meshmocap._validate import check_choice
+from meshmocap.errors import InputError
+from meshmocap.models.gplvm import GPLVM
+
+Space = Literal["latent", "quads"]
+Joints = Literal["green", "quads"]
+
+
+def manifold_digest(gp: GPLVM) -> str:
+    """16 hex digits of SHA-256 over everything a fitted GPLVM predicts from: its latent
+    points ``X_``, centred and scaled data ``Y_``, ``Y_mean_``, the kernel and noise
+    hyperparameters, the data scale and the back-constraint (``bc_gamma_``, ``A_`` or
+    the MLP weights). Equal for a model and its :meth:`~GPLVM.save`/:meth:`~GPLVM.load`
+    copy (bit-identical arrays), different for any other fit.
+
+    Raises
+    ------
+    InputError
+        ``gp`` is not a fitted GPLVM.
+    """
+    if not isinstance(gp, GPLVM) or not hasattr(gp, "X_"):
+        raise InputError(f"manifold_digest: gp must be a fitted GPLVM, found {type(gp).__name__}")
+    h = hashlib.sha256()
+    scalars = [gp.alpha_, gp.gamma_, gp.beta_, gp.bc_gamma_, gp.Y_scale_]
+    arrays = [gp.X_, gp.Y_, gp.Y_mean_, np.array(scalars, dtype=np.float64)]
+    arrays += [gp.A_] if gp.A_ is not None else []
+    arrays += list(gp.mlp_weights_ or ())
+    for a in arrays:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CageOptions:
+    """Settings of the cage tracker.
+
+    Parameters
+    ----------
+    space : {"latent", "quads"}
+        Optimise in the learned latent space (the method) or directly on the quads (the
+        ablation of Fig. 5a, which collapses without the manifold).
+    variance_weight : float
+        λσ of the variance regulariser (0: the ablation of Fig. 5b), against the mean
+        half squared distance in m² (~1e-4 on a fitted frame).
+    local_iters : int
+        Levenberg–Marquardt iterations of the local adjustment in quad space (Eq. 12; 0:
+        none).
+    local_damping : float
+        Pull of the local adjustment towards the manifold's configuration (weight of half
+        its squared distance, metres and unit axis vectors).
+    alternations, pose_iters, shape_iters : int
+        Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
+    restarts : int
+        Training poses, nearest to the previous frame's quads, tried as the latent
+        starting point (0: only the previous latent point and the back-constraint's).
+    inside_weight : float
+        Weight, in (0, 1], of the squared distance of points inside the hull (module
+        notes; 1: symmetric).
+    joints : {"green", "quads"}
+        Joints from the cage through Green coordinates (§6.2), or carried rigidly by the
+        quad that follows their rig joint (the quads sit at the joints, §3; joints of no
+        quad keep Green coordinates).
+    n_sample : int
+        Template vertices in the energy (the output deforms all of them).
+    damping : float
+        Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
+    seed : int
+        Seeds the choice of the sampled vertices.
+    """
+
+    space: Space = "latent"
+    variance_weight: float = 1e-5
+    local_iters: int = 3
+    local_damping: float = 1e-2
+    alternations: int = 3
+    pose_iters: int = 2
+    shape_iters: int = 3
+    restarts: int = 3
+    inside_weight: float = 0.05
+    joints: Joints = "green"
+    n_sample: int = 800
+    damping: float = 1e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_choice("CageOptions", "space", self.space, get_args(Space))
+        check_choice("CageOptions", "joints", self.joints, get_args(Joints))
+        if self.variance_weight < 0 or self.n_sample < 10:
+            raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
+        if not 0 < self.inside_weight <= 1 or self.restarts < 0:
+            raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
