@@ -279,9 +279,26 @@ def test_trunk_quads_fitted_into_the_arms_are_untangled_and_regrown(built):
     assert cage_problems(o.rest_vertices, o.faces, t.V, clearance=0.004) == []
 
 
+def test_arms_held_against_the_trunk_get_a_cage(built):
+    # neutral_5k re-rested with its arms lowered 0.3 rad towards the trunk and its elbows
+    # bent forward (the MIT crane's frame 0 stands so): the first placement leaves the
+    # upper arms' inner sides outside the cage, the second (upper arms boxed) encloses all
+    from meshmocap.body.autorig import rest_in_pose
+
+    t, _ = built["neutral_5k"]
+    sk = t.skeleton
+    R = np.tile(np.eye(3), (sk.n_joints, 1, 1))
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        R[sk.index(f"{side}Arm")] = so3_exp(np.array([0.0, sign * 0.3, 0.0]))
+        R[sk.index(f"{side}ForeArm")] = so3_exp(np.array([-0.8, 0.0, 0.0]))
+    arms = rest_in_pose(t, R, sk.rest_positions[0], name="arms_down")
+    o = build_oqr(arms)
+    assert cage_problems(o.rest_vertices, o.faces, arms.V, clearance=0.004) == []
+
+
 def test_build_oqr_names_the_failed_check_and_validates_its_inputs():
     t = load_template("neutral_5k")
-    with pytest.raises(MeshError, match="enclosure"):
+    with pytest.raises(MeshError, match=r"enclosure.*with the upper arms boxed: enclosure"):
         build_oqr(t, clearance=0.05, max_grow=0)
     with pytest.raises(MeshError, match="cross-section holds no vertex"):
         build_oqr(t, slab=1e-5)

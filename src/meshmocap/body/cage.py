@@ -315,14 +315,66 @@ def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, 
             break
         for (q, a, s), m in sorted(moves.items()):
             around = np.flatnonzero((q == F // 4).any(axis=1))
-            before = _pair_set(rect_cage(rects, apex_height), F, around)
+            V0 = rect_cage(rects, apex_height)
+            before = _pair_set(V0, F, around)
             delta = min(max(m, step), 4 * step)
             if not rects[q].grow(a, s, delta):
                 frozen.add((q, a, s))
-            elif not _pair_set(rect_cage(rects, apex_height), F, around) <= before:
+                continue
+            new = _pair_set(rect_cage(rects, apex_height), F, around) - before
+            if new and not (slide and _make_way(rects, F, points[check], V0, q, new, delta,
+                                                apex_height, clearance)):  # fmt: skip
                 rects[q].grow(a, s, -delta)
                 frozen.add((q, a, s))
     return it, False
+
+
+def _make_way(rects, F, P, V0, q, new, delta, apex_height, clearance) -> bool:
+    """After quad ``q`` grew by ``delta`` into faces it now intersects (``new`` pairs),
+    shrink by ``delta`` the sides of the other quads facing it (the corners of those
+    faces on the side towards ``q``'s face): kept (True) if no face then intersects one
+    it did not before and no point of ``P`` (the watched points, cage ``V0`` before the
+    move) becomes outside or closer than ``clearance``; else undone (False)."""
+    nq = len(rects)
+    V = rect_cage(rects, apex_height)
+    centre = V[F].mean(axis=1)
+    mine = set(np.flatnonzero((q == F // 4).any(axis=1)).tolist())
+    shrink: set[tuple[int, int, int]] = set()
+    for i, j in new:
+        own, other = (i, j) if i in mine else (j, i)
+        for c in F[other][F[other] < 4 * nq]:
+            b, k = divmod(int(c), 4)
+            if b == q:
+                continue
+            uv = (centre[own] - centre[other]) @ rects[b].R[:, :2]
+            ax = int(np.argmax(np.abs(uv)))
+            sg = int(np.sign(uv[ax]))
+            if CORNER_SIGNS[k, ax] == sg:
+                shrink.add((b, ax, sg))
+    if not shrink:
+        return False
+    quads = {q} | {b for b, _, _ in shrink}
+    faces = np.flatnonzero(np.isin(F // 4, list(quads)).any(axis=1))
+    before = _pair_set(V0, F, faces)
+    done = []
+    for b, ax, sg in sorted(shrink):
+        if (rects[b].hi - rects[b].lo)[ax] > 2 * delta and rects[b].grow(ax, sg, -delta):
+            done.append((b, ax, sg))
+    V1 = rect_cage(rects, apex_height)
+    ok = bool(done) and _pair_set(V1, F, faces) <= before
+    if ok:
+        was = _bad(P, V0, F, clearance)
+        ok = not (_bad(P, V1, F, clearance) & ~was).any()
+    if not ok:
+        for b, ax, sg in done:
+            rects[b].grow(ax, sg, delta)
+    return ok
+
+
+def _bad(P: np.ndarray, V: np.ndarray, F: np.ndarray, clearance: float) -> np.ndarray:
+    """(n,) bool: points outside the cage or closer than ``clearance`` to it."""
+    out = np.abs(winding_numbers(P, V, F) - 1.0) > 1e-6
+    return out | (surface_distances(P, V, F)[0] < clearance)
 
 
 def untangle(

@@ -35,8 +35,12 @@ its canonical rig turned with it:
 
 Each rectangle is the bounding box, in the quad frame, of the body part's vertices within
 ``slab`` of the quad plane (and of the boxed part projected along the box axis), its
-half-sizes times ``margin`` plus ``pad``; :func:`meshmocap.body.cage.enclose` then grows
-quad sides until every template vertex lies ``clearance`` inside the cage.
+half-sizes times ``margin`` plus ``pad``; :func:`meshmocap.body.cage.untangle` shrinks
+quads whose cage faces intersect and :func:`meshmocap.body.cage.enclose` then grows them
+until every template vertex lies ``clearance`` inside the cage. Where that fails, a second
+placement also boxes each upper arm (shoulder and elbow quads cover the upper arm's
+vertices between them projected along the bone: arms hanging against the trunk, whose
+inner side bulges out of a tube fitted to two cross-sections).
 
 The cage (:func:`meshmocap.body.cage.oqr_faces`): the 84 quad corners plus an apex above
 the head top (bound to the head quad): **85 vertices, 166 triangles**, a closed genus-0
@@ -199,9 +203,10 @@ def build_oqr(
     enough whole quads slide along their normals; steps of ``grow_step`` to
     ``4 grow_step``, never into a new self-intersection) until every template vertex is
     inside the cage and at least ``clearance`` from it; the rig is turned back to the
-    template's heading. On the four bundled templates this takes 1–4 rounds and about a
-    second (no shrinking, no sliding); on the MIT crane's frame 0 (arms hanging against
-    a jacket) 4 rounds of shrinking and 10 + 10 of growth, 5 s.
+    template's heading. Where the cage still fails a check, the quads are placed again
+    with the upper arms boxed (module docstring) and the same steps follow. On the four
+    bundled templates this takes 1–4 rounds and about a second (no shrinking, no sliding,
+    one placement); on the MIT crane's frame 0 (arms hanging against a jacket) 5–15 s.
 
     Parameters
     ----------
@@ -231,8 +236,9 @@ def build_oqr(
         The skeleton lacks a joint the quads need, or its hips and shoulders give no
         horizontal left-right axis (not upright, Z up).
     MeshError
-        A cross-section holds no vertex, or the cage fails a check; the message names it
-        (``manifold``, ``orientation``, ``outward``, ``self-intersection``, ``enclosure``).
+        A cross-section holds no vertex, or both cages fail a check; the message names
+        them (``manifold``, ``orientation``, ``outward``, ``self-intersection``,
+        ``enclosure``), for both placements.
     """
     func = "build_oqr"
     if not isinstance(template, Template):
@@ -251,26 +257,33 @@ def build_oqr(
     if isinstance(max_grow, bool) or not (isinstance(max_grow, int | np.integer) and max_grow >= 0):
         raise InputError(f"{func}: max_grow must be a non-negative integer, found {max_grow!r}")
     C = heading(template)  # canonical frame → world: the rig is built facing −Y
-    placed = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab)).place()
-    rects = [placed[name] for name in QUAD_NAMES]
-    try:
-        F = oqr_faces(np.stack([r.corners() for r in rects]))
-    except ValueError as exc:
-        raise MeshError(f"{func}: template {template.name!r}: {exc}") from None
-    head = rects[OQR_HEAD]
-    apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
-    untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
-    enclose(rects, F, template.V @ C, apex_height=apex, clearance=clearance, step=grow_step,
-            max_iter=int(max_grow))  # fmt: skip
-    for r in rects:  # back to the world frame (lo, hi are in the quad's own frame)
-        r.anchor, r.R = C @ r.anchor, C @ r.R
-        if r.keep_out is not None:
-            r.keep_out = (C @ r.keep_out[0], r.keep_out[1])
-    V = rect_cage(rects, apex)
-    problems = cage_problems(V, F, template.V, clearance=clearance)
-    if problems:
-        raise MeshError(f"{func}: template {template.name!r}: {'; '.join(problems)}")
-    return _assemble(template, rects, F, V)
+    why = []
+    for box_limbs in (False, True):  # the second placement boxes the upper arms
+        placer = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab))
+        placer.box_limbs = box_limbs
+        placed = placer.place()
+        rects = [placed[name] for name in QUAD_NAMES]
+        try:
+            F = oqr_faces(np.stack([r.corners() for r in rects]))
+        except ValueError as exc:
+            why.append(str(exc))
+            continue
+        head = rects[OQR_HEAD]
+        apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
+        untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
+        enclose(rects, F, template.V @ C, apex_height=apex, clearance=clearance,
+                step=grow_step, max_iter=int(max_grow))  # fmt: skip
+        for r in rects:  # back to the world frame (lo, hi are in the quad's own frame)
+            r.anchor, r.R = C @ r.anchor, C @ r.R
+            if r.keep_out is not None:
+                r.keep_out = (C @ r.keep_out[0], r.keep_out[1])
+        V = rect_cage(rects, apex)
+        problems = cage_problems(V, F, template.V, clearance=clearance)
+        if not problems:
+            return _assemble(template, rects, F, V)
+        why.append("; ".join(problems))
+    raise MeshError(f"{func}: template {template.name!r}: {why[0]} (with the upper arms "
+                    f"boxed: {why[1]})")  # fmt: skip
 
 
 def _assemble(template: Template, rects: list[QuadRect], F: np.ndarray, V: np.ndarray) -> OQR:

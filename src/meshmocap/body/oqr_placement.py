@@ -76,7 +76,9 @@ class Placer:
     (:mod:`meshmocap.body.oqr`), in the canonical frame: the template turned by ``C.T``
     about Z (``C`` from :func:`heading`), so that it faces −Y with its left along +X.
     ``joints`` are the rig joints the quads follow (all must exist);
-    :meth:`place` returns the quads by name (``QUAD_NAMES``), in that frame."""
+    :meth:`place` returns the quads by name (``QUAD_NAMES``), in that frame. With
+    ``box_limbs`` set (default False) the shoulder and elbow quads also cover the upper
+    arm's vertices between them, projected along the shoulder→elbow bone."""
 
     def __init__(self, t: Template, C: np.ndarray, joints: tuple[str, ...], margin: float,
                  pad: float, slab: float) -> None:  # fmt: skip
@@ -92,6 +94,7 @@ class Placer:
         self.t, self.V = t, t.V @ C
         self.owner = np.asarray(t.weights.argmax(axis=1)).ravel()  # rig joint of each vertex
         self.margin, self.pad, self.slab = margin, pad, slab
+        self.box_limbs = False
 
     def part(self, *names: str) -> np.ndarray:
         return np.isin(self.owner, [self.idx[n] for n in names if n in self.idx])
@@ -165,8 +168,13 @@ class Placer:
             # shoulder: the first cross-section of the upper arm clear of the torso
             L = np.linalg.norm(pe - pa)
             cand = [self.fit(pa + f * L * d1, d1, _Z, arm) for f in steps]
-            out[f"{side}_shoulder"] = self.clear(cand, torso)
+            sh = out[f"{side}_shoulder"] = self.clear(cand, torso)
             out[f"{side}_elbow"] = self.fit(pe, d1 + d2, _Z, arm)
+            if self.box_limbs:  # both quads cover the upper arm projected along its bone
+                h = (self.V - sh.anchor) @ d1
+                upper = arm & (h >= 0) & (h <= (pe - sh.anchor) @ d1)
+                out[f"{side}_shoulder"] = self.fit(sh.anchor, d1, _Z, arm, upper, d1)
+                out[f"{side}_elbow"] = self.fit(pe, d1 + d2, _Z, arm, upper, d1)
             out[f"{side}_wrist"] = self.fit(pw, d2 + d3, _Z, arm, hand, d3)
             tip = pw + (((self.V[hand] - pw) @ d3).max() + self.pad) * d3
             out[f"{side}_hand"] = self.fit(tip, d3, _Z, hand & False, hand, d3)
