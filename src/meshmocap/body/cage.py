@@ -240,10 +240,12 @@ def enclose(
     point: by the push where it is mostly along ``n`` (a crotch between two thighs, a
     cap), and away from the trunk (``+n``) where the side that should move cannot (undone
     before), which deepens the crease of a junction (an armpit under a hanging arm, the
-    crotch of legs held together). A third pass does the same with steps of ``step / 4``,
-    every move allowed again (a finer move may fit where a coarse one intersected).
-    Templates that the first pass encloses (the bundled ones) get exactly the cage they got
-    before the later passes existed. Returns the number of iterations used.
+    crotch of legs held together); there a move that runs into other quads' faces may keep
+    its place by shrinking those quads' facing sides as much, when that makes no new
+    intersection and no point outside or too close. A third pass does the same with steps
+    of ``step / 4``, every move allowed again (a finer move may fit where a coarse one
+    intersected). Templates that the first pass encloses (the bundled ones) get exactly
+    the cage they got before the later passes existed. Returns the iterations used.
     """
     frozen: set[tuple[int, int, int]] = set()
     used = 0
