@@ -121,7 +121,7 @@ CAPTURE_SETS: dict[str, CaptureSet] = {
         ("walk", "jog"),
         40,
         methods=("patch", "patch_noclf", "articulated_icp", "cage"),
-        keep_fractions=(0.1, 0.25, 0.5, 1.0),  # 0.5: the patch tracker's default, reused
+        keep_fractions=(0.1, 0.25, 0.5, 1.0),  # 1.0: the patch tracker's default, reused
     ),
     "standard": CaptureSet(_STANDARD, 120),
     "full": CaptureSet(_FULL, None),

@@ -103,7 +103,9 @@ class PatchOptions:
         Body-part classifier sorting the observed points (§III-B); "svc" is the paper's
         linear SVM with Platt scaling, "none" the tracker without classification.
     keep_fraction : float
-        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8).
+        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8). Default 1
+        (all): on CMU 05_01 (humaneva4, 299 frames) 0.5 gave 21.5 mm mean joint error and
+        a 59.5 mm worst frame, 1.0 16.3 mm and 34.0 mm; fewer points are faster.
     part_matching : {"all", "on_bone", "none"}
         Which kept points may only correspond to patches of their predicted body part:
         every one ("all"), the on-bone ones (near-joint points, whose label is uncertain by
@@ -147,7 +149,7 @@ class PatchOptions:
     lambda_bone: float = 1.0
     lambda_length: float = 100.0
     classifier: Classifier = "logistic"
-    keep_fraction: float = 0.5
+    keep_fraction: float = 1.0
     part_matching: PartMatching = "all"
     on_bone: float = 0.9
     outlier: float = 0.5
