@@ -145,7 +145,7 @@ def test_crane_frame0_gets_an_oqr_enclosing_every_vertex(crane0):
 
     # it faces −X: its rig is built turned to the canonical heading; its arms hang against
     # its jacket, so trunk and arm quads first intersect and the armpits and crotch need
-    # quads to slide (body.cage.untangle, enclose)
+    # quads to slide (body.cage_growth.untangle, enclose)
     C = heading(crane0)
     assert abs(abs(np.degrees(np.arctan2(C[1, 0], C[0, 0]))) - 90) < 10
     o = build_oqr(crane0)

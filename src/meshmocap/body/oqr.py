@@ -35,12 +35,12 @@ its canonical rig turned with it:
 
 Each rectangle is the bounding box, in the quad frame, of the body part's vertices within
 ``slab`` of the quad plane (and of the boxed part projected along the box axis), its
-half-sizes times ``margin`` plus ``pad``; :func:`meshmocap.body.cage.untangle` shrinks
-quads whose cage faces intersect and :func:`meshmocap.body.cage.enclose` then grows them
-until every template vertex lies ``clearance`` inside the cage. Where that fails, a second
-placement also boxes each upper arm (shoulder and elbow quads cover the upper arm's
-vertices between them projected along the bone: arms hanging against the trunk, whose
-inner side bulges out of a tube fitted to two cross-sections).
+half-sizes times ``margin`` plus ``pad``; :func:`~meshmocap.body.cage_growth.untangle`
+shrinks quads whose cage faces intersect and :func:`~meshmocap.body.cage_growth.enclose`
+then grows them until every template vertex lies ``clearance`` inside the cage. Where
+that fails, a second placement also boxes each upper arm (shoulder and elbow quads cover
+the upper arm's vertices between them projected along the bone: arms hanging against the
+trunk, whose inner side bulges out of a tube fitted to two cross-sections).
 
 The cage (:func:`meshmocap.body.cage.oqr_faces`): the 84 quad corners plus an apex above
 the head top (bound to the head quad): **85 vertices, 166 triangles**, a closed genus-0
@@ -66,11 +66,10 @@ from meshmocap.body.cage import (
     OQR_HEAD,
     QuadRect,
     cage_problems,
-    enclose,
     oqr_faces,
     rect_cage,
-    untangle,
 )
+from meshmocap.body.cage_growth import enclose, untangle
 from meshmocap.body.names import canonical_name_map
 from meshmocap.body.oqr_placement import Placer, heading
 from meshmocap.body.skeleton import forward_kinematics
@@ -197,10 +196,10 @@ def build_oqr(
 
     Placement as in the module docstring, in the template's canonical frame
     (:func:`heading`); the cage topology from :func:`meshmocap.body.cage.oqr_faces`; quads
-    whose cage faces intersect shrink (:func:`meshmocap.body.cage.untangle`: e.g. a trunk
-    quad fitted with its margin into an arm that hangs against the trunk); then quads grow
-    (:func:`meshmocap.body.cage.enclose`: sides in their planes, then where that is not
-    enough whole quads slide along their normals; steps of ``grow_step`` to
+    whose cage faces intersect shrink (:func:`~meshmocap.body.cage_growth.untangle`: e.g.
+    a trunk quad fitted with its margin into an arm that hangs against the trunk); then
+    quads grow (:func:`~meshmocap.body.cage_growth.enclose`: sides in their planes, then
+    where that is not enough whole quads slide along their normals; steps of ``grow_step`` to
     ``4 grow_step``, never into a new self-intersection) until every template vertex is
     inside the cage and at least ``clearance`` from it; the rig is turned back to the
     template's heading. Where the cage still fails a check, the quads are placed again
@@ -221,8 +220,8 @@ def build_oqr(
         corner growth per iteration, in (0, 0.05].
     max_grow : int, ≥ 0
         Maximum number of growth iterations (of each of the two passes of
-        :func:`~meshmocap.body.cage.enclose`, and of
-        :func:`~meshmocap.body.cage.untangle`).
+        :func:`~meshmocap.body.cage_growth.enclose`, and of
+        :func:`~meshmocap.body.cage_growth.untangle`).
 
     Returns
     -------
