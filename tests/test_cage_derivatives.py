@@ -15,6 +15,7 @@ from meshmocap.body.template import load_template
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage import CageOptions, CageTracker, _orthonormal
+from meshmocap.trackers.cage_energy import HullCoverage
 
 
 class _Field:
@@ -64,19 +65,40 @@ def _check(problem, state, dim, seed, h=1e-6):
         assert abs(g @ d - fd) <= 1e-6 * max(1.0, abs(fd)), (g @ d, fd)
 
 
-def test_pose_gradient(tracker):
+@pytest.fixture(params=["data", "coverage"])
+def terms(request, tracker):
+    """The data term alone, or with a hull coverage term: samples on a sphere around the
+    pelvis, 25 of them farther than the margin from every model point (some model points
+    are left out of the data term, as the first frame's misplaced ones)."""
     tr, field = tracker
+    keep = np.ones(len(tr.sample), dtype=bool)
+    if request.param == "coverage":
+        rng = np.random.default_rng(7)
+        H = rng.normal(size=(40, 3))
+        H = tr.pelvis_c + 0.6 * H / np.linalg.norm(H, axis=1, keepdims=True)
+        tr._coverage = HullCoverage(H, margin=0.05)
+        keep[::3] = False
+        P = tr.deform_sample.deform(tr._rig(tr.local, tr.pelvis_R, tr.pelvis_c)[0])
+        assert (tr._coverage.residuals(P)[0] > 0).sum() >= 5
+    tr._set_keep(keep)
+    yield tr, field
+    tr._coverage = None
+    tr._set_keep(np.ones(len(tr.sample), dtype=bool))
+
+
+def test_pose_gradient(terms):
+    tr, field = terms
     _check(tr._pose_problem(field, tr.local), (tr.pelvis_R, tr.pelvis_c), 6, seed=1)
 
 
-def test_latent_shape_gradient_with_the_variance_term(tracker):
-    tr, field = tracker
+def test_latent_shape_gradient_with_the_variance_term(terms):
+    tr, field = terms
     _check(tr._shape_problem(field), tr.x, tr.x.size, seed=2, h=1e-5)
 
 
 @pytest.mark.parametrize("anchored", [False, True])
-def test_local_adjustment_gradient(tracker, anchored):
-    tr, field = tracker
+def test_local_adjustment_gradient(terms, anchored):
+    tr, field = terms
     rng = np.random.default_rng(3)
     y = _orthonormal(tr.local + 0.02 * rng.normal(size=tr.local.size))
     anchor = _orthonormal(y + 0.05 * rng.normal(size=y.size)) if anchored else None

@@ -85,6 +85,28 @@ def test_a_folded_first_cage_falls_back_to_the_rest_cage(setup):
     assert not np.array_equal(tr.cage0, tr.oqr.rest_vertices)
 
 
+def test_vertices_the_cage_cannot_place_leave_the_data_term(setup):
+    t, gp, cap = setup
+    tr = CageTracker(gp)
+    I = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
+    root = t.skeleton.rest_positions[0]
+    tr.init(t, cap[0], I, root)  # rest pose: Green coordinates reproduce every vertex
+    assert tr._keep.all()
+    R = I.copy()
+    R[t.skeleton.index("Head")] = so3_exp(np.radians(50.0) * np.array([1.0, 0.0, 0.0]))
+    state = tr.init(t, cap[0], R, root).state  # the head bends inside the neck–head tube
+    part = np.asarray(t.weights.argmax(axis=1)).ravel()[tr.sample]
+    head = part == t.skeleton.index("Head")
+    neck = np.isin(part, [t.skeleton.index(n) for n in ("Head", "Neck", "Neck1")])
+    assert neck[~tr._keep].all() and (~tr._keep[head]).mean() > 0.5
+    again = CageTracker(gp)
+    again.setup(t)
+    again.set_state(state)  # a resumed run keeps the same data term
+    assert np.array_equal(again._keep, tr._keep)
+    with pytest.raises(InputError, match="max_model_error"):
+        CageOptions(max_model_error=0.0)
+
+
 def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setup, tmp_path):
     t, gp, cap = setup
     digest = CageTracker(gp).options()["manifold"]

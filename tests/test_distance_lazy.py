@@ -32,6 +32,11 @@ def test_same_field_as_the_full_distance_transform(pad):
     assert 0 < lazy.n_evaluated < np.prod(lazy.shape) and lazy.seconds > 0
     np.testing.assert_allclose(lazy.values, full.values, rtol=0, atol=1e-12)  # every point
     assert lazy.n_evaluated == np.prod(lazy.shape)
+    # the boundary points are the voxel centres the field is zero-crossing next to: half a
+    # voxel inside the surface, so the field reads -h/2 there (exactly, at grid points)
+    np.testing.assert_allclose(lazy(lazy.boundary), -h / 2, rtol=0, atol=1e-12)
+    inner = signed_distance(np.pad(occ, 1), h)[1:-1, 1:-1, 1:-1] > -h  # beyond: empty
+    assert len(lazy.boundary) == (occ & inner).sum()
 
 
 def test_gradient_matches_central_differences_inside_cells():

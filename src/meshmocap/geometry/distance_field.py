@@ -201,6 +201,10 @@ class LazyDistanceGrid(DistanceGrid):
 
     Attributes
     ----------
+    boundary : (m, 3) float64
+        Centres of the inner-boundary voxels (occupied, with an empty 6-neighbour), metres,
+        world frame: the points the distances are measured to, a sampling of the target's
+        surface half a voxel inside it.
     n_evaluated : int
         Grid points computed so far.
     seconds : float
@@ -234,7 +238,10 @@ class LazyDistanceGrid(DistanceGrid):
         self.upper = self.origin + (np.array(self.shape) - 1) * h
         self._set_strides()
         inner = np.unravel_index(np.flatnonzero(_inner_boundary(occ)), occ.shape)
-        self._tree = KDTree(np.stack(inner, axis=1).astype(np.float64))  # voxel units
+        ijk = np.stack(inner, axis=1).astype(np.float64)
+        self._tree = KDTree(ijk)  # voxel units
+        self.boundary = ijk * h + origin
+        self.boundary.setflags(write=False)
         size = int(np.prod(self.shape))
         self._known = np.zeros(size, dtype=bool)
         self._flat = np.empty(size)

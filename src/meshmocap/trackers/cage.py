@@ -4,7 +4,7 @@ The template sits in a cage built from 21 Oriented Quads (:mod:`meshmocap.body.o
 follows it through 3D Green coordinates (Eq. 1). Plausible quad configurations lie on a
 GPLVM manifold learned from motion capture (§4). Each frame minimises
 
-    E(x, Γ) = ½ Σ_i w_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)                   # Eq. (4)–(5)
+    E(x, Γ) = ½ Σ_i w_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)  [+ λc E_c]        # Eq. (4)–(5)
 
 over the latent point ``x`` (shape, Eq. 6: chain rule through the GPLVM mean, the
 quads, the cage and the Green coordinates) and the pelvis transform ``Γ`` (pose, Eq. 11),
@@ -33,6 +33,22 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
 - The local adjustment moves each quad by a centre and a rotation (6 numbers) instead of
   the 9 numbers of the configuration vector, 3 of which (the lengths of ``u, v`` and
   their dot product) do not change the quad: free directions Gauss–Newton would wander in.
+- The sum runs over ``n_sample`` template vertices drawn by area; those the cage cannot
+  place (farther than ``max_model_error`` from their skinned position in the first
+  frame's known pose: a head bent inside the neck–head tube, fingers) get ``w_i = 0``; a
+  coverage term ``E_c`` makes hull left unexplained cost (:mod:`~meshmocap.trackers.
+  cage_energy`, with the measurements behind each) in the pose and shape steps and in
+  the choice of the local adjustment's start, not in the adjustment itself: quads free
+  of the manifold follow it into the hull's phantom volumes (procedural walk: 20.2 mm
+  instead of 11.7).
+- The local adjustment (Eq. 12) tracks: it starts from whichever fits the frame best
+  (data and coverage terms) of the manifold's configuration and the previous frame's
+  adjusted quads, still and moved on at their last velocity (each with its own pelvis
+  fit, Eq. 11); a weak pull (``local_damping``) towards the manifold and soft joints
+  between consecutive quads (``articulation``) replace the manifold's hold. A manifold
+  learned on another subject (CMU 35 for 05's walk or 09's run) sits 0.1 m and more from
+  the true quads; held to it, the adjustment restarted from it every frame never got
+  there (86.8 mm on 05_01), and a run's feet move 0.1 m a frame.
 - If the first frame's cage folds over itself (Green coordinates taken in it do not give
   the joints back), the joints' coordinates are taken in the rest cage instead.
 
@@ -48,7 +64,6 @@ vertices; the output deforms the N vertices once. ``stage_seconds`` keeps the br
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict
 
 import numpy as np
@@ -70,6 +85,20 @@ from meshmocap.geometry.rotations import skew, so3_exp
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers.cage_energy import (
+    Articulation,
+    HullCoverage,
+    placement_errors,
+    surface_sample,
+)
+from meshmocap.trackers.cage_math import (
+    _Clock,
+    _cross,
+    _gs,
+    _gs_forward,
+    _move_pelvis,
+    _orthonormal,
+)
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
@@ -80,6 +109,7 @@ _REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the j
 _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
 _TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
+_JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articulation)
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
 _DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
 _DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
@@ -109,26 +139,6 @@ def learn_manifold(
     c, Q = quads_from_pose(oqr, template, R[pick], t[pick])
     Y = configuration_vector(c, Q)
     return GPLVM(n_components, back_constraint="rbf", random_state=random_state).fit(Y)
-
-
-def _gs_forward(a, b, da, db):
-    """Gram–Schmidt ``R = [u v u×v]`` of columns ``a, b`` (Q, 3) and its derivative along
-    ``da, db`` (forward mode)."""
-    na = np.linalg.norm(a, axis=1, keepdims=True)
-    u = a / na
-    du = (da - u * np.sum(u * da, axis=1, keepdims=True)) / na
-    ub = np.sum(u * b, axis=1, keepdims=True)
-    w = b - ub * u
-    dw = (
-        db
-        - (np.sum(du * b, axis=1, keepdims=True) + np.sum(u * db, axis=1, keepdims=True)) * u
-        - ub * du
-    )
-    nw = np.linalg.norm(w, axis=1, keepdims=True)
-    v = w / nw
-    dv = (dw - v * np.sum(v * dw, axis=1, keepdims=True)) / nw
-    n, dn = _cross(u, v), _cross(du, v) + _cross(u, dv)
-    return np.stack([u, v, n], axis=2), np.stack([du, dv, dn], axis=2)
 
 
 class CageTracker:
@@ -173,11 +183,15 @@ class CageTracker:
         self.oqr = build_oqr(template)
         rest = self.oqr.rest_vertices
         self.deform_all = GreenDeformer(rest, self.oqr.faces, template.V)
-        rng = np.random.default_rng(o.seed)
-        self.sample = np.sort(
-            rng.choice(template.n_vertices, min(o.n_sample, template.n_vertices), replace=False)
-        )
+        self.sample = surface_sample(template.V, template.F, o.n_sample, seed=o.seed)
         self.deform_sample = GreenDeformer(rest, self.oqr.faces, template.V[self.sample])
+        self._set_keep(np.ones(len(self.sample), dtype=bool))
+        self._coverage: HullCoverage | None = None  # this frame's (step)
+        q, sk = self.oqr.quads, template.skeleton
+        self._articulation = Articulation(q.centres, q.rotations, q.joint_indices,
+                                          sk.rest_positions, sk.parents)  # fmt: skip
+        c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
+        self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
         self.joint_deformer: GreenDeformer | None = None
         # each quad's cage vertices, padded to the largest count (mask 0 on the padding)
         quad = self.oqr.vertex_quad
@@ -200,7 +214,9 @@ class CageTracker:
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
     ) -> FrameResult:
         """Start from the quads of a known pose; joints get Green coordinates in its cage
-        (§6.2), or in the rest cage when that first cage folds over itself."""
+        (§6.2), or in the rest cage when that first cage folds over itself. Sampled
+        vertices the cage places more than ``max_model_error`` from their skinned position
+        in this pose leave the data term (module notes)."""
         if self.template is not template:
             self.setup(template)
         c, Q = quads_from_pose(self.oqr, template, R, root)
@@ -208,8 +224,13 @@ class CageTracker:
         y = configuration_vector(c, Q)
         self.x = self.gp.transform(y[None])[0]
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
-        joints = template.pose(R, root).eval_joints
+        self._velocity = (np.zeros_like(y), np.eye(3), np.zeros(3))  # last frame's motion
+        posed = template.pose(R, root)
+        joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
+        err = placement_errors(self.deform_sample.deform(cage0), posed.V[self.sample])
+        keep = err <= self.opts.max_model_error
+        self._set_keep(keep if keep.any() else np.ones_like(keep))
         self._set_joints(cage0, joints)
         if np.abs(self.joint_deformer.deform(cage0) - joints).max() > _REPRODUCED:
             # The first frame's cage folds over itself (e.g. a thigh tube through the pelvis
@@ -218,15 +239,25 @@ class CageTracker:
             self._set_joints(self.oqr.rest_vertices.copy(), template.eval_skeleton.rest_positions)
         return self._result(frame.index, {}, 0)
 
+    def _set_keep(self, keep: np.ndarray) -> None:
+        """Sampled vertices in the data term (bool, n); their weights √(1 / kept)."""
+        self._keep = keep.astype(bool)
+        self._data_w = self._keep / np.sqrt(self._keep.sum())
+
     def _set_joints(self, cage0: np.ndarray, joints0: np.ndarray) -> None:
         self.cage0, self.joints0 = cage0, joints0
         self.joint_deformer = GreenDeformer(cage0, self.oqr.faces, joints0)
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore latent point, pelvis transform, local quads and the joints' cage."""
+        """Restore latent point, pelvis transform, local quads and their last motion, the
+        joints' cage and the vertices in the data term."""
         self.x, self.local = state["x"].copy(), state["local"].copy()
+        self._set_keep(state["keep"] if "keep" in state else np.ones(len(self.sample), bool))
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
         self._set_joints(state["cage0"].copy(), state["joints0"].copy())
+        v = [state.get(f"velocity_{k}") for k in "yRc"]
+        self._velocity = (tuple(a.copy() for a in v) if v[0] is not None
+                          else (np.zeros_like(self.local), np.eye(3), np.zeros(3)))  # fmt: skip
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         cage = self._rig(self.local, self.pelvis_R, self.pelvis_c)[0]
@@ -239,7 +270,8 @@ class CageTracker:
         # "cage": this frame's cage vertices (85, 3), replayed by motion transfer
         state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
                  "pelvis_c": self.pelvis_c, "cage0": self.cage0, "joints0": self.joints0,
-                 "cage": cage}  # fmt: skip
+                 "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
+                 "velocity_R": self._velocity[1], "velocity_c": self._velocity[2]}  # fmt: skip
         return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
@@ -271,15 +303,24 @@ class CageTracker:
         return cage, M, R
 
     def _residuals(self, field, cage):
-        """Weighted residuals √w d_DF (n,) at the sampled template vertices (Eq. 4), their
-        gradients (n, 3) and the points (n, 3)."""
+        """:meth:`_distance` at the sampled template vertices of ``cage``, and the points."""
         P = self.deform_sample.deform(cage)
         return (*self._distance(field, P), P)
 
     def _distance(self, field, P):
+        """Residuals (s n,) of the distance terms at the points ``P`` (n, 3), scaled so that
+        the terms are ½ Σ r², and their gradients (s n, 3) with respect to the points: the
+        data term √(w_i / kept) d_DF(P_i) (Eq. 4; w_i: module notes) then, with a coverage
+        term this frame (s = 2), each point's share √(λc / m) r_i of it
+        (:meth:`~meshmocap.trackers.cage_energy.HullCoverage.residuals`)."""
         r, g = field.value_and_gradient(P)
-        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0)  # module notes
-        return r * w, g * w[..., None]
+        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w
+        r, g = r * w, g * w[:, None]
+        if self._coverage is None:
+            return r, g
+        rc, ac = self._coverage.residuals(P)
+        s = np.sqrt(self.opts.coverage_weight / len(self._coverage))
+        return np.concatenate([r, s * rc]), np.concatenate([g, s * ac])
 
     @staticmethod
     def _pose_jacobian(P: np.ndarray, g: np.ndarray, cp: np.ndarray) -> np.ndarray:
@@ -299,7 +340,7 @@ class CageTracker:
 
     # -------------------------------------------------------------- optimisation
     def _lm(self, state, n_iter, evaluate, linearise, update, key=None):
-        """Levenberg–Marquardt on ``E = ½ mean r² + priors``: ``evaluate(state) -> (E,
+        """Levenberg–Marquardt on ``E = ½ Σ r² + priors``: ``evaluate(state) -> (E,
         cache)``, ``linearise(state, cache) -> (gradient, Gauss–Newton Hessian)``,
         ``update(state, d) -> state``. A step is kept only if it does not raise ``E``
         (else λ × 10 and retry, at most ``_RETRIES`` times, then stop: a trust region);
@@ -341,12 +382,12 @@ class CageTracker:
         def evaluate(s):
             P = P0 @ s[0].T + s[1]
             r, g = self._distance(field, P)
-            return 0.5 * np.mean(r * r), (r, g, P)
+            return 0.5 * r @ r, (r, g, P)
 
         def linearise(s, cache):
             r, g, P = cache
-            J = self._pose_jacobian(P, g, s[1])
-            return J @ r / len(r), J @ J.T / len(r)
+            J = self._pose_jacobian(np.tile(P, (len(r) // len(P), 1)), g, s[1])
+            return J @ r, J @ J.T
 
         return evaluate, linearise, _move_pelvis
 
@@ -362,46 +403,59 @@ class CageTracker:
             # variance: Eq. (9) alone vanishes at training points, where its log is a
             # singular well of rounding noise (K is near singular) that traps the latent point
             var = max(var, 0.0) + noise
-            return 0.5 * np.mean(r * r) + lam * np.log(var), (r, g, mean, dmean, var, dvar)
+            return 0.5 * r @ r + lam * np.log(var), (r, g, mean, dmean, var, dvar)
 
         def linearise(x, cache):
             r, g, mean, dmean, var, dvar = cache
             cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
             dx = self.deform_sample.jvp(cage, self._config_directions(M, dmean))  # Eq. (6)
-            J = np.einsum("kpa,pa->kp", dx, g)
-            grad = J @ r / len(r) + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
-            return grad, J @ J.T / len(r) + lam * np.outer(dvar, dvar) / var**2
+            J = np.einsum("kpa,spa->ksp", dx, g.reshape(-1, *dx.shape[1:])).reshape(len(dx), -1)
+            grad = J @ r + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
+            return grad, J @ J.T + lam * np.outer(dvar, dvar) / var**2
 
         return evaluate, linearise, lambda x, d: x + d
 
     def _local_problem(self, field, anchor):
         """Eq. (12): every quad's centre and orientation (6 numbers: no Gram–Schmidt gauge)
         and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration,
-        weight ``local_damping``; None: free, the quads ablation)."""
+        weight ``local_damping``) and held together by soft joints (``articulation``,
+        :class:`~meshmocap.trackers.cage_energy.Articulation`); ``anchor`` None: free, the
+        quads ablation."""
         w = self.opts.local_damping if anchor is not None else 0.0
+        wa = self.opts.articulation if anchor is not None else 0.0
         loc, slots = self.oqr.vertex_local, self._slots
+        I0 = np.eye(3)[None]
 
         def evaluate(s):
             y, Rp, cp = s
             cage, _, R = self._rig(y, Rp, cp)
             r, g, P = self._residuals(field, cage)
             e = y - anchor if w else 0.0
-            return 0.5 * (np.mean(r * r) + w * np.sum(e * e)), (r, g, P, cage, R, e)
+            E = 0.5 * (r @ r + w * np.sum(e * e))
+            art = None
+            if wa:
+                c21 = np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]])
+                art = self._articulation.residuals_and_jacobian(c21, np.concatenate([I0, R]))
+                E += 0.5 * wa * art[0] @ art[0]
+            return E, (r, g, P, cage, R, e, art)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, cage, R, e = cache
-            n = len(r)
-            W = self.deform_sample.pointwise_vjp(cage, g).transpose(1, 2, 0)  # (85, 3, n)
+            r, g, P, cage, R, e, art = cache
+            n = len(P)
             # each vertex of quad q: dV = Rp (dc + ω × R_q l): columns Rp [I | −[R_q l]×]
             arm = np.einsum("qij,qvj->qvi", R, loc[slots])  # (20, w, 3)
             M6 = np.concatenate([np.broadcast_to(Rp, (*arm.shape[:2], 3, 3)), Rp @ -skew(arm)], 3)
             M6 *= self._slot_mask[..., None, None]
             nq, k = slots.shape
-            Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
-                           W[slots].reshape(nq, 3 * k, n))  # (20, 6, n)  # fmt: skip
-            J = np.concatenate([Jq.reshape(6 * nq, n), self._pose_jacobian(P, g, cp)])
-            grad, H = J @ r / n, J @ J.T / n
+            J = []
+            for gs in g.reshape(-1, n, 3):  # data rows, then coverage rows
+                W = self.deform_sample.pointwise_vjp(cage, gs).transpose(1, 2, 0)  # (85, 3, n)
+                Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
+                               W[slots].reshape(nq, 3 * k, n))  # (20, 6, n)  # fmt: skip
+                J.append(np.concatenate([Jq.reshape(6 * nq, n), self._pose_jacobian(P, gs, cp)]))
+            J = np.concatenate(J, axis=1)
+            grad, H = J @ r, J @ J.T
             if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
                 Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
                 Hq = np.zeros((nq, 6, 6))
@@ -415,6 +469,10 @@ class CageTracker:
                 idx = np.arange(6 * nq).reshape(nq, 6)
                 H[idx[:, :, None], idx[:, None, :]] += w * Hq
                 grad[: 6 * nq] += w * gq.ravel()
+            if art is not None:  # soft joints: residuals a, Jacobian Ja along the quads
+                a, Ja = art
+                H[: 6 * nq, : 6 * nq] += wa * Ja.T @ Ja
+                grad[: 6 * nq] += wa * Ja.T @ a
             return grad, H
 
         def update(s, d):
@@ -438,7 +496,14 @@ class CageTracker:
         field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size, pad=k)
         clock.lap("distance")
         it, anchor, self._lam = 0, None, {}  # _lam: LM damping per problem, this frame
+        self._coverage = None
+        if o.coverage_weight > 0:  # hull surface samples, the same on a resumed run
+            B = field.boundary
+            pick = np.random.default_rng([o.seed, frame.index]).choice(
+                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
+            self._coverage = HullCoverage(B[pick], o.coverage_margin)
         pelvis = (self.pelvis_R, self.pelvis_c)
+        previous = (_orthonormal(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
             self.x = self._restart(field)
             for _ in range(o.alternations):
@@ -455,20 +520,35 @@ class CageTracker:
                 it += n
                 clock.lap("shape")
             anchor = _orthonormal(self.gp.predict(self.x[None])[0])
-            self.local = anchor.copy()
         n_local = (
             o.local_iters
             if o.space == "latent"
             else o.alternations * (o.pose_iters + o.shape_iters)
         )
-        state = (_orthonormal(self.local), *pelvis)
+        state = previous  # or the start that fits best, coverage included (module notes)
+        if anchor is not None:  # the last quads, still and moving on, get a pelvis fit
+            starts = [(anchor, *pelvis)]
+            dy, dR, dc = self._velocity
+            for y, R, c in [previous, (_orthonormal(previous[0] + dy), dR @ previous[1],
+                                       previous[2] + dc)][: 1 + bool(np.any(dy))]:  # fmt: skip
+                moved, _, _, n = self._lm((R, c), o.pose_iters, *self._pose_problem(field, y),
+                                          key=2)  # fmt: skip
+                starts.append((y, *moved))
+                it += n
+            fit = self._local_problem(field, None)[0]
+            state = starts[int(np.argmin([(r := fit(s)[1][0]) @ r for s in starts]))]
+        coverage, self._coverage = self._coverage, None  # local: data term (module notes)
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
             state, n_local, *self._local_problem(field, anchor)
         )
+        self._velocity = (self.local - previous[0], self.pelvis_R @ previous[1].T,
+                          self.pelvis_c - previous[2])  # fmt: skip
         it += n
-        r = cache[0]
+        r, P = cache[0], cache[2]
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
-        energies = {"distance": float(np.mean(r**2)), "variance": var}
+        energies = {"distance": float(r @ r), "variance": var}
+        if coverage is not None:  # mean ρ² (m²) of the final fit
+            energies["coverage"] = float(np.sum(coverage.residuals(P)[0] ** 2)) / len(coverage)
         clock.lap("local")
         out = self._result(frame.index, energies, it)
         clock.lap("output")
@@ -490,49 +570,7 @@ class CageTracker:
         Y, var = gp.predict(X, return_var=True)
         cages = np.stack([self._rig(y, self.pelvis_R, self.pelvis_c)[0] for y in Y])
         P = self.deform_sample.deform(cages)  # one pass over the coordinates for all
-        r = self._distance(field, P)[0]
+        r = [self._distance(field, p)[0] for p in P]
         noise = gp.Y_scale_**2 / gp.beta_
-        E = 0.5 * np.mean(r * r, axis=1) + self.opts.variance_weight * np.log(var + noise)
+        E = 0.5 * np.array([v @ v for v in r]) + self.opts.variance_weight * np.log(var + noise)
         return X[np.argmin(E)].copy()
-
-
-def _gs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Gram–Schmidt ``R = [u v u×v]`` (Q, 3, 3) of columns ``a, b`` (Q, 3)."""
-    u = a / np.sqrt(np.sum(a * a, axis=1, keepdims=True))
-    w = b - np.sum(u * b, axis=1, keepdims=True) * u
-    v = w / np.sqrt(np.sum(w * w, axis=1, keepdims=True))
-    return np.stack([u, v, _cross(u, v)], axis=2)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a × b`` along the last axis (numpy's cross costs ~0.1 ms a call in overhead)."""
-    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
-
-
-def _move_pelvis(s, d):
-    """Pelvis transform ``s = (R, c)`` moved by ``d = (ω, dt)`` (world axes, about c)."""
-    return so3_exp(d[:3]) @ s[0], s[1] + d[3:]
-
-
-def _orthonormal(y: np.ndarray) -> np.ndarray:
-    """Configuration ``y`` (180,) with each quad's ``u, v`` made orthonormal (Gram–Schmidt;
-    the same quads)."""
-    Y = y.reshape(-1, 3, 3)
-    R = _gs(Y[:, 1], Y[:, 2])
-    return np.stack([Y[:, 0], R[:, :, 0], R[:, :, 1]], axis=1).reshape(-1)
-
-
-class _Clock:
-    """Wall time per stage of :meth:`CageTracker.step`, added to ``totals``; lazy
-    distance-field evaluations (``field.seconds``) are booked to ``"distance"``."""
-
-    def __init__(self, totals: dict[str, float]) -> None:
-        self.totals, self.t, self.field, self.f0 = totals, time.perf_counter(), None, 0.0
-
-    def lap(self, stage: str) -> None:
-        t = time.perf_counter()
-        spent = self.field.seconds if self.field is not None else 0.0
-        fill, self.f0 = spent - self.f0, spent
-        self.totals[stage] += t - self.t - fill
-        self.totals["distance"] += fill
-        self.t = t

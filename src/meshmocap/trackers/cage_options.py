@@ -60,7 +60,11 @@ class CageOptions:
         none).
     local_damping : float
         Pull of the local adjustment towards the manifold's configuration (weight of half
-        its squared distance, metres and unit axis vectors).
+        its squared distance, metres and unit axis vectors): weak, the adjustment tracks
+        from the previous frame (:mod:`~meshmocap.trackers.cage` notes).
+    articulation : float
+        Weight of the local adjustment's soft joints between consecutive quads (half
+        their squared gaps, m²; :class:`~meshmocap.trackers.cage_energy.Articulation`).
     alternations, pose_iters, shape_iters : int
         Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
     restarts : int
@@ -74,7 +78,20 @@ class CageOptions:
         quad that follows their rig joint (the quads sit at the joints, §3; joints of no
         quad keep Green coordinates).
     n_sample : int
-        Template vertices in the energy (the output deforms all of them).
+        Template vertices in the energy, drawn by area (the output deforms all of them).
+    max_model_error : float
+        Sampled vertices that the cage places farther than this (metres) from their
+        skinned position in the first frame's known pose get no data term (Eq. 4): the
+        cage cannot follow them (:mod:`~meshmocap.trackers.cage_energy`); ``inf``: keep
+        all.
+    coverage_weight : float
+        λc of the hull coverage term (0: none), against the data term: both are mean half
+        squared distances (m²).
+    coverage_margin : float
+        Distance, metres, from a hull surface sample to the nearest sampled model point
+        that the coverage term tolerates.
+    n_coverage : int
+        Hull surface samples of the coverage term per frame.
     damping : float
         Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
     seed : int
@@ -84,7 +101,8 @@ class CageOptions:
     space: Space = "latent"
     variance_weight: float = 1e-5
     local_iters: int = 3
-    local_damping: float = 1e-2
+    local_damping: float = 3e-5
+    articulation: float = 10.0
     alternations: int = 3
     pose_iters: int = 2
     shape_iters: int = 3
@@ -92,6 +110,10 @@ class CageOptions:
     inside_weight: float = 0.05
     joints: Joints = "green"
     n_sample: int = 800
+    max_model_error: float = 0.03
+    coverage_weight: float = 0.3
+    coverage_margin: float = 0.02
+    n_coverage: int = 500
     damping: float = 1e-3
     seed: int = 0
 
@@ -102,3 +124,9 @@ class CageOptions:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:
             raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
+        if not (self.max_model_error > 0 and self.coverage_weight >= 0 and self.articulation >= 0
+                and self.coverage_margin >= 0 and self.n_coverage >= 1):  # fmt: skip
+            raise InputError(
+                "CageOptions: max_model_error must be > 0, articulation, coverage_weight and "
+                "coverage_margin ≥ 0 and n_coverage ≥ 1"
+            )
