@@ -172,13 +172,12 @@ def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
 
     if not (shared_data / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz").is_file():
         pytest.skip("crane archive not available")
-    # (the cage is left out: build_oqr now rigs the crane, and the bench's manifold of 2
-    # fitted poses asks for a GPLVM of min(10, 2) = 2 latent dimensions, more than 2
-    # poses allow; evaluation/bench.py mesh_manifold should cap it at len(pick) − 2)
     res = run_bench(tmp_path / "out", captures=["crane+humaneva4"], data=shared_data,
-                    methods=["articulated_icp"], max_frames=2, keep_fractions=(),
+                    methods=["articulated_icp", "cage"], max_frames=2, keep_fractions=(),
                     show_progress=False)  # fmt: skip
-    (icp,) = res.rows
+    icp, cage = res.rows
+    # two frames cannot make a pose manifold (a GPLVM needs q + 2 poses): said, not raised
+    assert cage.status == "n/a" and "at least 3 frames" in cage.note
     assert icp.status == "ok" and icp.metric == "vertices" and icp.frames == 2
     assert icp.per_frame_mm[0] < 1.0  # frame 0 is the template itself
     assert icp.mean_mm < 30.0 and not math.isnan(icp.bone_std_max_mm)  # a real skeleton now

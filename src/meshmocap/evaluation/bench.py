@@ -292,13 +292,15 @@ def mesh_manifold(
         pm.check(template, oqr, source=path)
         return pm.gp, ""
     pick = np.unique(np.linspace(0, len(capture) - 1, n_poses).round().astype(np.int64))
+    if len(pick) < 3:  # a q-D GPLVM needs at least q + 2 poses
+        return None, f"a pose manifold needs at least 3 frames, the capture has {len(pick)}"
     meshes = [(capture[int(k)].truth.vertices.astype(np.float64), template.F) for k in pick]
     fits = fit_sequence(template, meshes)
     R, root = np.stack([f.R for f in fits]), np.stack([f.root for f in fits])
     Y = configuration_vector(*quads_from_pose(oqr, template, R, root))
     trials = np.array([f"{capture.path.name}:{capture[int(k)].index}" for k in pick])
     poses = PoseSet(Y, trials, np.full(len(pick), "fitted"), template.name, ("fitted poses",))
-    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=min(n_components, len(pick)),
+    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=min(n_components, len(pick) - 2),
                            n_samples=len(pick))  # fmt: skip
     pm.save(path)
     return pm.gp, ""
