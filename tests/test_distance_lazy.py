@@ -39,6 +39,24 @@ def test_same_field_as_the_full_distance_transform(pad):
     assert len(lazy.boundary) == (occ & inner).sum()
 
 
+@pytest.mark.parametrize("stride", [2, 3])
+def test_a_strided_grid_is_the_full_field_subsampled(stride):
+    occ, origin, h, pad = _blobs(4), np.array([0.1, -0.3, 0.2]), 0.02, 2
+    full = signed_distance(np.pad(occ, pad), h)[::stride, ::stride, ::stride]
+    lazy = LazyDistanceGrid(occ, origin, h, pad=pad, stride=stride)
+    ref = DistanceGrid(full, origin - pad * h, stride * h)
+    assert lazy.shape == ref.shape and np.allclose(lazy.upper, ref.upper, rtol=0, atol=1e-15)
+    rng = np.random.default_rng(5)
+    P = lazy.origin + rng.uniform(-0.1, 1.1, (400, 3)) * (lazy.upper - lazy.origin)
+    v, g = lazy.value_and_gradient(P)
+    vf, gf = ref.value_and_gradient(P)
+    np.testing.assert_allclose(v, vf, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g, gf, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(lazy.values, full, rtol=0, atol=1e-12)
+    with pytest.raises(InputError, match="stride"):
+        LazyDistanceGrid(occ, origin, h, stride=0)
+
+
 def test_gradient_matches_central_differences_inside_cells():
     lazy = LazyDistanceGrid(_blobs(2), np.zeros(3), 0.05, pad=2)
     rng = np.random.default_rng(3)

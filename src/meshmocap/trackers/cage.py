@@ -109,6 +109,8 @@ _REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the j
 _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
 _TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
+_SAME, _MEMO = 1e-12, 4  # metres, entries: _distance's results reused for the same points
+_SUB = slice(None, None, 4)  # sampled vertices that rank the latent restarts
 _JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articulation)
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
 _DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
@@ -187,6 +189,7 @@ class CageTracker:
         self.deform_sample = GreenDeformer(rest, self.oqr.faces, template.V[self.sample])
         self._set_keep(np.ones(len(self.sample), dtype=bool))
         self._coverage: HullCoverage | None = None  # this frame's (step)
+        self._memo: list = []  # _distance's last results
         q, sk = self.oqr.quads, template.skeleton
         self._articulation = Articulation(q.centres, q.rotations, q.joint_indices,
                                           sk.rest_positions, sk.parents)  # fmt: skip
@@ -307,14 +310,25 @@ class CageTracker:
         P = self.deform_sample.deform(cage)
         return (*self._distance(field, P), P)
 
-    def _distance(self, field, P):
+    def _distance(self, field, P, sub=slice(None)):
         """Residuals (s n,) of the distance terms at the points ``P`` (n, 3), scaled so that
         the terms are ½ Σ r², and their gradients (s n, 3) with respect to the points: the
         data term √(w_i / kept) d_DF(P_i) (Eq. 4; w_i: module notes) then, with a coverage
         term this frame (s = 2), each point's share √(λc / m) r_i of it
-        (:meth:`~meshmocap.trackers.cage_energy.HullCoverage.residuals`)."""
+        (:meth:`~meshmocap.trackers.cage_energy.HullCoverage.residuals`). ``sub``: the
+        sampled vertices ``P`` holds, when not all (comparing candidates). The last few
+        results are kept: the stages hand over the same points (to rounding)."""
+        key = (id(self._coverage), str(sub))  # the memo is emptied each frame (step)
+        for k, Q, out in self._memo:
+            if k == key and np.abs(Q - P).max() < _SAME:
+                return out
+        out = self._distance_terms(field, P, sub)
+        self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
+        return out
+
+    def _distance_terms(self, field, P, sub):
         r, g = field.value_and_gradient(P)
-        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w
+        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w[sub]
         r, g = r * w, g * w[:, None]
         if self._coverage is None:
             return r, g
@@ -432,16 +446,17 @@ class CageTracker:
             r, g, P = self._residuals(field, cage)
             e = y - anchor if w else 0.0
             E = 0.5 * (r @ r + w * np.sum(e * e))
-            art = None
-            if wa:
-                c21 = np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]])
-                art = self._articulation.residuals_and_jacobian(c21, np.concatenate([I0, R]))
-                E += 0.5 * wa * art[0] @ art[0]
-            return E, (r, g, P, cage, R, e, art)
+            quads = None
+            if wa:  # pelvis-relative quads, the pelvis's included
+                quads = (np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]]),
+                         np.concatenate([I0, R]))  # fmt: skip
+                a = self._articulation.residuals(*quads)
+                E += 0.5 * wa * a @ a
+            return E, (r, g, P, cage, R, e, quads)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, cage, R, e, art = cache
+            r, g, P, cage, R, e, quads = cache
             n = len(P)
             # each vertex of quad q: dV = Rp (dc + ω × R_q l): columns Rp [I | −[R_q l]×]
             arm = np.einsum("qij,qvj->qvi", R, loc[slots])  # (20, w, 3)
@@ -469,8 +484,8 @@ class CageTracker:
                 idx = np.arange(6 * nq).reshape(nq, 6)
                 H[idx[:, :, None], idx[:, None, :]] += w * Hq
                 grad[: 6 * nq] += w * gq.ravel()
-            if art is not None:  # soft joints: residuals a, Jacobian Ja along the quads
-                a, Ja = art
+            if quads is not None:  # soft joints: residuals a, Jacobian Ja along the quads
+                a, Ja = self._articulation.residuals(*quads, jacobian=True)
                 H[: 6 * nq, : 6 * nq] += wa * Ja.T @ Ja
                 grad[: 6 * nq] += wa * Ja.T @ a
             return grad, H
@@ -493,9 +508,11 @@ class CageTracker:
         clock = _Clock(self.stage_seconds)
         hull = frame.hull
         k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
-        field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size, pad=k)
+        stride = max(1, round(o.field_spacing / hull.voxel_size))
+        field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size,
+                                               pad=k, stride=stride)  # fmt: skip
         clock.lap("distance")
-        it, anchor, self._lam = 0, None, {}  # _lam: LM damping per problem, this frame
+        it, anchor, self._lam, self._memo = 0, None, {}, []  # _lam: LM damping per problem
         self._coverage = None
         if o.coverage_weight > 0:  # hull surface samples, the same on a resumed run
             B = field.boundary
@@ -526,7 +543,9 @@ class CageTracker:
             else o.alternations * (o.pose_iters + o.shape_iters)
         )
         state = previous  # or the start that fits best, coverage included (module notes)
-        if anchor is not None:  # the last quads, still and moving on, get a pelvis fit
+        if anchor is not None and not n_local:  # no adjustment (Table 1): the manifold's
+            state = (anchor, *pelvis)
+        elif anchor is not None:  # the last quads, still and moving on, get a pelvis fit
             starts = [(anchor, *pelvis)]
             dy, dR, dc = self._velocity
             for y, R, c in [previous, (_orthonormal(previous[0] + dy), dR @ previous[1],
@@ -570,7 +589,7 @@ class CageTracker:
         Y, var = gp.predict(X, return_var=True)
         cages = np.stack([self._rig(y, self.pelvis_R, self.pelvis_c)[0] for y in Y])
         P = self.deform_sample.deform(cages)  # one pass over the coordinates for all
-        r = [self._distance(field, p)[0] for p in P]
+        r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
         noise = gp.Y_scale_**2 / gp.beta_
         E = 0.5 * np.array([v @ v for v in r]) + self.opts.variance_weight * np.log(var + noise)
         return X[np.argmin(E)].copy()

@@ -193,19 +193,20 @@ class Articulation:
 
     def calibrate(self, c: np.ndarray, R: np.ndarray, sigma: float) -> np.ndarray:
         """Weigh the pairs by the gaps of poses ``c`` (N, 21, 3), ``R`` (N, 21, 3, 3)
-        (pelvis-relative, like :meth:`residuals_and_jacobian`'s): ``σ / sqrt(σ² + g²)``,
+        (pelvis-relative, like :meth:`residuals`'): ``σ / sqrt(σ² + g²)``,
         ``g`` the RMS over the poses of a pair's joint gap, ``σ`` (metres) the gap taken
         for exact. Returns the RMS gaps (k,), metres."""
         self.weights = np.ones(len(self.child))
-        gaps = np.stack([self.residuals_and_jacobian(a, b)[0][: 3 * len(self.child)]
+        gaps = np.stack([self.residuals(a, b)[: 3 * len(self.child)]
                          for a, b in zip(c, R, strict=True)])  # fmt: skip
         g = np.sqrt(np.mean(gaps.reshape(len(c), -1, 3) ** 2, axis=(0, 2)) * 3)
         self.weights = sigma / np.sqrt(sigma**2 + g**2)
         return g
 
-    def residuals_and_jacobian(self, c: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted residuals (k,) and their Jacobian (k, 6 · 20) along each quad's ``(dc, ω)``
-        (``c ← c + dc``, ``R ← exp(ω) R``, pelvis frame; quads 1…20 in order).
+    def residuals(self, c: np.ndarray, R: np.ndarray, *, jacobian: bool = False):
+        """Weighted residuals (k,) and, with ``jacobian``, their Jacobian (k, 6 · 20) along
+        each quad's ``(dc, ω)`` (``c ← c + dc``, ``R ← exp(ω) R``, pelvis frame; quads
+        1…20 in order).
 
         Parameters
         ----------
@@ -214,34 +215,31 @@ class Articulation:
         R : (21, 3, 3) float64
             Pelvis-relative quad frames (the pelvis's: identity).
         """
-        q, p, n = self.child, self.parent, len(c) - 1
+        q, p, k = self.child, self.parent, len(self.child)
         a = np.einsum("kij,kj->ki", R[p], self.l_parent)
         b = np.einsum("kij,kj->ki", R[q], self.l_child)
-        e = [(a + c[p]) - (b + c[q])]
-        J = [np.zeros((len(q), 3, 6 * n))]
-        rows = np.arange(len(q))
-        for k, sign, arm in ((q, -1.0, b), (p, 1.0, a)):
-            on = k > 0  # the pelvis quad does not move in its own frame
-            col = 6 * (k[on] - 1)
-            for i in range(3):
-                J[0][rows[on], :, col + i] = sign * np.eye(3)[i]
-                J[0][rows[on], :, col + 3 + i] = -sign * _skew(arm[on])[:, :, i]
         r = np.flatnonzero(self.rigid)
-        for axis in (0, 1):  # rigid pairs: the child's u and v where the parent carries them
-            u = R[q[r]][:, :, axis]
-            w = R[p[r]] @ self.B[r][:, :, axis][..., None]
-            e.append(u - w[..., 0])
-            Jr = np.zeros((len(r), 3, 6 * n))
-            for k, sign, arm in ((q[r], 1.0, u), (p[r], -1.0, w[..., 0])):
-                on = k > 0
-                col = 6 * (k[on] - 1)
-                for i in range(3):
-                    Jr[np.flatnonzero(on), :, col + 3 + i] = -sign * _skew(arm[on])[:, :, i]
-            J.append(Jr)
-        w = np.concatenate([np.repeat(self.weights, 3), np.repeat(self.weights[r], 3),
-                            np.repeat(self.weights[r], 3)])  # fmt: skip
-        return (w * np.concatenate([x.reshape(-1) for x in e]),
-                w[:, None] * np.concatenate([x.reshape(-1, 6 * n) for x in J]))  # fmt: skip
+        u = R[q[r]][:, :, :2]  # rigid pairs: the child's u and v where the parent carries them
+        v = R[p[r]] @ self.B[r][:, :, :2]
+        e = np.concatenate([((a + c[p]) - (b + c[q])).ravel(),
+                            (u - v).transpose(0, 2, 1).ravel()])  # fmt: skip
+        w = np.concatenate([np.repeat(self.weights, 3), np.repeat(self.weights[r], 6)])
+        if not jacobian:
+            return w * e
+        # d(R l) = −[R l]× ω; the pelvis quad (index 0) does not move in its own frame
+        J = np.zeros((k, 3, len(c), 6))
+        rows = np.arange(k)
+        J[rows, :, q, :3] = -np.eye(3)
+        J[rows, :, q, 3:] = _skew(b)
+        J[rows, :, p, :3] = np.eye(3)
+        J[rows, :, p, 3:] = -_skew(a)
+        Jr = np.zeros((len(r), 2, 3, len(c), 6))
+        rr, cols = np.arange(len(r))[:, None], [0, 1]
+        sk = [_skew(x.transpose(0, 2, 1).reshape(-1, 3)).reshape(len(r), 2, 3, 3) for x in (u, v)]
+        Jr[rr, cols, :, q[r][:, None], 3:] = -sk[0]
+        Jr[rr, cols, :, p[r][:, None], 3:] = sk[1]
+        J = np.concatenate([J[:, :, 1:].reshape(3 * k, -1), Jr[..., 1:, :].reshape(6 * len(r), -1)])
+        return w * e, w[:, None] * J
 
 
 def _skew(x: np.ndarray) -> np.ndarray:

@@ -92,6 +92,9 @@ class CageOptions:
         that the coverage term tolerates.
     n_coverage : int
         Hull surface samples of the coverage term per frame.
+    field_spacing : float
+        Spacing, metres, of the distance field's grid: the nearest multiple of the hull's
+        voxel (:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid` ``stride``).
     damping : float
         Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
     seed : int
@@ -104,8 +107,8 @@ class CageOptions:
     local_damping: float = 3e-5
     articulation: float = 10.0
     alternations: int = 3
-    pose_iters: int = 2
-    shape_iters: int = 3
+    pose_iters: int = 1
+    shape_iters: int = 2
     restarts: int = 3
     inside_weight: float = 0.05
     joints: Joints = "green"
@@ -114,6 +117,7 @@ class CageOptions:
     coverage_weight: float = 0.3
     coverage_margin: float = 0.02
     n_coverage: int = 500
+    field_spacing: float = 0.02
     damping: float = 1e-3
     seed: int = 0
 
@@ -125,8 +129,9 @@ class CageOptions:
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:
             raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
         if not (self.max_model_error > 0 and self.coverage_weight >= 0 and self.articulation >= 0
-                and self.coverage_margin >= 0 and self.n_coverage >= 1):  # fmt: skip
+                and self.coverage_margin >= 0 and self.n_coverage >= 1
+                and self.field_spacing > 0):  # fmt: skip
             raise InputError(
                 "CageOptions: max_model_error must be > 0, articulation, coverage_weight and "
-                "coverage_margin ≥ 0 and n_coverage ≥ 1"
+                "coverage_margin ≥ 0, n_coverage ≥ 1 and field_spacing > 0"
             )
