@@ -81,7 +81,7 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
-from meshmocap.geometry.rotations import skew, so3_exp
+from meshmocap.geometry.rotations import skew, so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
@@ -227,7 +227,7 @@ class CageTracker:
         y = configuration_vector(c, Q)
         self.x = self.gp.transform(y[None])[0]
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
-        self._velocity = (np.zeros_like(y), np.eye(3), np.zeros(3))  # last frame's motion
+        self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
@@ -258,9 +258,9 @@ class CageTracker:
         self._set_keep(state["keep"] if "keep" in state else np.ones(len(self.sample), bool))
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
         self._set_joints(state["cage0"].copy(), state["joints0"].copy())
-        v = [state.get(f"velocity_{k}") for k in "yRc"]
+        v = [state.get(f"velocity_{k}") for k in "ywc"]
         self._velocity = (tuple(a.copy() for a in v) if v[0] is not None
-                          else (np.zeros_like(self.local), np.eye(3), np.zeros(3)))  # fmt: skip
+                          else (np.zeros_like(self.local), np.zeros(3), np.zeros(3)))  # fmt: skip
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         cage = self._rig(self.local, self.pelvis_R, self.pelvis_c)[0]
@@ -274,7 +274,7 @@ class CageTracker:
         state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
                  "pelvis_c": self.pelvis_c, "cage0": self.cage0, "joints0": self.joints0,
                  "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
-                 "velocity_R": self._velocity[1], "velocity_c": self._velocity[2]}  # fmt: skip
+                 "velocity_w": self._velocity[1], "velocity_c": self._velocity[2]}  # fmt: skip
         return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
@@ -547,8 +547,8 @@ class CageTracker:
             state = (anchor, *pelvis)
         elif anchor is not None:  # the last quads, still and moving on, get a pelvis fit
             starts = [(anchor, *pelvis)]
-            dy, dR, dc = self._velocity
-            for y, R, c in [previous, (_orthonormal(previous[0] + dy), dR @ previous[1],
+            dy, dw, dc = self._velocity  # (the pelvis turns by exp(dw): a rotation, exactly)
+            for y, R, c in [previous, (_orthonormal(previous[0] + dy), so3_exp(dw) @ previous[1],
                                        previous[2] + dc)][: 1 + bool(np.any(dy))]:  # fmt: skip
                 moved, _, _, n = self._lm((R, c), o.pose_iters, *self._pose_problem(field, y),
                                           key=2)  # fmt: skip
@@ -560,7 +560,9 @@ class CageTracker:
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
             state, n_local, *self._local_problem(field, anchor)
         )
-        self._velocity = (self.local - previous[0], self.pelvis_R @ previous[1].T,
+        U, _, Vt = np.linalg.svd(self.pelvis_R)  # no rounding drift from a rotation
+        self.pelvis_R = U @ Vt
+        self._velocity = (self.local - previous[0], so3_log(self.pelvis_R @ previous[1].T),
                           self.pelvis_c - previous[2])  # fmt: skip
         it += n
         r, P = cache[0], cache[2]
