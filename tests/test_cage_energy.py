@@ -108,3 +108,30 @@ def test_articulation_gaps_jacobian_and_calibration():
         fd = (moved(h) - moved(-h)) / (2 * h)
         # central differences: O(h²) truncation and ~1e-16/h rounding on O(1) values
         np.testing.assert_allclose(J @ d.ravel(), fd, rtol=0, atol=1e-8)
+
+
+def test_graft_hangs_the_donor_limb_on_the_trunk():
+    from meshmocap.body.oqr import QUAD_NAMES, configuration_from_vector
+    from meshmocap.trackers.cage_math import _orthonormal, graft
+
+    rng = np.random.default_rng(6)
+    y, donor = (_orthonormal(rng.normal(size=180)) for _ in range(2))
+    arm = np.array([QUAD_NAMES.index(f"left_{q}") for q in ("shoulder", "elbow", "wrist")])
+    chest = QUAD_NAMES.index("chest")
+    leg = graft(y, donor, 0, arm)  # from the pelvis: the donor's quads as they are
+    c, R = configuration_from_vector(leg)
+    cd, Rd = configuration_from_vector(donor)
+    np.testing.assert_allclose(c[arm], cd[arm], rtol=0, atol=1e-15)
+    out = np.setdiff1d(np.arange(1, 21), arm)
+    np.testing.assert_array_equal(leg.reshape(-1, 3, 3)[out - 1], y.reshape(-1, 3, 3)[out - 1])
+    g = graft(y, donor, chest, arm)  # from the chest: the same pose relative to y's chest
+    c, R = configuration_from_vector(g)
+    cy, Ry = configuration_from_vector(y)
+    np.testing.assert_allclose(R[chest], Ry[chest], rtol=0, atol=1e-12)  # the trunk stays
+    np.testing.assert_allclose(c[chest], cy[chest], rtol=0, atol=1e-15)
+    rel = np.swapaxes(R[chest], 0, 1) @ R[arm]
+    reld = np.swapaxes(Rd[chest], 0, 1) @ Rd[arm]
+    np.testing.assert_allclose(rel, reld, rtol=0, atol=1e-12)
+    off = (c[arm] - c[chest]) @ R[chest]
+    offd = (cd[arm] - cd[chest]) @ Rd[chest]
+    np.testing.assert_allclose(off, offd, rtol=0, atol=1e-12)

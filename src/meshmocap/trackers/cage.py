@@ -48,7 +48,10 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
   between consecutive quads (``articulation``) replace the manifold's hold. A manifold
   learned on another subject (CMU 35 for 05's walk or 09's run) sits 0.1 m and more from
   the true quads; held to it, the adjustment restarted from it every frame never got
-  there (86.8 mm on 05_01), and a run's feet move 0.1 m a frame.
+  there (86.8 mm on 05_01), and a run's feet move 0.1 m a frame. Each limb of the
+  manifold's configuration is then tried on that start, hung from its trunk quad, and
+  kept if it fits better: an arm lost into the trunk's hull comes back (09_01: 34.8 →
+  28.8 mm).
 - If the first frame's cage folds over itself (Green coordinates taken in it do not give
   the joints back), the joints' coordinates are taken in the rest cage instead.
 
@@ -71,6 +74,7 @@ import numpy as np
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import (
     OQR,
+    QUAD_NAMES,
     build_oqr,
     cage_vertices,
     configuration_from_vector,
@@ -98,6 +102,7 @@ from meshmocap.trackers.cage_math import (
     _gs_forward,
     _move_pelvis,
     _orthonormal,
+    graft,
 )
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
 
@@ -109,6 +114,12 @@ _REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the j
 _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
 _TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
+#: The limbs (their quads) and the trunk quad (pelvis 0, chest 2) each hangs from.
+_LIMBS = tuple((QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") for q in qs]))
+               for b, qs in (("chest", ("shoulder", "elbow", "wrist", "hand")),
+                             ("pelvis", ("hip", "knee", "ankle", "toe")))
+               for side in ("left", "right"))  # fmt: skip
+_LM_KEYS = (0, 1, 2, None)  # _lm's problems: pose, shape, re-posed starts, local
 _SAME, _MEMO = 1e-12, 4  # metres, entries: _distance's results reused for the same points
 _SUB = slice(None, None, 4)  # sampled vertices that rank the latent restarts
 _JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articulation)
@@ -228,6 +239,7 @@ class CageTracker:
         self.x = self.gp.transform(y[None])[0]
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
         self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
+        self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
@@ -258,6 +270,8 @@ class CageTracker:
         self._set_keep(state["keep"] if "keep" in state else np.ones(len(self.sample), bool))
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
         self._set_joints(state["cage0"].copy(), state["joints0"].copy())
+        lam = state.get("lm_damping", np.full(len(_LM_KEYS), np.nan))
+        self._lam = {k: float(v) for k, v in zip(_LM_KEYS, lam, strict=True) if np.isfinite(v)}
         v = [state.get(f"velocity_{k}") for k in "ywc"]
         self._velocity = (tuple(a.copy() for a in v) if v[0] is not None
                           else (np.zeros_like(self.local), np.zeros(3), np.zeros(3)))  # fmt: skip
@@ -274,7 +288,8 @@ class CageTracker:
         state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
                  "pelvis_c": self.pelvis_c, "cage0": self.cage0, "joints0": self.joints0,
                  "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
-                 "velocity_w": self._velocity[1], "velocity_c": self._velocity[2]}  # fmt: skip
+                 "velocity_w": self._velocity[1], "velocity_c": self._velocity[2],
+                 "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS])}  # fmt: skip
         return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
@@ -358,8 +373,10 @@ class CageTracker:
         cache)``, ``linearise(state, cache) -> (gradient, Gauss–Newton Hessian)``,
         ``update(state, d) -> state``. A step is kept only if it does not raise ``E``
         (else λ × 10 and retry, at most ``_RETRIES`` times, then stop: a trust region);
-        λ starts at ``damping`` (or where the last call with the same ``key`` in this frame
-        left it) and ÷ 10 after each kept step; steps whose quadratic model
+        λ starts where the last call with the same ``key`` left it (÷ 10 at each new frame,
+        never below ``damping``: the latent problem's first steps were rejected three times
+        a frame from a fresh ``damping``) and ÷ 10 after each kept step; steps whose
+        quadratic model
         promises less than ``_CONVERGED`` relative decrease end it. Returns the state, its
         energy and cache, and the number of linearisations."""
         E, cache = evaluate(state)
@@ -512,7 +529,9 @@ class CageTracker:
         field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size,
                                                pad=k, stride=stride)  # fmt: skip
         clock.lap("distance")
-        it, anchor, self._lam, self._memo = 0, None, {}, []  # _lam: LM damping per problem
+        it, anchor, self._memo = 0, None, []
+        # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
+        self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
         self._coverage = None
         if o.coverage_weight > 0:  # hull surface samples, the same on a resumed run
             B = field.boundary
@@ -555,7 +574,13 @@ class CageTracker:
                 starts.append((y, *moved))
                 it += n
             fit = self._local_problem(field, None)[0]
-            state = starts[int(np.argmin([(r := fit(s)[1][0]) @ r for s in starts]))]
+            E = [(r := fit(s)[1][0]) @ r for s in starts]
+            state, E = starts[int(np.argmin(E))], min(E)
+            for base, quads in _LIMBS:  # the manifold's limbs, each tried on that start
+                y = graft(state[0], anchor, base, quads)
+                r = fit((y, *state[1:]))[1][0]
+                if r @ r < E:
+                    state, E = (y, *state[1:]), r @ r
         coverage, self._coverage = self._coverage, None  # local: data term (module notes)
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
             state, n_local, *self._local_problem(field, anchor)

@@ -71,3 +71,20 @@ class _Clock:
         self.totals[stage] += t - self.t - fill
         self.totals["distance"] += fill
         self.t = t
+
+
+def graft(y: np.ndarray, donor: np.ndarray, base: int, quads: np.ndarray) -> np.ndarray:
+    """Configuration ``y`` (180,) with the quads ``quads`` (indices 1…20) taken from
+    ``donor`` (180,), carried rigidly from the donor's quad ``base`` onto ``y``'s (0: the
+    pelvis, where both are the identity): a limb of one pose hung on another's trunk.
+    Both pelvis-relative, ``(c, u, v)`` per quad, orthonormal ``u, v`` expected."""
+    Y, D = y.reshape(-1, 3, 3).copy(), donor.reshape(-1, 3, 3)
+    k = np.asarray(quads) - 1
+    if base == 0:
+        Y[k] = D[k]
+    else:
+        b = base - 1
+        M = _gs(Y[b : b + 1, 1], Y[b : b + 1, 2])[0] @ _gs(D[b : b + 1, 1], D[b : b + 1, 2])[0].T
+        Y[k, 0] = (D[k, 0] - D[b, 0]) @ M.T + Y[b, 0]
+        Y[k, 1:] = D[k, 1:] @ M.T
+    return Y.reshape(-1)
