@@ -71,10 +71,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import (
-    OQR,
-    QUAD_NAMES,
     build_oqr,
     cage_vertices,
     configuration_from_vector,
@@ -82,7 +79,6 @@ from meshmocap.body.oqr import (
     quads_from_pose,
 )
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import skew, so3_exp, so3_log
@@ -95,6 +91,7 @@ from meshmocap.trackers.cage_energy import (
     placement_errors,
     surface_sample,
 )
+from meshmocap.trackers.cage_math import LIMBS as _LIMBS
 from meshmocap.trackers.cage_math import (
     _Clock,
     _cross,
@@ -105,6 +102,7 @@ from meshmocap.trackers.cage_math import (
     graft,
 )
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
+from meshmocap.trackers.manifold import learn_manifold
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
 #: Stages of :attr:`CageTracker.stage_seconds`.
@@ -114,11 +112,6 @@ _REPRODUCED = 1e-4  # metres: Green coordinates taken in a valid cage give the j
 _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent units)
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
 _TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
-#: The limbs (their quads) and the trunk quad (pelvis 0, chest 2) each hangs from.
-_LIMBS = tuple((QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") for q in qs]))
-               for b, qs in (("chest", ("shoulder", "elbow", "wrist", "hand")),
-                             ("pelvis", ("hip", "knee", "ankle", "toe")))
-               for side in ("left", "right"))  # fmt: skip
 _LM_KEYS = (0, 1, 2, None)  # _lm's problems: pose, shape, re-posed starts, local
 _SAME, _MEMO = 1e-12, 4  # metres, entries: _distance's results reused for the same points
 _SUB = slice(None, None, 4)  # sampled vertices that rank the latent restarts
@@ -126,32 +119,6 @@ _JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articu
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
 _DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
 _DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
-
-
-def learn_manifold(
-    template: Template,
-    motions: list[Motion],
-    *,
-    n_components: int = 2,
-    n_samples: int = 120,
-    oqr: OQR | None = None,
-    random_state: int = 0,
-) -> GPLVM:
-    """Learn the pose manifold (§4, §6.2) from motions on ``template``'s skeleton.
-
-    Every motion frame maps the quads rigidly to the skeleton (:func:`quads_from_pose`);
-    ``n_samples`` configurations evenly spread over all frames train a back-constrained
-    GPLVM with ``n_components`` latent dimensions.
-    """
-    if not motions:
-        raise InputError("learn_manifold: no motions given")
-    oqr = oqr or build_oqr(template)
-    R = np.concatenate([m.rotations for m in motions])
-    t = np.concatenate([m.root_positions for m in motions])
-    pick = np.unique(np.linspace(0, len(R) - 1, min(n_samples, len(R))).round().astype(int))
-    c, Q = quads_from_pose(oqr, template, R[pick], t[pick])
-    Y = configuration_vector(c, Q)
-    return GPLVM(n_components, back_constraint="rbf", random_state=random_state).fit(Y)
 
 
 class CageTracker:

@@ -8,7 +8,14 @@ import time
 
 import numpy as np
 
+from meshmocap.body.oqr import QUAD_NAMES
 from meshmocap.geometry.rotations import so3_exp
+
+#: The limbs (their quads) and the trunk quad (pelvis 0, chest 2) each hangs from.
+LIMBS = tuple((QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") for q in qs]))
+               for b, qs in (("chest", ("shoulder", "elbow", "wrist", "hand")),
+                             ("pelvis", ("hip", "knee", "ankle", "toe")))
+               for side in ("left", "right"))  # fmt: skip
 
 
 def _gs_forward(a, b, da, db):

@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.body.oqr import OQR, build_oqr
+from meshmocap.body.motion import Motion
+from meshmocap.body.oqr import OQR, build_oqr, configuration_vector, quads_from_pose
 from meshmocap.body.pose_data import PoseSet, load_pose_sources
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
@@ -46,6 +47,7 @@ __all__ = [
     "MANIFOLD_FORMAT",
     "PoseManifold",
     "fit_pose_manifold",
+    "learn_manifold",
     "learn_pose_manifold",
     "resolve_manifold",
     "template_digest",
@@ -190,6 +192,32 @@ class PoseManifold:
                    d["manifold_rest_cage"], d["manifold_trials"], d["manifold_groups"],
                    tuple(str(s) for s in d["manifold_sources"]), int(n_poses),
                    float(seconds))  # fmt: skip
+
+
+def learn_manifold(
+    template: Template,
+    motions: list[Motion],
+    *,
+    n_components: int = 2,
+    n_samples: int = 120,
+    oqr: OQR | None = None,
+    random_state: int = 0,
+) -> GPLVM:
+    """Learn the pose manifold (§4, §6.2) from motions on ``template``'s skeleton.
+
+    Every motion frame maps the quads rigidly to the skeleton (:func:`quads_from_pose`);
+    ``n_samples`` configurations evenly spread over all frames train a back-constrained
+    GPLVM with ``n_components`` latent dimensions.
+    """
+    if not motions:
+        raise InputError("learn_manifold: no motions given")
+    oqr = oqr or build_oqr(template)
+    R = np.concatenate([m.rotations for m in motions])
+    t = np.concatenate([m.root_positions for m in motions])
+    pick = np.unique(np.linspace(0, len(R) - 1, min(n_samples, len(R))).round().astype(int))
+    c, Q = quads_from_pose(oqr, template, R[pick], t[pick])
+    Y = configuration_vector(c, Q)
+    return GPLVM(n_components, back_constraint="rbf", random_state=random_state).fit(Y)
 
 
 def fit_pose_manifold(
