@@ -38,6 +38,7 @@ import trimesh
 from meshmocap._atomic import write_bytes_atomic
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapWarning
 from meshmocap.errors import MeshmocapFileNotFoundError as NotFound
+from meshmocap.io.ply import binary_ply_arrays
 
 Up = Literal["z", "y"]
 Kind = Literal["auto", "mesh", "points"]
@@ -100,6 +101,10 @@ def _read_bytes(path: Path) -> bytes:
 def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray, np.ndarray]:
     if ext not in MESH_EXTENSIONS:
         raise InputError(f"{label}: mesh files must end in {list(MESH_EXTENSIONS)}, found {ext!r}")
+    fast = binary_ply_arrays(data) if ext == ".ply" else None  # ~30x faster than trimesh
+    if fast is not None and len(fast[0]) and len(fast[1]):
+        _finite(fast[0], label, "vertices")
+        return _to_world(fast[0], up), fast[1]
     scene = _load_scene(data, ext, label)
     meshes = [g for g in scene.geometry.values() if isinstance(g, trimesh.Trimesh)]
     if not meshes:
