@@ -26,8 +26,8 @@ procedural walk with the 12k-vertex ``neutral`` and the 5k ``neutral_5k`` templa
 Timings are wall clock on a shared machine: the load average is printed with them.
 
 Run: ``python benchmarks/bench_cage.py [--work /tmp/meshmocap-bench-cage] [--clips 05_01
-09_01] [--max-frames N] [--skip-speed]``; captures and manifolds are cached in ``--work``,
-tracks are redone (for the timings).
+09_01] [--max-frames N] [--skip-speed | --speed-only]``; captures and manifolds are cached
+in ``--work``, tracks are redone (for the timings).
 """
 
 from __future__ import annotations
@@ -146,6 +146,7 @@ def main() -> None:
     ap.add_argument("--clips", nargs="+", default=["05_01", "09_01"])
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--skip-speed", action="store_true")
+    ap.add_argument("--speed-only", action="store_true", help="only the speed table")
     ap.add_argument("--quiet", action="store_true", help="no per-run progress lines")
     args = ap.parse_args()
     args.log = (lambda _: None) if args.quiet else (lambda s: print(s, flush=True))
@@ -157,7 +158,8 @@ def main() -> None:
     if not args.skip_speed:
         speed(args, work)
         print()
-    accuracy(args, work, template)
+    if not args.speed_only:
+        accuracy(args, work, template)
 
 
 if __name__ == "__main__":

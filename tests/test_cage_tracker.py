@@ -60,8 +60,13 @@ def test_the_pelvis_stays_a_rotation_when_it_moves_on_at_its_velocity(setup, tmp
     # constant-velocity start once multiplied such matrices, and their error grew from
     # 1e-12 to det 1.15 in 40 frames of a run (a sheared cage; the arms were lost)
     R = state["pelvis_R"] + 1e-6 * RNG.normal(size=(3, 3))
-    state = {**state, "pelvis_R": R, "velocity_w": np.array([0.0, 0.0, 0.2]),
-             "velocity_c": np.array([0.0, -0.05, 0.0]), "velocity_y": 1e-3 + 0 * state["local"]}
+    state = {
+        **state,
+        "pelvis_R": R,
+        "velocity_w": np.array([0.0, 0.0, 0.2]),
+        "velocity_c": np.array([0.0, -0.05, 0.0]),
+        "velocity_y": 1e-3 + 0 * state["local"],
+    }
     tr.set_state(state)
     for k in (1, 2, 3):
         tr.step(cap[k])
