@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 
 from meshmocap.errors import InputError
-from meshmocap.geometry.distance_field import DistanceGrid, LazyDistanceGrid, signed_distance
+from meshmocap.geometry.distance_field import (
+    DistanceGrid,
+    LazyDistanceGrid,
+    _inner_boundary,
+    signed_distance,
+)
 
 
 def _blobs(seed: int, n: int = 24) -> np.ndarray:
@@ -55,6 +60,21 @@ def test_a_strided_grid_is_the_full_field_subsampled(stride):
     np.testing.assert_allclose(lazy.values, full, rtol=0, atol=1e-12)
     with pytest.raises(InputError, match="stride"):
         LazyDistanceGrid(occ, origin, h, stride=0)
+
+
+@pytest.mark.parametrize("shape", [(24, 27, 22), (3, 5, 4), (2, 6, 5), (5, 1, 4), (4, 4, 3)])
+def test_inner_boundary_is_the_six_neighbour_definition(shape):
+    """The flat-offset computation (wrapping on the border layers) against the definition:
+    occupied with an empty 6-neighbour, beyond the grid empty."""
+    occ = np.random.default_rng(7).random(shape) < 0.8
+    if shape == (24, 27, 22):
+        occ = _blobs(2)
+    pad = np.pad(occ, 1)
+    c = pad[1:-1, 1:-1, 1:-1]
+    full = (pad[:-2, 1:-1, 1:-1] & pad[2:, 1:-1, 1:-1] & pad[1:-1, :-2, 1:-1]
+            & pad[1:-1, 2:, 1:-1] & pad[1:-1, 1:-1, :-2] & pad[1:-1, 1:-1, 2:])  # fmt: skip
+    assert np.array_equal(_inner_boundary(occ), c & ~full)
+    assert np.array_equal(_inner_boundary(np.asfortranarray(occ)), c & ~full)
 
 
 def test_gradient_matches_central_differences_inside_cells():

@@ -74,10 +74,17 @@ class DistanceGrid:
         sx, sy, _ = self._strides
         # flat offsets of a cell's 8 corners: (x, y, z) = 000, 001, 010, 011, 100, ... 111
         self._corners = np.array([0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1])
+        # per-lookup constants (a lookup of a few hundred points is overhead-bound)
+        self._top = np.array(self.shape, dtype=np.float64) - 1  # last grid point, grid units
+        self._last_cell = np.array(self.shape) - 2
 
     def _gather(self, idx: np.ndarray) -> np.ndarray:
         """Values at flat grid indices ``idx`` (any shape)."""
         return self._flat[idx]
+
+    def _cells(self, base: np.ndarray) -> np.ndarray:
+        """Values (n, 8) at the corners of the cells whose corner 000 is at flat ``base`` (n,)."""
+        return self._gather(base[:, None] + self._corners)
 
     def __repr__(self) -> str:
         return f"DistanceGrid(shape={self.shape}, origin={self.origin}, spacing={self.spacing})"
@@ -98,31 +105,33 @@ class DistanceGrid:
             raise InputError("points: expected finite coordinates, found NaN or infinity")
         lead = P.shape[:-1]
         P = P.reshape(-1, 3)
-        n = np.array(self.shape)
         g = (P - self.origin) / self.spacing
-        gc = np.clip(g, 0, n - 1)
-        i0 = np.minimum(gc.astype(np.intp), n - 2)  # gc ≥ 0: truncation is floor
+        gc = np.minimum(np.maximum(g, 0.0), self._top)  # np.clip, without its overhead
+        i0 = np.minimum(gc.astype(np.intp), self._last_cell)  # gc ≥ 0: truncation is floor
         f = gc - i0
-        fx, fy, fz = (f[:, k, None] for k in range(3))
-        base = i0 @ self._strides
-        c = self._gather(base[:, None] + self._corners)  # (n, 8): corners xyz = 000 … 111
+        fx, fy, fz = f[:, 0], f[:, 1, None], f[:, 2, None]
+        c = self._cells(i0 @ self._strides)  # (n, 8): corners xyz = 000 … 111
         d = c[:, 1::2] - c[:, 0::2]  # (n, 4) differences along z, at (x, y) = 00 01 10 11
         e = c[:, 0::2] + fz * d  # along z
         ey = e[:, 1::2] - e[:, 0::2]  # (n, 2) differences along y, at x = 0, 1
         e2 = e[:, 0::2] + fy * ey  # along y
         gx = e2[:, 1] - e2[:, 0]
-        value = e2[:, 0] + fx[:, 0] * gx  # along x
-        off = P - (self.origin + gc * self.spacing)  # zero inside the box
+        value = e2[:, 0] + fx * gx  # along x
+        off = P - (self.origin + gc * self.spacing)  # zero inside the box (to rounding)
         dist = np.sqrt(np.einsum("ij,ij->i", off, off))
         value = value + dist
         if not gradient:
             return value.reshape(lead), None
-        gy = ey[:, 0] + fx[:, 0] * (ey[:, 1] - ey[:, 0])
+        grad = np.empty_like(P)
+        grad[:, 0] = gx
+        grad[:, 1] = ey[:, 0] + fx * (ey[:, 1] - ey[:, 0])
         dz = d[:, 0::2] + fy * (d[:, 1::2] - d[:, 0::2])  # (n, 2) at x = 0, 1
-        gz = dz[:, 0] + fx[:, 0] * (dz[:, 1] - dz[:, 0])
-        grad = np.stack([gx, gy, gz], axis=1) / self.spacing
-        away = np.divide(off, dist[:, None], out=np.zeros_like(off), where=dist[:, None] > 0)
-        grad = np.where(g != gc, away, grad)  # outside the box: away from it
+        grad[:, 2] = dz[:, 0] + fx * (dz[:, 1] - dz[:, 0])
+        grad /= self.spacing
+        out = g != gc
+        if out.any():  # outside the box: away from it
+            away = np.divide(off, dist[:, None], out=np.zeros_like(off), where=dist[:, None] > 0)
+            grad = np.where(out, away, grad)
         return value.reshape(lead), grad.reshape(*lead, 3)
 
 
@@ -166,12 +175,30 @@ def signed_distance(occupancy: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def _inner_boundary(occ: np.ndarray) -> np.ndarray:
-    """Occupied voxels with an empty 6-neighbour (beyond the grid counts as empty)."""
-    inner = occ.copy()
-    c = occ[1:-1, 1:-1, 1:-1]
-    inner[1:-1, 1:-1, 1:-1] &= ~(c & occ[:-2, 1:-1, 1:-1] & occ[2:, 1:-1, 1:-1]
-                                 & occ[1:-1, :-2, 1:-1] & occ[1:-1, 2:, 1:-1]
-                                 & occ[1:-1, 1:-1, :-2] & occ[1:-1, 1:-1, 2:])  # fmt: skip
+    """Occupied voxels with an empty 6-neighbour (beyond the grid counts as empty).
+
+    Computed on the flat array: a voxel's neighbours are at flat offsets ±1, ±nz, ±ny nz,
+    which wrap around on the grid's border layers, so those are set apart (every occupied
+    voxel there is inner: it has a neighbour beyond the grid). Byte operations into one
+    buffer: 5× faster than the same with 3-D slices and temporaries (2.5 → 0.5 ms, 1.4 M
+    voxels).
+    """
+    occ = np.ascontiguousarray(occ, dtype=bool)
+    if min(occ.shape) < 3:
+        return occ.copy()  # every voxel is on the border
+    _, ny, nz = occ.shape
+    f = occ.reshape(-1).view(np.uint8)
+    lo, hi = ny * nz, f.size - ny * nz  # voxels with x in 1 … nx − 2
+    t = np.bitwise_and(f[: hi - lo], f[2 * lo :])  # the x − 1 and x + 1 neighbours
+    for s in (nz, 1):
+        np.bitwise_and(t, f[lo - s : hi - s], out=t)
+        np.bitwise_and(t, f[lo + s : hi + s], out=t)
+    inner = np.empty_like(occ)
+    flat = inner.reshape(-1)
+    np.greater(f[lo:hi], t, out=flat[lo:hi].view(np.uint8))  # occupied, not all 6 neighbours
+    flat[:lo], flat[hi:] = occ.reshape(-1)[:lo], occ.reshape(-1)[hi:]  # x borders
+    for border in ((slice(None), 0), (slice(None), -1), (Ellipsis, 0), (Ellipsis, -1)):
+        inner[border] = occ[border]  # y and z borders (wrapped above)
     return inner
 
 
@@ -252,13 +279,17 @@ class LazyDistanceGrid(DistanceGrid):
             v.setflags(write=False)
         self.upper = self.origin + (np.array(self.shape) - 1) * m * h
         self._set_strides()
-        inner = np.unravel_index(np.flatnonzero(_inner_boundary(occ)), occ.shape)
-        ijk = np.stack(inner, axis=1).astype(np.float64)
+        flat = np.flatnonzero(_inner_boundary(occ))
+        ijk = np.empty((len(flat), 3))  # np.unravel_index, without int → float copies
+        _, ny, nz = occ.shape
+        ijk[:, 0], rest = np.divmod(flat, ny * nz)
+        ijk[:, 1], ijk[:, 2] = np.divmod(rest, nz)
         self._tree = KDTree(ijk)  # voxel units
         self.boundary = ijk * h + origin
         self.boundary.setflags(write=False)
         size = int(np.prod(self.shape))
-        self._known = np.zeros(size, dtype=bool)
+        self._known = np.zeros(size, dtype=bool)  # grid points computed
+        self._cell_known = np.zeros(size, dtype=bool)  # cells (by corner 000) all computed
         self._flat = np.empty(size)
         self.n_evaluated = 0
         self.seconds = time.perf_counter() - t0
@@ -273,17 +304,29 @@ class LazyDistanceGrid(DistanceGrid):
         out.setflags(write=False)
         return out
 
+    def _cells(self, base: np.ndarray) -> np.ndarray:
+        # known is checked per cell, not per corner: 8× fewer flags to read on a lookup
+        todo = base[~self._cell_known[base]]
+        if todo.size:
+            self._gather((todo[:, None] + self._corners).ravel())
+            self._cell_known[todo] = True
+        return self._flat[base[:, None] + self._corners]
+
     def _gather(self, idx: np.ndarray) -> np.ndarray:
         new = idx[~self._known[idx]]
         if new.size:
             t0 = time.perf_counter()
             new = np.unique(new)
-            ijk = np.stack(np.unravel_index(new, self.shape), axis=1) * self._stride - self._pad
+            ijk = np.empty((len(new), 3), dtype=np.intp)  # np.unravel_index, into one array
+            ijk[:, 0], rest = np.divmod(new, self._strides[0])
+            ijk[:, 1], ijk[:, 2] = np.divmod(rest, self._strides[1])
+            ijk *= self._stride
+            ijk -= self._pad  # voxel indices of the grid points
             e = self._tree.query(ijk.astype(np.float64), k=1)[0]
-            n = np.array(self._occ.shape)
+            n = self._occ.shape
             ok = np.all((ijk >= 0) & (ijk < n), axis=1)
             inside = np.zeros(len(new), dtype=bool)
-            inside[ok] = self._occ[tuple(ijk[ok].T)]
+            inside[ok] = self._occ.reshape(-1)[np.ravel_multi_index(tuple(ijk[ok].T), n)]
             self._flat[new] = np.where(inside, -0.5 - e, e - 0.5) * self._h  # as signed_distance
             self._known[new] = True
             self.n_evaluated += len(new)

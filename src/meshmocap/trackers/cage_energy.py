@@ -122,16 +122,17 @@ class HullCoverage:
         P = np.ascontiguousarray(P, dtype=np.float64)
         H = self.points
         d, i = KDTree(P).query(H, k=1)
-        i = i.astype(np.int64)
-        rho = np.maximum(d - self.margin, 0.0)
-        on = rho > 0
+        on = d > self.margin  # ρ_m > 0
         n = len(P)
         if not on.any():
             return np.zeros(n), np.zeros((n, 3))
-        i, rho = i[on], rho[on]
-        u = (P[i] - H[on]) * (rho / d[on])[:, None]  # ρ_m ∂d_m/∂P_i
+        i, d = i[on].astype(np.intp), d[on]
+        rho = d - self.margin
+        u = (P[i] - H[on]) * (rho / d)[:, None]  # ρ_m ∂d_m/∂P_i
         r = np.sqrt(np.bincount(i, rho * rho, minlength=n))
-        g = np.stack([np.bincount(i, u[:, k], minlength=n) for k in range(3)], axis=1)
+        # the 3 coordinates in one bincount (bins 3 i + k): a third of the calls
+        g = np.bincount((3 * i[:, None] + np.arange(3)).ravel(), u.ravel(), minlength=3 * n)
+        g = g.reshape(n, 3)
         a = np.divide(g, r[:, None], out=np.zeros_like(g), where=r[:, None] > 0)
         return r, a
 
