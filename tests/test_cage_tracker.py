@@ -9,7 +9,8 @@ from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.cage import CageOptions, CageTracker, _gs_forward, learn_manifold
+from meshmocap.trackers.cage import CageOptions, CageTracker, learn_manifold
+from meshmocap.trackers.cage_math import _gs_forward
 from meshmocap.trackers.cage_options import manifold_digest
 from meshmocap.trackers.driver import track_sequence
 

