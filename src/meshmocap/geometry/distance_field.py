@@ -76,7 +76,7 @@ class DistanceGrid:
         self._corners = np.array([0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1])
         # per-lookup constants, as columns (a lookup of a few hundred points is overhead-bound)
         self._top = np.array(self.shape, dtype=np.float64)[:, None] - 1  # last grid point
-        self._last_cell = np.array(self.shape)[:, None] - 2
+        self._last_cell = np.array(self.shape, dtype=np.float64)[:, None] - 2
         self._col_origin, self._col_spacing = self.origin[:, None], self.spacing[:, None]
 
     def _gather(self, idx: np.ndarray) -> np.ndarray:
@@ -110,9 +110,9 @@ class DistanceGrid:
         # arithmetic runs along n (an (n, 3) array broadcast against (3,) costs 3× more)
         g = (P.T - self._col_origin) / self._col_spacing
         gc = np.minimum(np.maximum(g, 0.0), self._top)  # np.clip, without its overhead
-        i0 = np.minimum(gc.astype(np.intp), self._last_cell)  # gc ≥ 0: truncation is floor
+        i0 = np.minimum(np.floor(gc), self._last_cell)  # cell corner 000, exact in float64
         fx, fy, fz = gc - i0
-        c = self._cells(self._strides @ i0)  # corners xyz = 000 … 111
+        c = self._cells(self._strides @ i0.astype(np.intp))  # corners xyz = 000 … 111
         d = c[1::2] - c[0::2]  # (4, n) differences along z, at (x, y) = 00 01 10 11
         e = c[0::2] + fz * d  # along z
         ey = e[1::2] - e[0::2]  # (2, n) differences along y, at x = 0, 1
@@ -316,8 +316,8 @@ class LazyDistanceGrid(DistanceGrid):
         between them (measured: 0.6 against 2 µs a grid point)."""
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         g = (P[np.all(np.isfinite(P), axis=1)].T - self._col_origin) / self._col_spacing
-        i0 = np.minimum(np.minimum(np.maximum(g, 0.0), self._top).astype(np.intp), self._last_cell)
-        self._cells(np.unique(self._strides @ i0))
+        i0 = np.minimum(np.floor(np.minimum(np.maximum(g, 0.0), self._top)), self._last_cell)
+        self._cells(np.unique(self._strides @ i0.astype(np.intp)))
 
     def _cells(self, base: np.ndarray) -> np.ndarray:
         # known is checked per cell, not per corner: 8× fewer flags to read on a lookup

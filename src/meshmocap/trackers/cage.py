@@ -280,7 +280,7 @@ class CageTracker:
         results are kept: the stages hand over the same points (to rounding)."""
         key = (id(self._coverage), str(sub))  # the memo is emptied each frame (step)
         for k, Q, out in self._memo:
-            if k == key and np.abs(Q - P).max() < _SAME:
+            if k == key and abs(Q[0, 0] - P[0, 0]) < _SAME and np.abs(Q - P).max() < _SAME:
                 return out
         out = self._distance_terms(field, P, sub)
         self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
