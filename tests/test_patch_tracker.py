@@ -127,3 +127,24 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
     assert "3D joint error" in capsys.readouterr().out
     assert main(["track", str(cap.path), "--method", "nope", "--out", str(out)]) == 2
     assert "method must be one of" in capsys.readouterr().err
+
+
+def test_reverse_term_measures_vertex_to_data_distances(walk):
+    """The reverse term is the mean squared distance from the sampled template vertices to
+    their nearest compatible observation: observations = the fitted surface moved 10 µm
+    (less than half the ≥ 0.2 mm spacing of neutral_5k's vertices, so each vertex's
+    nearest observation is its own copy) give 1e-10 m²; beyond ``reverse_cap`` nothing."""
+    from pykdtree.kdtree import KDTree
+
+    from meshmocap.trackers.patch_solver import System
+
+    cap, t = walk
+    tracker = PatchTracker(PatchOptions(n_patches=120))
+    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
+    Vc, Nc = tracker.own_vertices()
+    for shift, expected in (([0.0, 0.0, 1e-5], 1e-10), ([2.0, 0.0, 0.0], 0.0)):
+        Y = Vc + shift
+        sys = System.empty(6 * tracker.model.P + 3 * len(tracker.X), tracker.model.P)
+        e = tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc)
+        assert e == pytest.approx(expected, rel=1e-6, abs=1e-18)  # rounding of 1 m coordinates
+    assert len(tracker.reverse_sample) >= 2000  # every k-th of the 5000 vertices
