@@ -395,11 +395,8 @@ class GreenDeformer:
         if self._GT.dtype == np.float64:  # share memory: phi_ and psi_ are views
             phi, psi = self._GT[: len(V)].T, self._GT[len(V) :].T
         self.phi_, self.psi_ = phi, psi
-        self.outside_ = outside
-        self.cage_F_ = F
-        self.rest_V_ = V
-        self.rest_u_ = V[F[:, 1]] - V[F[:, 0]]
-        self.rest_v_ = V[F[:, 2]] - V[F[:, 0]]
+        self.outside_, self.cage_F_, self.rest_V_ = outside, F, V
+        self.rest_u_, self.rest_v_ = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
         self.rest_area_ = 0.5 * np.linalg.norm(np.cross(self.rest_u_, self.rest_v_), axis=1)
         uu = np.einsum("ij,ij->i", self.rest_u_, self.rest_u_)
         self._a = 1.0 / np.sqrt(uu)  # 1/|u|
@@ -494,8 +491,11 @@ class GreenDeformer:
         B = np.empty((k, 3, self._GT.shape[0]), dtype=self._GT.dtype)
         B[:, :, :nv] = V.reshape(k, nv, 3).transpose(0, 2, 1)
         B[:, :, nv:] = (n * s[..., None]).reshape(k, -1, 3).transpose(0, 2, 1)  # s_j n'_j
-        X = (B.reshape(3 * k, -1) @ self._GT).reshape(k, 3, -1).transpose(0, 2, 1)  # Eq. (1)
-        X = np.ascontiguousarray(X, dtype=np.float64)
+        if k == 1 and B.dtype == np.float64:  # 3 gemv: dgemm on 3 rows packs G first (1.4×)
+            X = np.stack([b @ self._GT for b in B[0]])[None]
+        else:
+            X = (B.reshape(3 * k, -1) @ self._GT).reshape(k, 3, -1)
+        X = np.ascontiguousarray(X.transpose(0, 2, 1), dtype=np.float64)  # Eq. (1)
         return X[0] if V.ndim == 2 else X
 
     def _face_terms(self, V: np.ndarray) -> tuple[np.ndarray, ...]:
