@@ -457,7 +457,7 @@ class GreenDeformer:
         u, v = V[..., f1, :] - V[..., f0, :], V[..., f2, :] - V[..., f0, :]
         c = _cross(u, v)
         cn = np.sqrt(np.add.reduce(c * c, axis=-1))  # np.linalg.norm, without its overhead
-        n = np.divide(c, cn[..., None], out=np.zeros_like(c), where=cn[..., None] > 0)
+        n = c / np.where(cn > 0, cn, np.inf)[..., None]  # 0 on a collapsed face (c = 0)
         # GC08 stretch s = sqrt(|u'|²|v|² − 2(u'·v')(u·v) + |v'|²|u|²) / (sqrt(8) area),
         # evaluated as ‖J‖_F/√2 (the same number: the numerator is 4 area² ‖J‖_F²) with J
         # the face's linear map in a rest orthonormal frame, J = [u'/|u|, (v' − c u')|u|/2A],
@@ -505,12 +505,12 @@ class GreenDeformer:
         u, v, cn, n, J1, J2, s = self._faces(V)
         # s² = (|J1|² + |J2|²)/2, J1 = a u', J2 = b (v' − c u'):
         # ds/du' = (a J1 − c b J2)/(2s), ds/dv' = b J2/(2s)
-        inv2s = np.divide(0.5, s, out=np.zeros_like(s), where=s > 0)[:, None]
+        inv2s = 0.5 / np.where(s > 0, s, np.inf)[:, None]  # np.divide(where=) is 3× slower
         dsu = (self._a[:, None] * J1 - (self._c * self._b)[:, None] * J2) * inv2s
         dsv = self._b[:, None] * J2 * inv2s
         # dn' = (I − n'n'ᵀ) dc / |c|, dc = du' × v' + u' × dv', (I − n'n'ᵀ)[x]× = [x]× −
         # n'(n'×x)ᵀ: s dn' = k (n' (n'×v')·du' − v' × du' − n' (n'×u')·dv' + u' × dv')
-        k = np.divide(s, cn, out=np.zeros_like(s), where=cn > 0)[:, None]
+        k = (s / np.where(cn > 0, cn, np.inf))[:, None]
         ku, kv = k * u, k * v
         return n, dsu + _cross(n, kv), dsv - _cross(n, ku), ku, kv
 

@@ -133,7 +133,9 @@ class HullCoverage:
         # the 3 coordinates in one bincount (bins 3 i + k): a third of the calls
         g = np.bincount((3 * i[:, None] + np.arange(3)).ravel(), u.ravel(), minlength=3 * n)
         g = g.reshape(n, 3)
-        a = np.divide(g, r[:, None], out=np.zeros_like(g), where=r[:, None] > 0)
+        # r_i = 0 only where no sample maps to i, and g_i = 0 there: 0/∞ = 0 (a third of
+        # the cost of np.divide with where=)
+        a = g / np.where(r > 0, r, np.inf)[:, None]
         return r, a
 
 
