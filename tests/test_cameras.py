@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.camera import Camera, in_view, intrinsics, look_at
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.cameras import read_cameras, write_cameras
 from meshmocap.studio.rigs import VOLUME_HEIGHT, camera_rig
@@ -275,3 +275,19 @@ def test_preset_rig_round_trips_through_a_file(tmp_path):
     cams = camera_rig("humaneva4")
     write_cameras(tmp_path / "he.yml", cams)
     assert all(_same(a, b) for a, b in zip(cams, read_cameras(tmp_path / "he.yml"), strict=True))
+
+
+def test_in_view_needs_every_camera():
+    # A camera 3 m in front of the origin, 55° field of view (half-width at the origin
+    # 3 tan 27.5° = 1.56 m), the other from the opposite side.
+    K = intrinsics(640, 480, 55.0)
+    front = Camera(K, *look_at([0.0, -3.0, 1.0], [0.0, 0.0, 1.0]), 640, 480, None, "front")
+    back = Camera(K, *look_at([0.0, 3.0, 1.0], [0.0, 0.0, 1.0]), 640, 480, None, "back")
+    X = np.array([[0.0, 0.0, 1.0],  # centre: both see it
+                  [1.4, 0.0, 1.0],  # inside both images (1.4 < 1.56)
+                  [1.7, 0.0, 1.0],  # outside both images
+                  [0.0, -3.5, 1.0]])  # behind the front camera, seen by the back one  # fmt: skip
+    np.testing.assert_array_equal(in_view(X, [front]), [True, True, False, False])
+    np.testing.assert_array_equal(in_view(X, [back]), [True, True, False, True])
+    np.testing.assert_array_equal(in_view(X, [front, back]), [True, True, False, False])
+    assert in_view(X, []).all()  # no rig: nothing is known to be unseen

@@ -41,6 +41,7 @@ from meshmocap.evaluation.plots import (
     plot_silhouette_errors,
 )
 from meshmocap.evaluation.tables import format_table, table, write_csv
+from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import Track
 
@@ -166,16 +167,9 @@ def _out_of_view(truths: list, cameras: list) -> np.ndarray:
     (or passes behind one): a hull of a partly seen subject is not a fair test."""
     if not cameras:
         return np.zeros(0, np.int64)
-    out = []
-    for k, t in enumerate(truths):
-        if t is None:
-            continue
-        for cam in cameras:
-            uv, depth = cam.project(t.vertices)
-            inside = (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width) & (uv[:, 1] >= 0)
-            if not np.all(inside & (uv[:, 1] <= cam.height) & (depth > 0)):
-                out.append(k)
-                break
+    out = [
+        k for k, t in enumerate(truths) if t is not None and not in_view(t.vertices, cameras).all()
+    ]
     return np.asarray(out, dtype=np.int64)
 
 

@@ -165,3 +165,28 @@ class Camera:
         K = self.K
         uv = np.stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]], axis=-1)
         return uv, depth
+
+
+def in_view(X: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """Which points every camera sees: in front of it and inside its image.
+
+    Parameters
+    ----------
+    X : (n, 3) float64
+        World points, metres.
+    cameras : list of Camera
+        The rig; an empty list sees everything.
+
+    Returns
+    -------
+    (n,) bool
+        True where every camera projects the point to ``0 ≤ u ≤ width``, ``0 ≤ v ≤ height``
+        at positive depth. A visual hull exists only there: carving removes what one camera
+        cannot see, so a body part outside this region has no observations.
+    """
+    ok = np.ones(len(X), dtype=bool)
+    for cam in cameras:
+        uv, depth = cam.project(X)
+        ok &= (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width)
+        ok &= (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height)
+    return ok

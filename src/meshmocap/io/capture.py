@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -137,6 +137,11 @@ class CaptureFrame:
     def hull(self) -> VoxelHull:
         """The visual hull's voxel occupancy (a distance field without re-carving)."""
         return read_hull(self.capture.path / "hulls" / f"{frame_name(self.index)}.npz")
+
+    @property
+    def cameras(self) -> list[Camera]:
+        """The capture's rig (empty without ``cameras.json``)."""
+        return self.capture.cameras
 
     @cached_property
     def silhouettes(self) -> list[np.ndarray]:
@@ -264,6 +269,7 @@ class SequenceFrame:
     normals: np.ndarray | None
     silhouettes: list[np.ndarray] | None = None
     truth: Truth | None = None
+    cameras: list[Camera] = field(default_factory=list)
 
 
 class SequenceCapture:
@@ -303,7 +309,7 @@ class SequenceCapture:
                 read_mask(self.silhouette_dir / c.name / f"{frame_name(f.index)}.png")
                 for c in self.cameras
             ]
-        return SequenceFrame(f.index, (f.V, f.F), f.normals, masks)
+        return SequenceFrame(f.index, (f.V, f.F), f.normals, masks, cameras=self.cameras)
 
     def __iter__(self) -> Iterator[SequenceFrame]:
         for k in range(len(self)):

@@ -25,6 +25,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap._validate import check_choice
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.errors import InputError
+from meshmocap.geometry.camera import in_view
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
@@ -378,6 +379,7 @@ class PatchTracker:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         n_unknowns = 6 * m.P + 3 * len(self.X)
         tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
+        cameras = getattr(frame, "cameras", [])
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         energies: dict[str, float] = {}
         n_iter = 0
@@ -398,7 +400,7 @@ class PatchTracker:
                 e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
             e_rev = 0.0
             if tree_y is not None:
-                e_rev = self._add_reverse(sys, tree_y, Y, NY, Vc, Nc)
+                e_rev = self._add_reverse(sys, tree_y, Y, NY, Vc, Nc, cameras)
             w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
             e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
             w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
@@ -488,15 +490,18 @@ class PatchTracker:
         w = p / denom[i]
         return patch, idx[i, j], w, Y[i], NY[i]
 
-    def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc) -> float:
+    def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
         """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
-        its own patch predicts it) to its nearest observed point, where their normals agree
-        and they lie within ``reverse_cap``. Returns the mean squared distance (metres²)."""
+        its own patch predicts it) to its nearest observed point, where their normals agree,
+        they lie within ``reverse_cap``, and every camera of ``cameras`` sees the vertex
+        (carving removes what a camera does not see: feet outside an image have no hull to
+        be pulled onto). Returns the mean squared distance (metres²)."""
         o, m = self.opts, self.model
         v = self.reverse_sample
         d, j = tree_y.query(Vc[v], k=1)
         j = j.astype(np.int64)
         ok = (np.einsum("ij,ij->i", Nc[v], NY[j]) > o.normal_cos) & (d < o.reverse_cap)
+        ok &= in_view(Vc[v], cameras)
         v, y = v[ok], Y[j[ok]]
         if len(v) == 0:
             return 0.0
