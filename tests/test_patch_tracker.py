@@ -114,6 +114,10 @@ def test_options_are_validated():
         PatchOptions(keep_fraction=0.0)
     with pytest.raises(InputError, match="part_matching must be one of"):
         PatchOptions(part_matching="some")
+    with pytest.raises(InputError, match="lambda_reverse must be ≥ 0, found nan"):
+        PatchOptions(lambda_reverse=float("nan"))
+    with pytest.raises(InputError, match="reverse_cap must be > 0 metres, found 0"):
+        PatchOptions(reverse_cap=0)
 
 
 def test_track_and_eval_commands(walk, tmp_path, capsys):

@@ -191,6 +191,14 @@ class PatchOptions:
         check_choice("PatchOptions", "part_matching", self.part_matching, get_args(PartMatching))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
+        if not self.lambda_reverse >= 0:  # also rejects NaN
+            raise InputError(
+                f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
+            )
+        if not self.reverse_cap > 0:
+            raise InputError(
+                f"PatchOptions: reverse_cap must be > 0 metres, found {self.reverse_cap}"
+            )
         if not 0 < self.keep_fraction <= 1:
             raise InputError(
                 f"PatchOptions: keep_fraction must be in (0, 1], found {self.keep_fraction}"
