@@ -76,3 +76,26 @@ def test_missing_files_and_bad_options(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["render", "walk", "--frames", "a:b", "--out", str(tmp_path)])
     assert "START:STOP" in capsys.readouterr().err
+
+
+def test_a_closed_pipe_ends_quietly(monkeypatch, tmp_path):
+    """``meshmocap templates | head -1``: the reader closes the pipe; status 0, no
+    traceback, and stdout is pointed at the null device for the final flush."""
+    import io
+    import os
+    import sys
+
+    sink = os.open(tmp_path / "sink", os.O_WRONLY | os.O_CREAT)
+
+    class ClosedPipe(io.StringIO):
+        def write(self, s):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def fileno(self):
+            return sink
+
+    monkeypatch.setattr(sys, "stdout", ClosedPipe())
+    try:
+        assert main(["templates"]) == 0  # BrokenPipeError would propagate otherwise
+    finally:
+        os.close(sink)

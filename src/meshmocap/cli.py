@@ -8,6 +8,7 @@ printed as one line ``meshmocap: error: ...`` with exit status 2, never a traceb
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -473,6 +474,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("meshmocap: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `meshmocap eval ... | head`: the reader left, not an error
+        # keep the interpreter's final flush from raising again on the closed pipe
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
