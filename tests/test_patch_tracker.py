@@ -118,6 +118,8 @@ def test_options_are_validated():
         PatchOptions(lambda_reverse=float("nan"))
     with pytest.raises(InputError, match="reverse_cap must be > 0 metres, found 0"):
         PatchOptions(reverse_cap=0)
+    with pytest.raises(InputError, match="reverse_scale must be > 0 metres, found -1"):
+        PatchOptions(reverse_scale=-1)
 
 
 def test_track_and_eval_commands(walk, tmp_path, capsys):
@@ -135,10 +137,11 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
 
 
 def test_reverse_term_measures_vertex_to_data_distances(walk):
-    """The reverse term is the mean squared distance from the sampled template vertices to
-    their nearest compatible observation: observations = the fitted surface moved 10 µm
-    (less than half the ≥ 0.2 mm spacing of neutral_5k's vertices, so each vertex's
-    nearest observation is its own copy) give 1e-10 m²; beyond ``reverse_cap`` nothing."""
+    """The reverse term is the (Cauchy-weighted: weight 1 − 1e-7 at 10 µm) mean squared
+    distance from the sampled template vertices to their nearest compatible observation:
+    observations = the fitted surface moved 10 µm (less than half the ≥ 0.2 mm spacing of
+    neutral_5k's vertices, so each vertex's nearest observation is its own copy) give
+    1e-10 m²; beyond ``reverse_cap`` nothing."""
     from pykdtree.kdtree import KDTree
 
     from meshmocap.trackers.patch_solver import System
