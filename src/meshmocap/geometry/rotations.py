@@ -24,6 +24,12 @@ def skew(w: np.ndarray) -> np.ndarray:
     return S
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a × b`` along the last axis of (..., 3) arrays (``np.cross`` has ~0.1 ms of
+    overhead a call, which adds up in small per-iteration products)."""
+    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
+
+
 def so3_exp(w: np.ndarray) -> np.ndarray:
     """Return rotation matrices (..., 3, 3) for axis-angle vectors ``w`` (..., 3), radians.
 

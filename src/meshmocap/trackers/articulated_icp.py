@@ -65,7 +65,7 @@ from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.rotations import so3_exp, so3_log
+from meshmocap.geometry.rotations import cross, so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 
@@ -286,13 +286,6 @@ def apply_increment(
     return so3_exp(local) @ R, root + delta[:3]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a × b`` over the last axis, broadcast (np.cross is slower on these shapes)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
 def residual_jacobian(
     v: np.ndarray,
     a: np.ndarray,
@@ -320,7 +313,7 @@ def residual_jacobian(
     d = v[i] - y
     if residual == "point_to_plane":  # ∂(n·v)/∂ω_j = n·(ω_j × a_ij) = ω_j·(a_ij × n)
         r = np.sum(ny * d, axis=1)
-        Jr = np.concatenate([ny, _cross(ai, ny[:, None, :]).reshape(p, 3 * J)], axis=1)
+        Jr = np.concatenate([ny, cross(ai, ny[:, None, :]).reshape(p, 3 * J)], axis=1)
         return r, Jr
     # ∂v/∂ω_j = −[a_ij]× : row c of the cross-product matrix of −a_ij, for each axis c
     Jw = np.zeros((p, 3, J, 3))
@@ -486,7 +479,7 @@ class ArticulatedICP:
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
             self.R, self.root = apply_increment(sk, self.R, self.root, delta)
-            move = delta[:3] + _cross(delta[3:].reshape(1, -1, 3), a).sum(axis=1)
+            move = delta[:3] + cross(delta[3:].reshape(1, -1, 3), a).sum(axis=1)
             if np.max(np.linalg.norm(move, axis=1)) < o.tol:
                 break
         return self._result(frame.index, energies, n_iter)

@@ -81,7 +81,7 @@ from meshmocap.body.oqr import (
 from meshmocap.body.template import Template
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
-from meshmocap.geometry.rotations import skew, so3_exp, so3_log
+from meshmocap.geometry.rotations import cross, skew, so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
@@ -94,7 +94,6 @@ from meshmocap.trackers.cage_energy import (
 from meshmocap.trackers.cage_math import LIMBS as _LIMBS
 from meshmocap.trackers.cage_math import (
     _Clock,
-    _cross,
     _gs,
     _move_pelvis,
     _orthonormal,
@@ -302,7 +301,7 @@ class CageTracker:
         ``cp``, world axes) and translation (Eq. 11). Green coordinates follow similarities
         of the cage exactly (x' = R x + t), so a rigid motion of the cage moves the points
         ``P`` rigidly: dx = ω × (x − cp) + dt, and dr = g·dx."""
-        return np.concatenate([_cross(P - cp, g), g], axis=1).T
+        return np.concatenate([cross(P - cp, g), g], axis=1).T
 
     def _config_directions(self, M: np.ndarray, dy: np.ndarray) -> np.ndarray:
         """(k, 85, 3): cage derivatives along configuration directions ``dy`` (180, k)."""

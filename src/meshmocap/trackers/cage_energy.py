@@ -35,6 +35,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 
 from meshmocap.errors import InputError
+from meshmocap.geometry.rotations import skew
 
 __all__ = ["HullCoverage", "placement_errors", "surface_sample"]
 
@@ -233,20 +234,13 @@ class Articulation:
         J = np.zeros((k, 3, len(c), 6))
         rows = np.arange(k)
         J[rows, :, q, :3] = -np.eye(3)
-        J[rows, :, q, 3:] = _skew(b)
+        J[rows, :, q, 3:] = skew(b)
         J[rows, :, p, :3] = np.eye(3)
-        J[rows, :, p, 3:] = -_skew(a)
+        J[rows, :, p, 3:] = -skew(a)
         Jr = np.zeros((len(r), 2, 3, len(c), 6))
         rr, cols = np.arange(len(r))[:, None], [0, 1]
-        sk = [_skew(x.transpose(0, 2, 1).reshape(-1, 3)).reshape(len(r), 2, 3, 3) for x in (u, v)]
+        sk = [skew(x.transpose(0, 2, 1).reshape(-1, 3)).reshape(len(r), 2, 3, 3) for x in (u, v)]
         Jr[rr, cols, :, q[r][:, None], 3:] = -sk[0]
         Jr[rr, cols, :, p[r][:, None], 3:] = sk[1]
         J = np.concatenate([J[:, :, 1:].reshape(3 * k, -1), Jr[..., 1:, :].reshape(6 * len(r), -1)])
         return w * e, w[:, None] * J
-
-
-def _skew(x: np.ndarray) -> np.ndarray:
-    """(m, 3) → (m, 3, 3) cross-product matrices: ``_skew(x) @ y == x × y``."""
-    z = np.zeros(len(x))
-    return np.stack([np.stack([z, -x[:, 2], x[:, 1]], 1), np.stack([x[:, 2], z, -x[:, 0]], 1),
-                     np.stack([-x[:, 1], x[:, 0], z], 1)], 1)  # fmt: skip
