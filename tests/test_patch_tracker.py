@@ -152,14 +152,14 @@ def test_reverse_term_measures_vertex_to_data_distances(walk):
     Vc, Nc = tracker.own_vertices()
     for shift, expected in (([0.0, 0.0, 1e-5], 1e-10), ([2.0, 0.0, 0.0], 0.0)):
         Y = Vc + shift
-        sys = System.empty(6 * tracker.model.P + 3 * len(tracker.X), tracker.model.P)
+        sys = System.empty(tracker.pattern)
         e = tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc)
         assert e == pytest.approx(expected, rel=1e-6, abs=1e-18)  # rounding of 1 m coordinates
     assert len(tracker.reverse_sample) >= 2000  # every k-th of the 5000 vertices
     # vertices a camera does not see are left alone (no hull exists there)
     rig = list(cap.cameras)
     Y = Vc + [0.0, 0.0, 1e-5]
-    sys = System.empty(6 * tracker.model.P + 3 * len(tracker.X), tracker.model.P)
+    sys = System.empty(tracker.pattern)
     assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, rig) == pytest.approx(1e-10)
     blind = [replace(rig[0], t=rig[0].t + [0.0, 0.0, -50.0])]  # the body is behind it
     assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, blind) == 0.0

@@ -39,6 +39,7 @@ from meshmocap.trackers.patch_solver import (
     add_plane_terms,
     add_point_terms,
     add_rigidity,
+    normal_pattern,
     rigidity_moments,
 )
 
@@ -260,6 +261,7 @@ class PatchTracker:
         )
         self.moments = rigidity_moments(self.model)
         self.pairs = _held_pairs(template.eval_skeleton)
+        self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
         self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
 
@@ -394,7 +396,6 @@ class PatchTracker:
         self._lap("classify")
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
-        n_unknowns = 6 * m.P + 3 * len(self.X)
         tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
         cameras = getattr(frame, "cameras", [])
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
@@ -405,7 +406,7 @@ class PatchTracker:
             Vc, Nc = self.own_vertices()
             patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
             self._lap("assign")
-            sys = System.empty(n_unknowns, m.P)
+            sys = System.empty(self.pattern)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
             r = q + self.c[patch] - y
             wd = max(float(w.sum()), 1e-12)
@@ -424,7 +425,7 @@ class PatchTracker:
             e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
             e_len = 0.0
             if o.lambda_length > 0:
-                e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths, m.P,
+                e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths,
                                          o.lambda_length / len(self.pairs))  # fmt: skip
             self._lap("system")
             delta = sys.solve(o.damping)
@@ -492,7 +493,7 @@ class PatchTracker:
         K = min(o.k_neighbours, len(Vc))
         d, idx = KDTree(Vc).query(Y, k=K)
         d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
-        ok = np.sum(Nc[idx] * NY[:, None, :], axis=2) > o.normal_cos  # normal compatibility
+        ok = np.einsum("pkj,pj->pk", np.take(Nc, idx, axis=0), NY) > o.normal_cos  # normals agree
         if ycls is not None:  # only patches of the point's body part (§III-B)
             ok &= (m.bone_of_patch[m.labels[idx]] == ycls[:, None]) | (ycls[:, None] < 0)
         i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
