@@ -63,6 +63,7 @@ from meshmocap.body.oqr import (
 from meshmocap.body.pose_data import PoseSet
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.errors import MeshError
+from meshmocap.evaluation.bench import code_digest
 from meshmocap.evaluation.metrics import correspondence_error
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.io.meshes import MeshSequence
@@ -209,7 +210,8 @@ def main() -> None:
                 continue
         else:
             tracker = make_tracker(m)
-        opts = hashlib.sha1(repr(sorted(tracker.options().items())).encode()).hexdigest()[:8]
+        key = repr(sorted(tracker.options().items())) + code_digest()  # new code: new track
+        opts = hashlib.sha1(key.encode()).hexdigest()[:8]
         out = work / "tracks" / f"{m}-{N}f-{template_digest(tmpl)[:8]}-{opts}"
         track = track_sequence(tracker, tmpl, capture, out, frames=positions, show_progress=True)
         V = track.vertices[:N] if m != "cage" or n_cage is None else full_resolution(

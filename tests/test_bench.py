@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -79,6 +80,22 @@ def test_rerun_reuses_captures_tracks_and_scores(bench):
         assert (a.capture, a.method, a.frames) == (b.capture, b.method, b.frames)
         assert a.mean_mm == b.mean_mm and a.seconds_per_frame == b.seconds_per_frame
         assert np.array_equal(a.per_frame_mm, b.per_frame_mm)
+
+
+def test_changed_tracking_code_tracks_afresh(bench, tmp_path, monkeypatch):
+    """Tracks are keyed by the tracking code too: after an edit to the package a re-run
+    tracks again instead of resuming the old code's frames."""
+    import meshmocap.evaluation.bench as bench_module
+
+    _, root = bench
+    work = tmp_path / "work"
+    shutil.copytree(root / "work", work)
+    digest = bench_module.code_digest()
+    assert len(digest) == 8 and digest == bench_module.code_digest()  # stable
+    monkeypatch.setattr(bench_module, "code_digest", lambda: "0" * 8)
+    again = _bench(tmp_path / "out", work)
+    assert again.tracked  # new folders, tracked afresh
+    assert len(list(work.glob("tracks/*/*/"))) == 2 * len(list((root / "work").glob("tracks/*/*/")))
 
 
 def test_cli_prints_the_table_and_reuses_the_work_folder(bench, tmp_path, capsys):

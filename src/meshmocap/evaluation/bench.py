@@ -33,13 +33,15 @@ the crane; 120 frames; every method), ``full`` (everything, whole clips).
 The work folder caches everything and a re-run resumes: ``captures/<capture>-<N>f/``
 (:func:`~meshmocap.studio.synth.synthesize` resumes), ``tracks/<capture>-<N>f/
 <method>-<hash>/`` (:func:`~meshmocap.trackers.driver.track_sequence` resumes; the hash is
-of the tracker's options) with the scores cached beside the frames, the cage
+of the tracker's options and of the package's tracking code, so a changed tracker
+tracks afresh) with the scores cached beside the frames, the cage
 trackers' pose manifold ``manifold-<template>.npz``, and for a mesh capture its rigged
 frame 0 ``templates/<capture>.npz`` and manifold ``manifold-crane_frame0-<digest>.npz``.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -371,8 +373,9 @@ class _Run:
     ) -> BenchRow:
         """Track (or resume) and score ``tracker`` on ``capture`` (named ``name``) as
         method ``label``. The track folder is named by a digest of the tracker's options,
-        the template and ``salt`` (e.g. the manifold's); scores are cached beside it."""
-        opts = [tracker.name, tracker.options(), template.name, salt]
+        the template, ``salt`` (e.g. the manifold's) and the tracking code
+        (:func:`code_digest`); scores are cached beside it."""
+        opts = [tracker.name, tracker.options(), template.name, salt, code_digest()]
         digest = hashlib.sha1(json.dumps(opts, sort_keys=True).encode()).hexdigest()[:8]
         out = self.work / "tracks" / capture.path.name / f"{label.split('[')[0]}-{digest}"
         key = f"{capture.path.name}/{out.name}"
@@ -391,6 +394,20 @@ class _Run:
         write_text_atomic(cache, json.dumps({"stamp": stamp, "row": row.to_json()}) + "\n")
         self.evaluated.append(key)
         return row
+
+
+@functools.cache
+def code_digest() -> str:
+    """Digest (8 hex digits) of the package's source outside ``evaluation/``: the code
+    that makes a track. A benchmark keys its cached tracks by it, so an edited tracker
+    re-tracks instead of resuming a track made by the old code."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha1()
+    for p in sorted(root.rglob("*.py")):
+        rel = p.relative_to(root).as_posix()
+        if not rel.startswith("evaluation/"):
+            h.update(rel.encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()[:8]
 
 
 def _stamp(track: Path) -> str:
