@@ -1,5 +1,6 @@
 """The patch tracker and the sequence driver on a short synthetic walk."""
 
+import json
 import shutil
 from dataclasses import replace
 
@@ -128,8 +129,14 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
     cap, _ = walk
     out = tmp_path / "tr"
     args = ["track", str(cap.path), "--template", "neutral_5k", "--out", str(out)]
-    assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4"]) == 0
+    assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4",
+                 "--outlier-sigmas", "2.5"]) == 0  # fmt: skip
     assert "tracked 4 frames with patch" in capsys.readouterr().out
+    meta = json.loads((out / "track.json").read_text())
+    assert meta["options"]["outlier_sigmas"] == 2.5 and meta["options"]["n_patches"] == 100
+    bad = [*args[:-1], str(tmp_path / "bad"), "--outlier-sigmas", "0"]
+    assert main(bad) == 2
+    assert "outlier_sigmas must be > 0, found 0.0" in capsys.readouterr().err
     assert main(["eval", str(cap.path), str(out), "--surface-frames", "1"]) == 0
     assert "3D joint error" in capsys.readouterr().out
     assert main(["track", str(cap.path), "--method", "nope", "--out", str(out)]) == 2

@@ -154,7 +154,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
     options = {}
-    for name in ("n_patches", "classifier", "keep_fraction", "max_iter"):
+    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter"):
         value = getattr(args, name)
         if value is not None:
             options[name] = value
@@ -361,6 +361,10 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
     k.add_argument("--keep-fraction", type=float, help="patch tracker: on-bone points kept")
+    k.add_argument("--outlier-sigmas", type=float, help="patch tracker: a point this many σ "
+                   "from the model is as likely an outlier (default 3; 2 rejects more of a "
+                   "few-camera hull's phantom volumes, but also true points where the subject's "
+                   "surface differs from the template's)")  # fmt: skip
     k.add_argument("--max-iter", type=int, help="iterations per frame")
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip

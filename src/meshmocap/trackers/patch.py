@@ -213,6 +213,10 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
             )
+        if not self.outlier_sigmas > 0:
+            raise InputError(
+                f"PatchOptions: outlier_sigmas must be > 0, found {self.outlier_sigmas}"
+            )
         for name in ("reverse_cap", "reverse_scale"):
             if not getattr(self, name) > 0:
                 raise InputError(
