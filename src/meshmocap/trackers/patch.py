@@ -16,15 +16,12 @@ Each term is normalised by its total weight, so the λs weigh mean squared resid
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
-from typing import Literal, get_args
+from dataclasses import replace
 
 import numpy as np
 from pykdtree.kdtree import KDTree
 
-from meshmocap._validate import check_choice
 from meshmocap.body.template import EvalSkeleton, Template
-from meshmocap.errors import InputError
 from meshmocap.geometry.camera import in_view
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp, so3_log
@@ -32,6 +29,7 @@ from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
 from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind_bones
+from meshmocap.trackers.patch_options import PatchOptions
 from meshmocap.trackers.patch_solver import (
     System,
     add_bone,
@@ -43,10 +41,6 @@ from meshmocap.trackers.patch_solver import (
     rigidity_moments,
 )
 
-Classifier = Literal["logistic", "svc", "none"]
-Residual = Literal["point_to_point", "point_to_plane"]
-Prediction = Literal["bones", "patches", "none"]
-PartMatching = Literal["all", "on_bone", "none"]
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
 
@@ -80,152 +74,6 @@ RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
 REACQUIRE_OFFSET = 0.15
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
-
-
-@dataclass(frozen=True)
-class PatchOptions:
-    """Settings of the patch tracker (defaults from the paper where it gives them).
-
-    Parameters
-    ----------
-    n_patches : int
-        Number of surface patches (the paper uses 150–250).
-    joint_rigidity : float
-        Scale of Er (Eq. 2) between neighbouring patches bound to different bones (1: as
-        printed). Er penalises bending away from the rest pose, so across a joint it pulls
-        limbs back towards the template's pose: on perfect observations (true surfaces)
-        full weight leaves 30 mm joint errors after 20 frames, 0.3 about 10 mm.
-    lambda_data, lambda_rigid, lambda_bone : float
-        λd, λr, λb of Eq. (1) (the paper's 10, 1, 1).
-    lambda_reverse : float
-        Weight of a reverse data term (not in the paper; 0 turns it off): mean squared
-        distance from template vertices (:data:`REVERSE_SAMPLES` of them) to their nearest
-        compatible kept observation, ignoring pairs farther than ``reverse_cap``. Eq. (7)
-        only pulls patches that observations pick as candidates, so a limb that moved
-        further than its neighbours' vertices in one frame (a 10 cm kick at 30 fps) is
-        left in empty space; this term pulls it back onto the data. First 40 frames of
-        the crane: 29.5 → 20.9 mm per vertex (right foot 151 → 17 mm, frames 20–29);
-        first 150 frames of CMU 05_01: 16.9 → 14.4 mm joint error.
-    reverse_cap : float
-        Largest vertex-to-observation distance (metres) the reverse term uses.
-    reverse_scale : float
-        Scale τ (metres) of the reverse term's Cauchy weights ``1 / (1 + (d/τ)²)``: a
-        vertex 3 cm from the data pulls half as hard as one on it. Holes in the
-        silhouettes carve tunnels into the hull that unweighted pulls follow (degraded
-        05_01, 150 frames: 31.4 mm without the term, 57.2 unweighted, 34.8 at τ = 3 cm)
-        while clean data hardly notices (150 frames of 05_01: 14.4 → 14.7 mm; crane,
-        40 frames: 20.9 → 21.3 mm).
-    lambda_length : float
-        Weight of a bone-length prior (not in the paper; 0 turns it off): mean squared
-        change of each bone's length (and of the hip-to-hip and shoulder-to-shoulder
-        distances, :data:`RIGID_PAIRS`) from the first tracked frame, metres². Without it the
-        joints drift with the patches over a long walk (bone-length std 29 mm on 120 frames
-        of CMU 05_01; 0.1 mm with it, and a lower joint error).
-    classifier : {"logistic", "svc", "none"}
-        Body-part classifier sorting the observed points (§III-B); "svc" is the paper's
-        linear SVM with Platt scaling, "none" the tracker without classification.
-    keep_fraction : float
-        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8). Default 1
-        (all): on CMU 05_01 (humaneva4, 299 frames) 0.5 gave 21.5 mm mean joint error and
-        a 59.5 mm worst frame, 1.0 16.3 mm and 34.0 mm; fewer points are faster.
-    part_matching : {"all", "on_bone", "none"}
-        Which kept points may only correspond to patches of their predicted body part:
-        every one ("all"), the on-bone ones (near-joint points, whose label is uncertain by
-        Eq. 6, match any patch), or none (the classifier only selects points; Eq. 7 sums
-        over every patch).
-    on_bone, outlier : float
-        Probability thresholds of Eq. (6).
-    max_distance : float or None
-        Points farther than this (metres) from the previous fitted mesh are outliers too (a
-        linear classifier is confident far from the body, where phantom volumes lie).
-    max_points : int
-        Observed points sampled from each hull before classification.
-    max_iter : int
-        EM iterations per frame; ``tol`` (metres): stop when no vertex moves more.
-    sigma0, sigma_min, sigma_max : float
-        Initial, smallest and largest standard deviation (metres) of the EM Gaussians.
-    outlier_sigmas : float
-        A point as far as this many σ from its best candidate is as likely an outlier.
-        The trade-off between phantom volumes and a subject unlike the template. Hulls from
-        few cameras carry phantom volumes between and beside the limbs, which a strict
-        outlier class ignores: on synthetic humaneva4 captures whose subject is the
-        template, 2 gives CMU 05_01 11.9 mm mean joint error (3: 14.4; hips 15 / 19 → 9 /
-        9 mm), 01_01 13.2 (15.0), 09_01 12.7 (12.5), degraded silhouettes 30.1 (49.3). But
-        where the surface differs from the template's (clothes, another body) true points
-        lie several σ off, and a strict class drops them: the crane (real data) 35.6 mm
-        per vertex at 3, 38.7 at 2.5, 53.9 at 2; another body (heavy_male) 40.4 → 45.6 mm.
-        The default, 3, favours real data.
-    k_neighbours : int
-        Candidate vertices per observed point.
-    damping : float
-        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
-    prediction : {"bones", "patches", "none"}
-        Warm start of each frame: constant-velocity extrapolation of the joints, each patch
-        carried rigidly by its bone ("bones"); of every patch transform and joint on its
-        own ("patches"); or the last frame as it is ("none"). Steps are clipped.
-    normal_cos : float
-        Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
-    residual : {"point_to_point", "point_to_plane"}
-        Data residuals: the paper's Euclidean distances (Eq. 7), or distances along the
-        observed normals (plus a tenth of the Euclidean pull), which lets patches slide along
-        the surface towards their place.
-    seed : int
-        Patches and subsampling seed.
-    """
-
-    n_patches: int = 200
-    joint_rigidity: float = 0.3
-    lambda_data: float = 10.0
-    lambda_rigid: float = 1.0
-    lambda_bone: float = 1.0
-    lambda_reverse: float = 10.0
-    reverse_cap: float = 0.3
-    reverse_scale: float = 0.03
-    lambda_length: float = 100.0
-    classifier: Classifier = "logistic"
-    keep_fraction: float = 1.0
-    part_matching: PartMatching = "all"
-    on_bone: float = 0.9
-    outlier: float = 0.5
-    max_distance: float | None = 0.1
-    max_points: int = 6000
-    max_iter: int = 10
-    tol: float = 2e-4
-    sigma0: float = 0.03
-    sigma_min: float = 0.005
-    sigma_max: float = 0.05
-    outlier_sigmas: float = 3.0
-    k_neighbours: int = 8
-    normal_cos: float = 0.0
-    residual: Residual = "point_to_point"
-    damping: float = 1e-4
-    prediction: Prediction = "bones"
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
-        check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
-        check_choice("PatchOptions", "prediction", self.prediction, get_args(Prediction))
-        check_choice("PatchOptions", "part_matching", self.part_matching, get_args(PartMatching))
-        if self.n_patches < 1:
-            raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
-        if not self.lambda_reverse >= 0:  # also rejects NaN
-            raise InputError(
-                f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
-            )
-        if not self.outlier_sigmas > 0:
-            raise InputError(
-                f"PatchOptions: outlier_sigmas must be > 0, found {self.outlier_sigmas}"
-            )
-        for name in ("reverse_cap", "reverse_scale"):
-            if not getattr(self, name) > 0:
-                raise InputError(
-                    f"PatchOptions: {name} must be > 0 metres, found {getattr(self, name)}"
-                )
-        if not 0 < self.keep_fraction <= 1:
-            raise InputError(
-                f"PatchOptions: keep_fraction must be in (0, 1], found {self.keep_fraction}"
-            )
 
 
 class PatchTracker:

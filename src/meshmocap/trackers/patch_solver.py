@@ -76,7 +76,6 @@ class Pattern:
     ----------
     n_patches, n_joints : int
     pairs : (E, 2) int, neighbouring patches (the model's rigidity pairs)
-    bone : (P, 2) int, each patch's bone: start and end joint
     order : (n,) int, the fill-reducing order (position in the ordered system → unknown)
     indptr, indices : compressed-column structure of the ordered ``H``
     gather : (nnz,) int, index of each stored entry into the concatenated block arrays of a
@@ -88,7 +87,6 @@ class Pattern:
     n_patches: int
     n_joints: int
     pairs: np.ndarray
-    bone: np.ndarray
     order: np.ndarray
     indptr: np.ndarray
     indices: np.ndarray
@@ -140,7 +138,7 @@ def normal_pattern(model: PatchModel, n_joints: int) -> Pattern:
     indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))])
     indices = r[gather]
     diag = np.flatnonzero(indices == c[gather])
-    return Pattern(P, K, model.pairs, bone, order, indptr, indices, gather, diag)
+    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag)
 
 
 @dataclass
