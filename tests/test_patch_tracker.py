@@ -121,6 +121,29 @@ def test_options_are_validated():
         PatchOptions(reverse_cap=0)
     with pytest.raises(InputError, match="reverse_scale must be > 0 metres, found -1"):
         PatchOptions(reverse_scale=-1)
+    with pytest.raises(InputError, match=r"fast_iter_scale must be ≥ 1, found 0\.5"):
+        PatchOptions(fast_iter_scale=0.5)
+    with pytest.raises(InputError, match="fast_motion must be > 0 metres, found 0"):
+        PatchOptions(fast_motion=0)
+    with pytest.raises(InputError, match="max_iter must be ≥ 1, found 0"):
+        PatchOptions(max_iter=0)
+
+
+@pytest.mark.parametrize(("moved", "scale", "expected"), [(0.02, 2.0, 3), (0.08, 2.0, 6),
+                                                          (0.08, 1.0, 3)])  # fmt: skip
+def test_fast_frames_get_more_iterations(walk, moved, scale, expected):
+    """A frame after one where a joint moved more than ``fast_motion`` (5 cm) runs
+    ``fast_iter_scale × max_iter`` EM iterations; ``tol=0`` never stops early."""
+    cap, t = walk
+    opts = PatchOptions(n_patches=120, max_iter=3, tol=0.0, fast_iter_scale=scale)
+    tracker = PatchTracker(opts)
+    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
+    R, c, X = tracker.prev
+    X = X.copy()
+    X[5, 0] -= moved  # the last frame 'moved' one joint this far
+    tracker.prev = (R, c, X)
+    tracker.opts = replace(opts, prediction="none")  # keep the fake motion out of the fit
+    assert tracker.step(cap[1]).n_iter == expected
 
 
 def test_track_and_eval_commands(walk, tmp_path, capsys):
@@ -130,10 +153,11 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
     out = tmp_path / "tr"
     args = ["track", str(cap.path), "--template", "neutral_5k", "--out", str(out)]
     assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4",
-                 "--outlier-sigmas", "2.5"]) == 0  # fmt: skip
+                 "--outlier-sigmas", "2.5", "--fast-iter-scale", "1.5"]) == 0  # fmt: skip
     assert "tracked 4 frames with patch" in capsys.readouterr().out
     meta = json.loads((out / "track.json").read_text())
     assert meta["options"]["outlier_sigmas"] == 2.5 and meta["options"]["n_patches"] == 100
+    assert meta["options"]["fast_iter_scale"] == 1.5
     bad = [*args[:-1], str(tmp_path / "bad"), "--outlier-sigmas", "0"]
     assert main(bad) == 2
     assert "outlier_sigmas must be > 0, found 0.0" in capsys.readouterr().err

@@ -154,7 +154,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
     options = {}
-    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter"):
+    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
+                 "fast_iter_scale"):  # fmt: skip
         value = getattr(args, name)
         if value is not None:
             options[name] = value
@@ -366,6 +367,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "few-camera hull's phantom volumes, but also true points where the subject's "
                    "surface differs from the template's)")  # fmt: skip
     k.add_argument("--max-iter", type=int, help="iterations per frame")
+    k.add_argument("--fast-iter-scale", type=float, help="patch tracker: iterations of a frame "
+                   "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
+                   "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")

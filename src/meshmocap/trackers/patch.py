@@ -234,6 +234,10 @@ class PatchTracker:
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
+        # A fast frame gets more EM iterations: nearest-point correspondences close a gap
+        # of several centimetres only a fraction at a time (see ``max_iter_fast``).
+        speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
+        budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
         if o.prediction == "bones":
             self._predict_by_bones()
         elif o.prediction == "patches":
@@ -262,7 +266,7 @@ class PatchTracker:
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         energies: dict[str, float] = {}
         n_iter = 0
-        while n_iter < o.max_iter:
+        while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
             patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
