@@ -235,7 +235,7 @@ class PatchTracker:
             raise FloatingPointError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
         # A fast frame gets more EM iterations: nearest-point correspondences close a gap
-        # of several centimetres only a fraction at a time (see ``max_iter_fast``).
+        # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
         if o.prediction == "bones":

@@ -152,18 +152,11 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
             )
-        if not self.fast_motion > 0:
-            raise InputError(
-                f"PatchOptions: fast_motion must be > 0 metres, found {self.fast_motion}"
-            )
-        if not self.outlier_sigmas > 0:
-            raise InputError(
-                f"PatchOptions: outlier_sigmas must be > 0, found {self.outlier_sigmas}"
-            )
-        for name in ("reverse_cap", "reverse_scale"):
-            if not getattr(self, name) > 0:
+        for name, unit in (("outlier_sigmas", ""), ("fast_motion", " metres"),
+                           ("reverse_cap", " metres"), ("reverse_scale", " metres")):  # fmt: skip
+            if not getattr(self, name) > 0:  # also rejects NaN
                 raise InputError(
-                    f"PatchOptions: {name} must be > 0 metres, found {getattr(self, name)}"
+                    f"PatchOptions: {name} must be > 0{unit}, found {getattr(self, name)}"
                 )
         if not 0 < self.keep_fraction <= 1:
             raise InputError(
