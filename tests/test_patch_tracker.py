@@ -38,8 +38,10 @@ def test_patch_tracker_follows_a_walk(walk, tracked):
     true = np.stack([f.truth.joints for f in cap])
     err = np.linalg.norm(track.joints - true, axis=2).mean(axis=1) * 1000  # mm per frame
     # 4-camera hulls are fat (phantom volume); over 7 frames the tracker stays within the
-    # issue's 35 mm budget (the benchmark measures whole clips)
-    assert err[0] < 1e-6 and err.max() < 35.0
+    # issue's 35 mm budget (the benchmark measures whole clips). Frame 0 is the ground-truth
+    # pose; its reported joints are the default blended read-out of the patches fitted to
+    # it, within 2 mm (measured 0.8 mm; the skeleton state itself is exact there).
+    assert err[0] < 2.0 and err.max() < 35.0
     assert track.healthy.all() and np.isfinite(track.vertices).all()
     assert set(track.energies) >= {"data", "rigidity", "bone", "total"}
 
@@ -153,11 +155,13 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
     out = tmp_path / "tr"
     args = ["track", str(cap.path), "--template", "neutral_5k", "--out", str(out)]
     assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4",
-                 "--outlier-sigmas", "2.5", "--fast-iter-scale", "1.5"]) == 0  # fmt: skip
+                 "--outlier-sigmas", "2.5", "--fast-iter-scale", "1.5",
+                 "--joint-readout", "skeleton"]) == 0  # fmt: skip
     assert "tracked 4 frames with patch" in capsys.readouterr().out
     meta = json.loads((out / "track.json").read_text())
     assert meta["options"]["outlier_sigmas"] == 2.5 and meta["options"]["n_patches"] == 100
     assert meta["options"]["fast_iter_scale"] == 1.5
+    assert meta["options"]["joint_readout"] == "skeleton"
     bad = [*args[:-1], str(tmp_path / "bad"), "--outlier-sigmas", "0"]
     assert main(bad) == 2
     assert "outlier_sigmas must be > 0, found 0.0" in capsys.readouterr().err
@@ -194,3 +198,48 @@ def test_reverse_term_measures_vertex_to_data_distances(walk):
     assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, rig) == pytest.approx(1e-10)
     blind = [replace(rig[0], t=rig[0].t + [0.0, 0.0, -50.0])]  # the body is behind it
     assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, blind) == 0.0
+
+
+def test_skeleton_floor_is_zero_for_rigid_poses_and_largest_on_the_torso():
+    """The bone binding is exact when the body moves rigidly (floor < 1 µm on the rest pose
+    turned and shifted); on the template's training poses the pelvis and thorax, which no
+    patch follows rigidly, have the largest floors (measured 41 and 32 mm against 4 mm for
+    the knees)."""
+    from meshmocap.body.joint_regressor import training_poses
+    from meshmocap.geometry.rotations import so3_exp
+    from meshmocap.trackers.patch_model import build_patch_model, skeleton_floor
+
+    t = load_template("neutral_5k")
+    m = build_patch_model(t, n_patches=150)
+    R = so3_exp(np.array([[0.0, 0.0, 0.0], [0.2, -0.5, 1.0]]))
+    shift = np.array([[0.0, 0.0, 0.0], [0.3, 1.0, -0.2]])
+    X0 = t.eval_skeleton.rest_positions
+    V = np.einsum("tij,nj->tni", R, t.V) + shift[:, None]
+    X = np.einsum("tij,kj->tki", R, X0) + shift[:, None]
+    assert skeleton_floor(m, V, X).max() < 1e-6
+    V, X = training_poses(t, step=12)
+    floor = dict(zip(t.eval_skeleton.names, skeleton_floor(m, V, X), strict=True))
+    assert min(floor["pelvis"], floor["thorax"]) > 3 * max(floor["left_knee"], floor["right_knee"])
+
+
+@pytest.mark.parametrize("readout", ["skeleton", "surface", "blend"])
+def test_joint_readout_chooses_the_reported_joints(walk, readout):
+    """With "skeleton" the tracker reports its skeleton (the state), with "surface" the
+    regressor applied to the output mesh, with "blend" a per-joint mix of the two: mostly
+    surface for the pelvis (floor 41 mm), mostly skeleton for the knees (4 mm)."""
+    cap, t = walk
+    tracker = PatchTracker(PatchOptions(n_patches=120, max_iter=2, joint_readout=readout))
+    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
+    r = tracker.step(cap[1])
+    X, surface = r.state["X"], tracker.regressor @ r.vertices if readout != "skeleton" else None
+    if readout == "skeleton":
+        assert tracker.regressor is None and np.array_equal(r.joints, X)
+    elif readout == "surface":
+        assert np.allclose(r.joints, surface, atol=1e-12)
+    else:
+        w = tracker.surface_weight
+        named = dict(zip(t.eval_skeleton.names, w, strict=True))
+        assert named["pelvis"] > 0.8 and named["left_knee"] < 0.3 and np.all((w > 0) & (w < 1))
+        assert np.allclose(r.joints, X + w[:, None] * (surface - X), atol=1e-12)
+    with pytest.raises(InputError, match=r"joint_readout must be one of \['blend'"):
+        PatchOptions(joint_readout="mean")

@@ -155,7 +155,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
 
     options = {}
     for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
-                 "fast_iter_scale"):  # fmt: skip
+                 "fast_iter_scale", "joint_readout"):  # fmt: skip
         value = getattr(args, name)
         if value is not None:
             options[name] = value
@@ -370,6 +370,9 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--fast-iter-scale", type=float, help="patch tracker: iterations of a frame "
                    "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
                    "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
+    k.add_argument("--joint-readout", help="patch tracker: joints reported: blend (default: "
+                   "pelvis and thorax read off the surface, limbs mostly from the skeleton), "
+                   "skeleton (the paper's) or surface")  # fmt: skip
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")

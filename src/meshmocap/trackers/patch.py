@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.geometry.camera import in_view
 from meshmocap.geometry.mesh import vertex_normals
@@ -28,7 +29,13 @@ from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
-from meshmocap.trackers.patch_model import PatchModel, build_patch_model, rebind_bones
+from meshmocap.trackers.patch_model import (
+    PatchModel,
+    build_patch_model,
+    fit_patches,
+    rebind_bones,
+    skeleton_floor,
+)
 from meshmocap.trackers.patch_options import PatchOptions
 from meshmocap.trackers.patch_solver import (
     System,
@@ -72,6 +79,12 @@ STAGES = ("observations", "classify", "assign", "system", "solve", "output")
 RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
 REACQUIRE_OFFSET = 0.15
+#: Typical error (metres) of joints read off a tracked surface by the joint regressor
+#: (surface read-out over all joints of CMU 05_01, 09_01, 01_01: 13–14 mm); sets how much of each
+#: joint ``joint_readout="blend"`` takes from the surface (see PatchOptions).
+SURFACE_JOINT_ERROR = 0.01
+#: Every k-th training pose enters the skeleton's floor (skeleton_floor).
+FLOOR_POSE_STEP = 4
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
 
@@ -125,6 +138,16 @@ class PatchTracker:
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
         self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
+        # Joint read-out (joint_readout): share of each reported joint taken from the surface
+        self.regressor = None
+        self.surface_weight = np.zeros(len(template.eval_skeleton.names))
+        if o.joint_readout != "skeleton":
+            V, X = training_poses(template, seed=o.seed)
+            self.regressor = joint_regressor(template, poses=(V, X), seed=o.seed)
+            self.surface_weight[:] = 1.0
+            if o.joint_readout == "blend":
+                f2 = skeleton_floor(self.model, V[::FLOOR_POSE_STEP], X[::FLOOR_POSE_STEP]) ** 2
+                self.surface_weight = f2 / (f2 + SURFACE_JOINT_ERROR**2)
 
     def init(
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
@@ -135,7 +158,7 @@ class PatchTracker:
             self.setup(template)
         m = self.model
         posed = template.pose(R, root)
-        self.R, self.c = _fit_patches(m, posed.V)
+        self.R, self.c = fit_patches(m, posed.V)
         self.X = posed.eval_joints.copy()
         self.lengths = _pair_lengths(self.X, self.pairs)
         self.model = rebind_bones(m, self.R, self.c, self.X)
@@ -164,8 +187,17 @@ class PatchTracker:
                  "lengths": self.lengths}  # fmt: skip
         if self.logits is not None:
             state["clf_coef"], state["clf_intercept"] = self.logits
-        return FrameResult(index=index, joints=self.X.copy(), vertices=self.vertices(),
+        V = self.vertices()
+        return FrameResult(index=index, joints=self.joints(V), vertices=V,
                            energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+
+    def joints(self, V: np.ndarray) -> np.ndarray:
+        """The reported joints (K, 3) for the output mesh ``V`` (n, 3): the skeleton's, the
+        surface read-out, or their per-joint blend (``joint_readout``)."""
+        if self.regressor is None:
+            return self.X.copy()
+        w = self.surface_weight[:, None]
+        return (1.0 - w) * self.X + w * (self.regressor @ V)
 
     # ------------------------------------------------------------------ geometry
     def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
@@ -435,20 +467,3 @@ def _clip_rows(A: np.ndarray, limit: float) -> np.ndarray:
     """Rows of ``A`` (k, 3) scaled down to a norm of at most ``limit``."""
     n = np.linalg.norm(A, axis=1, keepdims=True)
     return A * np.minimum(1.0, limit / np.maximum(n, 1e-12))
-
-
-def _fit_patches(m: PatchModel, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Best rigid transform of every patch from rest to the vertex positions ``V`` (Kabsch)."""
-    P, lab = m.P, m.labels
-    n = np.bincount(lab, minlength=P)
-    c = np.stack([np.bincount(lab, V[:, a], minlength=P) for a in range(3)], 1) / n[:, None]
-    A = m.V0 - m.centres0[lab]
-    B = V - c[lab]
-    H = np.stack(
-        [np.bincount(lab, A[:, a] * B[:, b], minlength=P) for a in range(3) for b in range(3)], 1
-    )
-    U, _, Vt = np.linalg.svd(H.reshape(P, 3, 3))
-    D = np.ones((P, 3))
-    D[:, 2] = np.sign(np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)))
-    R = np.swapaxes(Vt, 1, 2) @ (D[:, :, None] * np.swapaxes(U, 1, 2))
-    return R, c

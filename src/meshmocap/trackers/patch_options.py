@@ -12,6 +12,7 @@ Classifier = Literal["logistic", "svc", "none"]
 Residual = Literal["point_to_point", "point_to_plane"]
 Prediction = Literal["bones", "patches", "none"]
 PartMatching = Literal["all", "on_bone", "none"]
+JointReadout = Literal["blend", "skeleton", "surface"]
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,19 @@ class PatchOptions:
         Data residuals: the paper's Euclidean distances (Eq. 7), or distances along the
         observed normals (plus a tenth of the Euclidean pull), which lets patches slide along
         the surface towards their place.
+    joint_readout : {"blend", "skeleton", "surface"}
+        The joints reported per frame (tracking itself always runs on the skeleton of
+        Eq. 8–11). "skeleton": the paper's, bound to the patches by Ebone. "surface": read
+        off the output mesh by the template's joint regressor
+        (:func:`~meshmocap.body.joint_regressor.joint_regressor`). "blend" (default): per
+        joint, the surface read-out weighted by ``f² / (f² + s²)`` and the skeleton by the
+        rest, where ``f`` is the skeleton's model floor for that joint (its error with
+        exact patches on the template's own training poses,
+        :func:`~meshmocap.trackers.patch_model.skeleton_floor`) and ``s`` the surface
+        read-out's typical error on a tracked mesh
+        (:data:`~meshmocap.trackers.patch.SURFACE_JOINT_ERROR`). The pelvis and thorax,
+        which no patch follows rigidly (floors 30–40 mm), come from the surface; the
+        limbs mostly from the skeleton.
     seed : int
         Patches and subsampling seed.
     """
@@ -133,6 +147,7 @@ class PatchOptions:
     residual: Residual = "point_to_point"
     damping: float = 1e-4
     prediction: Prediction = "bones"
+    joint_readout: JointReadout = "blend"
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -140,6 +155,7 @@ class PatchOptions:
         check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
         check_choice("PatchOptions", "prediction", self.prediction, get_args(Prediction))
         check_choice("PatchOptions", "part_matching", self.part_matching, get_args(PartMatching))
+        check_choice("PatchOptions", "joint_readout", self.joint_readout, get_args(JointReadout))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
         if not self.lambda_reverse >= 0:  # also rejects NaN
