@@ -12,7 +12,7 @@ from meshmocap.errors import InputError
 from meshmocap.io.results import done_frames, read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.patch import STAGES, PatchOptions, PatchTracker
+from meshmocap.trackers.patch import STAGES, PatchOptions, PatchTracker, _held_lengths
 
 
 @pytest.fixture(scope="module")
@@ -231,15 +231,26 @@ def test_joint_readout_chooses_the_reported_joints(walk, readout):
     tracker = PatchTracker(PatchOptions(n_patches=120, max_iter=2, joint_readout=readout))
     tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
     r = tracker.step(cap[1])
-    X, surface = r.state["X"], tracker.regressor @ r.vertices if readout != "skeleton" else None
+    X = r.state["X"]
     if readout == "skeleton":
         assert tracker.regressor is None and np.array_equal(r.joints, X)
-    elif readout == "surface":
-        assert np.allclose(r.joints, surface, atol=1e-12)
+        return
+    surface = tracker.regressor @ r.vertices
+    w = tracker.surface_weight
+    if readout == "surface":
+        assert np.array_equal(w, np.ones(len(w)))
     else:
-        w = tracker.surface_weight
         named = dict(zip(t.eval_skeleton.names, w, strict=True))
         assert named["pelvis"] > 0.8 and named["left_knee"] < 0.3 and np.all((w > 0) & (w < 1))
-        assert np.allclose(r.joints, X + w[:, None] * (surface - X), atol=1e-12)
+    # the mix, moved the least to hold the first frame's bone lengths (to 1 µm)
+    mix = X + w[:, None] * (surface - X)
+    assert np.allclose(r.joints, _held_lengths(mix, tracker.pairs, tracker.lengths), atol=1e-12)
+    pairs = tracker.pairs
+    held = np.linalg.norm(r.joints[pairs[:, 0]] - r.joints[pairs[:, 1]], axis=1)
+    assert np.abs(held - tracker.lengths).max() < 1e-6
+    assert np.abs(r.joints - mix).max() < 0.02  # a small correction (centimetres at most)
+
+
+def test_joint_readout_option_is_validated():
     with pytest.raises(InputError, match=r"joint_readout must be one of \['blend'"):
         PatchOptions(joint_readout="mean")

@@ -113,7 +113,8 @@ class PatchOptions:
         read-out's typical error on a tracked mesh
         (:data:`~meshmocap.trackers.patch.SURFACE_JOINT_ERROR`). The pelvis and thorax,
         which no patch follows rigidly (floors 30–40 mm), come from the surface; the
-        limbs mostly from the skeleton.
+        limbs mostly from the skeleton. Both read-outs are then moved the least that keeps
+        the skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
     seed : int
         Patches and subsampling seed.
     """
