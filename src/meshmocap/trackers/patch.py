@@ -44,6 +44,7 @@ from meshmocap.trackers.patch_solver import (
     add_plane_terms,
     add_point_terms,
     add_rigidity,
+    length_residuals,
     normal_pattern,
     rigidity_moments,
 )
@@ -144,7 +145,7 @@ class PatchTracker:
         if o.joint_readout != "skeleton":
             V, X = training_poses(template, seed=o.seed)
             self.regressor = joint_regressor(template, poses=(V, X), seed=o.seed)
-            self.surface_weight[:] = 1.0
+            self.surface_weight = np.ones(len(template.eval_skeleton.names))
             if o.joint_readout == "blend":
                 f2 = skeleton_floor(self.model, V[::FLOOR_POSE_STEP], X[::FLOOR_POSE_STEP]) ** 2
                 self.surface_weight = f2 / (f2 + SURFACE_JOINT_ERROR**2)
@@ -463,13 +464,11 @@ def _held_lengths(
     rows = np.repeat(np.arange(m), 6)
     cols = (3 * pairs[:, [0, 0, 0, 1, 1, 1]] + np.array([0, 1, 2, 0, 1, 2])).ravel()
     for _ in range(iters):
-        d = X[pairs[:, 0]] - X[pairs[:, 1]]
-        n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-        u = d / n[:, None]
+        u, r = length_residuals(X, pairs, lengths)
         J = np.zeros((m, 3 * K))
         J[rows, cols] = np.concatenate([u, -u], axis=1).ravel()
         H = np.eye(3 * K) + mu * J.T @ J
-        g = (X - B).ravel() + mu * J.T @ (n - lengths)
+        g = (X - B).ravel() + mu * J.T @ r
         X = X - np.linalg.solve(H, g).reshape(K, 3)
     return X
 

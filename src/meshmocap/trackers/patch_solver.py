@@ -379,6 +379,16 @@ def add_plane_terms(
     return float(np.sum(w * s * s))
 
 
+def length_residuals(
+    X: np.ndarray, pairs: np.ndarray, lengths: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions ``u`` (m, 3) of ``x_a − x_b`` over ``pairs`` (m, 2) of ``X`` (K, 3)
+    and the length errors ``r = |x_a − x_b| − L`` (m,), metres: ``∂r/∂x_a = uᵀ = −∂r/∂x_b``."""
+    d = X[pairs[:, 0]] - X[pairs[:, 1]]
+    n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+    return d / n[:, None], n - lengths
+
+
 def add_bone_lengths(
     sys: System,
     X: np.ndarray,
@@ -401,10 +411,7 @@ def add_bone_lengths(
     Returns the sum of squared length errors (before ``weight``).
     """
     b, p = pairs[:, 0], pairs[:, 1]
-    d = X[b] - X[p]
-    n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-    u = d / n[:, None]
-    r = n - lengths
+    u, r = length_residuals(X, pairs, lengths)
     base = 6 * sys.pattern.n_patches
     uu = weight * u[:, :, None] * u[:, None, :]
     sys.add_joints(
