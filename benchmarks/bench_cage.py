@@ -2,13 +2,13 @@
 ablations of the paper, and speed with a per-stage breakdown.
 
 Protocol: synthetic ``humaneva4`` captures from the studio at 60 fps
-(:func:`meshmocap.evaluation.bench.make_capture`, the captures of ``meshmocap bench``) of
+(:func:`meshmocap.apps.bench.make_capture`, the captures of ``meshmocap bench``) of
 CMU 05_01.amc (walk, whole clip) and 09_01.bvh (run, from frame 4: the BVH blends out of
 a T-pose first); subject = tracking template ``neutral_5k``; first frame from ground truth;
 visual hulls carved at 1 cm. The pose manifold (q = 2, 120 poses) is learned from the
 subject-35 walks and jogs of ``cmu35WalkJog.mat`` (``meshmocap learn ... --template
 neutral_5k``), and, for comparison, from the procedural walk and jog. Scores: 3D error of
-the 15 evaluation joints (:func:`meshmocap.evaluation.evaluate.evaluate`), in mm: mean and
+the 15 evaluation joints (:func:`meshmocap.analysis.evaluate.evaluate`), in mm: mean and
 median over all (frame, joint) pairs, worst frame (mean over its joints), worst joint.
 Methods (:data:`meshmocap.trackers.registry.METHODS`): ``cage`` (with local adjustment),
 ``cage_quads`` (quads, no manifold: Fig. 5a), ``cage_noreg`` (no variance term: Fig. 5b),
@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from meshmocap.analysis.evaluate import evaluate
+from meshmocap.apps.bench import make_capture, parse_capture
 from meshmocap.body.template import load_template
-from meshmocap.evaluation.bench import make_capture, parse_capture
-from meshmocap.evaluation.evaluate import evaluate
 from meshmocap.trackers.cage import STAGES
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.manifold import PoseManifold, learn_pose_manifold

@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap.analysis.metrics import correspondence_error
+from meshmocap.apps.bench import code_digest
 from meshmocap.body.autorig import fit_sequence, rig_mesh
 from meshmocap.body.cage import winding_numbers
 from meshmocap.body.oqr import (
@@ -60,13 +62,11 @@ from meshmocap.body.oqr import (
     configuration_vector,
     quads_from_pose,
 )
-from meshmocap.body.pose_data import PoseSet
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.errors import MeshError
-from meshmocap.evaluation.bench import code_digest
-from meshmocap.evaluation.metrics import correspondence_error
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.io.meshes import MeshSequence
+from meshmocap.io.pose_data import PoseSet
 from meshmocap.io.results import read_state
 from meshmocap.studio.synth import synthesize_from_meshes
 from meshmocap.trackers.driver import track_sequence

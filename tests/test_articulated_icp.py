@@ -6,6 +6,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    apply_increment,
+    articulated_model,
+    pose_points,
+    residual_jacobian,
+    subtree_matrix,
+)
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
@@ -13,16 +21,7 @@ from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.articulated_icp import (
-    FIXED_JOINTS,
-    ArticulatedICP,
-    ICPOptions,
-    apply_increment,
-    build_model,
-    pose_points,
-    residual_jacobian,
-    subtree_matrix,
-)
+from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
@@ -40,7 +39,7 @@ def posed(template):
     rng = np.random.default_rng(3)
     J = template.skeleton.n_joints
     R = so3_exp(rng.normal(scale=0.3, size=(J, 3)))
-    return build_model(template, n_points=200, seed=1), R, np.array([0.1, -0.2, 0.9])
+    return articulated_model(template, n_points=200, seed=1), R, np.array([0.1, -0.2, 0.9])
 
 
 def _numeric(f, n, eps=1e-6):

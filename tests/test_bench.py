@@ -9,10 +9,10 @@ import shutil
 import numpy as np
 import pytest
 
+from meshmocap.apps.bench import CAPTURE_SETS, parse_capture, run_bench
+from meshmocap.apps.bench_report import COLUMNS
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.evaluation.bench import CAPTURE_SETS, parse_capture, run_bench
-from meshmocap.evaluation.bench_report import COLUMNS
 
 FRAMES = 4
 PATCH = {"n_patches": 60, "max_iter": 3}
@@ -85,7 +85,7 @@ def test_rerun_reuses_captures_tracks_and_scores(bench):
 def test_changed_tracking_code_tracks_afresh(bench, tmp_path, monkeypatch):
     """Tracks are keyed by the tracking code too: after an edit to the package a re-run
     tracks again instead of resuming the old code's frames."""
-    import meshmocap.evaluation.bench as bench_module
+    import meshmocap.apps.bench as bench_module
 
     _, root = bench
     work = tmp_path / "work"

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from meshmocap.body.oqr import build_oqr
-from meshmocap.body.pose_data import load_pose_sources
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.io.meshes import read_mesh, write_mesh
+from meshmocap.io.pose_data import load_pose_sources
 from meshmocap.io.results import read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold

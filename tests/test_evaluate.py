@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
+from meshmocap.analysis.evaluate import evaluate, summary
+from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.cli import main
 from meshmocap.errors import InputError
-from meshmocap.evaluation.evaluate import evaluate, summary, write_evaluation
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 from meshmocap.studio.synth import SynthSpec, synthesize
 

@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
+from meshmocap.analysis.gait import gait_analysis, write_gait_csv
+from meshmocap.apps.plots import plot_gait
 from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.evaluation.gait import gait_analysis, plot_gait, write_gait_csv
 
 
 @pytest.fixture(scope="module")

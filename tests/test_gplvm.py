@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
+from meshmocap.apps.latent_plot import plot_latent_space
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.evaluation.latent_plot import plot_latent_space
 from meshmocap.models._kernels import rbf, sqdist
 from meshmocap.models.gplvm import GPLVM, _Problem
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from meshmocap.body.oqr import build_oqr
-from meshmocap.body.pose_data import load_pose_sources
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError
+from meshmocap.io.pose_data import load_pose_sources
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers import manifold as manifold_module
 from meshmocap.trackers.cage import CageTracker

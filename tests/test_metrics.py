@@ -1,4 +1,4 @@
-"""Evaluation metrics, tables and plots (meshmocap.evaluation.metrics / tables / plots)."""
+"""Evaluation metrics, tables and plots (meshmocap.analysis.metrics / tables / plots)."""
 
 import csv
 
@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
-from meshmocap.errors import InputError
-from meshmocap.evaluation.metrics import (
+from meshmocap.analysis.metrics import (
     Stats,
     bone_length_stats,
     bone_lengths,
@@ -20,13 +18,15 @@ from meshmocap.evaluation.metrics import (
     silhouette_overlap_error,
     surface_distance,
 )
-from meshmocap.evaluation.plots import (
+from meshmocap.analysis.tables import format_table, table, write_csv
+from meshmocap.apps.plots import (
     plot_bone_lengths,
     plot_frame_errors,
     plot_joint_errors,
     plot_silhouette_errors,
 )
-from meshmocap.evaluation.tables import format_table, table, write_csv
+from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
+from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
 from meshmocap.geometry.proximity import (
     closest_points_on_triangles,

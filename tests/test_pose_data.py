@@ -10,7 +10,13 @@ import scipy.io
 
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
-from meshmocap.body.pose_data import (
+from meshmocap.body.procedural import walk
+from meshmocap.body.retarget import retarget
+from meshmocap.body.template import load_template
+from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.geometry.rotations import so3_exp
+from meshmocap.io.asf_amc import read_amc, read_asf
+from meshmocap.io.pose_data import (
     CMU35_TRIALS,
     PoseSet,
     load_pose_source,
@@ -20,12 +26,6 @@ from meshmocap.body.pose_data import (
     read_poses,
     save_poses,
 )
-from meshmocap.body.procedural import walk
-from meshmocap.body.retarget import retarget
-from meshmocap.body.template import load_template
-from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.geometry.rotations import so3_exp
-from meshmocap.io.asf_amc import read_amc, read_asf
 
 RNG = np.random.default_rng(7)
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from meshmocap.apps.render import contact_sheet, framing_view, render_mesh, render_motion
 from meshmocap.body.motion import Motion
 from meshmocap.errors import InputError
-from meshmocap.evaluation.render import contact_sheet, framing_view, render_mesh, render_motion
 from meshmocap.geometry.camera import intrinsics, look_at, project
 from meshmocap.geometry.raster import coverage, rasterize
 from toys import toy_template

@@ -8,9 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from meshmocap.cli import main
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.evaluation.player import (
+from meshmocap.apps.player import (
     decode_array,
     encode_array,
     player_from_tracks,
@@ -18,7 +16,9 @@ from meshmocap.evaluation.player import (
     player_payload,
     surface_voxels,
 )
-from meshmocap.evaluation.report import Section, Table, report_html, write_report
+from meshmocap.apps.report import Section, Table, report_html, write_report
+from meshmocap.cli import main
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 from meshmocap.studio.synth import SynthSpec, synthesize
 

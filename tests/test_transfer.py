@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from meshmocap.body.oqr import build_oqr
-from meshmocap.body.pose_data import load_pose_sources
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapWarning
 from meshmocap.io.meshes import read_mesh
+from meshmocap.io.pose_data import load_pose_sources
 from meshmocap.io.results import frame_path, read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence

@@ -29,9 +29,9 @@ def _cmd_templates(args: argparse.Namespace) -> int:
 
 
 def _cmd_retarget(args: argparse.Namespace) -> int:
-    from meshmocap.body.clips import clip_on
     from meshmocap.body.template import load_template
     from meshmocap.io.bvh import write_bvh
+    from meshmocap.io.clips import clip_on
 
     template = load_template(args.template)
     motion = clip_on(template, args.clip, fps=args.fps)
@@ -41,9 +41,9 @@ def _cmd_retarget(args: argparse.Namespace) -> int:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    from meshmocap.body.clips import clip_on
+    from meshmocap.apps.render import render_motion
     from meshmocap.body.template import load_template
-    from meshmocap.evaluation.render import render_motion
+    from meshmocap.io.clips import clip_on
 
     template = load_template(args.template)
     if args.clip is None:  # the rest pose
@@ -77,7 +77,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from meshmocap.evaluation.demo import run_demo
+    from meshmocap.apps.demo import run_demo
 
     res = run_demo(args.out, seconds=args.seconds, track_frames=args.track_frames, clip=args.clip)
     print(f"meshmocap demo: wrote {args.out}/ in {res.seconds:.1f} s")
@@ -119,7 +119,8 @@ def _cmd_hull(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from meshmocap.evaluation.evaluate import evaluate, summary, write_evaluation
+    from meshmocap.analysis.evaluate import evaluate, summary
+    from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.io.capture import Capture
     from meshmocap.io.results import read_track
 
@@ -135,7 +136,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from meshmocap.evaluation.report import build_report
+    from meshmocap.apps.report import build_report
 
     t0 = time.perf_counter()
     path = build_report(
@@ -183,11 +184,11 @@ def _cmd_learn(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from meshmocap.apps.latent_plot import plot_latent_space
     from meshmocap.body.oqr import build_oqr
-    from meshmocap.body.pose_data import load_pose_sources
     from meshmocap.body.template import load_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-    from meshmocap.evaluation.latent_plot import plot_latent_space
+    from meshmocap.io.pose_data import load_pose_sources
     from meshmocap.trackers.manifold import fit_pose_manifold
 
     out = Path(args.out)
@@ -251,9 +252,9 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    from meshmocap.apps.bench import run_bench
+    from meshmocap.apps.bench_report import markdown_table, tradeoff_table
     from meshmocap.errors import InputError
-    from meshmocap.evaluation.bench import run_bench
-    from meshmocap.evaluation.bench_report import markdown_table, tradeoff_table
 
     def items(values: list[str] | None) -> list[str] | None:  # "a,b c" → [a, b, c]
         return None if values is None else [n for v in values for n in v.split(",") if n]

@@ -13,7 +13,7 @@ on it. :func:`rig_mesh` turns any closed human mesh, in roughly any upright pose
    free.
 2. **Articulated fit** (:func:`fit_skeleton`): Gauss–Newton on the root translation, a
    world-frame rotation increment per free joint (the parametrisation, model points and
-   lever arms of :mod:`meshmocap.trackers.articulated_icp`) and the log of a global scale
+   lever arms of :mod:`meshmocap.body.articulated`) and the log of a global scale
    about the root; closest points **both ways** (so a limb cannot collapse into the trunk
    while part of the mesh stays unexplained), point-to-plane plus a tenth of
    point-to-point, with agreeing normals, within a distance shrinking over the iterations;
@@ -46,6 +46,14 @@ import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    apply_increment,
+    articulated_model,
+    nearest_compatible,
+    pose_points,
+    residual_jacobian,
+)
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.template import EvalSkeleton, Template, load_template, template_problems
 from meshmocap.errors import InputError, MeshError
@@ -53,14 +61,6 @@ from meshmocap.geometry.decimate import decimate_mesh
 from meshmocap.geometry.mesh import face_normals, mesh_problems, signed_volume, vertex_normals
 from meshmocap.geometry.proximity import closest_points_on_triangles, sample_surface
 from meshmocap.geometry.rotations import so3_exp, so3_log
-from meshmocap.trackers.articulated_icp import (
-    FIXED_JOINTS,
-    apply_increment,
-    build_model,
-    nearest_compatible,
-    pose_points,
-    residual_jacobian,
-)
 
 __all__ = [
     "MIN_VERTICES",
@@ -153,7 +153,7 @@ class _Fitter:
                  fixed_joints, fit_scale, seed):  # fmt: skip
         self.t = template
         self.sk = template.skeleton
-        self.model = build_model(template, n_points=n_model_points, seed=seed)
+        self.model = articulated_model(template, n_points=n_model_points, seed=seed)
         self.Y, self.NY = _surface(V, F, n_data_points, seed)
         self.tree = KDTree(self.Y)
         self.lambda_pose = lambda_pose

@@ -3,7 +3,7 @@ cameras; silhouettes are rendered (optionally degraded), visual hulls carved, an
 truth (joints, posed vertices, pose parameters) stored beside them, frame by frame.
 
 The result is a capture folder (:mod:`meshmocap.io.capture`) that trackers read like a
-real one and that :mod:`meshmocap.evaluation` scores against the truth.
+real one and that :mod:`meshmocap.analysis` scores against the truth.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._progress import progress
-from meshmocap.body.clips import clip_on
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
@@ -33,6 +32,7 @@ from meshmocap.io.capture import (
     write_truth,
     write_truth_faces,
 )
+from meshmocap.io.clips import clip_on
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.silhouettes import write_mask
 from meshmocap.studio.degrade import Degradation, degrade

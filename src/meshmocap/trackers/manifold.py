@@ -37,9 +37,9 @@ import numpy as np
 
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import OQR, build_oqr, configuration_vector, quads_from_pose
-from meshmocap.body.pose_data import PoseSet, load_pose_sources
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.io.pose_data import PoseSet, load_pose_sources
 from meshmocap.models.gplvm import GPLVM
 
 __all__ = [
@@ -94,7 +94,7 @@ class PoseManifold:
     rest_cage : (85, 3) float64
         Rest cage of the template's OQR, metres, world frame (Z up).
     trials, groups : (N,) str
-        Labels of the training poses (:class:`~meshmocap.body.pose_data.PoseSet`).
+        Labels of the training poses (:class:`~meshmocap.io.pose_data.PoseSet`).
     sources : tuple of str
         The sources read.
     n_poses : int
@@ -235,7 +235,7 @@ def fit_pose_manifold(
     Parameters
     ----------
     poses : PoseSet
-        Training configurations of ``template`` (:mod:`meshmocap.body.pose_data`).
+        Training configurations of ``template`` (:mod:`meshmocap.io.pose_data`).
     template : Template
     oqr : OQR, optional
         The template's rigging (built when omitted).
@@ -272,7 +272,7 @@ def learn_pose_manifold(
     random_state: int = 0,
     max_iter: int = 2000,
 ) -> PoseManifold:
-    """Read pose sources (:func:`~meshmocap.body.pose_data.load_pose_source`: procedural
+    """Read pose sources (:func:`~meshmocap.io.pose_data.load_pose_source`: procedural
     names, ``.bvh``/``.amc``/``.mat`` mocap, hand-labelled ``.npz``) and fit the manifold
     (:func:`fit_pose_manifold`)."""
     oqr = oqr or build_oqr(template)

@@ -313,5 +313,5 @@ def player_payload(player: Player) -> dict:
 
 def player_js() -> str:
     """The player's JavaScript source (``report_assets/player.js``)."""
-    src = resources.files("meshmocap.evaluation").joinpath("report_assets/player.js")
+    src = resources.files("meshmocap.apps").joinpath("report_assets/player.js")
     return src.read_text(encoding="utf-8")

@@ -1,6 +1,6 @@
 """Plots of ``meshmocap bench`` (PNG, matplotlib's Agg canvas, written atomically).
 
-Each function takes rows of :class:`~meshmocap.evaluation.bench_report.BenchRow` (results
+Each function takes rows of :class:`~meshmocap.apps.bench_rows.BenchRow` (results
 that are ``ok``) and a ``.png`` path, and returns the path:
 
 * :func:`plot_mean_errors` — mean error per method per capture, grouped bars (±1 std);
@@ -17,15 +17,12 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from meshmocap.evaluation.plots import _figure, _save
-
-if TYPE_CHECKING:
-    from meshmocap.evaluation.bench_report import BenchRow, TradeoffPoint
+from meshmocap.apps.bench_rows import BenchRow, TradeoffPoint
+from meshmocap.apps.plots import _figure, _save
 
 
 def _methods(rows: Sequence[BenchRow]) -> list[str]:

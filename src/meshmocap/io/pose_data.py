@@ -169,7 +169,7 @@ def poses_from_motion(
     ----------
     motion : Motion
         On ``template``'s skeleton, or on any CMU-flavoured skeleton (then retargeted
-        like :func:`~meshmocap.body.clips.clip_on` does for synthetic captures, by
+        like :func:`~meshmocap.io.clips.clip_on` does for synthetic captures, by
         :func:`~meshmocap.body.retarget.retarget`; ``floor="none"``: the configurations
         are pelvis-relative).
     template : Template
@@ -431,7 +431,7 @@ def load_pose_source(
     -------
     PoseSet
     """
-    from meshmocap.body.clips import load_clip
+    from meshmocap.io.clips import load_clip
 
     oqr = oqr or build_oqr(template)
     name = os.fspath(source)

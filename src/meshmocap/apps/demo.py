@@ -12,15 +12,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshmocap.body.clips import clip_on
+from meshmocap.analysis.evaluate import evaluate
+from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.player import player_from_tracks
+from meshmocap.apps.render import render_motion
+from meshmocap.apps.report import Section, comparison_table, evaluation_section, write_report
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import load_template
-from meshmocap.evaluation.evaluate import evaluate, write_evaluation
-from meshmocap.evaluation.player import player_from_tracks
-from meshmocap.evaluation.render import render_motion
-from meshmocap.evaluation.report import Section, comparison_table, evaluation_section, write_report
 from meshmocap.io.bvh import read_bvh, write_bvh
+from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker

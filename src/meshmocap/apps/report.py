@@ -1,7 +1,7 @@
 """Self-contained HTML reports: tables, embedded plots and a 3D player of tracked meshes.
 
 A report is one ``.html`` file that works offline: PNG/JPEG images are embedded as
-``data:`` URIs and the player (:mod:`meshmocap.evaluation.player`, a dependency-free
+``data:`` URIs and the player (:mod:`meshmocap.apps.player`, a dependency-free
 canvas-2D viewer) is inlined with its data; the page refers to no URL at all. Its size is
 about the player's (≤ ``max_megabytes``, 30 MB by default) plus the images'.
 
@@ -26,16 +26,17 @@ import numpy as np
 
 from meshmocap import __version__
 from meshmocap._atomic import write_text_atomic
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.evaluation.evaluate import Evaluation, evaluate, write_evaluation
-from meshmocap.evaluation.player import (
+from meshmocap.analysis.evaluate import Evaluation, evaluate
+from meshmocap.analysis.tables import _summary
+from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.player import (
     PALETTE,
     Player,
     player_from_tracks,
     player_js,
     player_payload,
 )
-from meshmocap.evaluation.tables import _summary
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, open_capture
 from meshmocap.io.results import Track, read_track
 
@@ -69,7 +70,7 @@ class Section:
 
 def table_of(result: object, *, digits: int = 1) -> Table:
     """A metrics result (joint, vertex, silhouette, bone or surface) as a report table, in
-    the display units of :func:`meshmocap.evaluation.tables.table` (mm or %)."""
+    the display units of :func:`meshmocap.analysis.tables.table` (mm or %)."""
     title, headers, rows, scale = _summary(result)
     unit = "%" if scale == 100.0 else "mm"
     heads = []
@@ -81,7 +82,7 @@ def table_of(result: object, *, digits: int = 1) -> Table:
 
 
 def evaluation_tables(ev: Evaluation) -> list[Table]:
-    """The tables of :func:`meshmocap.evaluation.evaluate.summary`, as report tables."""
+    """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables."""
     out = [
         Table(
             "Overview",
@@ -358,10 +359,10 @@ def build_report(
     tracks : track folders (or read tracks), one or more
     eval_dirs : folders, one per track, optional
         Where each evaluation's CSV tables and PNG plots are written
-        (:func:`~meshmocap.evaluation.evaluate.write_evaluation`); default: a temporary
+        (:func:`~meshmocap.analysis.evaluate.write_evaluation`); default: a temporary
         folder, removed once the plots are embedded.
     max_frames : int, frames of the player (a regular stride over long tracks)
-    silhouettes, surface_frames : as in :func:`~meshmocap.evaluation.evaluate.evaluate`
+    silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
     """
     cap = capture if isinstance(capture, Capture | SequenceCapture) else open_capture(capture)
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]

@@ -127,37 +127,3 @@ def write_gait_csv(path: str | os.PathLike, gait: Gait) -> Path:
     )
     write_text_atomic(path, buf.getvalue())
     return Path(path)
-
-
-def plot_gait(gait: Gait, path: str | os.PathLike) -> Path:
-    """Fig. 11 of the cage paper: ankle heights over time, and the wrists' paths relative to
-    the pelvis in the sagittal plane, to a PNG."""
-    from matplotlib.figure import Figure
-
-    from meshmocap.evaluation.plots import _save
-
-    fig = Figure(figsize=(10, 4))
-    a, b = fig.subplots(1, 2)
-    for k, (name, col) in enumerate((("left", "tab:red"), ("right", "tab:blue"))):
-        a.plot(gait.times, gait.ankle_height[:, k] * 100, color=col, label=f"{name} ankle")
-        a.plot(
-            gait.times[gait.contacts[k]],
-            gait.ankle_height[gait.contacts[k], k] * 100,
-            "v",
-            color=col,
-        )
-        b.plot(gait.wrist_sagittal[:, k, 0] * 100, gait.wrist_sagittal[:, k, 1] * 100, color=col,
-               label=f"{name} wrist")  # fmt: skip
-    for s, e in gait.cycles:
-        a.axvspan(gait.times[s], gait.times[e], color="0.9", zorder=0)
-    a.set(
-        xlabel="time (s)", ylabel="height (cm)", title=f"ankle heights ({len(gait.cycles)} cycles)"
-    )
-    b.set(
-        xlabel="forward of pelvis (cm)", ylabel="above pelvis (cm)", title="wrists, sagittal plane"
-    )
-    b.set_aspect("equal", adjustable="datalim")
-    a.legend(loc="upper right")
-    b.legend(loc="upper right")
-    fig.tight_layout()
-    return _save(fig, path)

@@ -14,15 +14,11 @@ frames are listed as out of view rather than blamed on the tracker.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from meshmocap._atomic import write_text_atomic
-from meshmocap.errors import InputError
-from meshmocap.evaluation.metrics import (
+from meshmocap.analysis.metrics import (
     BoneLengths,
     CorrespondenceErrors,
     JointErrors,
@@ -34,13 +30,8 @@ from meshmocap.evaluation.metrics import (
     mesh_silhouette_errors,
     surface_distance,
 )
-from meshmocap.evaluation.plots import (
-    plot_bone_lengths,
-    plot_frame_errors,
-    plot_joint_errors,
-    plot_silhouette_errors,
-)
-from meshmocap.evaluation.tables import format_table, table, write_csv
+from meshmocap.analysis.tables import format_table, table
+from meshmocap.errors import InputError
 from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import Track
@@ -200,31 +191,3 @@ def summary(ev: Evaluation) -> str:
     if ev.correspondence is not None:
         out.append(table(ev.correspondence))
     return "\n\n".join(out)
-
-
-def write_evaluation(ev: Evaluation, out: str | os.PathLike) -> list[Path]:
-    """Write ``summary.txt``, CSV tables and PNG plots of ``ev`` into the folder ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    write_text_atomic(out / "summary.txt", summary(ev) + "\n")
-    written.append(out / "summary.txt")
-    if ev.joints is not None:
-        written += [write_csv(out / "joint_errors.csv", ev.joints),
-                    write_csv(out / "joint_errors_per_frame.csv", ev.joints, per_frame=True),
-                    plot_frame_errors(ev.joints, out / "joint_error_per_frame.png"),
-                    plot_joint_errors(ev.joints, out / "joint_error_per_joint.png")]  # fmt: skip
-    if ev.bones is not None:
-        written += [write_csv(out / "bone_lengths.csv", ev.bones),
-                    plot_bone_lengths(ev.bones, out / "bone_lengths.png")]  # fmt: skip
-    if ev.silhouettes is not None:
-        written += [
-            write_csv(out / "silhouette_errors.csv", ev.silhouettes),
-            plot_silhouette_errors(ev.silhouettes, out / "silhouette_errors.png"),
-        ]
-    if ev.correspondence is not None:
-        written += [
-            write_csv(out / "vertex_errors.csv", ev.correspondence),
-            plot_frame_errors(ev.correspondence, out / "vertex_error_per_frame.png"),
-        ]
-    return written

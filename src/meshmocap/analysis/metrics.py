@@ -3,8 +3,8 @@
 Inputs are in the library's units (metres, world frame Z up); joint, bone and
 correspondence results are in **millimetres**, surface distances in **metres**, silhouette
 errors are ratios (0.05 = 5 %). Results are small frozen dataclasses that
-:mod:`meshmocap.evaluation.tables` prints or writes as CSV and
-:mod:`meshmocap.evaluation.plots` draws.
+:mod:`meshmocap.analysis.tables` prints or writes as CSV and
+:mod:`meshmocap.apps.plots` draws.
 
 Frames whose prediction holds NaN or infinite values (a tracker that lost the subject) are
 **failures**: listed in ``failed`` and left out of every statistic, never propagated as

@@ -2,8 +2,8 @@
 
 Every method, ablation and baseline of :data:`~meshmocap.trackers.registry.METHODS` tracks
 every capture of a named set; each (capture, method) pair is scored by
-:func:`~meshmocap.evaluation.evaluate.evaluate` and written as ``results.csv``,
-``results.md`` and plots (:mod:`meshmocap.evaluation.bench_report`).
+:func:`~meshmocap.analysis.evaluate.evaluate` and written as ``results.csv``,
+``results.md`` and plots (:mod:`meshmocap.apps.bench_report`).
 
 Protocol: synthetic captures from the studio at 60 fps, tracking template ``neutral_5k``,
 subject = template unless a variant names another body, first frame initialised from
@@ -55,17 +55,17 @@ import numpy as np
 
 from meshmocap._atomic import write_text_atomic
 from meshmocap._validate import check_choice
-from meshmocap.body.procedural import PROCEDURAL_MOTIONS
-from meshmocap.body.template import Template, bundled_templates, load_template
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.evaluation.bench_report import (
+from meshmocap.analysis.evaluate import evaluate
+from meshmocap.apps.bench_report import write_report
+from meshmocap.apps.bench_rows import (
     BenchRow,
     TradeoffPoint,
     not_applicable,
     row_from_evaluation,
-    write_report,
 )
-from meshmocap.evaluation.evaluate import evaluate
+from meshmocap.body.procedural import PROCEDURAL_MOTIONS
+from meshmocap.body.template import Template, bundled_templates, load_template
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import done_frames
 from meshmocap.studio.degrade import Degradation
@@ -280,8 +280,8 @@ def mesh_manifold(
     rigging cannot be built (:func:`~meshmocap.body.oqr.build_oqr` fails)."""
     from meshmocap.body.autorig import fit_sequence
     from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
-    from meshmocap.body.pose_data import PoseSet
     from meshmocap.errors import MeshError
+    from meshmocap.io.pose_data import PoseSet
     from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold, template_digest
 
     try:
@@ -398,14 +398,14 @@ class _Run:
 
 @functools.cache
 def code_digest() -> str:
-    """Digest (8 hex digits) of the package's source outside ``evaluation/``: the code
-    that makes a track. A benchmark keys its cached tracks by it, so an edited tracker
+    """Digest (8 hex digits) of the package's source outside ``analysis/`` and ``apps/``:
+    the code that makes a track. A benchmark keys its cached tracks by it, so an edited tracker
     re-tracks instead of resuming a track made by the old code."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha1()
     for p in sorted(root.rglob("*.py")):
         rel = p.relative_to(root).as_posix()
-        if not rel.startswith("evaluation/"):
+        if not rel.startswith(("analysis/", "apps/")):
             h.update(rel.encode() + b"\0" + p.read_bytes())
     return h.hexdigest()[:8]
 

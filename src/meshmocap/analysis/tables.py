@@ -1,6 +1,6 @@
 """Evaluation results as plain-text tables for the terminal and as CSV files.
 
-:func:`table` renders any result of :mod:`meshmocap.evaluation.metrics` as aligned text
+:func:`table` renders any result of :mod:`meshmocap.analysis.metrics` as aligned text
 (millimetres for joints, bones, vertices and surfaces; percent for silhouettes);
 :func:`write_csv` writes the same summary, or one row per frame, atomically. CSV values
 are unrounded, in the units named in each header (``_mm``, ``_m``, ``_ratio``).
@@ -18,8 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import write_bytes_atomic
-from meshmocap.errors import InputError
-from meshmocap.evaluation.metrics import (
+from meshmocap.analysis.metrics import (
     BoneLengths,
     CorrespondenceErrors,
     JointErrors,
@@ -27,6 +26,7 @@ from meshmocap.evaluation.metrics import (
     Stats,
     SurfaceDistance,
 )
+from meshmocap.errors import InputError
 
 Result = JointErrors | CorrespondenceErrors | SilhouetteErrors | BoneLengths | SurfaceDistance
 _TYPES = (JointErrors, CorrespondenceErrors, SilhouetteErrors, BoneLengths, SurfaceDistance)
@@ -145,7 +145,7 @@ def write_csv(path: str | os.PathLike, result: Result, *, per_frame: bool = Fals
     Parameters
     ----------
     path : str or path, the ``.csv`` file
-    result : a result of :mod:`meshmocap.evaluation.metrics`
+    result : a result of :mod:`meshmocap.analysis.metrics`
     per_frame : bool
         False: the summary of :func:`table` (unrounded, units in the headers). True: one row
         per input frame with a ``status`` column (``ok``, ``failed``, ``skipped``; values

@@ -1,7 +1,7 @@
 /* meshmocap report player: a dependency-free canvas-2D viewer of tracked mesh sequences.
  *
  * Each <div class="mm-player"> holds a <script type="application/json"> with the data written
- * by meshmocap.evaluation.report (positions quantised to int16 around a shared origin,
+ * by meshmocap.apps.report (positions quantised to int16 around a shared origin,
  * base64-encoded), a <canvas> and the controls. Meshes are drawn with the painter's
  * algorithm and flat Lambert shading; hull points are depth-sorted with the triangles;
  * skeletons and ground-truth joints are drawn on top. World frame: metres, Z up.

@@ -1,0 +1,188 @@
+"""Check the package's architecture: imports point down the layers, no import cycle, small modules.
+
+Walks ``src/meshmocap`` with :mod:`ast` (nothing is imported) and reports:
+
+* every import of a module from a higher layer than its own (``LAYERS`` below);
+* import cycles between files and between packages (strongly connected components of the
+  import graph, with ``TYPE_CHECKING`` and function-level imports counted: a cycle hidden
+  in a function is still a knot);
+* modules over ``MAX_LINES`` lines.
+
+Usage: ``python tools/check_architecture.py [SRC]``; exit status 1 when anything is found.
+The test suite runs the same check (``tests/test_architecture.py``).
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Layers from the bottom up. A module may import its own layer and the layers below.
+#: Top-level modules and packages of ``meshmocap``; ``meshmocap/__init__.py`` is base.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("__init__", "errors", "_atomic", "_validate", "_progress", "_threads"),  # base
+    ("geometry",),
+    ("models",),
+    ("body",),
+    ("io",),
+    ("trackers",),
+    ("studio",),
+    ("analysis",),
+    ("apps",),
+    ("cli",),
+)
+MAX_LINES = 600
+
+
+@dataclass(frozen=True)
+class Report:
+    """What :func:`check` found; each entry is one human-readable line."""
+
+    upward: list[str]
+    file_cycles: list[list[str]]
+    package_cycles: list[list[str]]
+    long_modules: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not (self.upward or self.file_cycles or self.package_cycles or self.long_modules)
+
+
+def module_name(path: Path, src: Path) -> str:
+    """Dotted module name of ``path`` (a ``.py`` file under ``src``)."""
+    parts = list(path.relative_to(src).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imports(path: Path, name: str, known: set[str]) -> set[str]:
+    """The modules of ``known`` that the file at ``path`` (module ``name``) imports."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    is_package = path.name == "__init__.py"
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = name.split(".")
+                keep = len(base) - node.level + (1 if is_package else 0)
+                module = ".".join(base[:keep] + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            targets = [module] + [f"{module}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        for target in targets:
+            # ``import a.b.c`` also runs a and a.b: the deepest known module is the edge
+            while target and target not in known:
+                target = target.rpartition(".")[0]
+            if target and target != name and target.count(".") >= 1:
+                found.add(target)
+    return found
+
+
+def unit(module: str) -> str:
+    """The top-level module or package of ``meshmocap.x.y`` (``x``); ``__init__`` for the root."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            else:
+                work.pop()
+                if work:
+                    parent = work[-1][0]
+                    low[parent] = min(low[parent], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        component.append(member)
+                        if member == node:
+                            break
+                    if len(component) > 1:
+                        found.append(sorted(component))
+    return sorted(found)
+
+
+def check(src: Path) -> Report:
+    """Check the package ``src/meshmocap`` (``src`` is the folder that holds it)."""
+    files = {module_name(p, src): p for p in sorted((src / "meshmocap").rglob("*.py"))}
+    known = set(files)
+    layer = {u: k for k, names in enumerate(LAYERS) for u in names}
+    graph = {name: imports(path, name, known) for name, path in files.items()}
+
+    upward = []
+    for name in sorted(graph):
+        own = unit(name)
+        if own not in layer:
+            upward.append(f"{name}: '{own}' is in no layer of tools/check_architecture.py")
+            continue
+        for target in sorted(graph[name]):
+            other = unit(target)
+            if layer.get(other, len(LAYERS)) > layer[own]:
+                upward.append(f"{name} imports {target} (layer {other} is above {own})")
+
+    packages: dict[str, set[str]] = defaultdict(set)
+    for name, targets in graph.items():
+        packages[unit(name)] |= {unit(t) for t in targets} - {unit(name)}
+    long_modules = []
+    for name, path in files.items():
+        n = len(path.read_text(encoding="utf-8").splitlines())
+        if n > MAX_LINES:
+            long_modules.append(f"{name}: {n} lines (at most {MAX_LINES})")
+    return Report(upward, cycles(graph), cycles(dict(packages)), long_modules)
+
+
+def main(argv: list[str]) -> int:
+    src = Path(argv[0]) if argv else Path(__file__).resolve().parents[1] / "src"
+    report = check(src)
+    for line in report.upward:
+        print("upward import:", line)
+    for c in report.file_cycles:
+        print("file cycle:", " <-> ".join(c))
+    for c in report.package_cycles:
+        print("package cycle:", " <-> ".join(c))
+    for line in report.long_modules:
+        print("long module:", line)
+    if report.ok:
+        print(f"ok: {len(LAYERS)} layers, imports point down, no cycle, no module over "
+              f"{MAX_LINES} lines")  # fmt: skip
+    return 0 if report.ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
