@@ -1,0 +1,55 @@
+"""The ``meshmocap`` command: a thin shell over the library.
+
+Every subcommand parses its arguments, calls library functions and prints a short summary.
+Each module of this package holds a few commands and a ``register(sub)`` that adds their
+parsers; a new command is a new module listed in :data:`COMMANDS`. Errors the user can fix
+(a missing file, a malformed BVH, a bad option) are printed as one line
+``meshmocap: error: ...`` with exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from meshmocap import __version__
+from meshmocap.cli import capture, demo, evaluation, motion, track
+from meshmocap.errors import MeshmocapError
+
+#: Command modules, in the order ``meshmocap --help`` lists their commands.
+COMMANDS = (demo, motion, capture, track, evaluation)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of the ``meshmocap`` command."""
+    p = argparse.ArgumentParser(
+        prog="meshmocap", description="Markerless human performance capture from 3D mesh sequences."
+    )
+    p.add_argument("--version", action="version", version=f"meshmocap {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module in COMMANDS:
+        module.register(sub)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``meshmocap`` command; return its exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except MeshmocapError as exc:
+        print(f"meshmocap: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("meshmocap: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # `meshmocap eval ... | head`: the reader left, not an error
+        # keep the interpreter's final flush from raising again on the closed pipe
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

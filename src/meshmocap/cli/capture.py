@@ -1,0 +1,61 @@
+"""Captures: ``meshmocap synth`` (the synthetic studio) and ``hull`` (visual hulls of real
+silhouettes)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from meshmocap.cli._args import frame_range
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    from meshmocap.studio.degrade import Degradation
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    rng = args.frames or slice(None)
+    spec = SynthSpec(
+        motion=args.motion, template=args.template, subject=args.subject, rig=args.rig,
+        fps=args.fps, start=rng.start, stop=rng.stop, step=rng.step, seed=args.seed,
+        voxel_size=args.voxel_size,
+        degradation=Degradation(jitter=args.jitter, holes=args.holes, blobs=args.blobs,
+                                missed_limb=args.missed_limb),
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    cap = synthesize(args.out, spec)
+    dt = time.perf_counter() - t0
+    print(f"wrote {cap.path}: {len(cap)} frames, {len(cap.cameras)} cameras, {dt:.1f} s")
+    return 0
+
+
+def _cmd_hull(args: argparse.Namespace) -> int:
+    from meshmocap.studio.hulls import compute_hulls
+
+    t0 = time.perf_counter()
+    cap = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
+    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the parsers of this module's commands to ``sub``."""
+    y = sub.add_parser("synth", help="make a synthetic capture with ground truth")
+    y.add_argument("out", help="capture folder to write (resumes an interrupted run)")
+    y.add_argument("--motion", default="walk", help="procedural motion name or .bvh/.amc file")
+    y.add_argument("--template", default="neutral", help="tracking template (name or .npz)")
+    y.add_argument("--subject", help="body that performs, if not the template (e.g. heavy_male)")
+    y.add_argument("--rig", default="humaneva4", help="humaneva4, ring8 or a camera file")
+    y.add_argument("--fps", type=float, default=60.0, help="frame rate (default: %(default)s)")
+    y.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    y.add_argument("--voxel-size", type=float, default=0.01, help="hull voxel edge, metres")
+    y.add_argument("--jitter", type=float, default=0.0, help="silhouette boundary jitter, pixels")
+    y.add_argument("--holes", type=int, default=0, help="holes punched per silhouette")
+    y.add_argument("--blobs", type=int, default=0, help="spurious blobs per silhouette")
+    y.add_argument("--missed-limb", action="store_true", help="cut a limb from each silhouette")
+    y.add_argument("--seed", type=int, default=0, help="seed of the degradations")
+    y.set_defaults(func=_cmd_synth)
+    h = sub.add_parser("hull", help="carve visual hulls from a capture's silhouettes")
+    h.add_argument("capture", help="folder with cameras.json and silhouettes/<camera>/NNNNN.png")
+    h.add_argument("--voxel-size", type=float, default=0.01, help="voxel edge, metres")
+    h.add_argument("--overwrite", action="store_true", help="recompute existing hulls")
+    h.set_defaults(func=_cmd_hull)

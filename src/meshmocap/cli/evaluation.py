@@ -1,0 +1,108 @@
+"""Scores: ``meshmocap eval``, ``report`` and ``bench``."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from meshmocap.analysis.evaluate import evaluate, summary
+    from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.io.capture import Capture
+    from meshmocap.io.results import read_track
+
+    track, capture = read_track(args.track), Capture(args.capture)
+    ev = evaluate(
+        track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
+    )
+    print(summary(ev))
+    if args.out:
+        files = write_evaluation(ev, args.out)
+        print(f"\nwrote {len(files)} files to {args.out}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from meshmocap.apps.report import build_report
+
+    t0 = time.perf_counter()
+    path = build_report(
+        args.out, args.capture, args.tracks, eval_dirs=args.eval_dir, max_frames=args.max_frames,
+        silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames,
+    )  # fmt: skip
+    size = path.stat().st_size / 1e6
+    print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from meshmocap.apps.bench import run_bench
+    from meshmocap.apps.bench_report import markdown_table, tradeoff_table
+    from meshmocap.errors import InputError
+
+    def items(values: list[str] | None) -> list[str] | None:  # "a,b c" → [a, b, c]
+        return None if values is None else [n for v in values for n in v.split(",") if n]
+
+    fractions = items(args.keep_fractions)
+    try:
+        keep = (None if fractions is None else  # None: the set's sweep
+                [] if fractions == ["none"] else [float(f) for f in fractions])  # fmt: skip
+    except ValueError:
+        msg = f"bench: --keep-fractions must be numbers or none, found {fractions}"
+        raise InputError(msg) from None
+    res = run_bench(
+        args.out, captures=items(args.captures) or args.set, methods=items(args.methods),
+        data=args.data, work=args.work, max_frames=args.max_frames, keep_fractions=keep,
+        template=args.template, log=lambda line: print(line, flush=True),
+    )  # fmt: skip
+    print(f"\n{markdown_table(res.rows)}")
+    if res.tradeoff:
+        print(f"\nkept fraction of the patch classifier on {res.tradeoff_capture} (Fig. 8):")
+        print(tradeoff_table(res.tradeoff))
+    for name, why in res.skipped:
+        print(f"left out {name}: {why}")
+    n = len(res.rows) + len(res.tradeoff)
+    print(f"\nwrote {len(res.files)} files to {args.out} in {res.seconds:.0f} s "
+          f"({n} results, {len(res.tracked)} tracked by this run)")  # fmt: skip
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the parsers of this module's commands to ``sub``."""
+    e = sub.add_parser("eval", help="score a track against its capture's ground truth")
+    e.add_argument("capture", help="capture folder")
+    e.add_argument("track", help="track folder written by 'meshmocap track'")
+    e.add_argument("--out", help="folder for CSV tables and PNG plots")
+    e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
+    e.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
+    e.set_defaults(func=_cmd_eval)
+    o = sub.add_parser("report", help="write an HTML report: scores, plots and a 3D player")
+    o.add_argument("capture", help="capture folder")
+    o.add_argument("tracks", nargs="+", metavar="track", help="track folders to compare")
+    o.add_argument("--out", required=True, help="HTML file to write (one self-contained file)")
+    o.add_argument("--eval-dir", action="append", help="keep each track's CSV/PNG evaluation "
+                   "here (repeat once per track, in order)")  # fmt: skip
+    o.add_argument("--max-frames", type=int, default=120, help="frames in the 3D player")
+    o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
+    o.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
+    o.set_defaults(func=_cmd_report)
+    b = sub.add_parser(
+        "bench",
+        help="compare every tracker on a set of captures",
+        description="Run every tracker on a set of captures; write results.csv, results.md "
+        "and plots. Captures are BASE[+VARIANT...]: BASE a procedural motion (walk, jog, "
+        "squat, ...), a CMU clip (05_01, 09_01, 01_01; needs --data) or crane (needs --data); "
+        "VARIANT humaneva4|ring8, degraded, heavy_male|small_female. Re-runs reuse the work "
+        "folder.",
+    )
+    b.add_argument("--set", default="quick", help="quick (minutes; run it first), standard, full")
+    b.add_argument("--captures", nargs="+", help="captures instead of a set, e.g. walk,walk+ring8")
+    b.add_argument("--methods", nargs="+", help="trackers (default: the set's, else all)")
+    b.add_argument("--data", help="shared data folder (CMU clips, crane), e.g. ../shared/data")
+    b.add_argument("--work", help="cache of captures and tracks (default: OUT/work); resumes")
+    b.add_argument("--out", required=True, help="report folder")
+    b.add_argument("--max-frames", type=int, help="at most N frames per capture")
+    b.add_argument("--keep-fractions", nargs="+", help="Fig. 8 sweep of the patch tracker")
+    b.add_argument("--template", default="neutral_5k", help="tracking template")
+    b.set_defaults(func=_cmd_bench)

@@ -1,0 +1,176 @@
+"""Tracking: ``meshmocap track``, ``learn`` (pose manifolds) and ``transfer``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from meshmocap.cli._args import frame_range
+
+
+def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap.body.template import load_template
+    from meshmocap.io.capture import open_capture
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
+
+    options = {}
+    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
+                 "fast_iter_scale", "joint_readout"):  # fmt: skip
+        value = getattr(args, name)
+        if value is not None:
+            options[name] = value
+    template = load_template(args.template)
+    if args.method in MANIFOLD_METHODS and args.manifold is None:
+        print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
+              f"procedural walk and jog on {template.name!r}")  # fmt: skip
+    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    capture = open_capture(args.capture)
+    frames = range(len(capture))[args.frames] if args.frames else None
+    t0 = time.perf_counter()
+    track = track_sequence(
+        tracker, template, capture, args.out, frames=frames, resume=not args.restart
+    )
+    dt = time.perf_counter() - t0
+    bad = int((~track.healthy).sum())
+    print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
+          f"({track.seconds[1:].mean() if len(track.seconds) > 1 else 0:.3f} s per frame); "
+          f"{bad} flagged unhealthy; results in {args.out}")  # fmt: skip
+    return 0
+
+
+def _cmd_learn(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from meshmocap.apps.latent_plot import plot_latent_space
+    from meshmocap.body.oqr import build_oqr
+    from meshmocap.body.template import load_template
+    from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+    from meshmocap.io.pose_data import load_pose_sources
+    from meshmocap.trackers.manifold import fit_pose_manifold
+
+    out = Path(args.out)
+    if out.suffix != ".npz" or not out.parent.is_dir():  # fail before the work
+        bad = MeshmocapFileNotFoundError if out.suffix == ".npz" else InputError
+        raise bad(f"learn: --out must be a .npz file in an existing folder, found {out}")
+    template = load_template(args.template)
+    t0 = time.perf_counter()
+    oqr = build_oqr(template)
+    poses = load_pose_sources(args.sources, template, oqr=oqr, asf=args.asf)
+    print(f"read {len(poses)} poses of {template.name!r} from {len(args.sources)} source(s) "
+          f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=args.latent_dim,
+                           n_samples=args.samples, random_state=args.seed)  # fmt: skip
+    gp = pm.gp
+    names, counts = np.unique(pm.groups, return_counts=True)
+    err = gp.predict(gp.X_) - gp.Y_mean_ - gp.Y_scale_ * gp.Y_
+    centres = np.linalg.norm(err.reshape(len(err), -1, 3, 3)[:, :, 0], axis=2).mean() * 1000
+    print(f"learned a {pm.n_components}-D manifold from {pm.n_samples} poses "
+          f"({', '.join(f'{n} {g}' for g, n in zip(names, counts, strict=True))}) in "
+          f"{pm.fit_seconds:.1f} s: final log-likelihood {gp.log_likelihood_:.1f} after "
+          f"{gp.n_iter_} L-BFGS-B iterations{'' if gp.converged_ else ' (not converged)'}; "
+          f"training quads reproduced to {centres:.1f} mm")  # fmt: skip
+    print(f"wrote {pm.save(args.out)}")
+    if args.plot:
+        labels = pm.groups if len(names) <= 10 else None
+        title = f"{template.name}: {pm.n_components}-D pose manifold, {pm.n_samples} poses"
+        print(f"wrote {plot_latent_space(gp, args.plot, labels=labels, title=title)}")
+    return 0
+
+
+def _cmd_transfer(args: argparse.Namespace) -> int:
+    import warnings
+
+    from meshmocap.body.template import bundled_templates, load_template
+    from meshmocap.io.meshes import read_mesh
+    from meshmocap.trackers.transfer import read_cage_track, write_transfer
+
+    template = load_template(args.template) if args.template else None
+    track = read_cage_track(args.track, template=template)
+    if args.mesh in bundled_templates():
+        body = load_template(args.mesh)
+        V, F = body.V, body.F
+    else:
+        V, F = read_mesh(args.mesh, up=args.up)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = write_transfer(track, V, F, args.out, fit=args.fit, outside=args.outside,
+                             tolerance=args.tolerance, ext=f".{args.format}",
+                             resume=not args.restart, name=args.mesh)  # fmt: skip
+    for w in caught:
+        print(f"meshmocap: warning: {w.message}", file=sys.stderr)
+    s = res.placement.scale
+    print(f"transferred {len(res.files)} frames of {args.track} to {args.mesh!r} ({len(V)} "
+          f"vertices, fit {args.fit}: scale {'/'.join(f'{v:.3f}' for v in s)}) in "
+          f"{time.perf_counter() - t0:.1f} s: {res.written} written, {res.skipped} already "
+          f"there; {res.n_outside} vertices outside the rest cage (up to "
+          f"{res.max_outside * 1000:.0f} mm); meshes in {res.out}")  # fmt: skip
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the parsers of this module's commands to ``sub``."""
+    k = sub.add_parser(
+        "track", help="track a capture: skeleton joints and template shape per frame"
+    )
+    k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
+    k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
+                   "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
+    k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
+    k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")
+    k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
+    k.add_argument("--keep-fraction", type=float, help="patch tracker: on-bone points kept")
+    k.add_argument("--outlier-sigmas", type=float, help="patch tracker: a point this many σ "
+                   "from the model is as likely an outlier (default 3; 2 rejects more of a "
+                   "few-camera hull's phantom volumes, but also true points where the subject's "
+                   "surface differs from the template's)")  # fmt: skip
+    k.add_argument("--max-iter", type=int, help="iterations per frame")
+    k.add_argument("--fast-iter-scale", type=float, help="patch tracker: iterations of a frame "
+                   "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
+                   "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
+    k.add_argument("--joint-readout", help="patch tracker: joints reported: blend (default: "
+                   "pelvis and thorax read off the surface, limbs mostly from the skeleton), "
+                   "skeleton (the paper's) or surface")  # fmt: skip
+    k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
+                   "(default: learn one from the procedural walk and jog)")  # fmt: skip
+    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    k.set_defaults(func=_cmd_track)
+    m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")
+    m.add_argument("sources", nargs="+", metavar="SOURCE", help="walk, jog (procedural), "
+                   ".bvh/.amc/.mat mocap or a hand-labelled .npz pose file")  # fmt: skip
+    m.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    m.add_argument("--out", required=True, help="manifold file to write (.npz)")
+    m.add_argument("--latent-dim", type=int, default=2, help="latent dimension q")
+    m.add_argument("--samples", type=int, default=120, help="training poses (default: 120)")
+    m.add_argument("--asf", help="ASF skeleton of .amc/.mat sources (default: found beside)")
+    m.add_argument("--plot", help="also draw the latent space (.png, .pdf or .svg)")
+    m.add_argument("--seed", type=int, default=0, help="random seed")
+    m.set_defaults(func=_cmd_learn)
+    x = sub.add_parser("transfer", help="replay a cage track with another mesh (motion transfer)")
+    x.add_argument("track", help="track folder written by 'meshmocap track --method cage'")
+    x.add_argument("mesh", help="a bundled template name or a mesh file (.obj, .ply, ...)")
+    x.add_argument("--out", required=True, help="folder for one mesh per frame")
+    x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
+    x.add_argument(
+        "--fit",
+        default="none",
+        choices=["none", "scale", "stretch"],
+        help="place the mesh where the template stands (default: as it is)",
+    )
+    x.add_argument("--up", default="z", choices=["z", "y"], help="the mesh file's up axis")
+    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb"])
+    x.add_argument(
+        "--outside",
+        default="warn",
+        choices=["warn", "raise", "ignore"],
+        help="vertices outside the rest cage: warn, fail or ignore",
+    )
+    x.add_argument("--tolerance", type=float, default=0.005, help="outside tolerance, metres")
+    x.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    x.set_defaults(func=_cmd_transfer)
