@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("models",),
     ("body",),
     ("io",),
+    ("estimate",),
     ("trackers",),
     ("studio",),
     ("analysis",),
