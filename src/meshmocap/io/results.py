@@ -6,7 +6,7 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
       track.json        method, template, capture, evaluation-joint names and parents, options
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
-                        terms, iterations, seconds, health flag and message
+                        terms, iterations, seconds, health flag, flags and message
 
 A frame file is written atomically once the frame is done: the folder always holds whole
 frames, and :func:`done_frames` tells a resumed run where to continue.
@@ -22,9 +22,19 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
-from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
+from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 
 FORMAT = "meshmocap-track-1"
+
+#: What may have happened to a frame, besides a normal fit (:attr:`FrameResult.flags`):
+#:
+#: * ``failed``: the fit raised a numerical error or gave non-finite values; the frame
+#:   repeats the last good result (``healthy`` is False);
+#: * ``missing``: the capture has no usable observation of the frame (a dropped frame, an
+#:   empty hull); the tracker coasted across it (``healthy`` is False);
+#: * ``lost``: the fit is below the quality threshold (``message`` names the body parts);
+#: * ``reinit``: the tracker re-initialised the body, or some limbs, at this frame.
+FRAME_FLAGS = ("failed", "missing", "lost", "reinit")
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,8 +49,9 @@ class FrameResult:
     energies : dict of str → float, final value of each energy term
     n_iter : int, iterations used
     seconds : float, wall time of the frame
-    healthy : bool, False when the frame failed and the state was carried over
-    message : str, why a frame is unhealthy (empty otherwise)
+    healthy : bool, False when the frame failed or was missing and the state was carried over
+    message : str, why a frame is unhealthy or flagged (empty otherwise)
+    flags : tuple of str, from :data:`FRAME_FLAGS` (empty for a normal fit)
     state : dict of str → array, the tracker's state after the frame (to resume a run)
     """
 
@@ -53,6 +64,14 @@ class FrameResult:
     healthy: bool = True
     message: str = ""
     state: dict[str, np.ndarray] = field(default_factory=dict)
+    flags: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = set(self.flags) - set(FRAME_FLAGS)
+        if unknown:
+            raise InputError(
+                f"FrameResult: flags must be among {FRAME_FLAGS}, found {sorted(unknown)}"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +86,8 @@ class Track:
     joints : (T, K, 3) float64; vertices : (T, n, 3) float64
     energies : dict of str → (T,) float64
     n_iter : (T,) int64; seconds : (T,) float64; healthy : (T,) bool
+    flags : tuple of T tuples of str, each frame's :attr:`FrameResult.flags`
+    messages : tuple of T str, each frame's :attr:`FrameResult.message`
     """
 
     meta: dict
@@ -78,6 +99,8 @@ class Track:
     n_iter: np.ndarray
     seconds: np.ndarray
     healthy: np.ndarray
+    flags: tuple[tuple[str, ...], ...] = ()
+    messages: tuple[str, ...] = ()
 
 
 def frame_path(track: str | os.PathLike, index: int) -> Path:
@@ -126,7 +149,7 @@ def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
         np.savez_compressed(
             f, index=r.index, joints=r.joints, vertices=r.vertices.astype(np.float32),
             n_iter=r.n_iter, seconds=r.seconds, healthy=r.healthy, message=np.str_(r.message),
-            **extra,
+            flags=np.str_(",".join(r.flags)), **extra,
         )  # fmt: skip
 
 
@@ -173,4 +196,15 @@ def read_track(path: str | os.PathLike) -> Track:
         n_iter=np.array([int(r["n_iter"]) for r in rows]),
         seconds=np.array([float(r["seconds"]) for r in rows]),
         healthy=np.array([bool(r["healthy"]) for r in rows]),
+        flags=tuple(frame_flags(r) for r in rows),
+        messages=tuple(str(r["message"]) for r in rows),
     )
+
+
+def frame_flags(z: dict | np.lib.npyio.NpzFile) -> tuple[str, ...]:
+    """The flags of a frame file's contents (files written before flags existed: ``failed``
+    for an unhealthy frame, else none)."""
+    if "flags" in z:
+        text = str(z["flags"])
+        return tuple(text.split(",")) if text else ()
+    return () if bool(z["healthy"]) else ("failed",)

@@ -2,8 +2,9 @@
 frame, shows progress, resumes interrupted runs and never emits NaN.
 
 A frame whose fit raises a numerical error or returns non-finite values is flagged
-(``healthy = False``, with the reason), the tracker is reset to the last good state, and
-tracking continues with the next frame; the flagged frame repeats the last good result.
+``failed`` (``healthy = False``, with the reason), the tracker is reset to the last good
+state, and tracking continues with the next frame; the flagged frame repeats the last good
+result.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
     Track,
+    frame_flags,
     frame_path,
     read_state,
     read_track,
@@ -122,7 +124,8 @@ def track_sequence(
                 prev = read_track_frame(out, good)
                 why = f"{type(exc).__name__}: {exc}"[:200]
                 dt = time.perf_counter() - t0
-                r = replace(prev, index=frame.index, seconds=dt, healthy=False, message=why)
+                r = replace(prev, index=frame.index, seconds=dt, healthy=False, message=why,
+                            flags=("failed",))  # fmt: skip
             write_frame(out, r)
     return read_track(out)
 
@@ -135,6 +138,6 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
             vertices=z["vertices"].astype(np.float64),
             energies={k[7:]: float(z[k]) for k in z.files if k.startswith("energy_")},
             n_iter=int(z["n_iter"]), seconds=float(z["seconds"]), healthy=bool(z["healthy"]),
-            message=str(z["message"]),
+            message=str(z["message"]), flags=frame_flags(z),
             state={k[6:]: z[k] for k in z.files if k.startswith("state_")},
         )  # fmt: skip
