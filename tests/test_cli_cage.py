@@ -57,7 +57,8 @@ def test_learn_from_the_cmu35_walk_jog_mat(cmu, tmp_path, capsys):
 def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys):
     _, t, manifold, cap = setup
     track_dir = tmp_path / "track"
-    args = ["track", str(cap.path), "--method", "cage_nolocal", "--manifold", str(manifold)]
+    args = ["track", str(cap.path), "--method", "cage_nolocal", "--manifold", str(manifold),
+            "--init", "truth"]  # fmt: skip
     assert main([*args, "--out", str(track_dir)]) == 0
     assert "tracked 3 frames with cage_nolocal" in capsys.readouterr().out
     track = read_track(track_dir)

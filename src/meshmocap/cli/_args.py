@@ -20,3 +20,14 @@ def frame_range(text: str) -> slice:
         raise argparse.ArgumentTypeError(
             f"expected START:STOP[:STEP] with integers, found {text!r}"
         ) from None
+
+
+def xy_pair(text: str) -> tuple[float, float]:
+    """Parse ``X,Y`` (two finite numbers) into a tuple."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+        if not (abs(x) < float("inf") and abs(y) < float("inf")):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y with two numbers, found {text!r}") from None
+    return x, y

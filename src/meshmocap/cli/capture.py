@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import frame_range, xy_pair
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
@@ -14,12 +14,16 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from meshmocap.studio.synth import SynthSpec, synthesize
 
     rng = args.frames or slice(None)
+    gap = args.missed_limb_frames
+    gap = None if gap is None else (gap.start or 0, gap.stop)
     spec = SynthSpec(
         motion=args.motion, template=args.template, subject=args.subject, rig=args.rig,
         fps=args.fps, start=rng.start, stop=rng.stop, step=rng.step, seed=args.seed,
-        voxel_size=args.voxel_size,
+        voxel_size=args.voxel_size, heading=args.heading, offset=args.offset,
         degradation=Degradation(jitter=args.jitter, holes=args.holes, blobs=args.blobs,
-                                missed_limb=args.missed_limb),
+                                missed_limb=args.missed_limb or gap is not None
+                                or args.missed_limb_joint is not None,
+                                missed_limb_frames=gap, missed_limb_joint=args.missed_limb_joint),
     )  # fmt: skip
     t0 = time.perf_counter()
     cap = synthesize(args.out, spec)
@@ -52,6 +56,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     y.add_argument("--holes", type=int, default=0, help="holes punched per silhouette")
     y.add_argument("--blobs", type=int, default=0, help="spurious blobs per silhouette")
     y.add_argument("--missed-limb", action="store_true", help="cut a limb from each silhouette")
+    y.add_argument(
+        "--missed-limb-frames",
+        type=frame_range,
+        metavar="START:STOP",
+        help="cut the limb from these frames only (implies --missed-limb)",
+    )
+    y.add_argument(
+        "--missed-limb-joint",
+        metavar="JOINT",
+        help="cut the limb around this "
+        "evaluation joint (e.g. left_wrist) from every camera, so the hull misses it "
+        "(default: a random extremity per camera; implies --missed-limb)",
+    )
+    y.add_argument(
+        "--heading",
+        type=float,
+        default=0.0,
+        metavar="DEG",
+        help="turn the whole motion about the vertical axis through the volume's centre (degrees)",
+    )
+    y.add_argument(
+        "--offset",
+        type=xy_pair,
+        default=(0.0, 0.0),
+        metavar="X,Y",
+        help="shift the whole motion in the volume (metres)",
+    )
     y.add_argument("--seed", type=int, default=0, help="seed of the degradations")
     y.set_defaults(func=_cmd_synth)
     h = sub.add_parser("hull", help="carve visual hulls from a capture's silhouettes")

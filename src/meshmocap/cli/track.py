@@ -11,7 +11,7 @@ from meshmocap.cli._args import frame_range
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.body.template import load_template
-    from meshmocap.io.capture import open_capture
+    from meshmocap.estimate.axes import open_oriented
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
@@ -26,18 +26,41 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
-    capture = open_capture(args.capture)
+    capture, axes = open_oriented(args.capture, up=args.up, units=args.units)
+    if axes is not None and (args.up == "auto" or args.units == "auto"):
+        print(f"{args.capture}: {axes.up.upper()} up, {axes.units}, a body "
+              f"{axes.span:.2f} m long (--up, --units to set)")  # fmt: skip
     frames = range(len(capture))[args.frames] if args.frames else None
     t0 = time.perf_counter()
     track = track_sequence(
-        tracker, template, capture, args.out, frames=frames, resume=not args.restart
-    )
+        tracker, template, capture, args.out, frames=frames, resume=not args.restart,
+        init=args.init, recover=not args.no_recover,
+    )  # fmt: skip
     dt = time.perf_counter() - t0
-    bad = int((~track.healthy).sum())
     print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
           f"({track.seconds[1:].mean() if len(track.seconds) > 1 else 0:.3f} s per frame); "
-          f"{bad} flagged unhealthy; results in {args.out}")  # fmt: skip
+          f"{track_summary(track)}; results in {args.out}")  # fmt: skip
     return 0
+
+
+def track_summary(track) -> str:
+    """How a track started and which frames are flagged, in one line (with the first
+    unhealthy frame's reason, so no frame is flagged without a word why)."""
+    flags = track.flags or ((),) * len(track.frames)
+    count = {f: sum(f in fl for fl in flags) for f in ("failed", "missing", "lost", "reinit")}
+    text = f"{track.meta.get('init', 'truth')} init"
+    first = track.messages[0] if track.messages else ""
+    if first.startswith("init "):
+        text = first
+    bad = int((~track.healthy).sum())
+    text += f"; {bad} flagged unhealthy"
+    if count["lost"]:
+        text += f", {count['lost']} with a limb lost ({count['reinit']} re-initialised)"
+    worst = [k for k in range(len(track.frames)) if not track.healthy[k] or flags[k]]
+    if worst:
+        k = worst[0]
+        text += f" (first: frame {track.frames[k]}, {track.messages[k] or ','.join(flags[k])})"
+    return text
 
 
 def _cmd_learn(args: argparse.Namespace) -> int:
@@ -139,6 +162,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "skeleton (the paper's) or surface")  # fmt: skip
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
+    k.add_argument(
+        "--init",
+        default="auto",
+        choices=["auto", "truth"],
+        help="first pose: "
+        "found from the capture (auto, default) or copied from its ground truth "
+        "(truth: the papers' protocol, synthetic captures only)",
+    )
+    k.add_argument(
+        "--up",
+        default="auto",
+        choices=["auto", "z", "y"],
+        help="mesh/point-cloud files: their up axis (default: detected)",
+    )
+    k.add_argument(
+        "--units",
+        default="auto",
+        choices=["auto", "m", "cm", "mm"],
+        help="mesh/point-cloud files: their length unit (default: detected)",
+    )
+    k.add_argument(
+        "--no-recover",
+        action="store_true",
+        help="do not score frames, flag lost limbs or re-initialise them",
+    )
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")
     k.set_defaults(func=_cmd_track)
     m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")

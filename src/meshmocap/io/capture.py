@@ -284,12 +284,16 @@ class SequenceCapture:
         also carry their masks (for the silhouette overlap error).
     up : {"z", "y"}
         The files' up axis.
+    scale : float
+        Metres per file unit (0.001 for millimetres).
     """
 
-    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None):
+    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None,
+                 scale: float = 1.0):  # fmt: skip
         from meshmocap.io.meshes import MeshSequence
 
         self.seq = MeshSequence(source, up=up, frames=frames)
+        self.scale = float(scale)
         self.path = Path(os.fspath(source))
         self.meta: dict = {}
         self.cameras = read_cameras(cameras) if cameras else []
@@ -309,7 +313,8 @@ class SequenceCapture:
                 read_mask(self.silhouette_dir / c.name / f"{frame_name(f.index)}.png")
                 for c in self.cameras
             ]
-        return SequenceFrame(f.index, (f.V, f.F), f.normals, masks, cameras=self.cameras)
+        V = f.V if self.scale == 1.0 else f.V * self.scale
+        return SequenceFrame(f.index, (V, f.F), f.normals, masks, cameras=self.cameras)
 
     def __iter__(self) -> Iterator[SequenceFrame]:
         for k in range(len(self)):

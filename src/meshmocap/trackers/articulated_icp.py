@@ -61,7 +61,7 @@ from meshmocap.body.articulated import (
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.geometry.mesh import vertex_normals
+from meshmocap.estimate.observe import frame_points
 from meshmocap.geometry.rotations import cross, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
@@ -209,6 +209,13 @@ class ArticulatedICP:
         self.prev = (R.copy(), root.copy())
         return self._result(frame.index, {}, 0)
 
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Continue from the pose ``R`` (J, 3, 3), ``root`` (3,) with no velocity."""
+        self.R = np.array(R, dtype=np.float64)
+        self.root = np.array(root, dtype=np.float64)
+        self.prev = (self.R.copy(), self.root.copy())
+        return self._result(frame.index, {}, 0)
+
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore the pose (and the previous one, for prediction) saved with a frame."""
         self.R, self.root = state["R"].astype(np.float64), state["root"].astype(np.float64)
@@ -226,16 +233,7 @@ class ArticulatedICP:
         """Observed points (p, 3) and unit normals (p, 3), at most ``max_points`` of the
         frame's hull vertices (seeded per frame, so a resumed run sees the same points)."""
         o = self.opts
-        V, F = frame.hull_mesh
-        V = np.asarray(V, dtype=np.float64)
-        if F is not None:
-            N = vertex_normals(V, F)
-        elif getattr(frame, "normals", None) is not None:
-            N = np.asarray(frame.normals, dtype=np.float64)
-        else:
-            raise InputError(
-                f"ArticulatedICP: frame {frame.index} is a point cloud without normals"
-            )
+        V, N = frame_points(frame)  # a mesh's vertex normals, a point cloud's own or estimated
         if len(V) > o.max_points:
             rng = np.random.default_rng([o.seed, frame.index])
             pick = rng.choice(len(V), o.max_points, replace=False)

@@ -5,6 +5,13 @@ A frame whose fit raises a numerical error or returns non-finite values is flagg
 ``failed`` (``healthy = False``, with the reason), the tracker is reset to the last good
 state, and tracking continues with the next frame; the flagged frame repeats the last good
 result.
+
+The first frame's pose comes from the capture alone (``init="auto"``,
+:func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground
+truth (``init="truth"``). With ``recover``, every fitted frame is scored
+(:class:`~meshmocap.estimate.reinit.Recovery`): a frame with a limb lost is flagged
+``lost`` (the message names the limbs), and where a better pose is found from the frame
+the tracker is re-seated there (``Tracker.reseat``) and the frame also flagged ``reinit``.
 """
 
 from __future__ import annotations
@@ -14,12 +21,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
 from meshmocap._progress import progress
+from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
+from meshmocap.estimate.init import initial_pose
+from meshmocap.estimate.observe import observed
+from meshmocap.estimate.reinit import Recovery
+from meshmocap.geometry.carving import distance_grid
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
@@ -32,6 +45,9 @@ from meshmocap.io.results import (
     write_frame,
 )
 from meshmocap.trackers.base import Tracker
+
+#: How the first frame's pose is found: from the capture alone, or from its ground truth.
+Init = Literal["auto", "truth"]
 
 #: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake.
 NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
@@ -50,6 +66,8 @@ def track_sequence(
     frames: Sequence[int] | None = None,
     resume: bool = True,
     show_progress: bool | None = None,
+    init: Init = "auto",
+    recover: bool = True,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -59,15 +77,20 @@ def track_sequence(
     template : Template
         The tracking template.
     capture : Capture
-        Frames to track. The first one (of ``frames``) initialises the template's pose from
-        its ground truth when it has one (the protocol of the papers' evaluations), else the
-        template starts in its rest pose (right for a template made from that frame).
+        Frames to track (a capture folder or a sequence of meshes or point clouds).
     out : path
         Track folder (:mod:`meshmocap.io.results`).
     frames : sequence of int, optional
         Positions in the capture to track (default: all).
     resume : bool
         Continue an interrupted run in ``out`` (same settings) instead of starting over.
+    init : {"auto", "truth"}
+        The first frame's pose: found from the frame alone (a global search over heading,
+        place and a few seed poses, :func:`~meshmocap.estimate.init.initial_pose`), or
+        copied from its ground truth (the papers' protocol; the capture must have it).
+        ``track.json`` records which, and the search's winner.
+    recover : bool
+        Score every frame, flag lost limbs and re-initialise them (module docstring).
 
     Returns
     -------
@@ -77,6 +100,7 @@ def track_sequence(
     positions = list(range(len(capture))) if frames is None else list(frames)
     if not positions:
         raise InputError("track: no frames to track")
+    check_choice("track", "init", init, get_args(Init))
     indices = [capture[k].index for k in positions]
     meta = {
         "method": tracker.name,
@@ -86,19 +110,18 @@ def track_sequence(
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
+        "init": init,
+        "recover": bool(recover),
     }
     done = set(start_track(out, meta, template.F, resume=resume))
     first = capture[positions[0]]
     if indices[0] not in done:
-        truth = first.truth
-        if truth is not None and truth.rotations is not None:
-            R, root = truth.rotations, truth.root
-        else:  # no known pose: the template's rest pose (e.g. a template cut from frame 0)
-            R = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
-            root = template.skeleton.rest_positions[0]
         t0 = time.perf_counter()
+        R, root, how = first_pose(template, first, init)
         r = tracker.init(template, first, R, root)
-        write_frame(out, replace(r, index=first.index, seconds=time.perf_counter() - t0))
+        state = {**r.state, "pose_R": R, "pose_root": root}
+        write_frame(out, replace(r, index=first.index, seconds=time.perf_counter() - t0,
+                                 message=how, state=state))  # fmt: skip
         done.add(first.index)
     todo = [k for k in positions[1:] if capture[k].index not in done]
     if todo:
@@ -107,15 +130,22 @@ def track_sequence(
         )
         if getattr(tracker, "template", None) is not template:  # resuming: not initialised
             tracker.setup(template)
-        tracker.set_state(read_state(out, last))
+        state = read_state(out, last)
+        tracker.set_state(state)
+        recovery = None
+        if recover:
+            pose = _last_pose(out, [i for i in indices if i in done and i <= last])
+            recovery = Recovery(template, *pose)
         good = last
         for k in progress(todo, label=tracker.name, enabled=show_progress):
-            frame = capture[k]
+            frame = observed(capture[k])
             t0 = time.perf_counter()
             try:
                 r = tracker.step(frame)
                 if not _finite(r):
                     raise FloatingPointError("non-finite joints or vertices")
+                if recovery is not None:
+                    r = recovered(tracker, recovery, frame, r)
                 r = replace(r, index=frame.index, seconds=time.perf_counter() - t0)
                 good = frame.index
             except NUMERICAL_ERRORS as exc:
@@ -141,3 +171,55 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
             message=str(z["message"]), flags=frame_flags(z),
             state={k[6:]: z[k] for k in z.files if k.startswith("state_")},
         )  # fmt: skip
+
+
+def first_pose(template: Template, frame, init: Init) -> tuple[np.ndarray, np.ndarray, str]:
+    """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
+    found (the frame's message in the track)."""
+    if init == "truth":
+        truth = frame.truth
+        if truth is None or truth.rotations is None:
+            raise InputError(
+                "track: --init truth needs a capture with ground-truth poses "
+                "(a synthetic capture); this one has none: use --init auto"
+            )
+        return truth.rotations, truth.root, "init truth: the first pose from ground truth"
+    obs = observed(frame)
+    P, N = obs.points
+    if len(P) < 50:
+        raise InputError(f"track: frame {frame.index} has {len(P)} observed points; "
+                         "--init auto needs a body to start from")  # fmt: skip
+    masks = obs.silhouettes if obs.cameras else None
+    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks,
+                       field=distance_grid(obs.hull, pad=0.3))  # fmt: skip
+    return res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
+
+
+def recovered(tracker: Tracker, recovery: Recovery, frame, r: FrameResult) -> FrameResult:
+    """``r`` scored against ``frame``; flagged ``lost`` with the limbs concerned, and where a
+    better pose is found, the tracker re-seated there (flag ``reinit``). The frame's quality
+    (``fit_outside``, ``fit_unexplained``) joins its energies, the articulated pose of the
+    tracked mesh its state (``pose_R``, ``pose_root``)."""
+    q = recovery.assess(frame, r.vertices)
+    flags, message = tuple(r.flags), r.message
+    if q.lost:
+        flags += ("lost",)
+        message = f"lost {q.describe()}"
+        found = recovery.reinitialise(frame, r.vertices, q)
+        if found is not None:
+            r = tracker.reseat(frame, found.R, found.root)
+            flags += ("reinit",)
+            message += f"; re-initialised {', '.join(found.limbs)}"
+            q = found.quality
+    state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
+    return replace(r, flags=flags, message=message, energies={**r.energies, **q.energies()},
+                   state=state)  # fmt: skip
+
+
+def _last_pose(out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The articulated pose stored with the latest of ``indices`` that has one."""
+    for i in reversed(indices):
+        st = read_state(out, i)
+        if "pose_R" in st:
+            return st["pose_R"].astype(np.float64), st["pose_root"].astype(np.float64)
+    raise InputError(f"track: {out} holds no pose to resume recovery from; use --restart")
