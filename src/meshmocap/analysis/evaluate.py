@@ -73,6 +73,9 @@ class Evaluation:
     init: str = ""
     lost: int = 0
     reinit: int = 0
+    #: (frame, flags, message) of every flagged frame, in order: the track's timeline of
+    #: failures, missing frames, lost limbs and re-initialisations
+    flagged: tuple[tuple[int, tuple[str, ...], str], ...] = ()
 
 
 def track_init(track: Track) -> str:
@@ -167,7 +170,9 @@ def evaluate(
         init=track_init(track),
         lost=sum("lost" in f for f in track.flags),
         reinit=sum("reinit" in f for f in track.flags),
-    )
+        flagged=tuple((int(i), f, m) for i, f, m in zip(track.frames, track.flags,
+                                                         track.messages, strict=True) if f),
+    )  # fmt: skip
 
 
 def _out_of_view(truths: list, cameras: list) -> np.ndarray:

@@ -86,11 +86,32 @@ def evaluation_tables(ev: Evaluation) -> list[Table]:
     out = [
         Table(
             "Overview",
-            ("method", "frames", "unhealthy", "s/frame mean", "s/frame median"),
-            ((ev.method, ev.n_frames, ev.unhealthy, ev.seconds.mean, ev.seconds.median),),
+            (
+                "method",
+                "frames",
+                "unhealthy",
+                "s/frame mean",
+                "s/frame median",
+                "init",
+                "lost (re-initialised)",
+            ),
+            (
+                (
+                    ev.method,
+                    ev.n_frames,
+                    ev.unhealthy,
+                    ev.seconds.mean,
+                    ev.seconds.median,
+                    ev.init or "truth",
+                    f"{ev.lost} ({ev.reinit})",
+                ),
+            ),
             digits=3,
         )
     ]
+    if ev.flagged:  # the timeline of flags: failures, missing frames, lost limbs, re-inits
+        rows = tuple((f, ", ".join(flags), why) for f, flags, why in ev.flagged)
+        out.append(Table("Flagged frames", ("frame", "flags", "why"), rows))
     for r in (ev.joints, ev.joints14, ev.bones, ev.silhouettes):
         if r is not None:
             out.append(table_of(r))

@@ -192,58 +192,67 @@ class PoseFitter:
         if np.ndim(lambda_pose) == 0:
             lam[0] = 0.0
         free = self.free if joints is None else np.intersect1d(joints, self.free)
-        act = [np.arange(3)] if move_root else []
-        act = np.concatenate([*act, (3 + 3 * free[:, None] + np.arange(3)).ravel()])
         d0, d1 = max_distance
         for it in range(iterations):
             d = d0 * (d1 / d0) ** (it / max(iterations - 1, 1))
-            step = self._step(R, root, d, R_ref, lam, act, damping)
+            step = self._step(R, root, d, R_ref, lam, free, move_root, damping)
             if step is None:
                 break
             R, root = apply_increment(self.sk, R, root, step)
         return PoseFit(R, root, self.score(R, root), label)
 
-    def _step(self, R, root, max_distance, R_ref, lam, act, damping) -> np.ndarray | None:
-        """One damped Gauss–Newton increment (3 + 3J,), or None without any pair."""
+    def _step(self, R, root, max_distance, R_ref, lam, joints, move_root, damping):
+        """One damped Gauss–Newton increment (3 + 3J,) of the root (if ``move_root``) and
+        the rotations of ``joints``, or None without any pair. Only the model points those
+        move, and their pairs, enter (the others' residuals do not change)."""
         J = self.sk.n_joints
-        n_par = 3 + 3 * J
         v, nv, a = pose_points(self.model, R, root)
+        moving = np.ones(len(v), bool) if move_root else self.model.W_acc[:, joints].sum(1) > 0
         cand = dict(k=8, max_distance=max_distance, normal_cos=self.normal_cos)
-        i, k = nearest_compatible(self.tree, self.NY, v, nv, **cand)  # model → data
+        on = np.flatnonzero(moving)
+        i, k = nearest_compatible(self.tree, self.NY, v[on], nv[on], **cand)  # model → data
+        i = on[i]
         k2, i2 = nearest_compatible(KDTree(v), nv, self.Y, self.NY, **cand)  # data → model
+        k2, i2 = k2[moving[i2]], i2[moving[i2]]
         if not (len(i) or len(i2)):
             return None
-        H = np.zeros((n_par, n_par))
-        g = np.zeros(n_par)
+        a = a[:, joints]  # lever arms of the estimated joints only
+        cols = np.arange(0 if move_root else 3, 3 + 3 * len(joints))
+        n = len(cols)
+        H, g = np.zeros((n, n)), np.zeros(n)
         for ii, kk, w in ((i, k, 1.0), (i2, k2, self.w_dm)):
             if len(ii) == 0:
                 continue
             y, ny = self.Y[kk], self.NY[kk]
             r, Jr = residual_jacobian(v, a, ii, y, ny, "point_to_plane")
+            Jr = Jr[:, cols]
             H += (w / len(ii)) * (Jr.T @ Jr)
             g += (w / len(ii)) * (Jr.T @ r)
             sub = slice(None, None, max(1, len(ii) // 500))  # the weak pull: 500 pairs suffice
             r, Jr = residual_jacobian(v, a, ii[sub], y[sub], ny[sub], "point_to_point")
+            Jr = Jr[:, cols]
             s = w * POINT_MIX / len(ii[sub])
             H += s * (Jr.T @ Jr)
             g += s * (Jr.T @ r)
         # pull towards the reference pose, linearised in world-frame rotation errors
         G, _ = forward_kinematics(self.sk, R, root)
-        Gp = np.concatenate([np.eye(3)[None], G[self.sk.parents[1:]]])
-        e = np.einsum("jab,jb->ja", Gp, so3_log(R @ np.swapaxes(R_ref, 1, 2)))
-        idx = np.arange(3, n_par)
-        H[idx, idx] += np.repeat(lam, 3)
-        g[idx] += (lam[:, None] * e).ravel()
-        Ha, ga = H[np.ix_(act, act)], g[act]
-        Ha[np.diag_indices(len(act))] *= 1.0 + damping
-        Ha[np.diag_indices(len(act))] += 1e-9
-        delta = np.zeros(n_par)
-        delta[act] = -np.linalg.solve(Ha, ga)
-        if not np.all(np.isfinite(delta)):
+        Gp = np.concatenate([np.eye(3)[None], G[self.sk.parents[1:]]])[joints]
+        e = np.einsum("jab,jb->ja", Gp, so3_log(R[joints] @ np.swapaxes(R_ref[joints], 1, 2)))
+        rot = np.arange(n - 3 * len(joints), n)
+        H[rot, rot] += np.repeat(lam[joints], 3)
+        g[rot] += (lam[joints][:, None] * e).ravel()
+        H[np.diag_indices(n)] *= 1.0 + damping
+        H[np.diag_indices(n)] += 1e-9
+        x = -np.linalg.solve(H, g)
+        if not np.all(np.isfinite(x)):
             return None
-        w = delta[3:].reshape(J, 3)
+        delta = np.zeros(3 + 3 * J)
+        if move_root:
+            delta[:3] = x[:3]
+        w = x[rot].reshape(-1, 3)
         ang = np.linalg.norm(w, axis=1, keepdims=True)
-        delta[3:] = (w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))).ravel()
+        w = w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))
+        delta[(3 + 3 * joints[:, None] + np.arange(3)).ravel()] = w.ravel()
         return delta
 
 

@@ -298,6 +298,7 @@ def limb_candidates(
     *,
     directions: int = 10,
     iterations: int = 10,
+    lower: bool = False,
 ) -> list[PoseFit]:
     """Re-seed one limb of the pose ``(R, root)`` (:data:`LIMBS`) and fit it.
 
@@ -305,10 +306,12 @@ def limb_candidates(
     (Fibonacci lattice), each with the limb straight and bent at its middle joint by 90°
     (an elbow towards the body's front, a knee towards its back), and each candidate is
     fitted with only that limb's joints free; the rest of the body keeps ``(R, root)``.
+    With ``lower``, only the lower bone (forearm, shank) is re-seeded and fitted, the
+    upper one kept.
 
     Returns
     -------
-    list of PoseFit, two per direction, best (lowest score) first.
+    list of PoseFit, best (lowest score) first.
     """
     if limb not in LIMBS:
         raise InputError(f"reinit: limb must be one of {list(LIMBS)}, found {limb!r}")
@@ -329,6 +332,16 @@ def limb_candidates(
     P0 = sk.rest_positions
     Gp = G[sk.parents[j]] if sk.parents[j] >= 0 else np.eye(3)
     out = []
+    if lower:  # the lower bone along each direction, the upper one kept
+        Gm = G[j]
+        for d in dirs:
+            Rs = R.copy()
+            Rs[idx[2:]] = np.eye(3)
+            Rs[m] = Gm.T @ rotation_between(P0[tip] - P0[m], d)
+            out.append(fitter.fit(Rs, root, iterations=iterations, max_distance=(0.2, 0.05),
+                                  joints=idx[1:], move_root=False, lambda_pose=0.0,
+                                  label=f"{limb}:lower:{np.round(d, 2).tolist()}"))  # fmt: skip
+        return sorted(out, key=lambda f: f.score)
     for d in dirs:
         for bent in (False, True):
             Rs = R.copy()

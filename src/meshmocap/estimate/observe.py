@@ -5,8 +5,8 @@ and of the fit-quality checks).
 A capture folder's frame has both (its hull mesh and the hull's voxels). A frame of a mesh
 or point-cloud sequence has only its geometry: the occupancy is made from it here —
 surface points splatted into voxels, closed (gaps between samples) and filled (the
-inside) — and a point cloud without normals gets them from that occupancy (the gradient
-of its signed distance, so they point out of the body).
+inside) — and a point cloud without normals gets them from its points' neighbourhoods,
+turned out of that occupancy (the gradient of its signed distance).
 
 :class:`ObservedFrame` wraps any frame and computes each of these once; the sequence
 driver hands trackers wrapped frames. Metres, world frame Z up throughout.
@@ -17,10 +17,12 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
+from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
 from meshmocap.errors import InputError
-from meshmocap.geometry.carving import VoxelHull, distance_grid
+from meshmocap.geometry.carving import VoxelHull
+from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.proximity import sample_surface
 
@@ -31,6 +33,7 @@ __all__ = [
     "frame_points",
     "observed",
     "occupancy_from_points",
+    "plane_normals",
 ]
 
 #: Voxel edge (metres) of occupancies made from meshes and point clouds (as the studio's
@@ -38,6 +41,8 @@ __all__ = [
 VOXEL_SIZE = 0.01
 #: Voxels of closing: gaps up to about twice this between surface samples are bridged.
 CLOSING = 2
+#: Metres of exact signed distance around a frame's occupancy (:attr:`ObservedFrame.field`).
+FIELD_PAD = 0.1
 #: Surface samples per voxel face area when a mesh is splatted.
 SAMPLES_PER_VOXEL = 4
 
@@ -56,9 +61,9 @@ def occupancy_from_points(P: np.ndarray, *, voxel_size: float = VOXEL_SIZE) -> V
     Returns
     -------
     VoxelHull
-        Voxels holding a point, closed by :data:`CLOSING` voxels and with the inside filled
-        (``scipy.ndimage.binary_fill_holes``). A surface with a hole wider than the closing
-        stays a shell (its inside is not filled).
+        Voxels holding a point, dilated by :data:`CLOSING` voxels, the inside filled
+        (``scipy.ndimage.binary_fill_holes``), eroded back (a closing that fills). A surface
+        with a hole wider than the dilation bridges stays a shell.
     """
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) == 0 or not np.all(np.isfinite(P)):
@@ -76,9 +81,23 @@ def occupancy_from_points(P: np.ndarray, *, voxel_size: float = VOXEL_SIZE) -> V
     occ = np.zeros(shape, dtype=bool)
     occ[tuple(ijk.T)] = True
     ball = ndimage.generate_binary_structure(3, 1)
-    occ = ndimage.binary_closing(occ, ball, iterations=CLOSING, border_value=0)
-    occ = ndimage.binary_fill_holes(occ)
+    occ = ndimage.binary_dilation(occ, ball, iterations=CLOSING)  # bridge the gaps, ...
+    occ = ndimage.binary_fill_holes(occ)  # ... fill the inside, ...
+    occ = ndimage.binary_erosion(occ, ball, iterations=CLOSING)  # ... and shrink back
     return VoxelHull(occ, origin + 0.5 * h, h)  # VoxelHull's origin: the first voxel's centre
+
+
+def plane_normals(P: np.ndarray, out: np.ndarray, *, k: int = 16) -> np.ndarray:
+    """Unit normals (p, 3) of points ``P`` (p, 3): the least-variance axis of each point's
+    ``k`` nearest neighbours (principal component analysis), signed to agree with the
+    rough outward directions ``out`` (p, 3) (e.g. a distance field's gradient)."""
+    k = min(k, len(P))
+    _, idx = KDTree(P).query(P, k=k)
+    Q = P[np.asarray(idx, dtype=np.int64).reshape(len(P), k)]
+    Q = Q - Q.mean(axis=1, keepdims=True)
+    _, U = np.linalg.eigh(np.einsum("pki,pkj->pij", Q, Q))
+    N = U[:, :, 0]
+    return N * np.where(np.sum(N * out, axis=1) < 0, -1.0, 1.0)[:, None]
 
 
 def _dense_samples(V: np.ndarray, F: np.ndarray, h: float, seed: int) -> np.ndarray:
@@ -123,6 +142,15 @@ class ObservedFrame:
         return occupancy_from_points(P, voxel_size=self.voxel_size)
 
     @cached_property
+    def field(self) -> LazyDistanceGrid:
+        """Signed distance to the occupancy's surface (metres, negative inside), computed
+        where it is looked up; beyond its box (:data:`FIELD_PAD` around the occupancy) it
+        grows with the distance to the box."""
+        h = self.hull
+        pad = 1 + int(np.ceil(FIELD_PAD / h.voxel_size))
+        return LazyDistanceGrid(h.occupancy, h.origin, h.voxel_size, pad=pad)
+
+    @cached_property
     def points(self) -> tuple[np.ndarray, np.ndarray]:
         """``(P (p, 3), N (p, 3))``: the frame's surface points (mesh vertices or cloud
         points), metres, and their outward unit normals."""
@@ -138,9 +166,9 @@ class ObservedFrame:
             norm = np.linalg.norm(N, axis=1, keepdims=True)
             if np.all(norm > 1e-12):
                 return V, N / norm
-        # no normals: the outward gradient of the occupancy's signed distance
-        _, g = distance_grid(self.hull, pad=0.05).value_and_gradient(V)
-        return V, g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+        # no normals: each point's neighbourhood plane, turned out of the occupancy
+        _, g = self.field.value_and_gradient(V)
+        return V, plane_normals(V, g)
 
 
 def observed(frame, *, voxel_size: float = VOXEL_SIZE) -> ObservedFrame:

@@ -50,18 +50,18 @@ from meshmocap.estimate.quality import (
     limb_labels,
     limb_shares,
 )
-from meshmocap.geometry.carving import distance_grid
 
-__all__ = ["COOLDOWN", "MIN_GAIN", "Recovery", "Reinit"]
+__all__ = ["COOLDOWN", "JUMP", "MIN_GAIN", "Recovery", "Reinit"]
 
 #: Least decrease of the ranking key (metres of fit score) that makes a re-seeded limb win.
 MIN_GAIN = 0.001
 #: Frames only flagged after a search that found no better pose.
 COOLDOWN = 3
+#: Metres a tracked limb must stand from where it was last seen (mean over its vertices)
+#: to count as having jumped away from observations that no longer show it.
+JUMP = 0.08
 #: Joints above a limb's own that move with it (an arm's clavicle).
 _ROOTS = {"left_arm": ("LeftShoulder",), "right_arm": ("RightShoulder",)}
-#: Field padding (metres) around the observed solid.
-_PAD = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,7 +109,7 @@ class Recovery:
     def _inputs(self, frame):
         obs = observed(frame)
         P, _ = obs.points
-        field = distance_grid(obs.hull, pad=_PAD)
+        field = obs.field
         masks = obs.silhouettes if obs.cameras else None
         return obs, P, field, obs.cameras, masks
 
@@ -122,28 +122,50 @@ class Recovery:
     def assess(self, frame, V: np.ndarray) -> FitQuality:
         """The fit quality of ``V`` on ``frame`` (:meth:`check`), with each limb also posed
         as when last seen (its joints' rotations then, on the trunk tracked now) and
-        checked against the observations: a limb they miss (``unseen``) is lost however
-        well the tracked mesh fits, until it is seen again. Updates the pose estimate."""
+        checked against the observations. A limb is missed (``unseen``, lost however well
+        the tracked mesh fits) when, posed as last seen, it stands outside the observations
+        while the tracked limb has jumped away from there (the tracker put it where the
+        observations have something else); it is seen again when, posed as last seen, it is
+        inside them again or the tracked limb is back there. Updates the pose estimate."""
         q = self.check(frame, V)
         R, root = self.track_pose(V)
         if self.held is None:  # the first frame checked: every limb as tracked
             self.held = R.copy()
-        coast = R.copy()
-        for idx in self.limb_joints.values():
-            coast[idx] = self.held[idx]
+        Vc = self.coast_pose(R)
         _, _, field, _, _ = self._inputs(frame)
-        out = field(self.template.pose(coast, root).V) > UNSEEN_MARGIN
+        out = field(self.template.pose(Vc, root).V) > UNSEEN_MARGIN
         unseen = {n: v for n, v in limb_shares(self.labels, out).items() if n in self.limb_joints}
+        moved = self._limb_moves(V, self.template.pose(Vc, root).V)
         for n, v in unseen.items():  # hysteresis: missed until clearly seen again
-            if v > UNSEEN_LOST:
+            if v > UNSEEN_LOST and moved[n] > JUMP:
                 self.missing.add(n)
-            elif v < UNSEEN_LOST / 2:
+            elif v < UNSEEN_LOST / 2 or moved[n] < JUMP / 2:
                 self.missing.discard(n)
         lost = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
         for n, idx in self.limb_joints.items():
             if n not in lost:
                 self.held[idx] = R[idx]
         return replace(q, lost=lost, unseen={n: float(n in self.missing) for n in unseen})
+
+    def coast_pose(self, R: np.ndarray | None = None) -> np.ndarray:
+        """Local rotations (J, 3, 3): ``R`` (default: the pose estimate) with each limb's
+        joints as when the limb was last seen (its missed limbs held, the others as of the
+        last frame)."""
+        coast = (self.R if R is None else R).copy()
+        if self.held is not None:
+            for idx in self.limb_joints.values():
+                coast[idx] = self.held[idx]
+        return coast
+
+    def _limb_moves(self, V: np.ndarray, W: np.ndarray) -> dict[str, float]:
+        """Per limb, the mean distance (metres) between its vertices in ``V`` and ``W``."""
+        d = np.linalg.norm(V - W, axis=1)
+        n = len(LIMB_PARTS)
+        on = self.labels >= 0
+        mean = np.bincount(self.labels[on], d[on], minlength=n) / np.maximum(
+            np.bincount(self.labels[on], minlength=n), 1
+        )
+        return {name: float(mean[k]) for k, name in enumerate(LIMB_PARTS)}
 
     def track_pose(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The articulated pose of the tracked vertices ``V``, warm-started from the last."""
