@@ -40,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshmocap._atomic import atomic_open
+from meshmocap._npz import read_npz
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import apply_skinning, skinning_operator, skinning_transforms
 from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
@@ -211,11 +212,7 @@ def load_template(name_or_path: str | os.PathLike = "neutral") -> Template:
 
 
 def _read(path: Path) -> Template:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise MeshError(f"{path}: not a readable .npz template ({exc})") from None
+    d = read_npz(path, "template", error=MeshError)
     if str(d.get("format", "")) != FORMAT:
         raise MeshError(
             f"{path}: expected format {FORMAT!r}, found {str(d.get('format', 'none'))!r}"

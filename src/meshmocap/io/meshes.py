@@ -446,6 +446,33 @@ class MeshSequence:
         return Frame(int(i), label, P, None, N)
 
 
+def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
+    """The frame files of several sources (files, folders, globs), one list, sorted
+    naturally (``mesh_2`` before ``mesh_10``), as a quoted glob would list them: what a
+    shell passes for an unquoted ``my-meshes/*.ply``.
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError : a source that does not exist, or no frame files at all.
+    InputError : a file that is not a frame file, or frame files of several formats.
+    """
+    names: list[str] = []
+    for source in map(os.fspath, sources):
+        path = Path(source)
+        if path.is_file():
+            if not _is_frame(path.name):
+                raise InputError(f"{source}: not a frame file {list(_FRAME_EXTENSIONS)}")
+            names.append(source)
+        elif path.is_dir() or globlib.has_magic(source):
+            names += MeshSequence(source).paths
+        else:
+            raise NotFound(f"{source}: no such file or folder")
+    exts = sorted({_ext(n) for n in names})
+    if len(exts) > 1:
+        raise InputError(f"frame files of several formats {exts}; give one format")
+    return sorted(dict.fromkeys(names), key=natural_key)
+
+
 def _is_frame(name: str) -> bool:
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS

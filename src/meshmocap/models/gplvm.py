@@ -57,6 +57,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from meshmocap._atomic import atomic_open
+from meshmocap._npz import read_npz
 from meshmocap._validate import check_choice
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import chol_inverse, rbf, sqdist
@@ -557,13 +558,17 @@ class GPLVM:
         path = Path(path)
         if not path.is_file():
             raise MeshmocapFileNotFoundError(f"{path}: no such GPLVM file")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                d = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise FormatError(f"{path}: not a GPLVM .npz file ({e})") from None
+        d = read_npz(path, "GPLVM file")
         if str(d.get("kind", "")) != _KIND:
             raise FormatError(f"{path}: not a meshmocap GPLVM file")
+        try:
+            return cls._from_arrays(d, path)
+        except (KeyError, ValueError, TypeError, IndexError, np.linalg.LinAlgError) as e:
+            why = f"{type(e).__name__}: {e}".splitlines()[0][:160]
+            raise FormatError(f"{path}: corrupt GPLVM file ({why})") from None
+
+    @classmethod
+    def _from_arrays(cls, d: dict, path: Path) -> GPLVM:
         version = int(d["format_version"])
         if version != FORMAT_VERSION:
             raise FormatError(f"{path}: GPLVM format version {version}, "
