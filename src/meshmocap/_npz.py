@@ -14,10 +14,15 @@ import os
 import zipfile
 import zlib
 from pathlib import Path
+from tokenize import TokenError
 
 import numpy as np
 
 from meshmocap.errors import FormatError, MeshmocapError, MeshmocapFileNotFoundError
+
+#: What ``numpy.load`` raises on a damaged ``.npy`` (its header is parsed as Python syntax).
+NPY_ERRORS = (ValueError, OSError, EOFError, SyntaxError, TokenError, UnicodeDecodeError,
+              TypeError, MemoryError, OverflowError)  # fmt: skip
 
 #: Largest total of uncompressed array bytes one ``.npz`` may hold (4 GiB; a 2.6-million-
 #: vertex hull's occupancy and mesh take about 100 MB). ``MESHMOCAP_MAX_NPZ_MB`` changes it.
@@ -67,12 +72,12 @@ def read_npz(
                     f"{path}: {what} arrays unpack to {total / 1e6:.0f} MB, above the "
                     f"{cap / 1e6:.0f} MB limit (MESHMOCAP_MAX_NPZ_MB)"
                 )
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
     except MeshmocapError:
         raise
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
-            NotImplementedError, RuntimeError, UnicodeDecodeError, MemoryError) as exc:  # fmt: skip
+    except (zipfile.BadZipFile, zlib.error, KeyError, NotImplementedError, RuntimeError,
+            *NPY_ERRORS) as exc:  # fmt: skip
         text = str(exc).strip().splitlines()
         why = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
         raise error(f"{path}: not a readable .npz {what} ({why[:160]})") from None

@@ -152,6 +152,10 @@ def _pack_mesh(V: np.ndarray, F: np.ndarray, hull: VoxelHull) -> dict[str, np.nd
 
 
 def _unpack_mesh(d: dict, origin: np.ndarray, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    kinds = {"mesh_V": "f", "mesh_F": "iu", "mesh_dK": "iu", "mesh_dtop": "iu", "mesh_below": "iu"}
+    for key, kind in kinds.items():
+        if key in d and d[key].dtype.kind not in kind:
+            raise ValueError(f"{key} has dtype {d[key].dtype}")
     if "mesh_V" in d:
         return d["mesh_V"].astype(np.float64), d["mesh_F"].astype(np.int64)
     K = np.cumsum(d["mesh_dK"].astype(np.int64), axis=0)
@@ -179,13 +183,17 @@ def _hull_of(d: dict, path) -> VoxelHull:
     for k in ("bits", "shape", "origin", "voxel_size"):
         if k not in d:
             raise FormatError(f"{path}: missing key {k!r}")
-    shape = tuple(int(s) for s in np.ravel(d["shape"]))
-    n = int(np.prod(shape, dtype=np.int64)) if len(shape) == 3 and min(shape) > 0 else -1
+    raw = np.ravel(d["shape"])
+    shape = tuple(int(s) for s in raw) if raw.dtype.kind in "iu" else ()
+    n = int(np.prod(shape, dtype=np.int64)) if len(shape) == 3 and 0 < min(shape) < 1 << 20 else -1
     if n < 0 or d["bits"].dtype != np.uint8 or d["bits"].size != -(-n // 8):
         raise FormatError(f"{path}: occupancy of {d['bits'].size} bytes does not fit {shape}")
     occ = np.unpackbits(d["bits"].ravel(), count=n).astype(bool).reshape(shape)
+    origin, vs = d["origin"], d["voxel_size"]
+    if origin.dtype.kind not in "fiu" or vs.dtype.kind not in "fiu" or vs.size != 1:
+        raise FormatError(f"{path}: origin and voxel_size must be numbers")
     try:
-        return VoxelHull(occ, d["origin"].astype(np.float64), float(d["voxel_size"]))
+        return VoxelHull(occ, origin.astype(np.float64), float(vs.ravel()[0]))
     except (InputError, TypeError, ValueError) as exc:
         raise FormatError(f"{path}: not a voxel hull ({exc})") from None
 
@@ -220,7 +228,7 @@ def hull_missing(path: str | os.PathLike) -> str | None:
     if not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             return str(z["missing"]) if "missing" in z.files else None
     except Exception:  # any damage is reported when the hull is read
         return None
@@ -229,7 +237,7 @@ def hull_missing(path: str | os.PathLike) -> str | None:
 def hull_note(path: str | os.PathLike) -> str:
     """How the frame of hull file ``path`` was carved (empty when from every camera)."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             for key in ("missing", "note"):
                 if key in z.files and str(z[key]):
                     return str(z[key])

@@ -582,6 +582,13 @@ class GPLVM:
             int(nit),
             bool(conv),
         )
+        keys = ["X_", "Y_", "Y_mean_", "history", "Kinv_", "KinvY_", "A_",
+                *(f"mlp{i}" for i in range(4))]  # fmt: skip
+        for key in (k for k in keys if k in d):
+            a = d[key]
+            if a.dtype.kind not in "fiu" or not np.isfinite(a).all():
+                raise ValueError(f"{key} must hold finite real numbers, found {a.dtype}")
+            d[key] = a.astype(np.float64)
         self.X_, self.Y_, self.Y_mean_ = d["X_"], d["Y_"], d["Y_mean_"]
         self.log_likelihood_history_ = d["history"]
         self.A_ = d.get("A_")

@@ -188,6 +188,9 @@ class PoseManifold:
                 "with 'meshmocap learn' (or PoseManifold.save)"
             )
         try:
+            cage = d["manifold_rest_cage"]
+            if cage.dtype.kind != "f" or cage.shape != (85, 3) or not np.isfinite(cage).all():
+                raise ValueError(f"rest cage must be finite (85, 3) floats, found {cage.shape}")
             n_poses, seconds = d["manifold_stats"].tolist()
             return cls(gp, str(d["manifold_template"]), str(d["manifold_digest"]),
                        d["manifold_rest_cage"], d["manifold_trials"], d["manifold_groups"],
