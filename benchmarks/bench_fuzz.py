@@ -22,8 +22,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from fuzzing import Defect, loaders, manifold_loader, run_one  # noqa: E402
-from hypothesis import HealthCheck, given, seed, settings  # noqa: E402
+from hypothesis import HealthCheck, given, seed, settings
+
+from fuzzing import Defect, loaders, manifold_loader, run_one
 
 
 def _manifold(work: Path) -> Path:
@@ -91,7 +92,7 @@ def main() -> int:
                   f"{counts['error']:5d} meshmocap errors, {counts['defect']:4d} defects "
                   f"({rows[-1][5]:.0f} s, slowest {slowest[0]:.2f} s)", flush=True)  # fmt: skip
         total = sum(r[1] for r in rows)
-        print(f"\n| loader | examples | read | meshmocap error | defects | s | slowest s |")
+        print("\n| loader | examples | read | meshmocap error | defects | s | slowest s |")
         print("|---|---:|---:|---:|---:|---:|---:|")
         for r in rows:
             print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]:.0f} | {r[6]:.2f} |")

@@ -28,9 +28,27 @@ from hypothesis import strategies as st
 
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
 
-_NUMBERS = [b"nan", b"inf", b"-inf", b"1e309", b"-1e309", b"99999999999999999999", b"-1",
-            b"0", b"1e-320", b"abc", b"", b"3.5.6", b"0x10", b"7", b"0.25", b"-2.5", b"1e3",
-            b"12", b"1"]  # fmt: skip
+_NUMBERS = [
+    b"nan",
+    b"inf",
+    b"-inf",
+    b"1e309",
+    b"-1e309",
+    b"99999999999999999999",
+    b"-1",
+    b"0",
+    b"1e-320",
+    b"abc",
+    b"",
+    b"3.5.6",
+    b"0x10",
+    b"7",
+    b"0.25",
+    b"-2.5",
+    b"1e3",
+    b"12",
+    b"1",
+]
 
 
 @st.composite
@@ -39,9 +57,13 @@ def mutated(draw, seeds: list[bytes], text: bool = False) -> bytes:
     data = bytearray(draw(st.sampled_from(seeds)))
     for _ in range(draw(st.integers(1, 4))):
         n = len(data)
-        kind = draw(st.sampled_from(["truncate", "flip", "insert", "delete", "repeat", "number",
-                                     "random"] if text else
-                                    ["truncate", "flip", "insert", "delete", "repeat", "random"]))  # fmt: skip
+        kind = draw(
+            st.sampled_from(
+                ["truncate", "flip", "insert", "delete", "repeat", "number", "random"]
+                if text
+                else ["truncate", "flip", "insert", "delete", "repeat", "random"]
+            )
+        )
         at = draw(st.integers(0, max(n - 1, 0)))
         if kind == "truncate":
             del data[at:]
@@ -164,7 +186,7 @@ def run_one(loader: Loader, data: bytes, workdir: Path) -> str:
         return "error"
     except AssertionError as exc:
         raise Defect(f"{loader.name}: returned garbage ({exc})") from exc
-    except Exception as exc:  # noqa: BLE001 (that is the point: anything else is a defect)
+    except Exception as exc:
         raise Defect(f"{loader.name}: {type(exc).__name__}: {str(exc)[:200]}") from exc
     return "ok"
 
@@ -186,8 +208,9 @@ def _seed_meshes() -> dict[str, list[bytes]]:
     mesh = trimesh.Trimesh(V, F, process=False)
     out[".ply"].append(trimesh.exchange.ply.export_ply(mesh, encoding="ascii"))
     out[".stl"].append(trimesh.exchange.stl.export_stl_ascii(mesh).encode())
-    out[".obj"].append(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nf 1/1 3/1 2/1\nf 1 2 4\n"
-                       b"f 1 4 3\nf 2 3 4\n")  # fmt: skip
+    out[".obj"].append(
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nf 1/1 3/1 2/1\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+    )
     gltf = trimesh.exchange.gltf.export_gltf(mesh, embed_buffers=True)
     out[".gltf"] = [next(v for k, v in gltf.items() if k.endswith(".gltf"))]
     return out
@@ -199,13 +222,16 @@ def _seed_points() -> dict[str, list[bytes]]:
     N = P / np.linalg.norm(P, axis=1, keepdims=True)
     buf = io.BytesIO()
     np.save(buf, np.hstack([P, N]))
-    ply = ("ply\nformat ascii 1.0\nelement vertex 12\nproperty float x\nproperty float y\n"
-           "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
-           "end_header\n" + "".join(" ".join(f"{x:.4f}" for x in r) + "\n"
-                                    for r in np.hstack([P, N]))).encode()  # fmt: skip
+    ply = (
+        "ply\nformat ascii 1.0\nelement vertex 12\nproperty float x\nproperty float y\n"
+        "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+        "end_header\n" + "".join(" ".join(f"{x:.4f}" for x in r) + "\n" for r in np.hstack([P, N]))
+    ).encode()
     xyz = "".join(" ".join(f"{x:.5f}" for x in r) + "\n" for r in P).encode()
-    pcd = ("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 12\nHEIGHT 1\n"
-           "POINTS 12\nDATA ascii\n").encode() + xyz  # fmt: skip
+    pcd = (
+        b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 12\nHEIGHT 1\n"
+        b"POINTS 12\nDATA ascii\n"
+    ) + xyz
     return {".npy": [buf.getvalue()], ".ply": [ply], ".xyz": [xyz], ".pcd": [pcd]}
 
 
@@ -282,36 +308,83 @@ def loaders(workdir: Path) -> list[Loader]:
     (workdir / "ref.asf").write_bytes(asf_text)
     json_cams, yaml_cams = _cameras()
     out = [
-        Loader(f"mesh_{ext[1:]}", ext, mutated(seeds, text=ext in (".obj", ".off", ".gltf")),
-               read_mesh, _mesh_ok)  # fmt: skip
+        Loader(
+            f"mesh_{ext[1:]}",
+            ext,
+            mutated(seeds, text=ext in (".obj", ".off", ".gltf")),
+            read_mesh,
+            _mesh_ok,
+        )
         for ext, seeds in meshes.items()
     ]
     out += [
-        Loader(f"points_{ext[1:]}", ext, mutated(seeds, text=ext != ".npy"), read_points,
-               _points_ok)  # fmt: skip
+        Loader(
+            f"points_{ext[1:]}", ext, mutated(seeds, text=ext != ".npy"), read_points, _points_ok
+        )
         for ext, seeds in points.items()
     ]
     frames = {f"f/{k:03d}.ply": meshes[".ply"][k % 2] for k in range(3)}
-    out.append(Loader("archive_tar_gz", ".tar.gz",
-                      mutated([_tar(frames, True), _tar(frames, False)]),
-                      lambda p: [(f.V, f.F) for f in MeshSequence(p)],
-                      lambda out: [_mesh_ok(m) for m in out]))  # fmt: skip
-    out.append(Loader("bvh", ".bvh", mutated([_tiny_bvh()], text=True), read_bvh,
-                      lambda m: _finite(m.rotations, m.root_positions)))  # fmt: skip
-    out.append(Loader("asf", ".asf", mutated([asf_text], text=True), read_asf,
-                      lambda a: _finite(a.skeleton.offsets, a.axes)))  # fmt: skip
-    out.append(Loader("amc", ".amc", mutated([amc_text], text=True),
-                      lambda p: read_amc(p, read_asf(workdir / "ref.asf")),
-                      lambda m: _finite(m.rotations, m.root_positions)))  # fmt: skip
+    out.append(
+        Loader(
+            "archive_tar_gz",
+            ".tar.gz",
+            mutated([_tar(frames, True), _tar(frames, False)]),
+            lambda p: [(f.V, f.F) for f in MeshSequence(p)],
+            lambda out: [_mesh_ok(m) for m in out],
+        )
+    )
+    out.append(
+        Loader(
+            "bvh",
+            ".bvh",
+            mutated([_tiny_bvh()], text=True),
+            read_bvh,
+            lambda m: _finite(m.rotations, m.root_positions),
+        )
+    )
+    out.append(
+        Loader(
+            "asf",
+            ".asf",
+            mutated([asf_text], text=True),
+            read_asf,
+            lambda a: _finite(a.skeleton.offsets, a.axes),
+        )
+    )
+    out.append(
+        Loader(
+            "amc",
+            ".amc",
+            mutated([amc_text], text=True),
+            lambda p: read_amc(p, read_asf(workdir / "ref.asf")),
+            lambda m: _finite(m.rotations, m.root_positions),
+        )
+    )
     cams_ok = lambda cams: [_finite(c.K, c.R, c.t, c.dist) for c in cams]  # noqa: E731
-    out.append(Loader("cameras_json", ".json", mutated([json_cams], text=True), read_cameras,
-                      cams_ok))  # fmt: skip
-    out.append(Loader("cameras_yaml", ".yml", mutated([yaml_cams], text=True), read_cameras,
-                      cams_ok))  # fmt: skip
-    out.append(Loader("silhouette_png", ".png", mutated(_masks()), read_mask,
-                      lambda m: None if m.dtype == bool and m.ndim == 2 else _bad("mask")))  # fmt: skip
-    out.append(Loader("template_npz", ".npz", npz_mutated([_template_arrays()]), load_template,
-                      lambda t: _finite(t.V, t.skeleton.offsets)))  # fmt: skip
+    out.append(
+        Loader("cameras_json", ".json", mutated([json_cams], text=True), read_cameras, cams_ok)
+    )
+    out.append(
+        Loader("cameras_yaml", ".yml", mutated([yaml_cams], text=True), read_cameras, cams_ok)
+    )
+    out.append(
+        Loader(
+            "silhouette_png",
+            ".png",
+            mutated(_masks()),
+            read_mask,
+            lambda m: None if m.dtype == bool and m.ndim == 2 else _bad("mask"),
+        )
+    )
+    out.append(
+        Loader(
+            "template_npz",
+            ".npz",
+            npz_mutated([_template_arrays()]),
+            load_template,
+            lambda t: _finite(t.V, t.skeleton.offsets),
+        )
+    )
     out += _result_loaders(workdir)
     return out
 
@@ -322,8 +395,8 @@ def _bad(what: str) -> None:
 
 def _result_loaders(workdir: Path) -> list[Loader]:
     """Track folders, capture frames and pose manifolds: one file of a valid folder mutated."""
-    from meshmocap.io.capture import Capture, write_hull, write_truth, Truth
     from meshmocap.geometry.carving import VoxelHull
+    from meshmocap.io.capture import Capture, Truth, write_hull, write_truth
     from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -331,8 +404,10 @@ def _result_loaders(workdir: Path) -> list[Loader]:
     track = workdir / "track_seed"
     start_track(track, {"method": "x", "eval_names": ["a", "b"], "eval_parents": [-1, 0]}, F)
     for i in range(2):
-        write_frame(track, FrameResult(i, V[:2] + i, V + i, {"data": 1.0}, 3, 0.1,
-                                       state={"pose": np.eye(3)}))  # fmt: skip
+        write_frame(
+            track,
+            FrameResult(i, V[:2] + i, V + i, {"data": 1.0}, 3, 0.1, state={"pose": np.eye(3)}),
+        )
     frame_seed = (track / "frames" / "00001.npz").read_bytes()
     with np.load(track / "frames" / "00001.npz") as z:
         frame_arrays = {k: z[k] for k in z.files}
@@ -360,10 +435,12 @@ def _result_loaders(workdir: Path) -> list[Loader]:
     (cap / "hulls").mkdir(parents=True)
     (cap / "truth").mkdir()
     write_hull(cap / "hulls" / "00000.npz", hull)
-    write_truth(cap / "truth" / "00000.npz", Truth(V, V[:2], np.tile(np.eye(3), (2, 1, 1)),
-                                                   np.zeros(3)))  # fmt: skip
-    (cap / "capture.json").write_text(json.dumps({"format": "meshmocap-capture-1", "fps": 30,
-                                                  "frames": [0]}))  # fmt: skip
+    write_truth(
+        cap / "truth" / "00000.npz", Truth(V, V[:2], np.tile(np.eye(3), (2, 1, 1)), np.zeros(3))
+    )
+    (cap / "capture.json").write_text(
+        json.dumps({"format": "meshmocap-capture-1", "fps": 30, "frames": [0]})
+    )
     hull_arrays = dict(np.load(cap / "hulls" / "00000.npz"))
 
     def read_capture_with(part: str) -> Callable[[Path], object]:
@@ -380,25 +457,55 @@ def _result_loaders(workdir: Path) -> list[Loader]:
         return read
 
     def capture_ok(out) -> None:
-        fps, missing, mesh, hull, truth = out
+        fps, _missing, mesh, hull, truth = out
         assert fps > 0 and np.isfinite(fps)
         _mesh_ok(mesh)
         _finite(hull.origin, truth.vertices)
 
     return [
-        Loader("track_frame_npz", ".npz", npz_mutated([frame_arrays]),
-               read_track_with("frames/00001.npz"), track_ok),
-        Loader("track_frame_bytes", ".npz", mutated([frame_seed]),
-               read_track_with("frames/00001.npz"), track_ok),
-        Loader("track_json", ".json", mutated([json_seed], text=True),
-               read_track_with("track.json"), track_ok),
-        Loader("capture_hull_npz", ".npz", npz_mutated([hull_arrays]),
-               read_capture_with("hulls/00000.npz"), capture_ok),
-        Loader("capture_truth_npz", ".npz", mutated([(cap / "truth" / "00000.npz").read_bytes()]),
-               read_capture_with("truth/00000.npz"), capture_ok),
-        Loader("capture_json", ".json", mutated([(cap / "capture.json").read_bytes()], text=True),
-               read_capture_with("capture.json"), capture_ok),
-    ]  # fmt: skip
+        Loader(
+            "track_frame_npz",
+            ".npz",
+            npz_mutated([frame_arrays]),
+            read_track_with("frames/00001.npz"),
+            track_ok,
+        ),
+        Loader(
+            "track_frame_bytes",
+            ".npz",
+            mutated([frame_seed]),
+            read_track_with("frames/00001.npz"),
+            track_ok,
+        ),
+        Loader(
+            "track_json",
+            ".json",
+            mutated([json_seed], text=True),
+            read_track_with("track.json"),
+            track_ok,
+        ),
+        Loader(
+            "capture_hull_npz",
+            ".npz",
+            npz_mutated([hull_arrays]),
+            read_capture_with("hulls/00000.npz"),
+            capture_ok,
+        ),
+        Loader(
+            "capture_truth_npz",
+            ".npz",
+            mutated([(cap / "truth" / "00000.npz").read_bytes()]),
+            read_capture_with("truth/00000.npz"),
+            capture_ok,
+        ),
+        Loader(
+            "capture_json",
+            ".json",
+            mutated([(cap / "capture.json").read_bytes()], text=True),
+            read_capture_with("capture.json"),
+            capture_ok,
+        ),
+    ]
 
 
 def manifold_loader(path: Path) -> Loader:
@@ -407,5 +514,10 @@ def manifold_loader(path: Path) -> Loader:
 
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
-    return Loader("manifold_npz", ".npz", npz_mutated([arrays]), PoseManifold.load,
-                  lambda pm: _finite(pm.gp.X_, pm.gp.Y_))  # fmt: skip
+    return Loader(
+        "manifold_npz",
+        ".npz",
+        npz_mutated([arrays]),
+        PoseManifold.load,
+        lambda pm: _finite(pm.gp.X_, pm.gp.Y_),
+    )

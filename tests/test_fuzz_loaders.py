@@ -10,8 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from fuzzing import Loader, loaders, manifold_loader, run_one
 from hypothesis import HealthCheck, given, settings
+
+from fuzzing import Loader, loaders, manifold_loader, run_one
 
 #: Examples per loader in the test suite.
 EXAMPLES = 15

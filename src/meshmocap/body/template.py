@@ -234,7 +234,6 @@ def _read(path: Path) -> Template:
     return t
 
 
-
 def _from_arrays(d: dict[str, np.ndarray]) -> Template:
     names = tuple(str(s) for s in d["joint_names"])
     parents = d["joint_parents"].astype(np.int64)

@@ -32,8 +32,11 @@ def _cmd_hull(args: argparse.Namespace) -> int:
     from meshmocap.studio.hulls import compute_hulls
 
     t0 = time.perf_counter()
-    cap = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
-    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({time.perf_counter() - t0:.1f} s)")
+    run = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
+    cap = run.capture
+    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
+          f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "
+          f"{time.perf_counter() - t0:.1f} s)")  # fmt: skip
     return 0
 
 

@@ -209,14 +209,16 @@ def read_hull_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     d = _load_npz(path, ())
     hull = _hull_of(d, path)
     try:
-        if "mesh_V" in d or "mesh_dK" in d:
-            V, F = _unpack_mesh(d, hull.origin, hull.voxel_size)
-        else:
-            V, F = hull_mesh(hull)
-            V = V.astype(np.float32).astype(np.float64)
-    except (KeyError, ValueError, TypeError, IndexError) as exc:
-        raise FormatError(f"{path}: corrupt hull mesh ({exc})") from None
-    if not len(F) or F.ndim != 2 or F.shape[1] != 3 or F.min() < 0 or F.max() >= len(V):
+        with np.errstate(over="raise", invalid="raise"):
+            if "mesh_V" in d or "mesh_dK" in d:
+                V, F = _unpack_mesh(d, hull.origin, hull.voxel_size)
+            else:
+                V, F = hull_mesh(hull)
+                V = V.astype(np.float32).astype(np.float64)
+    except (KeyError, ValueError, TypeError, IndexError, ArithmeticError) as exc:
+        raise FormatError(f"{path}: corrupt hull mesh ({type(exc).__name__}: {exc})") from None
+    bad = V.ndim != 2 or V.shape[-1] != 3 or not np.isfinite(V).all()
+    if bad or not len(F) or F.ndim != 2 or F.shape[1] != 3 or F.min() < 0 or F.max() >= len(V):
         raise FormatError(f"{path}: corrupt or empty hull mesh ({len(V)} vertices)")
     return V, F
 

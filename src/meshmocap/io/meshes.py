@@ -265,7 +265,9 @@ def _parse_text_points(data: bytes, ext: str, label: str) -> np.ndarray:
         head, sep, body = data.partition(b"\nDATA ")
         fmt = body.split(b"\n", 1)[0].strip() if sep else b""
         if fmt != b"ascii":
-            raise FormatError(f"{label}: only ASCII PCD is supported, found DATA {fmt.decode(errors='replace')!r}")
+            raise FormatError(
+                f"{label}: only ASCII PCD is supported, found DATA {fmt.decode(errors='replace')!r}"
+            )
         fields = next((ln.split()[1:] for ln in head.splitlines() if ln[:6] == b"FIELDS"), [])
         if not fields or fields[:3] != [b"x", b"y", b"z"]:
             raise FormatError(f"{label}: PCD FIELDS must start with x y z, found {fields}")

@@ -84,7 +84,7 @@ def track_sequence(
     positions = list(range(len(capture))) if frames is None else list(frames)
     if not positions:
         raise InputError("track: no frames to track")
-    indices = [capture[k].index for k in positions]
+    indices = [int(capture.indices[k]) for k in positions]  # without reading the frames
     meta = {
         "method": tracker.name,
         "template": template.name,
@@ -100,10 +100,10 @@ def track_sequence(
         if indices[0] not in done:
             _initialise(tracker, template, capture, out, positions)
             done = set(done_frames(out))
-        todo = [k for k in positions[1:] if capture[k].index not in done]
+        todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
             last = max(
-                (i for i in indices if i in done and i < capture[todo[0]].index),
+                (i for i in indices if i in done and i < capture.indices[todo[0]]),
                 default=indices[0],
             )
             if getattr(tracker, "template", None) is not template:  # resuming: not initialised
@@ -111,22 +111,23 @@ def track_sequence(
             tracker.set_state(read_state(out, last))
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
-                frame = capture[k]
+                index, reason = int(capture.indices[k]), None
                 t0 = time.perf_counter()
-                reason = missing_reason(frame)
                 try:
+                    frame = capture[k]  # a mesh sequence reads the file here
+                    reason = missing_reason(frame)
                     if reason is None:
                         r = tracker.step(frame)
                         if not _finite(r):
                             raise FloatingPointError("non-finite joints or vertices")
-                        r = replace(r, index=frame.index, seconds=time.perf_counter() - t0)
-                        good = frame.index
+                        r = replace(r, index=index, seconds=time.perf_counter() - t0)
+                        good = index
                 except NUMERICAL_ERRORS as exc:
-                    r = _carry(tracker, out, good, frame.index, t0, "failed", _why(exc))
+                    r = _carry(tracker, out, good, index, t0, "failed", _why(exc))
                 except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
                     reason = _why(exc)
                 if reason is not None:
-                    r = _carry(tracker, out, good, frame.index, t0, "missing", reason)
+                    r = _carry(tracker, out, good, index, t0, "missing", reason)
                 write_frame(out, r)
     return read_track(out)
 
@@ -164,8 +165,12 @@ def _initialise(tracker: Tracker, template: Template, capture, out, positions: l
     it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
-        frame = capture[k]
-        reason = missing_reason(frame)
+        index = int(capture.indices[k])
+        try:
+            frame = capture[k]  # a mesh sequence reads the file here
+            reason = missing_reason(frame)
+        except FRAME_ERRORS as exc:
+            reason = _why(exc)
         if reason is None:
             truth = _truth(frame)
             if truth is not None and truth.rotations is not None:
@@ -179,9 +184,9 @@ def _initialise(tracker: Tracker, template: Template, capture, out, positions: l
             except FRAME_ERRORS as exc:
                 reason = _why(exc)
         if reason is not None:
-            skipped.append((frame.index, reason))
+            skipped.append((index, reason))
             continue
-        write_frame(out, replace(r, index=frame.index, seconds=time.perf_counter() - t0))
+        write_frame(out, replace(r, index=index, seconds=time.perf_counter() - t0))
         for index, why in skipped:
             write_frame(out, replace(r, index=index, seconds=0.0, healthy=False, message=why,
                                      flags=("missing",)))  # fmt: skip
