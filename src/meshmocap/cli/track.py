@@ -77,7 +77,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(
-        tracker, template, capture, args.out, frames=frames, resume=not args.restart
+        tracker,
+        template,
+        capture,
+        args.out,
+        frames=frames,
+        resume=not args.restart,
+        vertices=False,
     )
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))

@@ -207,13 +207,17 @@ def read_hull_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if ply.is_file():  # a capture written the old way
         return read_mesh(ply)
     d = _load_npz(path, ())
-    hull = _hull_of(d, path)
+    if "missing" in d:
+        raise FormatError(f"{path}: the frame has no hull ({d['missing']})")
     try:
         with np.errstate(over="raise", invalid="raise"):
-            if "mesh_V" in d or "mesh_dK" in d:
-                V, F = _unpack_mesh(d, hull.origin, hull.voxel_size)
+            if "mesh_V" in d or "mesh_dK" in d:  # no need to unpack the occupancy
+                origin, vs = d["origin"].astype(np.float64), float(d["voxel_size"])
+                if origin.shape != (3,) or not np.isfinite(origin).all() or not vs > 0:
+                    raise ValueError("origin must be 3 finite numbers, voxel_size > 0")
+                V, F = _unpack_mesh(d, origin, vs)
             else:
-                V, F = hull_mesh(hull)
+                V, F = hull_mesh(_hull_of(d, path))
                 V = V.astype(np.float32).astype(np.float64)
     except (KeyError, ValueError, TypeError, IndexError, ArithmeticError) as exc:
         raise FormatError(f"{path}: corrupt hull mesh ({type(exc).__name__}: {exc})") from None

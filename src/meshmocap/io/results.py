@@ -160,8 +160,12 @@ def read_state(path: str | os.PathLike, index: int) -> dict[str, np.ndarray]:
     return {k[6:]: v for k, v in z.items() if k.startswith("state_")}
 
 
-def read_track(path: str | os.PathLike) -> Track:
-    """Read every frame of a track folder, stacked in frame order."""
+def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
+    """Read every frame of a track folder, stacked in frame order.
+
+    ``vertices=False`` leaves the tracked vertices out (``Track.vertices`` is (T, 0, 3)):
+    a 10,000-frame track of a 12k-vertex template holds 3 GB of them.
+    """
     path = Path(path)
     meta_path = path / "track.json"
     if not meta_path.is_file():
@@ -173,13 +177,16 @@ def read_track(path: str | os.PathLike) -> Track:
     if not frames:
         raise MeshmocapFileNotFoundError(f"track: {path / 'frames'} holds no frame results")
     rows = [read_frame_arrays(path, i) for i in frames]
+    if not vertices:
+        for r in rows:
+            r["vertices"] = r["vertices"][:0]
     keys = sorted({k for r in rows for k in r if k.startswith("energy_")})
     faces = _read_faces(path / "faces.npy")
     shapes = {(r["joints"].shape, r["vertices"].shape) for r in rows}
     if len(shapes) > 1:
         raise FormatError(f"track: {path / 'frames'} holds frames of different shapes {shapes}")
     n = rows[0]["vertices"].shape[0]
-    if len(faces) and (faces.min() < 0 or faces.max() >= n):
+    if vertices and len(faces) and (faces.min() < 0 or faces.max() >= n):
         raise FormatError(f"{path / 'faces.npy'}: face indices outside the {n} vertices")
     try:
         energies = {k[7:]: np.array([float(r.get(k, 0.0)) for r in rows]) for k in keys}

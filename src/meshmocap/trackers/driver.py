@@ -57,6 +57,7 @@ def track_sequence(
     frames: Sequence[int] | None = None,
     resume: bool = True,
     show_progress: bool | None = None,
+    vertices: bool = True,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -75,6 +76,9 @@ def track_sequence(
         Positions in the capture to track (default: all).
     resume : bool
         Continue an interrupted run in ``out`` (same settings) instead of starting over.
+    vertices : bool
+        Read the tracked vertices back into the returned track (False for long runs: see
+        :func:`~meshmocap.io.results.read_track`).
 
     Returns
     -------
@@ -129,7 +133,7 @@ def track_sequence(
                 if reason is not None:
                     r = _carry(tracker, out, good, index, t0, "missing", reason)
                 write_frame(out, r)
-    return read_track(out)
+    return read_track(out, vertices=vertices)
 
 
 #: Errors reading one frame's observation (an absent, empty or corrupt hull or mesh file):
