@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from meshmocap.apps import batch as batch_module
 from meshmocap.apps.batch import run_batch
 from meshmocap.apps.batch_items import BatchItem, batch_items
 from meshmocap.apps.batch_summary import SUMMARY_COLUMNS
@@ -134,11 +135,15 @@ def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, clu
     assert "| bad | articulated_icp | neutral_5k | failed |" in md
 
 
-def test_serial_mode_without_dask_gives_the_same_tracks(captures, alone, tmp_path):
+def test_without_dask_it_runs_serially_and_says_how_to_get_the_cluster(
+    captures, alone, tmp_path, monkeypatch
+):
+    monkeypatch.setattr(batch_module, "have_dask", lambda: False)
     items = batch_items([str(captures / "walk")], method=METHOD)
     lines = []
-    res = run_batch(items, tmp_path / "b", serial=True, show_progress=False, log=lines.append)
+    res = run_batch(items, tmp_path / "b", show_progress=False, log=lines.append)
     assert res.mode == "serial" and res.summaries[0].status == "ok"
+    assert 'pip install "meshmocap[cluster]" runs them in parallel' in lines[0]
     _same_frames(tmp_path / "b" / "walk" / "track", alone / "walk")
     assert lines[-1].startswith("done walk: 5 frames, 0 flagged")
 
