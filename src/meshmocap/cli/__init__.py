@@ -17,11 +17,11 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from meshmocap import __version__
-from meshmocap.cli import capture, demo, evaluation, motion, track
+from meshmocap.cli import batch, capture, demo, evaluation, motion, track
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, track, evaluation)
+COMMANDS = (demo, motion, capture, track, evaluation, batch)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -71,7 +71,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"meshmocap: warning: {message}", file=sys.stderr)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
 from meshmocap.errors import (
     GreyMaskWarning,
@@ -131,11 +131,20 @@ class HullRun:
     grey_masks: int
 
 
+def camera_file(path: Path) -> Path:
+    """The rig file of a capture folder: ``cameras.json``, ``cameras.yml`` or ``cameras.yaml``."""
+    for name in ("cameras.json", "cameras.yml", "cameras.yaml"):
+        if (path / name).is_file():
+            return path / name
+    raise MeshmocapFileNotFoundError(f"hull: {path} has no cameras.json or cameras.yml")
+
+
 def compute_hulls(
     capture: str | os.PathLike,
     *,
     voxel_size: float = 0.01,
     overwrite: bool = False,
+    frames: Sequence[int] | None = None,
     min_cameras: int = MIN_CAMERAS,
     show_progress: bool | None = None,
 ) -> HullRun:
@@ -150,6 +159,8 @@ def compute_hulls(
     overwrite : bool
         Recompute frames that already have a hull (default: keep them, so an interrupted
         run resumes).
+    frames : sequence of int, optional
+        Carve only these frame numbers (default: every frame with silhouettes).
     min_cameras : int
         Fewest cameras that must see the subject (see the module docstring).
 
@@ -167,14 +178,13 @@ def compute_hulls(
     path = Path(capture)
     if not path.is_dir():
         raise MeshmocapFileNotFoundError(f"hull: {path} is not a folder")
-    cam_file = next(
-        (path / n for n in ("cameras.json", "cameras.yml", "cameras.yaml") if (path / n).is_file()),
-        None,
-    )
-    if cam_file is None:
-        raise MeshmocapFileNotFoundError(f"hull: {path} has no cameras.json or cameras.yml")
-    cameras = read_cameras(cam_file)
-    frames = silhouette_frames(path, [c.name for c in cameras])
+    cameras = read_cameras(camera_file(path))
+    available = silhouette_frames(path, [c.name for c in cameras])
+    if frames is not None:
+        absent = sorted(set(frames) - set(available))
+        if absent:
+            raise InputError(f"hull: frames {absent[:5]} have no silhouettes in {path}")
+    frames = available if frames is None else sorted(set(frames))
     (path / "hulls").mkdir(exist_ok=True)
     todo = [
         f for f in frames if overwrite or not (path / "hulls" / f"{frame_name(f)}.npz").is_file()
@@ -182,21 +192,22 @@ def compute_hulls(
     partial: dict[int, str] = {}
     missing: dict[int, str] = {}
     grey = 0
-    with folder_lock(path / "hulls", "hull"):
-        for f in progress(todo, label="hull", enabled=show_progress):
-            name = frame_name(f)
-            files = [path / "silhouettes" / c.name / f"{name}.png" for c in cameras]
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", GreyMaskWarning)
-                masks = [
-                    read_mask(p, shape=c.shape) if p.is_file() else None
-                    for p, c in zip(files, cameras, strict=True)
-                ]
-            grey += sum(issubclass(w.category, GreyMaskWarning) for w in caught)
-            carved = carve_seen(masks, cameras, voxel_size=voxel_size, min_cameras=min_cameras)
-            write_carved(path / "hulls" / f"{name}.npz", carved)  # marks the frame done
-            if carved.note:
-                (missing if carved.hull is None else partial)[f] = carved.note
+    # no folder lock: `meshmocap batch` carves chunks of one capture in parallel (each
+    # frame's file is written atomically, so concurrent runs cannot corrupt one)
+    for f in progress(todo, label="hull", enabled=show_progress):
+        name = frame_name(f)
+        files = [path / "silhouettes" / c.name / f"{name}.png" for c in cameras]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", GreyMaskWarning)
+            masks = [
+                read_mask(p, shape=c.shape) if p.is_file() else None
+                for p, c in zip(files, cameras, strict=True)
+            ]
+        grey += sum(issubclass(w.category, GreyMaskWarning) for w in caught)
+        carved = carve_seen(masks, cameras, voxel_size=voxel_size, min_cameras=min_cameras)
+        write_carved(path / "hulls" / f"{name}.npz", carved)  # marks the frame done
+        if carved.note:
+            (missing if carved.hull is None else partial)[f] = carved.note
     if grey:
         warnings.warn(f"hull: {grey} masks in {path / 'silhouettes'} are not binary (grey "
                       "levels); thresholded at 50 % of full scale", GreyMaskWarning,
