@@ -389,6 +389,11 @@ def loaders(workdir: Path) -> list[Loader]:
     return out
 
 
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
 def _bad(what: str) -> None:
     raise AssertionError(f"bad {what}")
 
@@ -441,7 +446,7 @@ def _result_loaders(workdir: Path) -> list[Loader]:
     (cap / "capture.json").write_text(
         json.dumps({"format": "meshmocap-capture-1", "fps": 30, "frames": [0]})
     )
-    hull_arrays = dict(np.load(cap / "hulls" / "00000.npz"))
+    hull_arrays = _arrays(cap / "hulls" / "00000.npz")
 
     def read_capture_with(part: str) -> Callable[[Path], object]:
         def read(p: Path):
@@ -494,7 +499,7 @@ def _result_loaders(workdir: Path) -> list[Loader]:
         Loader(
             "capture_truth_npz",
             ".npz",
-            mutated([(cap / "truth" / "00000.npz").read_bytes()]),
+            npz_mutated([_arrays(cap / "truth" / "00000.npz")]),
             read_capture_with("truth/00000.npz"),
             capture_ok,
         ),

@@ -8,6 +8,8 @@ the flag, the range and what was found (``argument --jitter: expected a number f
 from __future__ import annotations
 
 import argparse
+import math
+from collections.abc import Callable
 
 from meshmocap._validate import frame_slice
 from meshmocap.errors import InputError
@@ -20,3 +22,31 @@ def frame_range(text: str) -> slice:
         return frame_slice(text)
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("frames: ")) from None
+
+
+def number(
+    lo: float, hi: float, unit: str = "", *, integer: bool = False, open_lo: bool = False
+) -> Callable[[str], float | int]:
+    """An argparse type: a finite number in ``[lo, hi]`` (``(lo, hi]`` with ``open_lo``),
+    an integer with ``integer``; ``unit`` is named in the message."""
+    kind = "an integer" if integer else "a number"
+    rng = f"above {lo:g} up to {hi:g}" if open_lo else f"from {lo:g} to {hi:g}"
+    what = f"{kind} {rng}" + (f" ({unit})" if unit else "")
+
+    def parse(text: str) -> float | int:
+        try:
+            value: float | int = int(text) if integer else float(text)
+        except ValueError:
+            value = math.nan
+        ok = math.isfinite(value) and (value > lo if open_lo else value >= lo) and value <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f"expected {what}, found {text!r}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # argparse names the type on errors
+    return parse
+
+
+def flag(name: str) -> str:
+    """``--n-patches`` for the option ``n_patches``."""
+    return "--" + name.replace("_", "-")

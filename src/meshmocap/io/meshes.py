@@ -282,6 +282,9 @@ def _parse_text_points(data: bytes, ext: str, label: str) -> np.ndarray:
     except ValueError as exc:
         raise FormatError(f"{label}: not a table of numbers ({_one_line(exc)})") from None
     if A.size == 0 or cols is not None:
+        if A.size and A.shape[1] <= max(cols):
+            raise FormatError(f"{label}: PCD FIELDS name {len(fields)} columns, the data has "
+                              f"{A.shape[1]}")  # fmt: skip
         return A[:, cols] if A.size else np.zeros((0, 3))
     return A[:, :6] if A.shape[1] >= 6 else A[:, :3] if A.shape[1] >= 3 else A
 
