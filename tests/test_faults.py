@@ -279,10 +279,14 @@ def test_eval_takes_a_mesh_folder_that_track_accepts(cap, tmp_path, capsys):
 
 
 def test_point_clouds_without_normals_are_tracked_by_the_patch_tracker(cap, tmp_path, capsys):
+    import trimesh
+
     seq = tmp_path / "pc"
     seq.mkdir()
-    for f in Capture(cap):
-        np.save(seq / f"{f.index:03d}.npy", f.hull_mesh[0][::2])  # points only
+    for f in Capture(cap):  # PLY point clouds: vertices, no faces, no normals
+        (seq / f"{f.index:03d}.ply").write_bytes(
+            trimesh.PointCloud(f.hull_mesh[0][::2]).export(file_type="ply")
+        )
     argv = ["track", str(seq), "--frames", "0:2", "--max-iter", "2", "--n-patches", "40"]
     assert main([*argv, "--out", str(tmp_path / "t")]) == 0
     t = read_track(tmp_path / "t")

@@ -127,8 +127,10 @@ def evaluate(
     against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"
     usable = _surface_frames(frames, truths, against)
     if surface_frames > 0 and len(usable):
-        pick = np.linspace(0, len(usable) - 1, min(surface_frames, len(usable))).round()
-        pick = usable[np.unique(pick.astype(int))]
+        pick = np.linspace(0, len(frames) - 1, min(surface_frames, len(frames))).round()
+        # a pick the cameras did not see (or without hull) moves to the nearest usable frame
+        nearest = np.abs(usable[None, :] - pick.astype(int)[:, None]).argmin(axis=1)
+        pick = np.unique(usable[nearest])
         means, hd = [], []
         for k in pick:
             Vb, Fb = (truths[k].vertices, F_true) if against == "truth" else frames[k].hull_mesh
