@@ -321,10 +321,17 @@ def test_hull_storage_is_compact_lossless_and_old_captures_read_unchanged(cap, t
         write_mesh(p.with_suffix(".ply"), *hull_mesh(Capture(cap)[int(p.stem)].hull))
     Vo, Fo = Capture(old)[2].hull_mesh
     assert np.array_equal(Vo, V) and np.array_equal(Fo, F)
+    with np.load(old / "hulls" / "00002.npz") as z:
+        assert "mesh_dK" not in z.files  # it was read from the PLY
     old_bytes = (old / "hulls" / "00002.ply").stat().st_size + (
         old / "hulls" / "00002.npz"
     ).stat().st_size
     assert npz.stat().st_size * 4 <= old_bytes
+    from meshmocap.io.capture import write_hull
+
+    write_hull(old / "hulls" / "00002.npz", hull)  # re-carved (hull --overwrite): PLY is stale
+    assert not (old / "hulls" / "00002.ply").exists()
+    assert np.array_equal(Capture(old)[2].hull_mesh[1], F)
 
 
 def test_size_limits_give_one_line(monkeypatch, tmp_path, cap):

@@ -122,6 +122,7 @@ def write_hull(
     arrays.update(_pack_mesh(np.asarray(V, np.float64), np.asarray(F, np.int64), hull))
     with atomic_open(path) as f:
         np.savez_compressed(f, **arrays)
+    Path(path).with_suffix(".ply").unlink(missing_ok=True)  # an old layout's mesh: stale now
 
 
 def write_missing_hull(path: str | os.PathLike, reason: str) -> None:
@@ -129,6 +130,7 @@ def write_missing_hull(path: str | os.PathLike, reason: str) -> None:
     camera seeing the subject); trackers coast across such a frame (flag ``missing``)."""
     with atomic_open(path) as f:
         np.savez_compressed(f, missing=np.str_(reason))
+    Path(path).with_suffix(".ply").unlink(missing_ok=True)
 
 
 def _small_int(a: np.ndarray, signed: bool) -> np.ndarray:
