@@ -59,7 +59,7 @@ class Degradation:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.jitter) and 0 <= self.jitter <= MAX_JITTER):
-            raise InputError(f"Degradation: jitter must be from 0 to {MAX_JITTER} pixels, "
+            raise InputError(f"Degradation: jitter must be from 0 to {MAX_JITTER:g} pixels, "
                              f"found {self.jitter}")  # fmt: skip
         for name in ("holes", "blobs"):
             v = getattr(self, name)
