@@ -660,6 +660,17 @@ INPUTS: list[Case] = [
         "learn: --out must be a .npz file in an existing folder",
     ),
     (
+        "batch_frames",
+        _args("batch", C, "--out", "TMP/b", "--serial", "--frames", "-3"),
+        "expected frame numbers ≥ 0 (START:STOP[:STEP] or N), found '-3'",
+    ),
+    ("batch_missing", _args("batch", "TMP/none", "--out", "TMP/b", "--serial"), "no such capture"),
+    (
+        "batch_workers",
+        _args("batch", C, "--out", "TMP/b", "--workers", "0"),
+        "batch: --workers must be an integer ≥ 1, found 0",
+    ),
+    (
         "transfer_no_track",
         _args("transfer", "TMP/none", "heavy_male", "--out", "TMP/x"),
         "has no track.json",
