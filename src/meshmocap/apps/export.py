@@ -52,6 +52,7 @@ from meshmocap.io.trc import write_trc
 __all__ = [
     "ExportFormat",
     "ExportResult",
+    "capture_fps",
     "export_format",
     "export_track",
     "track_fps",
@@ -110,26 +111,30 @@ def export_format(path: str | os.PathLike, format: str | None = None) -> str:
     return ext
 
 
-def track_fps(track: Track, fps: float | None = None) -> tuple[float, str]:
-    """The frame rate of ``track`` and where it comes from: ``fps`` when given, else
-    ``track.json``'s ``fps``, else its capture's ``capture.json``, else
-    :data:`DEFAULT_FPS`."""
+def capture_fps(meta: dict, fps: float | None = None) -> tuple[float, str]:
+    """The frame rate of a track from its ``track.json`` contents ``meta`` and where it
+    comes from: ``fps`` when given, else ``meta["fps"]``, else its capture's
+    ``capture.json``, else :data:`DEFAULT_FPS`."""
     if fps is not None:
         if not (np.isfinite(fps) and fps > 0):
             raise InputError(f"export: fps must be a positive number, found {fps!r}")
         return float(fps), "given"
-    if track.meta.get("fps"):
-        return float(track.meta["fps"]), "track.json"
-    cap = track.meta.get("capture")
+    if meta.get("fps"):
+        return float(meta["fps"]), "track.json"
+    cap = meta.get("capture")
     if cap:
-        meta = Path(cap) / "capture.json"
         try:
-            value = json.loads(meta.read_text()).get("fps")
-        except (OSError, ValueError):
+            value = json.loads((Path(cap) / "capture.json").read_text()).get("fps")
+        except (OSError, ValueError, AttributeError):
             value = None
         if value:
             return float(value), "capture.json"
     return DEFAULT_FPS, "default"
+
+
+def track_fps(track: Track, fps: float | None = None) -> tuple[float, str]:
+    """The frame rate of ``track`` and where it comes from (:func:`capture_fps`)."""
+    return capture_fps(track.meta, fps)
 
 
 def track_template(track: Track, template: Template | str | None = None) -> Template:
