@@ -15,7 +15,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     res = export_track(
         args.track, args.out, format=args.format, frames=args.frames, joints=joints,
         markers=args.markers, long=args.long, fps=args.fps, template=args.template,
-        bvh_unit=args.bvh_unit,
+        bvh_unit=args.bvh_unit, joint_weight=args.joint_weight,
     )  # fmt: skip
     fit = ""
     if not math.isnan(res.vertex_error_mm):
@@ -47,4 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
     x.add_argument("--bvh-unit", default="cm", choices=["m", "cm", "mm", "inch"],
                    help="length unit of a BVH file (default cm)")  # fmt: skip
+    x.add_argument("--joint-weight", type=float, default=2.0,
+                   help="bvh, gltf: weight of the tracked joints against the tracked surface "
+                   "in the pose fit (default 2; 0 fits the surface alone)")  # fmt: skip
     x.set_defaults(func=_cmd_export)
