@@ -18,6 +18,7 @@ from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS, load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.bvh import read_bvh
+from meshmocap.io.gltf import morph_gltf, write_gltf
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 
 SCRIPTS = Path(__file__).parent / "scripts"
@@ -186,7 +187,9 @@ def test_glb_and_gltf_pass_the_khronos_validator(track_dir, glb, tmp_path):
         )
     node, base = found
     export_track(track_dir, tmp_path / "walk.gltf")
-    for path in (glb[0], tmp_path / "walk.gltf"):
+    tr = read_track(track_dir)  # and a morph-target animation, as transfer writes it
+    write_gltf(tmp_path / "morph.glb", morph_gltf(tr.vertices[:3], tr.faces, np.arange(3) / 60))
+    for path in (glb[0], tmp_path / "walk.gltf", tmp_path / "morph.glb"):
         env = {**os.environ, "NODE_PATH": str(Path(base) / "node_modules")}
         res = subprocess.run(
             [node, str(SCRIPTS / "gltf_validate.js"), str(path)], capture_output=True,
