@@ -265,7 +265,8 @@ def player_payload(player: Player) -> dict:
     root = shown[0].joints[:, 0, [0, 2]].astype(np.float64)  # the pelvis on the floor plane
     travel = root[-1] - root[0]
     axis = travel / np.linalg.norm(travel) if np.linalg.norm(travel) > 0.2 else np.array([1.0, 0])
-    lane = [-float(axis[1]), float(axis[0])]  # side by side: across the direction of travel
+    lane = np.array([-axis[1], axis[0]])  # side by side: across the direction of travel,
+    lane = lane if lane[0] - 0.5 * lane[1] >= 0 else -lane  # left to right seen from the camera
     tracks = []
     for k, t in enumerate(player.tracks):
         tracks.append(
@@ -288,7 +289,7 @@ def player_payload(player: Player) -> dict:
         "center": [float(x) for x in origin],
         "floor": float(lo[1]),
         "extent": float((hi - lo).max()),
-        "lane": lane,
+        "lane": [float(x) for x in lane],
         "tracks": tracks,
         "truth": None,
         "hull": None,
