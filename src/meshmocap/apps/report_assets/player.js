@@ -115,7 +115,6 @@
     var c = data.center, ext = Math.max(data.extent, 1.5);
     this.camera = new THREE.PerspectiveCamera(35, 4 / 3, 0.01, 200);
     this.controls = new THREE.OrbitControls(this.camera, this.canvas);
-    this.home = { target: [c[0], c[1], c[2]], eye: [c[0] + 0.9 * ext, c[1] + 0.35 * ext, c[2] + 1.6 * ext] };
     this.controls.addEventListener("change", function () { self.render(); });
     var grid = new THREE.GridHelper(Math.ceil(ext * 3), Math.ceil(ext * 6), 0xb8c0cc, 0xd8dde4);
     grid.position.set(c[0], data.floor, c[2]);
@@ -166,7 +165,11 @@
     this.el_("mm-play").addEventListener("click", function () { self.toggle(); });
     this.el_("mm-speed").addEventListener("change", function (e) { self.speed = +e.target.value; });
     root.querySelectorAll("input[data-layer]").forEach(function (box) {
-      box.addEventListener("change", function () { self.layout(); self.setFrame(self.frame); });
+      box.addEventListener("change", function () {
+        self.layout();
+        if (box.getAttribute("data-layer") === "side" || box.getAttribute("data-layer") === "follow") self.resetView();
+        self.setFrame(self.frame);
+      });
     });
     this.canvas.addEventListener("keydown", function (e) {
       if (e.key === " ") { self.toggle(); e.preventDefault(); }
@@ -201,11 +204,21 @@
     this.camera.updateProjectionMatrix();
   };
 
+  /* The home view: the first track's pelvis at the current frame when following it (else
+   * the scene's centre), the lanes side by side in view, seen from the front right. */
   Player.prototype.resetView = function () {
-    var h = this.home, side = this.layer("side") ? (this.lanes.length - 1) / 2 : 0, l = this.data.lane;
-    var dx = l[0] * this.spacing() * side, dz = l[1] * this.spacing() * side;
-    this.controls.target.set(h.target[0] + dx, h.target[1], h.target[2] + dz);
-    this.camera.position.set(h.eye[0] + dx * 1.6, h.eye[1], h.eye[2] + dz * 1.6 + side * 1.2);
+    var d = this.data, c = d.center, l = d.lane, s = this.spacing();
+    var lanes = this.layer("side") ? this.lanes.length : 1, first = this.lanes[0];
+    var tx = c[0], tz = c[2], ty = d.floor + 0.9, dist = 2.8 + 1.1 * (lanes - 1);
+    if (this.layer("follow") && first && first.rows[this.frame] >= 0) {
+      var b = 3 * first.track.n_joints * first.rows[this.frame];
+      tx = first.J[b]; tz = first.J[b + 2];
+    } else {
+      dist = Math.max(dist, 1.2 * d.extent);
+    }
+    tx += l[0] * s * (lanes - 1) / 2; tz += l[1] * s * (lanes - 1) / 2;
+    this.controls.target.set(tx, ty, tz);
+    this.camera.position.set(tx + 0.45 * dist, ty + 0.25 * dist, tz + 0.85 * dist);
     this.controls.update();
   };
 
