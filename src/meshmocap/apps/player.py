@@ -37,7 +37,7 @@ from meshmocap.apps.export import track_fps, track_gltf, track_template
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, frame_name, read_hull
-from meshmocap.io.gltf import Z_UP_TO_Y_UP, gltf_bytes
+from meshmocap.io.gltf import Z_UP_TO_Y_UP, gltf_bytes, morph_gltf
 from meshmocap.io.results import Track
 
 #: Colours of the player's tracks (RGB), in order: blue, crimson, amber, purple, dark cyan.
@@ -130,6 +130,15 @@ def _hull_points(capture, pos: int, limit: int) -> np.ndarray:
     return P.astype(np.float32)
 
 
+def _rig(track: Track, template) -> Template | None:
+    """The template that skins ``track``, or None when it cannot be had (a template file
+    that is not bundled and was not given, another vertex count)."""
+    try:
+        return track_template(track, template)
+    except (MeshmocapFileNotFoundError, InputError):
+        return None
+
+
 def _y_up(X: np.ndarray) -> np.ndarray:
     return (np.asarray(X, dtype=np.float64) @ Z_UP_TO_Y_UP.T).astype(np.float32)
 
@@ -164,6 +173,8 @@ def player_from_tracks(
         Include the ground-truth joints when every shown frame has them.
     templates : sequence, optional
         Each track's template when it is not the bundled one named in its ``track.json``.
+        A track whose template cannot be had is shown as its tracked meshes (morph
+        targets, 12 bytes per vertex and frame, counted in ``max_megabytes``).
 
     Raises
     ------
@@ -184,7 +195,11 @@ def player_from_tracks(
         if missing:
             raise InputError(f"track {name!r}: frames {missing[:5]} are not in the capture")
     every = np.unique(np.concatenate([t.frames for t in tracks]))
+    rigs = [_rig(t, tpl) for t, tpl in zip(tracks, templates, strict=True)]
     per_frame = 8 * (sum(t.joints.shape[1] for t in tracks) + hull_points + 15) + 8
+    per_frame += sum(
+        16 * t.vertices.shape[1] for t, r in zip(tracks, rigs, strict=True) if r is None
+    )
     fit = max(1, int(max_megabytes * 1e6 // per_frame))
     stride = math.ceil(len(every) / min(max_frames, fit))
     frames = every[::stride]
@@ -195,12 +210,15 @@ def player_from_tracks(
         player_rows = np.full(len(frames), -1, np.int64)
         player_rows[np.searchsorted(frames, t.frames[rows])] = np.arange(len(rows))
         glb, first, err = b"", int(frames[0]), float("nan")
-        if len(rows):
-            template = track_template(t, templates[k])
-            color = tuple(c / 255.0 for c in PALETTE[k % len(PALETTE)])
-            g, fitted = track_gltf(t, template, rows, fps, color=color, name=name)
+        color = tuple(c / 255.0 for c in PALETTE[k % len(PALETTE)])
+        if len(rows) and rigs[k] is not None:
+            g, fitted = track_gltf(t, rigs[k], rows, fps, color=color, name=name)
             glb, first = gltf_bytes(g), int(t.frames[rows[0]])
             err = float(fitted.vertex_error.mean() * 1e3)
+        elif len(rows):  # no template to skin: the tracked meshes themselves, as morph targets
+            times = (t.frames[rows] - t.frames[rows[0]]) / fps
+            g = morph_gltf(t.vertices[rows], t.faces, times, name=name, color=color)
+            glb, first, err = gltf_bytes(g), int(t.frames[rows[0]]), 0.0
         parents = t.meta.get("eval_parents")
         ptracks.append(
             PlayerTrack(name, glb, first, _y_up(t.joints[rows]), player_rows,

@@ -149,7 +149,8 @@
         lane.model = gltf.scene;
         lane.model.traverse(function (o) {
           if (o.isMesh) {
-            o.material = new THREE.MeshStandardMaterial({ color: color(t.color), roughness: 0.75, metalness: 0, transparent: true, opacity: 0.85 });
+            // a morph-target mesh has no normals: shade it from its faces
+            o.material = new THREE.MeshStandardMaterial({ color: color(t.color), roughness: 0.75, metalness: 0, transparent: true, opacity: 0.85, flatShading: !o.geometry.attributes.normal });
             o.frustumCulled = false;
           }
         });
