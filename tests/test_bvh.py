@@ -262,7 +262,7 @@ def test_root_positions_are_written_absolute(tmp_path: Path) -> None:
     offset (Blender's importer) place the body where readers that add it do."""
     m = _random_motion()
     text = write_bvh(tmp_path / "r.bvh", m, unit="m", up="z").read_text().splitlines()
-    assert text[2].split() == ["OFFSET", "0.00000000", "0.00000000", "0.00000000"]
+    assert text[3].split() == ["OFFSET", "0.00000000", "0.00000000", "0.00000000"]
     first = np.array(text[text.index("MOTION") + 3].split()[:3], dtype=float)
     np.testing.assert_allclose(first, m.root_positions[0], atol=1e-8)
 
