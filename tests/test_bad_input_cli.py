@@ -349,6 +349,14 @@ RANGES: list[tuple[list[str], str]] = [
         ["demo", "--out", "TMP/d", "--track-frames", "-1"],
         "argument --track-frames: expected an integer from 0",
     ),
+    (
+        ["export", "TMP/t", "--format", "bvh", "--out", "TMP/e.bvh", "--fps", "0"],
+        "argument --fps: expected a number above 0 up to 1000",
+    ),
+    (
+        ["export", "TMP/t", "--format", "bvh", "--out", "TMP/e.bvh", "--joint-weight", "-1"],
+        "argument --joint-weight: expected a number from 0 to 1000",
+    ),
     (["track", C], "the following arguments are required: --out"),
     (["nope"], "argument COMMAND: invalid choice: 'nope'"),
 ]
