@@ -214,6 +214,8 @@ def read_hull_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     try:
         with np.errstate(over="raise", invalid="raise"):
             if "mesh_V" in d or "mesh_dK" in d:  # no need to unpack the occupancy
+                if any(d[k].dtype.kind not in "fiu" for k in ("origin", "voxel_size")):
+                    raise ValueError("origin and voxel_size must be real numbers")
                 origin, vs = d["origin"].astype(np.float64), float(d["voxel_size"])
                 if origin.shape != (3,) or not np.isfinite(origin).all() or not vs > 0:
                     raise ValueError("origin must be 3 finite numbers, voxel_size > 0")
