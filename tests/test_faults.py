@@ -373,3 +373,18 @@ def test_eval_of_a_capture_partly_out_of_view_scores_surfaces_on_frames_in_view(
     ev = evaluate(read_track(tmp_path / "t"), Capture(c), silhouettes=False, surface_frames=8)
     assert ev.out_of_view.tolist() == [0, 1]
     assert ev.surface.frames.tolist() == [2, 3, 4] and np.isfinite(ev.surface.mean).all()
+
+
+def test_a_camera_that_does_not_see_the_subject_is_not_scored():
+    from meshmocap.analysis.metrics import silhouette_errors
+    from meshmocap.analysis.tables import table
+
+    true = np.zeros((2, 2, 4, 4), bool)
+    true[:, :, 1:3, 1:3] = True
+    true[1, 1] = False  # frame 1: camera B lost the subject (synth kept the frame)
+    pred = true.copy()
+    pred[0, 0, 0, 0] = True
+    se = silhouette_errors(pred, true, cameras=["A", "B"])
+    assert np.isnan(se.errors[1, 1]) and se.errors[0, 0] == 0.25
+    assert se.per_camera.tolist() == [0.125, 0.0] and se.overall == pytest.approx(0.25 / 3)
+    assert "nan" not in table(se).split("pooled")[0].lower()
