@@ -78,6 +78,10 @@ def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys)
     assert "3 written" in captured.out and "scale 0.944/0.944/0.944" in captured.out
     assert captured.err.startswith("meshmocap: warning: write_transfer:")
     assert len(sorted((tmp_path / "heavy").glob("frame_*.obj"))) == 3
+    # one animated glTF instead of one mesh per frame
+    assert main([*heavy, str(tmp_path / "anim"), "--format", "glb", "--outside", "ignore"]) == 0
+    assert "3 written" in capsys.readouterr().out
+    assert [p.name for p in (tmp_path / "anim").glob("*.glb")] == ["transfer.glb"]
 
 
 def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
@@ -90,7 +94,7 @@ def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
          "a manifold is only used by"),
         (["learn", "walkk", "--out", str(tmp_path / "m.npz")], "expected one of"),
         (["learn", "walk", "--samples", "0", "--out", str(tmp_path / "m.npz")],
-         "n must be a positive int"),
+         "argument --samples: expected an integer from 3 to 100000, found '0'"),
         (["learn", "walk", "--out", str(tmp_path / "no" / "m.npz")], "in an existing folder"),
         (["transfer", str(tmp_path / "none"), "heavy_male", "--out", str(tmp_path / "x")],
          "has no track.json"),

@@ -10,10 +10,9 @@ from meshmocap.errors import InputError
 from meshmocap.estimate.axes import detect_axes
 from meshmocap.estimate.fit import PoseFitter, pose_of_vertices
 from meshmocap.estimate.init import initial_pose, limb_candidates, seed_pose
-from meshmocap.estimate.observe import ObservedFrame, occupancy_from_points
+from meshmocap.estimate.observe import ObservedFrame
 from meshmocap.estimate.quality import fit_quality, limb_labels
 from meshmocap.estimate.reinit import Recovery
-from meshmocap.geometry.carving import distance_grid
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.capture import SequenceFrame
@@ -40,18 +39,16 @@ def _frame(V, F=None, index=0):
     return ObservedFrame(SequenceFrame(index, (V, F), None))
 
 
-def test_occupancy_and_normals_of_a_point_cloud():
+def test_a_point_cloud_frame_has_outward_normals_and_a_signed_distance():
     rng = np.random.default_rng(0)
     d = rng.normal(size=(20000, 3))
     P = 0.3 * d / np.linalg.norm(d, axis=1, keepdims=True) + [1.0, 2.0, 0.5]
-    hull = occupancy_from_points(P)
-    assert hull.volume == pytest.approx(4 / 3 * np.pi * 0.3**3, rel=0.1)  # ± half a voxel
-    obs = _frame(P)  # a cloud without normals: from its neighbourhoods and the occupancy
+    obs = _frame(P)  # a cloud without normals: estimated (geometry.normals)
     Q, N = obs.points
     radial = (Q - [1.0, 2.0, 0.5]) / 0.3
     assert np.percentile(np.sum(N * radial, axis=1), 5) > 0.9  # outward, 5th percentile
-    with pytest.raises(InputError, match=r"too large for 0\.01 m voxels"):
-        occupancy_from_points(P * 1000)
+    inside = obs.field(np.array([[1.0, 2.0, 0.5], [1.0, 2.0, 1.2]]))
+    assert inside[0] == pytest.approx(-0.3, abs=0.02) and inside[1] == pytest.approx(0.4, abs=0.02)
 
 
 def test_up_axis_units_and_distance_are_read_or_refused(body):
@@ -104,8 +101,8 @@ def test_a_lost_arm_is_found_again_by_its_limb_search(body):
 def test_fit_quality_names_the_limb_outside_and_unexplained(body):
     t, R, root, posed = body
     labels = limb_labels(t)
-    P = posed.V
-    field = distance_grid(occupancy_from_points(P), pad=0.3)
+    obs = _frame(posed.V, t.F)  # the true surface, closed
+    P, field = obs.points[0], obs.field
     good = fit_quality(posed.V, labels, P, field)
     assert good.lost == () and max(good.outside.values()) < 0.02
     down = R.copy()

@@ -5,62 +5,132 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import flag, frame_range, number
+
+#: Tracking options the command line offers (each taken only by the methods that have it).
+TRACK_OPTIONS = ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
+                 "fast_iter_scale", "joint_readout")  # fmt: skip
+
+
+def _tracker_options(args: argparse.Namespace) -> dict:
+    from meshmocap.errors import InputError
+    from meshmocap.trackers.registry import METHODS, method_options
+
+    given = {n: getattr(args, n) for n in TRACK_OPTIONS if getattr(args, n) is not None}
+    if args.method not in METHODS:  # the registry's one-line error
+        method_options(args.method)
+    takes = method_options(args.method)
+    unused = [n for n in given if n not in takes]
+    if unused:
+        users = [m for m in METHODS if unused[0] in method_options(m)]
+        offered = [flag(n) for n in TRACK_OPTIONS if n in takes]
+        raise InputError(
+            f"track: {flag(unused[0])} is not an option of --method {args.method} (it is of "
+            f"{', '.join(users)}); {args.method} takes {', '.join(offered) or 'none of them'}"
+        )
+    return given
+
+
+def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
+    """One capture folder, or several mesh files/folders (the shell expands an unquoted
+    glob into many arguments), in metres and Z up (mesh files: ``up`` and ``units`` read
+    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`).
+    Returns the capture and the axes read (None for a capture folder)."""
+    from meshmocap.errors import InputError
+    from meshmocap.estimate.axes import open_oriented
+    from meshmocap.io.meshes import frame_files
+
+    if len(sources) == 1:
+        return open_oriented(sources[0], up=up, units=units)
+    capture_dirs = [s for s in sources if (Path(s) / "capture.json").is_file()
+                    or (Path(s) / "hulls").is_dir()]  # fmt: skip
+    if capture_dirs:
+        raise InputError(f"track: give one capture folder, or several mesh files and folders; "
+                         f"{capture_dirs[0]} is a capture folder")  # fmt: skip
+    return open_oriented(frame_files(sources), up=up, units=units)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.body.template import load_template
-    from meshmocap.estimate.axes import open_oriented
+    from meshmocap.errors import InputError
+    from meshmocap.io.results import done_frames
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
-    options = {}
-    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
-                 "fast_iter_scale", "joint_readout"):  # fmt: skip
-        value = getattr(args, name)
-        if value is not None:
-            options[name] = value
+    options = _tracker_options(args)
+    capture, axes = _capture_source(args.capture, args.up, args.units)
+    if axes is not None and (args.up == "auto" or args.units == "auto"):
+        print(f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
+              f"{axes.span:.2f} m long (--up, --units to set)")  # fmt: skip
+    frames = None
+    if args.frames:
+        frames = range(len(capture))[args.frames]
+        if not frames:
+            raise InputError(f"track: --frames {_text(args.frames)} selects none of the "
+                             f"{len(capture)} frames of {args.capture[0]}")  # fmt: skip
+        if args.frames.stop is not None and args.frames.stop > len(capture):
+            print(f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
+                  f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                  f"{len(frames)}", file=sys.stderr)  # fmt: skip
     template = load_template(args.template)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
-    capture, axes = open_oriented(args.capture, up=args.up, units=args.units)
-    if axes is not None and (args.up == "auto" or args.units == "auto"):
-        print(f"{args.capture}: {axes.up.upper()} up, {axes.units}, a body "
-              f"{axes.span:.2f} m long (--up, --units to set)")  # fmt: skip
-    frames = range(len(capture))[args.frames] if args.frames else None
+    before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(
-        tracker, template, capture, args.out, frames=frames, resume=not args.restart,
-        init=args.init, recover=not args.no_recover,
-    )  # fmt: skip
+        tracker,
+        template,
+        capture,
+        args.out,
+        frames=frames,
+        resume=not args.restart,
+        vertices=False,
+        init=args.init,
+        recover=not args.no_recover,
+    )
     dt = time.perf_counter() - t0
-    print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
-          f"({track.seconds[1:].mean() if len(track.seconds) > 1 else 0:.3f} s per frame); "
-          f"{track_summary(track)}; results in {args.out}")  # fmt: skip
+    resumed = len(before & set(track.frames.tolist()))
+    new = len(track.frames) - resumed
+    bad = int((~track.healthy).sum())
+    missing = sum("missing" in f for f in track.flags)
+    fresh = [s for i, s in zip(track.frames, track.seconds, strict=True) if int(i) not in before]
+    per = sum(fresh[1:]) / (len(fresh) - 1) if len(fresh) > 1 else 0.0
+    done = f"tracked {new} frames"
+    done += f" ({resumed} resumed from an earlier run)" if resumed else ""
+    flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
+    print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
+          f"{_started(track)}; {flagged}{_lost(track)}; results in {args.out}")  # fmt: skip
+    if missing:
+        first = next(k for k, f in enumerate(track.flags) if "missing" in f)
+        print(f"meshmocap: warning: {missing} frames had no observation and were coasted "
+              f"across, first {int(track.frames[first])}: {track.messages[first]}",
+              file=sys.stderr)  # fmt: skip
     return 0
 
 
-def track_summary(track) -> str:
-    """How a track started and which frames are flagged, in one line (with the first
-    unhealthy frame's reason, so no frame is flagged without a word why)."""
-    flags = track.flags or ((),) * len(track.frames)
-    count = {f: sum(f in fl for fl in flags) for f in ("failed", "missing", "lost", "reinit")}
-    text = f"{track.meta.get('init', 'truth')} init"
+def _started(track) -> str:
+    """How the track's first pose was found (its first frame's message)."""
     first = track.messages[0] if track.messages else ""
-    if first.startswith("init "):
-        text = first
-    bad = int((~track.healthy).sum())
-    text += f"; {bad} flagged unhealthy"
-    if count["lost"]:
-        text += f", {count['lost']} with a limb lost ({count['reinit']} re-initialised)"
-    worst = [k for k in range(len(track.frames)) if not track.healthy[k] or flags[k]]
-    if worst:
-        k = worst[0]
-        text += f" (first: frame {track.frames[k]}, {track.messages[k] or ','.join(flags[k])})"
-    return text
+    return first if first.startswith("init ") else f"init {track.meta.get('init', 'truth')}"
+
+
+def _lost(track) -> str:
+    """Frames with a limb lost, re-initialised, and the first one's reason ('' if none)."""
+    lost = [k for k, f in enumerate(track.flags) if "lost" in f]
+    if not lost:
+        return ""
+    reinit = sum("reinit" in f for f in track.flags)
+    k = lost[0]
+    return (f", {len(lost)} with a limb lost ({reinit} re-initialised; first: frame "
+            f"{int(track.frames[k])}, {track.messages[k]})")  # fmt: skip
+
+
+def _text(s: slice) -> str:
+    return ":".join("" if v is None else str(v) for v in (s.start, s.stop, s.step)).rstrip(":")
 
 
 def _cmd_learn(args: argparse.Namespace) -> int:
@@ -105,8 +175,11 @@ def _cmd_learn(args: argparse.Namespace) -> int:
 
 
 def _cmd_transfer(args: argparse.Namespace) -> int:
+    import json
     import warnings
+    from pathlib import Path
 
+    from meshmocap.apps.export import capture_fps
     from meshmocap.body.template import bundled_templates, load_template
     from meshmocap.io.meshes import read_mesh
     from meshmocap.trackers.transfer import read_cage_track, write_transfer
@@ -118,20 +191,24 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         V, F = body.V, body.F
     else:
         V, F = read_mesh(args.mesh, up=args.up)
+    fps, _ = capture_fps(json.loads((Path(args.track) / "track.json").read_text()))
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = write_transfer(track, V, F, args.out, fit=args.fit, outside=args.outside,
                              tolerance=args.tolerance, ext=f".{args.format}",
-                             resume=not args.restart, name=args.mesh)  # fmt: skip
+                             resume=not args.restart, name=args.mesh, fps=fps)  # fmt: skip
     for w in caught:
         print(f"meshmocap: warning: {w.message}", file=sys.stderr)
     s = res.placement.scale
-    print(f"transferred {len(res.files)} frames of {args.track} to {args.mesh!r} ({len(V)} "
+    animated = args.format in ("glb", "gltf")
+    where = f"animation in {res.files[0]}" if animated else f"meshes in {res.out}"
+    print(f"transferred {res.written + res.skipped} frames of {args.track} to {args.mesh!r} "
+          f"({len(V)} "
           f"vertices, fit {args.fit}: scale {'/'.join(f'{v:.3f}' for v in s)}) in "
           f"{time.perf_counter() - t0:.1f} s: {res.written} written, {res.skipped} already "
           f"there; {res.n_outside} vertices outside the rest cage (up to "
-          f"{res.max_outside * 1000:.0f} mm); meshes in {res.out}")  # fmt: skip
+          f"{res.max_outside * 1000:.0f} mm); {where}")  # fmt: skip
     return 0
 
 
@@ -140,21 +217,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     k = sub.add_parser(
         "track", help="track a capture: skeleton joints and template shape per frame"
     )
-    k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
+    k.add_argument("capture", nargs="+", help="capture folder (meshmocap synth/hull), or mesh "
+                   "or point-cloud files, folders or a quoted glob or archive of them")  # fmt: skip
     k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
                    "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
     k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
-    k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")
+    k.add_argument(
+        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+    )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
-    k.add_argument("--keep-fraction", type=float, help="patch tracker: on-bone points kept")
-    k.add_argument("--outlier-sigmas", type=float, help="patch tracker: a point this many σ "
+    k.add_argument(
+        "--keep-fraction",
+        type=number(0, 1, open_lo=True),
+        help="patch tracker: on-bone points kept",
+    )
+    k.add_argument("--outlier-sigmas", type=number(0, 100, open_lo=True),
+                   help="patch tracker: a point this many σ "
                    "from the model is as likely an outlier (default 3; 2 rejects more of a "
                    "few-camera hull's phantom volumes, but also true points where the subject's "
                    "surface differs from the template's)")  # fmt: skip
-    k.add_argument("--max-iter", type=int, help="iterations per frame")
-    k.add_argument("--fast-iter-scale", type=float, help="patch tracker: iterations of a frame "
+    k.add_argument("--max-iter", type=number(1, 10_000, integer=True), help="iterations per frame")
+    k.add_argument("--fast-iter-scale", type=number(1, 100),
+                   help="patch tracker: iterations of a frame "
                    "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
                    "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
     k.add_argument("--joint-readout", help="patch tracker: joints reported: blend (default: "
@@ -162,31 +248,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "skeleton (the paper's) or surface")  # fmt: skip
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
-    k.add_argument(
-        "--init",
-        default="auto",
-        choices=["auto", "truth"],
-        help="first pose: "
-        "found from the capture (auto, default) or copied from its ground truth "
-        "(truth: the papers' protocol, synthetic captures only)",
-    )
-    k.add_argument(
-        "--up",
-        default="auto",
-        choices=["auto", "z", "y"],
-        help="mesh/point-cloud files: their up axis (default: detected)",
-    )
+    k.add_argument("--init", default="auto", choices=["auto", "truth"], help="first pose: "
+                   "found from the capture (auto, default) or copied from its ground truth "
+                   "(truth: the papers' protocol, synthetic captures only)")  # fmt: skip
+    k.add_argument("--up", default="auto", choices=["auto", "z", "y"],
+                   help="mesh/point-cloud files: their up axis (default: detected)")  # fmt: skip
     k.add_argument(
         "--units",
         default="auto",
         choices=["auto", "m", "cm", "mm"],
         help="mesh/point-cloud files: their length unit (default: detected)",
     )
-    k.add_argument(
-        "--no-recover",
-        action="store_true",
-        help="do not score frames, flag lost limbs or re-initialise them",
-    )
+    k.add_argument("--no-recover", action="store_true", help="do not score frames, flag lost "
+                   "limbs or re-initialise them")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")
     k.set_defaults(func=_cmd_track)
     m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")
@@ -194,16 +268,24 @@ def register(sub: argparse._SubParsersAction) -> None:
                    ".bvh/.amc/.mat mocap or a hand-labelled .npz pose file")  # fmt: skip
     m.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
     m.add_argument("--out", required=True, help="manifold file to write (.npz)")
-    m.add_argument("--latent-dim", type=int, default=2, help="latent dimension q")
-    m.add_argument("--samples", type=int, default=120, help="training poses (default: 120)")
+    m.add_argument(
+        "--latent-dim", type=number(1, 20, integer=True), default=2, help="latent dimension q"
+    )
+    m.add_argument(
+        "--samples",
+        type=number(3, 100_000, integer=True),
+        default=120,
+        help="training poses (default: 120)",
+    )
     m.add_argument("--asf", help="ASF skeleton of .amc/.mat sources (default: found beside)")
     m.add_argument("--plot", help="also draw the latent space (.png, .pdf or .svg)")
-    m.add_argument("--seed", type=int, default=0, help="random seed")
+    m.add_argument("--seed", type=number(0, 2**32 - 1, integer=True), default=0, help="random seed")
     m.set_defaults(func=_cmd_learn)
     x = sub.add_parser("transfer", help="replay a cage track with another mesh (motion transfer)")
     x.add_argument("track", help="track folder written by 'meshmocap track --method cage'")
     x.add_argument("mesh", help="a bundled template name or a mesh file (.obj, .ply, ...)")
-    x.add_argument("--out", required=True, help="folder for one mesh per frame")
+    x.add_argument("--out", required=True, help="folder for one mesh per frame, or for one "
+                   "animated glTF (--format glb/gltf: transfer.glb, Y up)")  # fmt: skip
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
     x.add_argument(
         "--fit",
@@ -212,13 +294,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="place the mesh where the template stands (default: as it is)",
     )
     x.add_argument("--up", default="z", choices=["z", "y"], help="the mesh file's up axis")
-    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb"])
+    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb", "gltf"],
+                   help="obj, ply, off, stl: one mesh per frame; glb, gltf: one "
+                   "animation")  # fmt: skip
     x.add_argument(
         "--outside",
         default="warn",
         choices=["warn", "raise", "ignore"],
         help="vertices outside the rest cage: warn, fail or ignore",
     )
-    x.add_argument("--tolerance", type=float, default=0.005, help="outside tolerance, metres")
+    x.add_argument(
+        "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
+    )
     x.add_argument("--restart", action="store_true", help="start over instead of resuming")
     x.set_defaults(func=_cmd_transfer)
