@@ -19,8 +19,8 @@ stride length within 2 %.
 
 Run: ``nice -n 10 python benchmarks/bench_gait.py [--clips 05_01 walk ...] [--methods patch
 ...] [--max-frames N] [--work /tmp/meshmocap-gait]``. Captures and tracks are cached in
-``--work`` (runs resume; a track folder is named by the tracker's options and the tracking
-code's digest); the table is printed and written to ``--work``/results.md.
+``--work`` (runs resume; a track folder is named by the tracker's options and a digest of the
+code below ``analysis/``); the table is printed and written to ``--work``/results.md.
 """
 
 from __future__ import annotations
@@ -34,8 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
+import meshmocap
 from meshmocap.analysis.gait import compare_gaits, gait_analysis, track_gait
-from meshmocap.apps.bench import bench_manifold, code_digest
+from meshmocap.apps.bench import bench_manifold
 from meshmocap.body.template import load_template
 from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture
@@ -74,6 +75,19 @@ TEMPLATE = "neutral_5k"
 BVH_SKIP = 6
 
 
+def track_digest() -> str:
+    """Digest (8 hex digits) of the code that makes a capture and a track: every module
+    below ``analysis/`` (the command line, analysis and apps left out, so that editing the
+    gait analysis reuses the cached tracks)."""
+    root = Path(meshmocap.__file__).resolve().parent
+    h = hashlib.sha1()
+    for p in sorted(root.rglob("*.py")):
+        rel = p.relative_to(root).as_posix()
+        if not rel.startswith(("analysis/", "apps/", "cli/")):
+            h.update(rel.encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()[:8]
+
+
 def in_view_range(source: str, template, cameras, *, max_frames: int | None) -> tuple[int, int]:
     """``(start, stop)`` of the longest run of frames (at 60 fps) whose posed surface every
     camera sees, at most ``max_frames`` long (centred in the run)."""
@@ -99,7 +113,7 @@ def tracked(method: str, template, capture: Capture, work: Path, manifold) -> Pa
     opts = {"manifold": manifold} if method in MANIFOLD_METHODS else {}
     tracker = make_tracker(method, **opts)
     salt = hashlib.sha1(manifold.X_.tobytes()).hexdigest()[:8] if opts else ""
-    key = [tracker.name, tracker.options(), template.name, salt, code_digest()]
+    key = [tracker.name, tracker.options(), template.name, salt, track_digest()]
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
     out = work / "tracks" / capture.path.name / f"{method}-{digest}"
     track_sequence(tracker, template, capture, out, show_progress=False)
@@ -158,7 +172,7 @@ def main() -> None:
             print(row, flush=True)
     load = os.getloadavg()
     tail = (f"\n{time.perf_counter() - t0:.0f} s; load average {load[0]:.1f} {load[1]:.1f} "
-            f"{load[2]:.1f}; code {code_digest()}")  # fmt: skip
+            f"{load[2]:.1f}; tracking code {track_digest()}")  # fmt: skip
     print(tail)
     (work / "results.md").write_text("\n".join(lines) + "\n" + tail + "\n")
 
