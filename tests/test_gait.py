@@ -234,3 +234,27 @@ def test_gait_command_writes_tables_and_plots(folders, tmp_path, capsys):
     assert len(err) == 1 and "no walking" in err[0] and "0.00 m/s" in err[0]
     assert not (tmp_path / "s").exists()
     assert main(["gait", str(tmp_path / "nowhere"), "--out", str(tmp_path / "n")]) == 2
+
+
+def test_report_gait_section(folders):
+    """The report's gait section: truth and track rows, the comparison, notes and plots; a
+    clip without walking says why instead of numbers."""
+    from meshmocap.apps.report import gait_section, table_html
+
+    cap, track, squat_cap = folders
+    s = gait_section(cap, [read_track(track)], ["jittered"])
+    (t,) = s.tables
+    truth, tracked = t.rows
+    assert truth[0] == "ground truth" and truth[3] == pytest.approx(110.0, rel=0.01)
+    matched, events = map(int, tracked[8].split("/"))  # no "+n": no spurious event
+    assert tracked[0] == "jittered" and events - 2 <= matched <= events
+    assert abs(tracked[11]) < 2.0 and tracked[10] <= 1.0  # cadence error %, max offset
+    assert any("ankle joints" in n for n in t.notes) and len(s.images) == 2
+    html = table_html(t)
+    assert "<tfoot>" in html and "events matched" in html
+    # no walking: a note, no row, no plot
+    sq = _track(squat_cap.path.parent / "squat_track", squat_cap,
+                np.stack([f.truth.joints for f in squat_cap]))  # fmt: skip
+    s = gait_section(squat_cap, [read_track(sq)], ["squat"])
+    assert s.tables[0].rows == () and s.images == ()
+    assert any(n.startswith("squat: no gait: the pelvis travels") for n in s.tables[0].notes)

@@ -290,3 +290,90 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
         raise MeshmocapFileNotFoundError(f"gait: {path} does not exist")
     raise InputError(f"gait: {path} is neither a track folder (track.json) nor a capture "
                      "folder (capture.json)")  # fmt: skip
+
+
+# --------------------------------------------------------------------------- report
+
+
+GAIT_HEADERS = ("source", "cycles", "steps", "cadence (steps/min)", "stride length (m)",
+                "stride time (s)", "speed (m/s)", "stance (%)", "events matched",
+                "mean offset (frames)", "max offset (frames)", "cadence error (%)",
+                "stride length error (%)")  # fmt: skip
+EVENTS_NOTE = (
+    "Gait events come from the ankle joints (the 15-joint skeleton has no toe or heel): a foot "
+    "is planted while its ankle moves slower than half the walking speed in the lower half of "
+    "its height range; a foot strike starts a stance and a foot off ends it (to a fraction of "
+    "a frame). Stance % therefore ends when the ankle moves off, a little before the toes do."
+)
+
+
+@dataclass(frozen=True)
+class GaitReport:
+    """The gait part of a report: table rows under :data:`GAIT_HEADERS`, notes, and
+    ``(caption, PNG bytes)`` plots."""
+
+    rows: tuple[tuple[object, ...], ...]
+    notes: tuple[str, ...]
+    images: tuple[tuple[str, bytes], ...]
+
+
+def _has_truth(capture) -> bool:
+    if not isinstance(capture, Capture) or not len(capture):
+        return False
+    t = capture[0].truth
+    return t is not None and t.joints is not None and bool(capture.meta.get("eval_names"))
+
+
+def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport:
+    """Gait of each track (and of the capture's ground truth, when it has one) at the
+    capture's frame rate, each track compared with the truth; plots written under
+    ``folder`` and returned as bytes."""
+    nan = math.nan
+    rows, notes, images = [], [EVENTS_NOTE], []
+    truth = None
+    if _has_truth(capture):
+        try:
+            truth = capture_gait(capture)
+        except InputError as exc:  # e.g. a capture of two frames
+            notes.append(f"ground truth: no gait: {exc}")
+    if truth is not None and truth.found:
+        s = truth.summary()
+        rows.append(("ground truth", s.n_cycles, s.n_steps, s.cadence_steps_per_min,
+                     s.stride_length_m, s.stride_time_s, s.speed_m_per_s, s.stance_pct,
+                     "", nan, nan, nan, nan))  # fmt: skip
+        notes.append(
+            "events matched: the truth's foot strikes and foot offs that the track reproduces "
+            "(same foot and kind, within 0.2 s; +n: spurious events); offsets in frames at "
+            f"{capture.fps:g} fps; errors are (track − truth) / truth."
+        )
+    elif truth is not None:
+        notes.append(f"ground truth: no gait: {truth.message}")
+    for k, (name, track) in enumerate(zip(names, tracks, strict=True)):
+        try:
+            g = track_gait(track, capture.fps)
+        except InputError as exc:  # e.g. a track of two frames
+            notes.append(f"{name}: no gait: {exc}")
+            continue
+        if not g.found:
+            notes.append(f"{name}: no gait: {g.message}")
+            continue
+        s = g.summary()
+        c = compare_gaits(g, truth) if truth is not None and truth.found else None
+        matched = ""
+        if c is not None:
+            matched = f"{c.matched}/{c.reference_events}" + (f" +{c.spurious}" * bool(c.spurious))
+        rows.append((name, s.n_cycles, s.n_steps, s.cadence_steps_per_min, s.stride_length_m,
+                     s.stride_time_s, s.speed_m_per_s, s.stance_pct, matched,
+                     c.mean_offset if c else nan, c.max_offset if c else nan,
+                     c.cadence_error_pct if c else nan,
+                     c.stride_length_error_pct if c else nan))  # fmt: skip
+        ref = truth if truth is not None and truth.found else None
+        out = Path(folder) / str(k)
+        out.mkdir(parents=True, exist_ok=True)
+        title = f"{name}{' (dashed: truth)' if ref else ''}"
+        plots = ((plot_gait, "gait.png", "ankle heights and wrist paths"),
+                 (plot_flexion, "gait_flexion.png", "hip and knee flexion"))  # fmt: skip
+        for plot, file, what in plots:
+            p = plot(g, out / file, reference=ref, title=title)
+            images.append((f"{name}: {what}", p.read_bytes()))
+    return GaitReport(tuple(rows), tuple(notes), tuple(images))

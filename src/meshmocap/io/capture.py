@@ -6,7 +6,7 @@ Layout (``capture.json`` holds ``"format": "meshmocap-capture-1"``)::
       capture.json                     metadata: fps, frame count, how it was made
       cameras.json                     the rig (see meshmocap.io.cameras)
       silhouettes/<camera>/NNNNN.png   one binary mask per camera and frame
-      hulls/NNNNN.ply                  visual-hull mesh, metres, Z up
+      hulls/NNNNN.ply                  visual-hull mesh, metres, Z up (optional beside the .npz)
       hulls/NNNNN.npz                  its voxel occupancy (bit-packed), origin, voxel size
       truth/NNNNN.npz                  ground truth of synthetic captures: posed vertices
                                        (n, 3), evaluation joints (K, 3), local rotations
@@ -33,7 +33,7 @@ import numpy as np
 from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
-from meshmocap.geometry.carving import VoxelHull
+from meshmocap.geometry.carving import VoxelHull, hull_mesh
 from meshmocap.io.cameras import read_cameras
 from meshmocap.io.meshes import read_mesh
 from meshmocap.io.silhouettes import read_mask
@@ -130,8 +130,12 @@ class CaptureFrame:
 
     @cached_property
     def hull_mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(V (n, 3), F (m, 3))`` of the visual hull, metres, Z up."""
-        return read_mesh(self.capture.path / "hulls" / f"{frame_name(self.index)}.ply")
+        """``(V (n, 3), F (m, 3))`` of the visual hull, metres, Z up; rebuilt from the voxel
+        occupancy (marching cubes) where the ``.ply`` was removed to save space."""
+        ply = self.capture.path / "hulls" / f"{frame_name(self.index)}.ply"
+        if not ply.is_file() and ply.with_suffix(".npz").is_file():
+            return hull_mesh(self.hull)
+        return read_mesh(ply)
 
     @cached_property
     def hull(self) -> VoxelHull:
