@@ -2,7 +2,8 @@
 tracker's joints against the same quantities from the ground-truth joints.
 
 Protocol: each clip (CMU walks and runs of ``../shared/data/mocap/cmu`` and its library,
-chosen by CMU's own index, and the procedural walk and jog) is retargeted onto
+chosen by CMU's own index, and the procedural walk and jog, their paths centred on the
+studio) is retargeted onto
 ``neutral_5k``, resampled to 60 fps and played by it in a synthetic ``humaneva4`` studio
 (4 cameras, silhouettes, 1 cm visual hulls; :func:`~meshmocap.studio.synth.synthesize`),
 on the longest run of frames in which every camera sees the whole body (a CMU walk crosses
@@ -30,6 +31,7 @@ import hashlib
 import json
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +39,10 @@ import numpy as np
 import meshmocap
 from meshmocap.analysis.gait import compare_gaits, gait_analysis, track_gait
 from meshmocap.apps.bench import bench_manifold
+from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template
 from meshmocap.geometry.camera import in_view
+from meshmocap.io.bvh import write_bvh
 from meshmocap.io.capture import Capture
 from meshmocap.io.clips import clip_on
 from meshmocap.io.results import read_track
@@ -88,11 +92,25 @@ def track_digest() -> str:
     return h.hexdigest()[:8]
 
 
+def procedural_bvh(name: str, template, work: Path) -> str:
+    """The procedural motion ``name`` (6 s at 60 fps) on ``template``, its path centred on the
+    studio (a procedural motion starts at the centre and would leave the volume after half
+    of it), written as a BVH in ``work/motions``."""
+    path = work / "motions" / f"{name}.bvh"
+    if not path.is_file():
+        m = procedural_motion(name, template, duration=6.0, fps=FPS)
+        root = m.root_positions.copy()
+        root[:, :2] -= 0.5 * (root[0, :2] + root[-1, :2])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_bvh(path, replace(m, root_positions=root))
+    return str(path.resolve())
+
+
 def in_view_range(source: str, template, cameras, *, max_frames: int | None) -> tuple[int, int]:
     """``(start, stop)`` of the longest run of frames (at 60 fps) whose posed surface every
     camera sees, at most ``max_frames`` long (centred in the run)."""
     m = clip_on(template, source, fps=FPS)
-    skip = BVH_SKIP if source.endswith(".bvh") else 0
+    skip = BVH_SKIP if "/mocap/cmu/" in source and source.endswith(".bvh") else 0
     V = template.pose(m.rotations, m.root_positions).V[:, ::4]
     seen = np.array([in_view(v, cameras).all() for v in V])
     seen[:skip] = False
@@ -146,7 +164,9 @@ def main() -> None:
     t0 = time.perf_counter()
     for name in args.clips:
         source, what = CLIPS[name]
-        if source not in ("walk", "jog"):
+        if source in ("walk", "jog"):
+            source = procedural_bvh(source, template, work)
+        else:
             path = data / source
             if not path.is_file():
                 print(f"left out {name}: {path} is absent")

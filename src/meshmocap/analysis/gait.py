@@ -7,16 +7,22 @@ Protocol
 Only the 15 evaluation joints are used (no toe or heel marker), so every event is an event
 of the **ankle joint**:
 
-* A foot is **planted** while its ankle moves horizontally slower than ``speed_threshold``
-  (default half the walking speed: the median horizontal speed of the pelvis, at least
-  0.25 m/s) *and* lies in the lower half of its height range (above the ankle's stance
-  height by less than half its swing clearance). Positions are smoothed first by a
-  Savitzky–Golay filter (quadratic, ``smooth`` = 0.1 s), which also gives the velocities.
+* A foot is **planted** while its ankle moves horizontally slower than the body walks (the
+  walking speed: the median horizontal speed of the pelvis; at least 0.25 m/s) *and* lies
+  in the lower half of its height range (above the ankle's stance height by less than half
+  its swing clearance). A planted foot is still and a swinging one overtakes the body, so
+  the ankle crosses that speed where it decelerates and accelerates fastest: the steepest,
+  least noise-sensitive place to time an event (half the walking speed, in the slow tail of
+  the landing, put tracked events up to 2.6 frames off the truth's on CMU 05_01; the
+  walking speed, 2.1; stance then takes 56–61 % of a CMU walk's cycle, as a toe-off would).
+  ``strike_factor`` and ``off_factor`` scale the two crossings separately. Positions are
+  smoothed first by a Savitzky–Golay filter (quadratic, ``smooth`` = 0.1 s), which also
+  gives the velocities.
 * Interruptions of a stance shorter than ``min_swing`` (0.1 s) are closed and stances
   shorter than ``min_stance`` (0.08 s) are dropped: a few centimetres of jitter of a tracked
   ankle at stance neither end a stance nor start a spurious one.
 * **Foot strike** is the start of a stance, **foot off** its end, timed to a fraction of a
-  frame where the ankle's speed crosses the threshold (linear interpolation). Events within
+  frame where the ankle's speed crosses the walking speed (linear interpolation). Events within
   two frames of the clip's ends or of a frame flagged as unusable are dropped.
 * A **cycle** runs from a foot strike to the next strike of the same foot with one foot off
   in between; a **step** from a strike of one foot to the next strike of the other.
@@ -58,6 +64,7 @@ from meshmocap.analysis.gait_signals import (
     forward,
     smoothed,
     stance_events,
+    stance_mask,
 )
 from meshmocap.errors import InputError
 from meshmocap.io.capture import Capture
@@ -70,6 +77,8 @@ _JOINTS = (
 )
 #: Samples of a normalised cycle curve: 0, 1, ..., 100 % of the cycle.
 CYCLE_SAMPLES = 101
+#: Ankle speeds that time a foot strike and a foot off, as fractions of the walking speed.
+STRIKE_FACTOR, OFF_FACTOR = 1.0, 1.0
 #: Frame flags (:data:`meshmocap.io.results.FRAME_FLAGS`) whose joints gait analysis ignores.
 UNUSABLE_FLAGS = ("failed", "missing", "lost")
 
@@ -163,7 +172,7 @@ class Gait:
     cycles : tuple of :class:`GaitCycle`, ordered by strike
     steps : (s, 4) float64, one row per step: landing side (0 left, 1 right), step time
         (s), step length (m), landing position (fractional frame)
-    speed_threshold : float, m/s, below which an ankle counted as planted
+    strike_speed, off_speed : float, m/s, the ankle speeds that timed the strikes and offs
     progression_speed : float, m/s, median horizontal speed of the pelvis
     message : str, why no gait was found (empty when one was)
     """
@@ -181,7 +190,8 @@ class Gait:
     foot_offs: tuple[np.ndarray, np.ndarray]
     cycles: tuple[GaitCycle, ...]
     steps: np.ndarray
-    speed_threshold: float
+    strike_speed: float
+    off_speed: float
     progression_speed: float
     message: str = ""
     _cache: dict = field(default_factory=dict, repr=False)
@@ -246,7 +256,9 @@ def gait_analysis(
     *,
     valid: np.ndarray | None = None,
     frames: np.ndarray | None = None,
-    speed_threshold: float | None = None,
+    strike_factor: float = STRIKE_FACTOR,
+    off_factor: float = OFF_FACTOR,
+    min_speed: float = 0.25,
     smooth: float = 0.1,
     min_swing: float = 0.1,
     min_stance: float = 0.08,
@@ -268,9 +280,9 @@ def gait_analysis(
         (NaN included); events near them are dropped and no cycle spans them.
     frames : (T,) int, optional
         Frame numbers to report (default 0…T−1).
-    speed_threshold : float, optional
-        Horizontal ankle speed (m/s) below which a foot may be planted; default half the
-        median horizontal pelvis speed, at least 0.25 m/s.
+    strike_factor, off_factor : float
+        The ankle speeds that time a foot strike and a foot off, as fractions of the walking
+        speed (the median horizontal speed of the pelvis), at least ``min_speed`` m/s.
     smooth : float
         Savitzky–Golay window, seconds (0: no smoothing).
     min_swing, min_stance : float
@@ -312,7 +324,7 @@ def gait_analysis(
     Vel = smoothed(J[:, legs], w, deriv=1) * fps
     speed = np.linalg.norm(Vel[:, :2, :2], axis=-1)  # (T, 2) ankles, horizontal
     v_prog = float(np.median(np.linalg.norm(Vel[ok, 2, :2], axis=-1)))
-    thr = max(0.25, 0.5 * v_prog) if speed_threshold is None else float(speed_threshold)
+    v_on, v_off = max(min_speed, strike_factor * v_prog), max(min_speed, off_factor * v_prog)
     height = P[:, :2, 2]
     fwd = forward(J, idx, fps)
     rel = J[:, [idx["left_wrist"], idx["right_wrist"]]] - J[:, [idx["pelvis"]]]
@@ -321,12 +333,12 @@ def gait_analysis(
     bad = ~ok
     stances, strikes, offs = [], [], []
     for k in range(2):
-        slow = speed[:, k] < thr
+        slow = speed[:, k] < min(v_on, v_off)
         base = np.median(height[ok & slow, k]) if (ok & slow).any() else height[ok, k].min()
         gate = base + 0.5 * (np.percentile(height[ok, k], 95) - base)
-        planted = slow & (height[:, k] < gate)
+        planted = stance_mask(speed[:, k], height[:, k] < gate, v_on, v_off)
         planted = drop_short(close_gaps(planted, round(min_swing * fps)), round(min_stance * fps))
-        s, e, hs, to = stance_events(speed[:, k], height[:, k], thr, gate, planted)
+        s, e, hs, to = stance_events(planted, speed[:, k], height[:, k], v_on, v_off, gate)
         hs = np.array([p if event_usable(p, bad) else np.nan for p in hs])
         to = np.array([p if event_usable(p, bad) else np.nan for p in to])
         where = np.array([np.median(P[a:b, k, :2], axis=0) for a, b in zip(s, e, strict=True)])
@@ -351,7 +363,7 @@ def gait_analysis(
         ankle_height=height, ankle_speed=speed, wrist_sagittal=wrist, hip_flexion=hip,
         knee_flexion=knee, strikes=tuple(h[np.isfinite(h)] for h in strikes),  # type: ignore[arg-type]
         foot_offs=tuple(o[np.isfinite(o)] for o in offs),  # type: ignore[arg-type]
-        cycles=cycles, steps=steps, speed_threshold=thr, progression_speed=v_prog,
+        cycles=cycles, steps=steps, strike_speed=v_on, off_speed=v_off, progression_speed=v_prog,
         message=message,
     )  # fmt: skip
 

@@ -116,22 +116,48 @@ def crossing(x0: float, x1: float, level: float) -> float:
     return float(np.clip((level - x0) / d, 0.0, 1.0)) if d != 0 else 0.5
 
 
+def stance_mask(
+    speed: np.ndarray, low: np.ndarray, strike_speed: float, off_speed: float
+) -> np.ndarray:
+    """(T,) bool, where a foot is planted: runs of frames that are ``low`` and slower than
+    both speeds, each extended backwards while slower than ``strike_speed`` (the stance
+    starts where the landing foot slows below it) and forwards while slower than
+    ``off_speed`` (it ends where the foot speeds up past it), still ``low``."""
+    out = (speed < min(strike_speed, off_speed)) & low
+    starts, ends = runs(out)
+    T = len(speed)
+    for s, e in zip(starts, ends, strict=True):
+        while s > 0 and low[s - 1] and speed[s - 1] < strike_speed:
+            s -= 1
+        while e < T and low[e] and speed[e] < off_speed:
+            e += 1
+        out[s:e] = True
+    return out
+
+
 def stance_events(
-    speed: np.ndarray, height: np.ndarray, threshold: float, gate: float, planted: np.ndarray
+    planted: np.ndarray,
+    speed: np.ndarray,
+    height: np.ndarray,
+    strike_speed: float,
+    off_speed: float,
+    gate: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Stance runs (starts, exclusive ends) of ``planted`` and the fractional positions of
-    their strikes and foot offs (NaN at a clip end): the last crossing of the two conditions
-    (slow, low) before a stance, the first after it."""
+    their strikes and foot offs (NaN at a clip end): where the speed crosses
+    ``strike_speed`` before a stance and ``off_speed`` after it, or the height crosses
+    ``gate`` (the later crossing before, the earlier after)."""
     starts, ends = runs(planted)
     T = len(planted)
     strikes = np.full(len(starts), np.nan)
     offs = np.full(len(starts), np.nan)
-    pairs = ((speed, threshold), (height, gate))
     for k, (s, e) in enumerate(zip(starts, ends, strict=True)):
         if s > 0:  # frame s−1 fails a condition that frame s meets: the later crossing
+            pairs = ((speed, strike_speed), (height, gate))
             fr = [crossing(x[s - 1], x[s], lv) if x[s - 1] >= lv else 0.0 for x, lv in pairs]
             strikes[k] = s - 1 + max(fr)
         if e < T:  # frame e−1 meets both, frame e fails one: the earlier crossing
+            pairs = ((speed, off_speed), (height, gate))
             fr = [crossing(x[e - 1], x[e], lv) if x[e] >= lv else 1.0 for x, lv in pairs]
             offs[k] = e - 1 + min(fr)
     return starts, ends, strikes, offs

@@ -301,9 +301,9 @@ GAIT_HEADERS = ("source", "cycles", "steps", "cadence (steps/min)", "stride leng
                 "stride length error (%)")  # fmt: skip
 EVENTS_NOTE = (
     "Gait events come from the ankle joints (the 15-joint skeleton has no toe or heel): a foot "
-    "is planted while its ankle moves slower than half the walking speed in the lower half of "
-    "its height range; a foot strike starts a stance and a foot off ends it (to a fraction of "
-    "a frame). Stance % therefore ends when the ankle moves off, a little before the toes do."
+    "is planted while its ankle moves slower than the body walks (the pelvis's median speed) "
+    "in the lower half of its height range; a foot strike starts a stance and a foot off ends "
+    "it, to a fraction of a frame."
 )
 
 
