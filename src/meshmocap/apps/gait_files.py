@@ -330,6 +330,9 @@ def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport
     ``folder`` and returned as bytes."""
     nan = math.nan
     rows, notes, images = [], [EVENTS_NOTE], []
+    if not (isinstance(capture, Capture) and "fps" in capture.meta):
+        notes.append(f"frame rate: the capture does not say; {capture.fps:g} fps assumed (times, "
+                     "speeds and cadence scale with it)")  # fmt: skip
     truth = None
     if _has_truth(capture):
         try:
