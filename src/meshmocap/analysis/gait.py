@@ -23,7 +23,8 @@ of the **ankle joint**:
   ankle at stance neither end a stance nor start a spurious one.
 * **Foot strike** is the start of a stance, **foot off** its end, timed to a fraction of a
   frame where the ankle's speed crosses the walking speed (linear interpolation). Events within
-  two frames of the clip's ends or of a frame flagged as unusable are dropped.
+  two frames of the clip's ends, or whose smoothing window reaches a frame flagged as
+  unusable, are dropped.
 * A **cycle** runs from a foot strike to the next strike of the same foot with one foot off
   in between; a **step** from a strike of one foot to the next strike of the other.
 * Stride length: horizontal distance between consecutive stance positions of one foot (the
@@ -330,7 +331,7 @@ def gait_analysis(
     rel = J[:, [idx["left_wrist"], idx["right_wrist"]]] - J[:, [idx["pelvis"]]]
     wrist = np.stack([np.einsum("tkj,tj->tk", rel, fwd), rel[..., 2]], axis=-1)
     hip, knee = flexion_angles(J, names, fwd)
-    bad = ~ok
+    bad, margin = ~ok, max(2, w // 2 + 1)
     stances, strikes, offs = [], [], []
     for k in range(2):
         slow = speed[:, k] < min(v_on, v_off)
@@ -339,8 +340,9 @@ def gait_analysis(
         planted = stance_mask(speed[:, k], height[:, k] < gate, v_on, v_off)
         planted = drop_short(close_gaps(planted, round(min_swing * fps)), round(min_stance * fps))
         s, e, hs, to = stance_events(planted, speed[:, k], height[:, k], v_on, v_off, gate)
-        hs = np.array([p if event_usable(p, bad) else np.nan for p in hs])
-        to = np.array([p if event_usable(p, bad) else np.nan for p in to])
+        # the smoothing window of an event must not reach into frames filled by interpolation
+        hs, to = (np.array([p if event_usable(p, bad, bad_margin=margin) else np.nan for p in x])
+                  for x in (hs, to))  # fmt: skip
         where = np.array([np.median(P[a:b, k, :2], axis=0) for a, b in zip(s, e, strict=True)])
         stances.append((s, e, where.reshape(-1, 2)))
         strikes.append(hs)

@@ -163,9 +163,10 @@ def stance_events(
     return starts, ends, strikes, offs
 
 
-def event_usable(pos: float, bad: np.ndarray, margin: int = 2) -> bool:
-    """Whether an event at ``pos`` lies at least ``margin`` frames inside the clip and away
-    from unusable frames (``bad``: the positions of invalid frames, sorted)."""
-    if not np.isfinite(pos) or pos < margin or pos > len(bad) - 1 - margin:
+def event_usable(pos: float, bad: np.ndarray, *, end_margin: int = 2, bad_margin: int = 2) -> bool:
+    """Whether an event at frame position ``pos`` lies at least ``end_margin`` frames inside
+    the clip and ``bad_margin`` frames away from unusable ones (``bad``: (T,) bool)."""
+    if not np.isfinite(pos) or pos < end_margin or pos > len(bad) - 1 - end_margin:
         return False
-    return not bad[int(np.floor(pos)) - margin : int(np.ceil(pos)) + margin + 1].any()
+    lo = max(0, int(np.floor(pos)) - bad_margin)
+    return not bad[lo : int(np.ceil(pos)) + bad_margin + 1].any()
