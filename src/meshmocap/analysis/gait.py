@@ -9,12 +9,15 @@ of the **ankle joint**:
 
 * A foot is **planted** while its ankle moves horizontally slower than the body walks (the
   walking speed: the median horizontal speed of the pelvis; at least 0.25 m/s) *and* lies
-  in the lower half of its height range (above the ankle's stance height by less than half
-  its swing clearance). A planted foot is still and a swinging one overtakes the body, so
+  low: above the ankle's stance height by less than ``lift`` (70 %) of its swing clearance
+  (a tracked ankle rising early at push-off must not cut the stance short: at 50 %, a
+  slow walk's foot off came 1.9 frames early on a cage track; a foot in the air, as in
+  a jump, still ends it). A planted foot is still and a swinging one overtakes the body, so
   the ankle crosses that speed where it decelerates and accelerates fastest: the steepest,
   least noise-sensitive place to time an event (half the walking speed, in the slow tail of
   the landing, put tracked events up to 2.6 frames off the truth's on CMU 05_01; the
-  walking speed, 2.1; stance then takes 56–61 % of a CMU walk's cycle, as a toe-off would).
+  walking speed, 2.1; stance then takes 57–61 % of a CMU walk's cycle, as a toe-off would,
+  but 47–49 % of a run's, longer than a toe-off's).
   ``strike_factor`` and ``off_factor`` scale the two crossings separately. Positions are
   smoothed first by a Savitzky–Golay filter (quadratic, ``smooth`` = 0.1 s), which also
   gives the velocities.
@@ -80,6 +83,8 @@ _JOINTS = (
 CYCLE_SAMPLES = 101
 #: Ankle speeds that time a foot strike and a foot off, as fractions of the walking speed.
 STRIKE_FACTOR, OFF_FACTOR = 1.0, 1.0
+#: Fraction of an ankle's height range above which its foot is in the air.
+LIFT = 0.7
 #: Frame flags (:data:`meshmocap.io.results.FRAME_FLAGS`) whose joints gait analysis ignores.
 UNUSABLE_FLAGS = ("failed", "missing", "lost")
 
@@ -260,6 +265,7 @@ def gait_analysis(
     strike_factor: float = STRIKE_FACTOR,
     off_factor: float = OFF_FACTOR,
     min_speed: float = 0.25,
+    lift: float = LIFT,
     smooth: float = 0.1,
     min_swing: float = 0.1,
     min_stance: float = 0.08,
@@ -284,6 +290,9 @@ def gait_analysis(
     strike_factor, off_factor : float
         The ankle speeds that time a foot strike and a foot off, as fractions of the walking
         speed (the median horizontal speed of the pelvis), at least ``min_speed`` m/s.
+    lift : float
+        Fraction of the ankle's height range (stance height to its 95th percentile) above
+        which a foot is in the air whatever its speed.
     smooth : float
         Savitzky–Golay window, seconds (0: no smoothing).
     min_swing, min_stance : float
@@ -336,7 +345,7 @@ def gait_analysis(
     for k in range(2):
         slow = speed[:, k] < min(v_on, v_off)
         base = np.median(height[ok & slow, k]) if (ok & slow).any() else height[ok, k].min()
-        gate = base + 0.5 * (np.percentile(height[ok, k], 95) - base)
+        gate = base + lift * (np.percentile(height[ok, k], 95) - base)
         planted = stance_mask(speed[:, k], height[:, k] < gate, v_on, v_off)
         planted = drop_short(close_gaps(planted, round(min_swing * fps)), round(min_stance * fps))
         s, e, hs, to = stance_events(planted, speed[:, k], height[:, k], v_on, v_off, gate)

@@ -302,7 +302,7 @@ GAIT_HEADERS = ("source", "cycles", "steps", "cadence (steps/min)", "stride leng
 EVENTS_NOTE = (
     "Gait events come from the ankle joints (the 15-joint skeleton has no toe or heel): a foot "
     "is planted while its ankle moves slower than the body walks (the pelvis's median speed) "
-    "in the lower half of its height range; a foot strike starts a stance and a foot off ends "
+    "in the lower 70 % of its height range; a foot strike starts a stance and a foot off ends "
     "it, to a fraction of a frame."
 )
 
