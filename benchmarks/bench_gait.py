@@ -153,13 +153,14 @@ def main() -> None:
     manifold = None
     if any(m in MANIFOLD_METHODS for m in args.methods):
         manifold = bench_manifold(None, template, work)
-    head = ("| clip | what | frames | method | events matched | mean offset (frames) | "
-            "max offset (frames) | cadence truth (steps/min) | cadence error % | "
+    head = ("| clip | what | frames | method | events matched | within 1 frame | mean offset "
+            "(frames) | max offset (frames) | cadence truth (steps/min) | cadence error % | "
             "stride truth (m) | stride error % |")  # fmt: skip
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     print(head, flush=True)
     print(lines[1], flush=True)
     t0 = time.perf_counter()
+    totals = {m: [0, 0, 0, 0.0, 0.0] for m in args.methods}  # events, matched, ≤ 1, |errors|
     for name in args.clips:
         source, what = CLIPS[name]
         if source in ("walk", "jog"):
@@ -182,12 +183,22 @@ def main() -> None:
             track = tracked(method, template, cap, work, manifold)
             c = compare_gaits(track_gait(read_track(track), cap.fps), truth)
             extra = f" +{c.spurious}" if c.spurious else ""
+            close = int((np.abs(c.offsets) <= 1.0).sum())
+            t = totals[method]
+            t[:3] = t[0] + c.reference_events, t[1] + c.matched, t[2] + close
+            t[3] = np.nanmax([t[3], abs(c.cadence_error_pct)])
+            t[4] = np.nanmax([t[4], abs(c.stride_length_error_pct)])
             row = (f"| {name} | {what} | {len(cap)} | {method} | {c.matched}/{c.reference_events}"
-                   f"{extra} | {c.mean_offset:.2f} | {c.max_offset:.2f} | "
+                   f"{extra} | {close}/{c.matched} | {c.mean_offset:.2f} | {c.max_offset:.2f} | "
                    f"{ref.cadence_steps_per_min:.1f} | {c.cadence_error_pct:+.2f} | "
                    f"{ref.stride_length_m:.3f} | {c.stride_length_error_pct:+.2f} |")  # fmt: skip
             lines.append(row)
             print(row, flush=True)
+    for m, (n, matched, close, cad, stride) in totals.items():
+        row = (f"| all | | | {m} | {matched}/{n} | {close}/{matched} | | | | ≤ {cad:.2f} | | "
+               f"≤ {stride:.2f} |")  # fmt: skip
+        lines.append(row)
+        print(row)
     load = os.getloadavg()
     tail = (f"\n{time.perf_counter() - t0:.0f} s; load average {load[0]:.1f} {load[1]:.1f} "
             f"{load[2]:.1f}; tracking code {track_digest()}")  # fmt: skip
