@@ -15,11 +15,11 @@ import sys
 from collections.abc import Sequence
 
 from meshmocap import __version__
-from meshmocap.cli import batch, capture, demo, evaluation, gait, motion, track
+from meshmocap.cli import batch, capture, demo, evaluation, export, gait, motion, track
 from meshmocap.errors import MeshmocapError
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, track, evaluation, batch, gait)
+COMMANDS = (demo, motion, capture, track, evaluation, batch, export, gait)
 
 
 def build_parser() -> argparse.ArgumentParser:
