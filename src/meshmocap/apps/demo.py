@@ -132,7 +132,6 @@ def run_demo(
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
-        drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(
         out / "report.html", title="meshmocap demo", players=players,
@@ -142,19 +141,6 @@ def run_demo(
     )  # fmt: skip
     files.append(("report (tables, plots, 3D player; open in a browser)", report))
     return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0)
-
-
-def drop_hull_meshes(capture: str | os.PathLike) -> int:
-    """Delete a capture's visual-hull meshes (``hulls/NNNNN.ply``, 1.5 MB a frame at 1 cm)
-    where their voxel occupancy (``hulls/NNNNN.npz``, 12 kB) is kept: reading the capture
-    rebuilds the same mesh from it (marching cubes), so nothing is lost but disk space.
-    Returns the number of files deleted."""
-    n = 0
-    for ply in sorted((Path(capture) / "hulls").glob("*.ply")):
-        if ply.with_suffix(".npz").is_file():
-            ply.unlink()
-            n += 1
-    return n
 
 
 def drop_resume_state(track: str | os.PathLike) -> int:

@@ -39,7 +39,6 @@ from meshmocap._validate import check_choice
 from meshmocap.body.markers import MARKER_SETS, marker_vertices
 from meshmocap.body.motion import Motion
 from meshmocap.body.pose_fit import PoseFit, pose_from_surface
-from meshmocap.body.skeleton import Skeleton
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.bvh import LengthUnit, write_bvh
@@ -190,20 +189,14 @@ def track_motion(
     """The template's rig animated by the poses fitted to the track's rows (frame rate
     ``fps`` divided by the rows' spacing), and the fit.
 
-    The motion's skeleton is the template's with the root's rest offset at the origin: the
-    root positions are absolute, so a BVH file written from it means the same to readers
-    that add the root's ``OFFSET`` to its position channels (this library's) and to those
-    that ignore it (Blender's importer).
+    The motion's skeleton is the template's (:func:`~meshmocap.io.bvh.write_bvh` writes
+    the root's positions absolute, as every BVH reader understands them).
     """
     fit = pose_from_surface(
         template, track.vertices[rows], joints=track.joints[rows], joint_weight=joint_weight
     )
     step = _step(track, rows, "a motion")
-    sk = template.skeleton
-    offsets = sk.offsets.copy()
-    offsets[0] = 0.0
-    skeleton = Skeleton(sk.names, sk.parents, offsets, sk.end_offsets)
-    return Motion(skeleton, fit.rotations, fit.root_positions, fps / step), fit
+    return Motion(template.skeleton, fit.rotations, fit.root_positions, fps / step), fit
 
 
 def track_gltf(
