@@ -132,6 +132,7 @@ def run_demo(
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
+        drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(
         out / "report.html", title="meshmocap demo", players=players,
@@ -148,13 +149,24 @@ def drop_resume_state(track: str | os.PathLike) -> int:
     interrupted run (``state_*`` arrays: 45 kB a frame for the patch tracker), except the
     last frame's, from which tracking can still be extended. Returns the files rewritten."""
     files = [frame_path(track, i) for i in done_frames(track)][:-1]
-    n = 0
-    for path in files:
-        with np.load(path, allow_pickle=False) as z:
-            keep = {k: z[k] for k in z.files if not k.startswith("state_")}
-            if len(keep) == len(z.files):
-                continue
-        with atomic_open(path) as f:
-            np.savez_compressed(f, **keep)
-        n += 1
-    return n
+    return sum(_drop_arrays(p, "state_") for p in files)
+
+
+def drop_hull_meshes(capture: str | os.PathLike) -> int:
+    """Rewrite a capture's hull files (``hulls/NNNNN.npz``) without their surface mesh
+    (``mesh_*`` arrays, 0.22 MB a frame at 1 cm), keeping the voxel occupancy (12 kB) from
+    which reading the capture rebuilds the same mesh by marching cubes
+    (:func:`~meshmocap.io.capture.read_hull_mesh`). Returns the files rewritten."""
+    return sum(_drop_arrays(p, "mesh_") for p in sorted((Path(capture) / "hulls").glob("*.npz")))
+
+
+def _drop_arrays(path: Path, prefix: str) -> bool:
+    """Rewrite the ``.npz`` at ``path`` without its arrays named ``prefix…``, atomically;
+    whether there were any."""
+    with np.load(path, allow_pickle=False) as z:
+        keep = {k: z[k] for k in z.files if not k.startswith(prefix)}
+        if len(keep) == len(z.files):
+            return False
+    with atomic_open(path) as f:
+        np.savez_compressed(f, **keep)
+    return True
