@@ -15,11 +15,11 @@ import sys
 from collections.abc import Sequence
 
 from meshmocap import __version__
-from meshmocap.cli import capture, demo, evaluation, motion, track
+from meshmocap.cli import capture, demo, evaluation, motion, subject, track
 from meshmocap.errors import MeshmocapError
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, track, evaluation)
+COMMANDS = (demo, motion, capture, subject, track, evaluation)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -10,7 +10,7 @@ from meshmocap.cli._args import frame_range
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from meshmocap.body.template import load_template
+    from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.capture import open_capture
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
@@ -21,16 +21,24 @@ def _cmd_track(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value is not None:
             options[name] = value
-    template = load_template(args.template)
+    capture = open_capture(args.capture)
+    choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
+    template = choice.template
+    print(choice.note)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
-    capture = open_capture(args.capture)
     frames = range(len(capture))[args.frames] if args.frames else None
     t0 = time.perf_counter()
     track = track_sequence(
-        tracker, template, capture, args.out, frames=frames, resume=not args.restart
+        tracker,
+        template,
+        capture,
+        args.out,
+        frames=frames,
+        resume=not args.restart,
+        template_info=choice.info,
     )
     dt = time.perf_counter() - t0
     bad = int((~track.healthy).sum())
@@ -120,7 +128,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
     k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
                    "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
-    k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    k.add_argument("--template", help="tracking template: a name or .npz, or auto to estimate "
+                   "the performer's body (default: the template capture.json names, else auto; "
+                   "an estimate is cached as subject.npz in --out)")  # fmt: skip
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
     k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")

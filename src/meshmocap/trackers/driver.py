@@ -50,6 +50,7 @@ def track_sequence(
     frames: Sequence[int] | None = None,
     resume: bool = True,
     show_progress: bool | None = None,
+    template_info: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -68,6 +69,10 @@ def track_sequence(
         Positions in the capture to track (default: all).
     resume : bool
         Continue an interrupted run in ``out`` (same settings) instead of starting over.
+    template_info : dict, optional
+        How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
+        ``"capture"`` or ``"estimated"``; ``template_file``); see
+        :func:`meshmocap.estimate.tracking_template.tracking_template`.
 
     Returns
     -------
@@ -86,6 +91,7 @@ def track_sequence(
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
+        **(template_info or {}),
     }
     done = set(start_track(out, meta, template.F, resume=resume))
     first = capture[positions[0]]
