@@ -15,11 +15,11 @@ import sys
 from collections.abc import Sequence
 
 from meshmocap import __version__
-from meshmocap.cli import capture, demo, evaluation, motion, subject, track
+from meshmocap.cli import batch, capture, demo, evaluation, motion, subject, track
 from meshmocap.errors import MeshmocapError
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, subject, track, evaluation)
+COMMANDS = (demo, motion, capture, subject, track, evaluation, batch)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,7 +49,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         # keep the interpreter's final flush from raising again on the closed pipe
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -4,19 +4,13 @@ from __future__ import annotations
 
 import argparse
 
+from meshmocap._validate import frame_slice
+from meshmocap.errors import InputError
+
 
 def frame_range(text: str) -> slice:
     """Parse ``START:STOP[:STEP]`` (any part optional) into a slice."""
-    parts = text.split(":")
     try:
-        if len(parts) > 3:
-            raise ValueError
-        return (
-            slice(*(int(p) if p else None for p in parts))
-            if len(parts) > 1
-            else slice(int(text), int(text) + 1)
-        )
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected START:STOP[:STEP] with integers, found {text!r}"
-        ) from None
+        return frame_slice(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("frames: ")) from None

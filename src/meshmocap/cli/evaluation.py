@@ -24,13 +24,21 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from meshmocap.apps.batch_report import build_batch_report, is_batch_folder
     from meshmocap.apps.report import build_report
+    from meshmocap.errors import InputError
 
     t0 = time.perf_counter()
-    path = build_report(
-        args.out, args.capture, args.tracks, eval_dirs=args.eval_dir, max_frames=args.max_frames,
-        silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames,
-    )  # fmt: skip
+    if is_batch_folder(args.capture):  # a batch folder: its summary and evaluations
+        if args.tracks:
+            raise InputError(f"report: {args.capture} is a batch folder; give no track folders")
+        path = build_batch_report(args.out, args.capture)
+    else:
+        path = build_report(
+            args.out, args.capture, args.tracks, eval_dirs=args.eval_dir,
+            max_frames=args.max_frames, silhouettes=not args.no_silhouettes,
+            surface_frames=args.surface_frames,
+        )  # fmt: skip
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
     return 0
@@ -78,8 +86,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
     e.set_defaults(func=_cmd_eval)
     o = sub.add_parser("report", help="write an HTML report: scores, plots and a 3D player")
-    o.add_argument("capture", help="capture folder")
-    o.add_argument("tracks", nargs="+", metavar="track", help="track folders to compare")
+    o.add_argument("capture", help="capture folder, or a batch folder (meshmocap batch)")
+    o.add_argument("tracks", nargs="*", metavar="track", help="track folders to compare")
     o.add_argument("--out", required=True, help="HTML file to write (one self-contained file)")
     o.add_argument("--eval-dir", action="append", help="keep each track's CSV/PNG evaluation "
                    "here (repeat once per track, in order)")  # fmt: skip

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from meshmocap._progress import progress
@@ -50,11 +51,20 @@ def silhouette_frames(path: Path, camera_names: list[str]) -> list[int]:
     return sorted(sets[first])
 
 
+def camera_file(path: Path) -> Path:
+    """The rig file of a capture folder: ``cameras.json``, ``cameras.yml`` or ``cameras.yaml``."""
+    for name in ("cameras.json", "cameras.yml", "cameras.yaml"):
+        if (path / name).is_file():
+            return path / name
+    raise MeshmocapFileNotFoundError(f"hull: {path} has no cameras.json or cameras.yml")
+
+
 def compute_hulls(
     capture: str | os.PathLike,
     *,
     voxel_size: float = 0.01,
     overwrite: bool = False,
+    frames: Sequence[int] | None = None,
     show_progress: bool | None = None,
 ) -> Capture:
     """Carve the visual hull of every frame of a capture folder and write ``hulls/``.
@@ -68,16 +78,17 @@ def compute_hulls(
     overwrite : bool
         Recompute frames that already have a hull (default: keep them, so an interrupted
         run resumes).
+    frames : sequence of int, optional
+        Carve only these frame numbers (default: every frame with silhouettes).
     """
     path = Path(capture)
-    cam_file = next(
-        (path / n for n in ("cameras.json", "cameras.yml", "cameras.yaml") if (path / n).is_file()),
-        None,
-    )
-    if cam_file is None:
-        raise MeshmocapFileNotFoundError(f"hull: {path} has no cameras.json or cameras.yml")
-    cameras = read_cameras(cam_file)
-    frames = silhouette_frames(path, [c.name for c in cameras])
+    cameras = read_cameras(camera_file(path))
+    available = silhouette_frames(path, [c.name for c in cameras])
+    if frames is not None:
+        absent = sorted(set(frames) - set(available))
+        if absent:
+            raise InputError(f"hull: frames {absent[:5]} have no silhouettes in {path}")
+    frames = available if frames is None else sorted(set(frames))
     (path / "hulls").mkdir(exist_ok=True)
     todo = [
         f for f in frames if overwrite or not (path / "hulls" / f"{frame_name(f)}.npz").is_file()

@@ -1,0 +1,330 @@
+"""Many captures at once (``meshmocap batch``): hulls, tracking and evaluation as tasks on
+Dask, from one machine to a cluster, or one after another without Dask.
+
+Layout of a batch folder::
+
+    OUT/
+      batch.json             the items (capture, method, template, frames) and settings
+      summary.csv            one row per capture (:data:`SUMMARY_COLUMNS`)
+      summary.md             the same as a markdown table
+      <name>/track/          the capture's track folder (as ``meshmocap track`` writes it)
+      <name>/eval/           its evaluation (summary.txt, CSV, PNG) where the capture has truth
+      <name>/attempts.log    one line per attempt at tracking it (a retry adds a line)
+      <name>/result.json     the capture's summary row, written when it is done
+
+Work per capture: the visual hulls a capture folder lacks are carved first (one task per
+chunk of frames, so a long capture spreads over the workers), then the capture is tracked
+(one task: frames depend on each other), then evaluated where it has ground truth. A
+capture that fails records its one-line error and does not stop the others. Every frame
+file is written atomically, so a worker killed mid-run loses only its unfinished frame:
+Dask reschedules the task and the track resumes. Rerunning a batch redoes only what is
+missing (finished captures are read back from ``result.json``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from meshmocap._atomic import write_text_atomic
+from meshmocap._progress import progress
+from meshmocap._validate import frame_slice
+from meshmocap.apps.batch_items import BatchItem
+from meshmocap.apps.batch_summary import (
+    CaptureSummary,
+    read_summary,
+    summary_line,
+    write_result,
+    write_summary,
+)
+from meshmocap.errors import InputError, MeshmocapError
+
+__all__ = ["BatchResult", "have_dask", "run_batch"]
+
+#: Frames of hull carving per task.
+HULL_CHUNK = 20
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What :func:`run_batch` did: one summary per item (in the items' order), the files it
+    wrote, the wall time, how it ran (``"dask"`` or ``"serial"``) and the Dask dashboard's
+    address (empty when there is none)."""
+
+    summaries: tuple[CaptureSummary, ...]
+    files: tuple[Path, ...]
+    seconds: float
+    mode: str
+    dashboard: str = ""
+
+
+# ------------------------------------------------------------------------------ tasks
+def _hull_chunks(item: BatchItem) -> list[list[int]]:
+    """Frames of a capture folder that have silhouettes but no hull yet, in chunks."""
+    path = Path(item.capture)
+    if not (path / "silhouettes").is_dir():
+        return []
+    from meshmocap.io.cameras import read_cameras
+    from meshmocap.io.capture import frame_name
+    from meshmocap.studio.hulls import camera_file, silhouette_frames
+
+    cameras = read_cameras(camera_file(path))
+    todo = [f for f in silhouette_frames(path, [c.name for c in cameras])
+            if not (path / "hulls" / f"{frame_name(f)}.npz").is_file()]  # fmt: skip
+    return [todo[i : i + HULL_CHUNK] for i in range(0, len(todo), HULL_CHUNK)]
+
+
+def _carve(capture: str, frames: list[int]) -> int:
+    """Task: carve the hulls of ``frames`` of a capture folder; returns how many."""
+    from meshmocap.studio.hulls import compute_hulls
+
+    compute_hulls(capture, frames=frames, show_progress=False)
+    return len(frames)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, MeshmocapError):
+        return text[:300]
+    return f"{type(exc).__name__}: {text}"[:300]  # a defect: say where it came from
+
+
+def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
+    """Task: track (and evaluate) one capture into ``out/<name>``; never raises for a
+    capture's fault, returns its :class:`CaptureSummary` as a dict."""
+    folder = Path(out) / item.name
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / "attempts.log").open("a") as log:  # the retry count survives a kill
+        log.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} pid {os.getpid()}\n")
+    attempts = len((folder / "attempts.log").read_text().splitlines())
+    base = CaptureSummary(item.name, item.capture, item.method, item.template, "failed",
+                          attempts=attempts)  # fmt: skip
+    try:
+        summary = _track_and_score(item, folder, base)
+    except Exception as exc:  # one capture's failure must not stop the batch
+        summary = replace(base, error=_one_line(exc))
+        if not isinstance(exc, MeshmocapError):
+            write_text_atomic(folder / "traceback.txt", traceback.format_exc())
+    write_result(folder / "result.json", summary)
+    return asdict(summary)
+
+
+def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
+    from meshmocap.analysis.evaluate import evaluate
+    from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.body.template import load_template
+    from meshmocap.io.capture import Capture, open_capture
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    template = load_template(item.template)
+    capture = open_capture(item.capture)
+    tracker = make_tracker(item.method, template=template)
+    frames = None
+    if item.frames:
+        frames = range(len(capture))[frame_slice(item.frames, what="batch: frames")]
+    track = track_sequence(tracker, template, capture, folder / "track", frames=frames,
+                           show_progress=False)  # fmt: skip
+    flags = track.flags or tuple(() if h else ("failed",) for h in track.healthy)
+    steady = track.seconds[1:] if len(track.seconds) > 1 else track.seconds
+    summary = replace(
+        base, status="ok", frames=len(track.frames),
+        flagged=sum(1 for f in flags if f), lost=sum("lost" in f for f in flags),
+        missing=sum("missing" in f for f in flags), seconds_per_frame=float(steady.mean()),
+    )  # fmt: skip
+    if isinstance(capture, Capture) and (Path(capture.path) / "truth").is_dir():
+        ev = evaluate(track, capture, silhouettes=False, surface_frames=0)
+        write_evaluation(ev, folder / "eval")
+        errs = ev.joints if ev.joints is not None else ev.correspondence
+        if errs is not None and errs.per_frame.size:
+            summary = replace(summary, mean_mm=float(errs.overall.mean),
+                              worst_frame_mm=float(errs.per_frame.max()))  # fmt: skip
+    return summary
+
+
+# ------------------------------------------------------------------------------ running
+def _frames_done(out: Path, items: Sequence[BatchItem]) -> int:
+    return sum(len(list((out / it.name / "track" / "frames").glob("*.npz"))) for it in items)
+
+
+def _frame_total(item: BatchItem) -> int:
+    """Frames the capture will give (for the progress bar; 0 when it cannot be opened:
+    the task reports why)."""
+    try:
+        from meshmocap.io.capture import open_capture
+
+        n = len(open_capture(item.capture))
+        return len(range(n)[frame_slice(item.frames, what="frames")]) if item.frames else n
+    except MeshmocapError:
+        return 0
+
+
+def _watch(done: Callable[[], int], finished: Callable[[], bool]) -> Iterator[None]:
+    """Yield once per newly finished frame until ``finished()`` (polled every 0.5 s)."""
+    seen = done()
+    while True:
+        now = done()
+        for _ in range(max(now - seen, 0)):
+            yield
+        seen = max(seen, now)
+        if finished():
+            return
+        time.sleep(0.5)
+
+
+def _client(workers: int | None, scheduler: str | None, dashboard: bool):
+    """A Dask client: on ``scheduler``, or on a new local cluster of worker processes."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s"), None
+        except OSError as exc:
+            raise InputError(
+                f"batch: --scheduler {scheduler}: no Dask scheduler answers there ({exc})"
+            ) from None
+    cluster = LocalCluster(
+        n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+        dashboard_address=":0" if dashboard else None,
+    )  # fmt: skip
+    return Client(cluster), cluster
+
+
+def have_dask() -> bool:
+    """Whether ``dask.distributed`` is installed (``pip install "meshmocap[cluster]"``)."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def run_batch(
+    items: Sequence[BatchItem],
+    out: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    serial: bool = False,
+    dashboard: bool = True,
+    show_progress: bool | None = None,
+    log: Callable[[str], None] = lambda line: None,
+) -> BatchResult:
+    """Carve missing hulls, track and evaluate every item; write the summaries to ``out``.
+
+    Parameters
+    ----------
+    items : sequence of BatchItem
+        From :func:`batch_items`.
+    out : path
+        Batch folder (see the module docstring); a rerun redoes only what is missing.
+    workers : int, optional
+        Worker processes of the local Dask cluster (default: the number of cores).
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``) to send the work to.
+    client : distributed.Client, optional
+        An existing client to use (for tests and notebooks); it is not closed.
+    serial : bool
+        Run in this process, one capture after another, without Dask (the default when
+        Dask is not installed).
+    dashboard : bool
+        Start the local cluster's dashboard (its address is in the result).
+    log : callable
+        Receives one line per finished capture and the run's setup.
+    """
+    if not items:
+        raise InputError("batch: no captures to run")
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InputError(f"batch: --workers must be an integer ≥ 1, found {workers!r}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(
+        out / "batch.json",
+        json.dumps({"format": "meshmocap-batch-1", "items": [asdict(i) for i in items]}, indent=2)
+        + "\n",
+    )
+    t0 = time.perf_counter()
+    results: dict[str, CaptureSummary] = {}
+    todo = []
+    for it in items:
+        old = read_summary(out / it.name / "result.json")
+        if old is not None and old.status == "ok" and old.capture == it.capture:
+            results[it.name] = old
+        else:
+            todo.append(it)
+    if results:
+        log(f"{len(results)} capture(s) already done, {len(todo)} to run")
+    total = sum(_frame_total(it) for it in todo)
+    done = lambda: _frames_done(out, todo)  # noqa: E731
+    mode, link = "serial", ""
+    if todo and not serial and (client is not None or scheduler or have_dask()):
+        mode = "dask"
+        own_client, cluster = (client, None) if client is not None else _client(
+            workers, scheduler, dashboard)  # fmt: skip
+        try:
+            link = getattr(own_client, "dashboard_link", "") or "" if dashboard else ""
+            n = len(own_client.scheduler_info().get("workers", {}))
+            log(f"running {len(todo)} capture(s) on Dask ({n} workers)"
+                + (f"; dashboard {link}" if link else ""))  # fmt: skip
+            futures = {}
+            for it in todo:
+                hulls = [own_client.submit(_carve, it.capture, chunk, pure=False)
+                         for chunk in _hull_chunks(it)]  # fmt: skip
+                futures[it.name] = own_client.submit(_track, it, str(out), *hulls, pure=False)
+            pending = set(futures)
+            name_of = {f.key: n for n, f in futures.items()}
+
+            def finished() -> bool:
+                for f in list(futures.values()):
+                    if f.done() and name_of[f.key] in pending:
+                        pending.discard(name_of[f.key])
+                        results[name_of[f.key]] = _collect(f, name_of[f.key], todo, out)
+                        log(summary_line(results[name_of[f.key]]))
+                return not pending
+
+            for _ in progress(_watch(done, finished), total=total, label="batch",
+                              enabled=show_progress):  # fmt: skip
+                pass
+        finally:
+            if client is None:
+                own_client.close()
+                if cluster is not None:
+                    cluster.close()
+    elif todo:
+        if not serial and not have_dask():
+            log('batch: Dask is not installed, running the captures one after another in this '
+                'process; pip install "meshmocap[cluster]" runs them in parallel')  # fmt: skip
+        bar = iter(progress(range(total), total=total, label="batch", enabled=show_progress))
+        for it in todo:
+            for chunk in _hull_chunks(it):
+                _carve(it.capture, chunk)
+            before = done()
+            results[it.name] = CaptureSummary(**_track(it, str(out)))
+            for _ in range(done() - before):
+                next(bar, None)
+            log(summary_line(results[it.name]))
+        for _ in bar:  # finish the bar (frames counted beforehand but not tracked)
+            pass
+    summaries = tuple(results[it.name] for it in items)
+    files = write_summary(out, summaries)
+    return BatchResult(summaries, files, time.perf_counter() - t0, mode, link)
+
+
+def _collect(future: Any, name: str, todo: Sequence[BatchItem], out: Path) -> CaptureSummary:
+    """The summary of a finished future; a task that Dask gave up on (its workers kept
+    dying) is a failed capture with that reason."""
+    try:
+        return CaptureSummary(**future.result())
+    except Exception as exc:
+        it = next(i for i in todo if i.name == name)
+        log_file = out / name / "attempts.log"
+        attempts = len(log_file.read_text().splitlines()) if log_file.is_file() else 0
+        return CaptureSummary(name, it.capture, it.method, it.template, "failed",
+                              error=_one_line(exc), attempts=attempts)  # fmt: skip

@@ -1,0 +1,208 @@
+"""meshmocap batch: captures named every way, Dask results bit-identical to tracking alone,
+a worker killed mid-run, a bad capture among good ones, reruns, the serial fallback."""
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshmocap.apps import batch as batch_module
+from meshmocap.apps.batch import run_batch
+from meshmocap.apps.batch_items import BatchItem, batch_items
+from meshmocap.apps.batch_summary import SUMMARY_COLUMNS
+from meshmocap.body.template import load_template
+from meshmocap.cli import main
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.io.capture import Capture
+from meshmocap.io.results import done_frames, frame_path
+from meshmocap.studio.synth import SynthSpec, synthesize
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.registry import make_tracker
+
+distributed = pytest.importorskip("distributed")
+
+METHOD = "articulated_icp"  # the quickest tracker to set up
+MOTIONS = {"walk": 5, "jog": 5, "squat": 10}
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory):
+    root = tmp_path_factory.mktemp("captures")
+    for motion, n in MOTIONS.items():
+        synthesize(root / motion, SynthSpec(motion=motion, template="neutral_5k", stop=n),
+                   show_progress=False)  # fmt: skip
+    return root
+
+
+@pytest.fixture(scope="module")
+def alone(captures, tmp_path_factory):
+    """Each capture tracked by itself in this process: what batch must reproduce."""
+    root = tmp_path_factory.mktemp("alone")
+    template = load_template("neutral_5k")
+    for motion in MOTIONS:
+        track_sequence(make_tracker(METHOD, template=template), template,
+                       Capture(captures / motion), root / motion, show_progress=False)  # fmt: skip
+    return root
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    options = dict(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    with distributed.LocalCluster(**options) as c, distributed.Client(c) as client:
+        yield client
+
+
+def _same_frames(a: Path, b: Path) -> None:
+    """Every frame file of two tracks holds the same arrays, bit for bit (timings aside)."""
+    assert done_frames(a) == done_frames(b) and done_frames(a)
+    for i in done_frames(a):
+        with np.load(frame_path(a, i)) as x, np.load(frame_path(b, i)) as y:
+            assert set(x.files) == set(y.files)
+            for key in x.files:
+                if key != "seconds":
+                    np.testing.assert_array_equal(x[key], y[key], err_msg=f"frame {i} {key}")
+
+
+def _summary(out: Path) -> list[dict]:
+    import csv
+
+    with (out / "summary.csv").open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_dask_results_are_bit_identical_to_tracking_alone(captures, alone, cluster, tmp_path):
+    items = batch_items([str(captures / "*")], method=METHOD)
+    assert [i.name for i in items] == ["jog", "squat", "walk"]
+    res = run_batch(items, tmp_path / "b", client=cluster, show_progress=False)
+    assert res.mode == "dask"
+    assert [s.status for s in res.summaries] == ["ok"] * 3
+    for motion in MOTIONS:
+        _same_frames(tmp_path / "b" / motion / "track", alone / motion)
+    rows = _summary(tmp_path / "b")
+    assert tuple(rows[0]) == SUMMARY_COLUMNS
+    assert {r["name"]: int(r["frames"]) for r in rows} == MOTIONS
+    # errors against the capture's truth, as meshmocap eval gives them: a few mm
+    assert all(0 < float(r["mean_mm"]) < 30 for r in rows)
+    assert (tmp_path / "b" / "walk" / "eval" / "summary.txt").is_file()
+    # a rerun redoes nothing: the finished captures' results are read back
+    before = {m: (tmp_path / "b" / m / "result.json").stat().st_mtime_ns for m in MOTIONS}
+    again = run_batch(items, tmp_path / "b", client=cluster, show_progress=False)
+    assert [s.status for s in again.summaries] == ["ok"] * 3
+    assert before == {m: (tmp_path / "b" / m / "result.json").stat().st_mtime_ns for m in MOTIONS}
+
+
+def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, cluster,
+                                                              tmp_path):  # fmt: skip
+    items = batch_items([str(captures / "squat")], method=METHOD)
+    out = tmp_path / "b"
+    done = {}
+    thread = threading.Thread(target=lambda: done.setdefault(
+        "res", run_batch(items, out, client=cluster, show_progress=False)))  # fmt: skip
+    thread.start()
+    frames = out / "squat" / "track"
+    deadline = time.monotonic() + 120
+    while (not frame_path(frames, 2).is_file()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(done_frames(frames)) < MOTIONS["squat"], "tracked too fast to kill mid-run"
+    busy = [w for w, keys in cluster.processing().items() if keys]
+    assert len(busy) == 1
+    pid = cluster.run(os.getpid, workers=busy)[busy[0]]
+    os.kill(pid, signal.SIGKILL)
+    thread.join(timeout=180)
+    res = done["res"]
+    (s,) = res.summaries
+    assert s.status == "ok" and s.attempts == 2
+    assert _summary(out)[0]["attempts"] == "2"
+    _same_frames(frames, alone / "squat")
+
+
+def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, cluster,
+                                                                   tmp_path):  # fmt: skip
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "capture.json").write_text("{not json")
+    items = batch_items([str(captures / "walk"), str(bad)], method=METHOD)
+    res = run_batch(items, tmp_path / "b", client=cluster, show_progress=False)
+    good, failed = res.summaries
+    assert good.status == "ok" and good.frames == MOTIONS["walk"]
+    assert failed.status == "failed" and "capture.json" in failed.error
+    assert "\n" not in failed.error
+    md = (tmp_path / "b" / "summary.md").read_text()
+    assert "| bad | articulated_icp | neutral_5k | failed |" in md
+
+
+def test_without_dask_it_runs_serially_and_says_how_to_get_the_cluster(
+    captures, alone, tmp_path, monkeypatch
+):
+    monkeypatch.setattr(batch_module, "have_dask", lambda: False)
+    items = batch_items([str(captures / "walk")], method=METHOD)
+    lines = []
+    res = run_batch(items, tmp_path / "b", show_progress=False, log=lines.append)
+    assert res.mode == "serial" and res.summaries[0].status == "ok"
+    assert 'pip install "meshmocap[cluster]" runs them in parallel' in lines[0]
+    _same_frames(tmp_path / "b" / "walk" / "track", alone / "walk")
+    assert lines[-1].startswith("done walk: 5 frames, 0 flagged")
+
+
+def test_items_from_folders_globs_lists_and_manifests(captures, tmp_path):
+    (tmp_path / "list.txt").write_text(f"# my session\n{captures / 'walk'}\n\n{captures}/j*\n")
+    items = batch_items([str(tmp_path / "list.txt")], method="patch", frames="0:3")
+    assert [(i.name, i.method, i.frames) for i in items] == [("walk", "patch", "0:3"),
+                                                             ("jog", "patch", "0:3")]  # fmt: skip
+    (tmp_path / "m.csv").write_text(
+        "capture,method,template,frames\n"
+        f"{captures / 'walk'},cage,,\n{captures / 'walk'},,neutral,1:4\nsquat,,,\n"
+    )
+    (tmp_path / "squat").symlink_to(captures / "squat")
+    items = batch_items([str(tmp_path / "m.csv")], method="patch", template="neutral_5k")
+    assert items == [
+        BatchItem("walk", str(captures / "walk"), "cage", "neutral_5k", ""),
+        BatchItem("walk-2", str(captures / "walk"), "patch", "neutral", "1:4"),
+        BatchItem("squat", str(tmp_path / "squat"), "patch", "neutral_5k", ""),
+    ]
+    # the same capture with the same settings twice is one item
+    assert len(batch_items([str(captures / "walk")] * 2)) == 1
+
+
+@pytest.mark.parametrize(
+    ("sources", "kwargs", "error", "match"),
+    [
+        (["nowhere"], {}, MeshmocapFileNotFoundError, "batch: nowhere: no such capture"),
+        (["no*where"], {}, MeshmocapFileNotFoundError, "'no\\*where' matches no capture"),
+        (["{walk}"], {"method": "fast"}, InputError, "method must be one of .* found 'fast'"),
+        (["{walk}"], {"frames": "1:x"}, InputError, "expected START:STOP\\[:STEP\\]"),
+        ([], {}, InputError, "expected one or more captures"),
+    ],
+)
+def test_bad_items_are_one_line_errors(captures, sources, kwargs, error, match):
+    sources = [s.format(walk=captures / "walk") for s in sources]
+    with pytest.raises(error, match=match):
+        batch_items(sources, **kwargs)
+
+
+def test_manifest_without_capture_column_is_refused(tmp_path):
+    (tmp_path / "m.csv").write_text("path,method\nx,patch\n")
+    with pytest.raises(InputError, match=r"m.csv: a manifest needs a 'capture' column"):
+        batch_items([str(tmp_path / "m.csv")])
+
+
+def test_batch_command_in_process(captures, tmp_path, capsys):
+    argv = ["batch", str(captures / "walk"), "--method", METHOD, "--out", str(tmp_path / "b"),
+            "--serial"]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "batch: 1 of 1 captures tracked one after another" in out
+    assert main(["report", str(tmp_path / "b"), "--out", str(tmp_path / "r.html")]) == 0
+    html = (tmp_path / "r.html").read_text()
+    assert "1 of 1 captures tracked" in html and "joint error per frame" in html
+    assert main(["report", str(tmp_path / "b"), "walk", "--out", str(tmp_path / "r.html")]) == 2
+    assert "is a batch folder; give no track folders" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path / "none"), "--out", str(tmp_path / "c")]) == 2
+    assert "meshmocap: error: batch:" in capsys.readouterr().err
+    assert main(["batch", str(captures / "walk"), "--out", str(tmp_path / "d"),
+                 "--workers", "0"]) == 2  # fmt: skip
+    assert "--workers must be an integer ≥ 1, found 0" in capsys.readouterr().err
