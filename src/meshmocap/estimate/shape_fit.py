@@ -40,12 +40,19 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
-from meshmocap.body.articulated import FIXED_JOINTS, apply_increment, articulated_model, pose_points
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    apply_increment,
+    articulated_model,
+    limit_step,
+    pose_points,
+    rest_rotation_error,
+)
 from meshmocap.body.shape_space import BodyShapeSpace
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.geometry.camera import Camera
-from meshmocap.geometry.rotations import cross, so3_log
+from meshmocap.geometry.rotations import cross
 from meshmocap.geometry.silhouette import silhouette
 
 __all__ = ["ShapeFit", "SilhouetteView", "fit_shape", "shape_jacobian", "silhouette_view"]
@@ -311,9 +318,7 @@ def fit_shape(
                 g[:K] += Jz.T @ (w * r)
                 sq, cnt = sq + float(r @ r), cnt + len(r)
             # weak pull of every non-root joint towards the rest pose (world-frame error)
-            G, _ = forward_kinematics(tmpl.skeleton, R[f], root[f])
-            Gp = np.concatenate([np.eye(3)[None], G[tmpl.skeleton.parents[1:]]])
-            e = np.einsum("jab,jb->ja", Gp, so3_log(R[f]))[1:].ravel()
+            e = rest_rotation_error(tmpl.skeleton, R[f], root[f])[1:].ravel()
             idx = np.arange(sl.start + 6, sl.stop)
             H[idx, idx] += lambda_pose
             g[idx] += lambda_pose * e
@@ -330,9 +335,6 @@ def fit_shape(
             raise FloatingPointError("fit_shape: singular normal equations")
         z = z + np.clip(delta[:K], -MAX_STEP_Z, MAX_STEP_Z)
         for f in range(n_f):
-            d = delta[K + f * n_pose : K + (f + 1) * n_pose].copy()
-            w = d[3:].reshape(J, 3)
-            ang = np.linalg.norm(w, axis=1, keepdims=True)
-            d[3:] = (w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))).ravel()
+            d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose], MAX_STEP_ANGLE)
             R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
     return ShapeFit(z, R, root, rms, int(iterations))
