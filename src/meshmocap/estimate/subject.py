@@ -33,7 +33,15 @@ from meshmocap.errors import InputError, MeshError
 from meshmocap.estimate.shape_fit import fit_shape, silhouette_view
 from meshmocap.geometry.rotations import so3_exp
 
-__all__ = ["KINDS", "Kind", "SubjectEstimate", "choose_frames", "estimate_subject", "subject_kind"]
+__all__ = [
+    "KINDS",
+    "Kind",
+    "SubjectEstimate",
+    "choose_frames",
+    "estimate_subject",
+    "subject_kind",
+    "whole_in_view",
+]
 
 Kind = Literal["auto", "hull", "mesh"]
 KINDS: tuple[str, ...] = get_args(Kind)
@@ -53,6 +61,7 @@ class SubjectEstimate:
         (mesh kind: the identity at the rest root, the template's own pose)
     rms : float, the fit's residual (hull: silhouette residuals, metres; mesh: 0)
     seconds : float
+    notes : dict, diagnostics (hull: the first guesses' size and RMS distance to the hulls)
     """
 
     template: Template
@@ -82,7 +91,7 @@ def subject_kind(capture) -> str:
     return "hull" if masks else "mesh"
 
 
-def in_view(frame) -> bool:
+def whole_in_view(frame) -> bool:
     """Whether the performer is whole in every camera of a frame: no silhouette touches its
     image border (a body cut by the border carves a cut hull). True without silhouettes."""
     masks = frame.silhouettes or []
@@ -93,14 +102,14 @@ def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
     """Positions of up to ``n`` frames spread over the capture in different poses.
 
     Among ``candidates`` evenly spaced frames where the performer is whole in every view
-    (:func:`in_view`), the first one and then, greedily, the frame farthest from those
+    (:func:`whole_in_view`), the first one and then, greedily, the frame farthest from those
     chosen, in a pose descriptor of the frame's mesh: the square roots of the covariance
     eigenvalues of its vertices (metres) and its height. Returns sorted positions (not
     indices); empty when no candidate is in view.
     """
     total = len(capture)
     pos = np.unique(np.linspace(0, total - 1, min(candidates, total)).round().astype(int))
-    pos = [int(k) for k in pos if in_view(capture[int(k)])]
+    pos = [int(k) for k in pos if whole_in_view(capture[int(k)])]
     if len(pos) <= n:
         return pos
     desc = []
@@ -135,7 +144,9 @@ def _hull_surface(frame) -> tuple[np.ndarray, np.ndarray]:
 
 def _initial_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed: int):
     """A simple first guess of the pose and size of ``template`` in a hull mesh: fitted from
-    8 headings (about Z, through the area centroid), the two best refined, the best kept."""
+    8 headings (about Z, through the centroid), the two best refined, the best kept. (Only
+    a start for the silhouette fit; the first-pose search of automatic initialisation is
+    another part of :mod:`meshmocap.estimate`.)"""
     sk = template.skeleton
     s0 = float(np.ptp(V[:, 2]) / np.ptp(template.V[:, 2]))
     centre = V.mean(axis=0)
