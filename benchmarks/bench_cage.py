@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench import make_capture, parse_capture
+from meshmocap.apps.bench_captures import make_capture, parse_capture
 from meshmocap.body.template import load_template
 from meshmocap.trackers.cage import STAGES
 from meshmocap.trackers.driver import track_sequence

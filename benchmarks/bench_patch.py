@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench import CMU_CLIPS, make_capture, parse_capture, run_bench
+from meshmocap.apps.bench import run_bench
+from meshmocap.apps.bench_captures import CMU_CLIPS, make_capture, parse_capture
 from meshmocap.apps.bench_report import markdown_table
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence

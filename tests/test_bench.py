@@ -9,7 +9,8 @@ import shutil
 import numpy as np
 import pytest
 
-from meshmocap.apps.bench import CAPTURE_SETS, parse_capture, run_bench
+from meshmocap.apps.bench import run_bench
+from meshmocap.apps.bench_captures import CAPTURE_SETS, parse_capture
 from meshmocap.apps.bench_report import COLUMNS
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
@@ -63,6 +64,24 @@ def test_writes_table_markdown_and_plots(bench):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"]({name}.png)" in md
     assert set(res.files) >= {out / "results.csv", out / "results.md"}
     assert res.tradeoff_capture == "walk" and len(res.tradeoff) == 2
+
+
+def test_settings_beside_the_results_say_how_to_reproduce_them(bench):
+    import json
+
+    res, root = bench
+    settings = json.loads((root / "out" / "settings.json").read_text())
+    assert [c["name"] for c in settings["captures"]] == ["walk"]
+    assert settings["captures"][0]["stop"] == FRAMES
+    assert settings["methods"] == ["articulated_icp", "patch"]
+    assert settings["method_options"] == {"patch": PATCH}
+    assert settings["template"] == "neutral_5k" and len(settings["template_digest"]) == 16
+    assert set(settings["tracks"]) == {"walk/articulated_icp", "walk/patch",
+                                       "walk/patch[keep=0.25]", "walk/patch[keep=1]"}  # fmt: skip
+    assert all(str(root / "work" / "tracks") in t for t in settings["tracks"].values())
+    assert settings["versions"]["numpy"] == np.__version__
+    assert settings["machine"]["cores"] >= 1 and len(settings["code_digest"]) == 8
+    assert root / "out" / "settings.json" in res.files
 
 
 def test_rerun_reuses_captures_tracks_and_scores(bench):

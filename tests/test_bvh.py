@@ -257,6 +257,16 @@ def test_write_read_round_trip(tmp_path: Path, order: str, unit: str) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["rt.bvh"]  # no temporary file left
 
 
+def test_root_positions_are_written_absolute(tmp_path: Path) -> None:
+    """Root OFFSET zero and absolute position channels: readers that ignore the root's
+    offset (Blender's importer) place the body where readers that add it do."""
+    m = _random_motion()
+    text = write_bvh(tmp_path / "r.bvh", m, unit="m", up="z").read_text().splitlines()
+    assert text[3].split() == ["OFFSET", "0.00000000", "0.00000000", "0.00000000"]
+    first = np.array(text[text.index("MOTION") + 3].split()[:3], dtype=float)
+    np.testing.assert_allclose(first, m.root_positions[0], atol=1e-8)
+
+
 def test_write_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "keep.bvh"
     path.write_text("old")

@@ -77,6 +77,10 @@ def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys)
     assert "3 written" in captured.out and "scale 0.944/0.944/0.944" in captured.out
     assert captured.err.startswith("meshmocap: warning: write_transfer:")
     assert len(sorted((tmp_path / "heavy").glob("frame_*.obj"))) == 3
+    # one animated glTF instead of one mesh per frame
+    assert main([*heavy, str(tmp_path / "anim"), "--format", "glb", "--outside", "ignore"]) == 0
+    assert "3 written" in capsys.readouterr().out
+    assert [p.name for p in (tmp_path / "anim").glob("*.glb")] == ["transfer.glb"]
 
 
 def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):

@@ -139,6 +139,40 @@ def test_write_transfer_is_atomic_per_frame_and_resumes(tracked, tmp_path):
         write_transfer(ct, body, t.F, out, ext=".xyz", **kw)
 
 
+def test_write_transfer_as_one_animated_y_up_gltf(tracked, tmp_path):
+    """glb: one file, every frame a morph target (pygltflib reads it back), Y up."""
+    import pygltflib
+
+    t, _, _, ct = tracked
+    body = t.V * [1.04, 1.0, 0.97]
+    kw = dict(fit=Placement(np.full(3, 1.01), np.zeros(3)), outside="ignore", name="body.obj")
+    res = write_transfer(ct, body, t.F, tmp_path, ext=".glb", fps=30.0, **kw)
+    assert [p.name for p in res.files] == ["transfer.glb"] and (res.written, res.skipped) == (4, 0)
+    want = transfer_motion(ct, body, fit=kw["fit"], outside="ignore")
+    g = pygltflib.GLTF2.load(str(res.files[0]))
+    blob = g.binary_blob()
+
+    def data(i):
+        a = g.accessors[i]
+        start = g.bufferViews[a.bufferView].byteOffset
+        dt = {5126: "<f4", 5121: "u1"}[a.componentType]
+        n = a.count * {"SCALAR": 1, "VEC3": 3}[a.type]
+        return np.frombuffer(blob, dt, n, start).astype(np.float64)
+
+    prim = g.meshes[0].primitives[0]
+    base = data(prim.attributes.POSITION).reshape(-1, 3)
+    to_y_up = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]])
+    np.testing.assert_allclose(base, want[0] @ to_y_up.T, atol=1e-6)
+    frame2 = base + data(prim.targets[1]["POSITION"]).reshape(-1, 3)
+    np.testing.assert_allclose(frame2, want[2] @ to_y_up.T, atol=1e-6)
+    sampler = g.animations[0].samplers[0]
+    np.testing.assert_allclose(data(sampler.input), (ct.frames - ct.frames[0]) / 30.0, atol=1e-6)
+    weights = data(sampler.output).reshape(4, 3)  # frame k shows target k − 1
+    np.testing.assert_array_equal(weights, 255 * np.eye(4, 3, -1))
+    again = write_transfer(ct, body, t.F, tmp_path, ext=".glb", fps=30.0, **kw)
+    assert (again.written, again.skipped) == (0, 4)
+
+
 def test_read_cage_track_checks_its_input(rig, tracked, tmp_path):
     t, oqr = rig
     _, out, _, ct = tracked

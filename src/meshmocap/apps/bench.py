@@ -32,11 +32,15 @@ the crane; 120 frames; every method), ``full`` (everything, whole clips).
 
 The work folder caches everything and a re-run resumes: ``captures/<capture>-<N>f/``
 (:func:`~meshmocap.studio.synth.synthesize` resumes), ``tracks/<capture>-<N>f/
-<method>-<hash>/`` (:func:`~meshmocap.trackers.driver.track_sequence` resumes; the hash is
-of the tracker's options and of the package's tracking code, so a changed tracker
-tracks afresh) with the scores cached beside the frames, the cage
-trackers' pose manifold ``manifold-<template>.npz``, and for a mesh capture its rigged
-frame 0 ``templates/<capture>.npz`` and manifold ``manifold-crane_frame0-<digest>.npz``.
+<method>-<key>/`` (:func:`~meshmocap.trackers.driver.track_sequence` resumes) with the
+scores cached beside the frames, the cage trackers' pose manifold
+``manifold-<template>-<key>.npz``, and for a mesh capture its rigged first frame
+``templates/<capture>.npz`` (named after the sequence, e.g. ``crane_frame0``) and manifold
+``manifold-<capture>-<key>.npz``. Every key is a digest of all the settings that make the
+cached thing (options, template, frames, manifold) and of the tracking code
+(:func:`settings_key`), so a run in a fresh folder reproduces a cached one. The report
+folder gets ``settings.json`` beside the results: every setting, the track folders, the
+code digest, the library versions and the machine.
 """
 
 from __future__ import annotations
@@ -44,18 +48,27 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import math
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any
 
 import numpy as np
 
 from meshmocap._atomic import write_text_atomic
 from meshmocap._validate import check_choice
 from meshmocap.analysis.evaluate import evaluate
+from meshmocap.apps.bench_captures import (
+    CAPTURE_SETS,
+    DEFAULT_KEEP_FRACTIONS,
+    capture_set,
+    make_capture,
+    mesh_template,
+    parse_capture,
+)
 from meshmocap.apps.bench_report import write_report
 from meshmocap.apps.bench_rows import (
     BenchRow,
@@ -64,203 +77,16 @@ from meshmocap.apps.bench_rows import (
     row_from_evaluation,
 )
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS
-from meshmocap.body.template import Template, bundled_templates, load_template
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.body.template import Template, load_template
+from meshmocap.errors import InputError
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import done_frames
-from meshmocap.studio.degrade import Degradation
-from meshmocap.studio.rigs import RigName
-from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.manifold import template_digest
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
-SetName = Literal["quick", "standard", "full"]
-
-#: CMU clip → (file in DATA/mocap/cmu, first frame, last frame) at 60 fps. The Daz BVH
-#: 09_01 starts with a T-pose and blends out of it over its first 8 frames at 120 fps.
-CMU_CLIPS: dict[str, tuple[str, int | None, int | None]] = {
-    "05_01": ("05_01.amc", None, None),
-    "09_01": ("09_01.bvh", 4, None),
-    "01_01": ("01_01.amc", None, 600),
-}
-#: The MIT crane sequence in DATA (175 frames, fixed connectivity, Y up).
-CRANE = "meshes/crane/crane_mesh_0000-0174.tar.gz"
-#: Silhouette degradations of the ``degraded`` variant (pixels).
-DEGRADED = Degradation(jitter=1.5, holes=2, blobs=2)
-
-#: Kept fractions of the patch tracker's classifier swept for Fig. 8.
-DEFAULT_KEEP_FRACTIONS = (0.05, 0.1, 0.25, 0.5, 1.0)
-
-
-@dataclass(frozen=True)
-class CaptureSet:
-    """A named set of captures and what runs on it by default.
-
-    Attributes
-    ----------
-    captures : tuple of capture names (module docstring)
-    frames : int or None, frames per capture (None: whole clips)
-    methods : tuple of method names, or None for every registered method; names not
-        registered are left out
-    keep_fractions : tuple of float, the Fig. 8 sweep
-    """
-
-    captures: tuple[str, ...]
-    frames: int | None
-    methods: tuple[str, ...] | None = None
-    keep_fractions: tuple[float, ...] = DEFAULT_KEEP_FRACTIONS
-
-
-_STANDARD = ("walk", "jog", "squat", "walk+ring8", "walk+degraded", "walk+heavy_male", "05_01",
-             "09_01", "crane")  # fmt: skip
-_FULL = (*PROCEDURAL_MOTIONS, "walk+ring8", "walk+degraded", "walk+heavy_male",
-         "walk+small_female", "jog+ring8+degraded", *CMU_CLIPS, "05_01+ring8", "05_01+degraded",
-         "09_01+heavy_male", "crane")  # fmt: skip
-#: The named sets. ``quick`` runs in minutes: each paper's method and the baselines (the
-#: cage ablations are in the other sets) on 40 frames of a walk and a jog.
-CAPTURE_SETS: dict[str, CaptureSet] = {
-    "quick": CaptureSet(
-        ("walk", "jog"),
-        40,
-        methods=("patch", "patch_noclf", "articulated_icp", "cage"),
-        keep_fractions=(0.1, 0.25, 0.5, 1.0),  # 1.0: the patch tracker's default, reused
-    ),
-    "standard": CaptureSet(_STANDARD, 120),
-    "full": CaptureSet(_FULL, None),
-}
 _EVAL_CACHE = "bench_eval.json"
 _EVAL_VERSION = 1
-
-
-@dataclass(frozen=True)
-class BenchCapture:
-    """One capture of a benchmark, before it is made.
-
-    Attributes
-    ----------
-    name : str, e.g. ``"walk+ring8"``
-    kind : ``"synthetic"`` (a template plays a motion) or ``"meshes"`` (a real mesh
-        sequence, skeleton-less, truth = its vertices)
-    source : str, procedural motion name, absolute motion file, or mesh archive
-    rig : str; subject : str or None (default: the template); degraded : bool
-    start, stop : int or None, frame range at 60 fps (30 fps for the crane)
-    """
-
-    name: str
-    kind: Literal["synthetic", "meshes"]
-    source: str
-    rig: str = "humaneva4"
-    subject: str | None = None
-    degraded: bool = False
-    start: int | None = None
-    stop: int | None = None
-
-    @property
-    def folder(self) -> str:
-        """Folder name in the work folder (name and frame count)."""
-        n = "all" if self.stop is None else f"{self.stop - (self.start or 0)}f"
-        return f"{self.name}-{n}"
-
-
-def capture_set(name: str) -> CaptureSet:
-    """Return the set ``name`` (:data:`CAPTURE_SETS`)."""
-    check_choice("bench", "set", name, list(CAPTURE_SETS))
-    return CAPTURE_SETS[name]
-
-
-def parse_capture(
-    name: str, *, data: str | os.PathLike | None = None, frames: int | None = None
-) -> BenchCapture:
-    """Resolve a capture name ``BASE[+VARIANT...]`` (see the module docstring).
-
-    Parameters
-    ----------
-    data : path, optional
-        The shared data folder (``mocap/cmu``, ``meshes/crane``); needed by CMU clips and
-        the crane.
-    frames : int, optional
-        Frames kept from the clip's first frame (default: all).
-    """
-    base, *variants = name.split("+")
-    bases = [*PROCEDURAL_MOTIONS, *CMU_CLIPS, "crane"]
-    check_choice("bench", "capture", base, bases)
-    rigs, subjects = list(get_args(RigName)), [t for t in bundled_templates() if t != "neutral_5k"]
-    opts: dict[str, Any] = {}
-    for v in variants:
-        check_choice(f"bench: capture {name!r}", "variant", v, [*rigs, "degraded", *subjects])
-        key = "rig" if v in rigs else "degraded" if v == "degraded" else "subject"
-        if key in opts:
-            raise InputError(f"bench: capture {name!r} names two {key} variants")
-        opts[key] = True if key == "degraded" else v
-    if frames is not None and frames < 1:
-        raise InputError(f"bench: frames must be ≥ 1, found {frames}")
-    if base in PROCEDURAL_MOTIONS:
-        return BenchCapture(name, "synthetic", base, stop=frames, **opts)
-    if data is None:
-        raise InputError(f"bench: capture {name!r} needs the data folder (--data DIR)")
-    root = Path(data).resolve()
-    if base == "crane":
-        if "subject" in opts:
-            raise InputError(f"bench: capture {name!r}: the crane has no subject variant")
-        path = root / CRANE
-        stop = min(175, frames or 175)
-        kind, start = "meshes", None
-        opts.setdefault("rig", "ring8")
-    else:
-        file, start, last = CMU_CLIPS[base]
-        path = root / "mocap" / "cmu" / file
-        limits = [x for x in (last, frames + (start or 0) if frames else None) if x]
-        stop = min(limits) if limits else None
-        kind = "synthetic"
-    if not path.is_file():
-        raise MeshmocapFileNotFoundError(f"bench: capture {name!r} needs {path}")
-    return BenchCapture(name, kind, str(path), start=start, stop=stop, **opts)
-
-
-def make_capture(
-    spec: BenchCapture,
-    work: str | os.PathLike,
-    *,
-    template: str = "neutral_5k",
-    show_progress: bool | None = None,
-) -> Capture:
-    """Make (or resume) the capture ``spec`` in ``work/captures/`` and return it (folder
-    :attr:`BenchCapture.folder`, plus ``@<template>`` for a synthetic capture made for
-    another template than ``neutral_5k``)."""
-    other = spec.kind == "synthetic" and template != "neutral_5k"
-    out = Path(work) / "captures" / (f"{spec.folder}@{template}" if other else spec.folder)
-    deg = DEGRADED if spec.degraded else Degradation()
-    if spec.kind == "meshes":
-        return synthesize_from_meshes(
-            spec.source, out, rig=spec.rig, frames=range(spec.start or 0, spec.stop or 0),
-            up="y", degradation=deg, show_progress=show_progress,
-        )  # fmt: skip
-    synth = SynthSpec(
-        motion=spec.source, template=template, subject=spec.subject, rig=spec.rig, fps=60.0,
-        start=spec.start, stop=spec.stop, degradation=deg,
-    )  # fmt: skip
-    return synthesize(out, synth, show_progress=show_progress)
-
-
-def mesh_template(capture: Capture, *, cache: str | os.PathLike | None = None) -> Template:
-    """The tracking template of a skeleton-less capture (the crane): frame 0's true mesh
-    rigged by :func:`~meshmocap.body.autorig.rig_mesh` (reference ``neutral``), so its rest
-    pose is frame 0 and every tracker starts there (identity rotations at the rest root).
-    Named ``crane_frame0``; read from / written to ``cache`` (a ``.npz``) when given."""
-    from meshmocap.body.autorig import rig_mesh
-    from meshmocap.body.template import save_template
-    from meshmocap.io.meshes import MeshSequence
-
-    if cache is not None and Path(cache).is_file():
-        return load_template(cache)
-    spec = capture.meta["spec"]
-    F = MeshSequence(spec["source"], frames=[capture.indices[0]], up=spec["up"])[0].F
-    V = capture[0].truth.vertices.astype(np.float64)
-    t = rig_mesh(V, F, name="crane_frame0")
-    if cache is not None:
-        Path(cache).parent.mkdir(parents=True, exist_ok=True)
-        save_template(cache, t)
-    return t
 
 
 def mesh_manifold(
@@ -275,20 +101,22 @@ def mesh_manifold(
     cage-manifold-tracking §6.1 but fitted automatically: ``template``'s skeleton fitted to
     the true meshes of ``n_poses`` frames evenly spread over the capture
     (:func:`~meshmocap.body.autorig.fit_sequence`), the quads mapped rigidly to each fitted
-    skeleton, an ``n_components``-D GPLVM learned; cached as ``work/manifold-<template>-
-    <digest>.npz``. Returns ``(GPLVM, "")``, or ``(None, why)`` when the template's quad
-    rigging cannot be built (:func:`~meshmocap.body.oqr.build_oqr` fails)."""
+    skeleton, an ``n_components``-D GPLVM learned; cached as ``work/manifold-<capture>-
+    <key>.npz`` (the key: the template, the frames, the settings and the tracking code).
+    Returns ``(GPLVM, "")``, or ``(None, why)`` when the template's quad rigging cannot be
+    built (:func:`~meshmocap.body.oqr.build_oqr` fails)."""
     from meshmocap.body.autorig import fit_sequence
     from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
     from meshmocap.errors import MeshError
     from meshmocap.io.pose_data import PoseSet
-    from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold, template_digest
+    from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold
 
     try:
         oqr = build_oqr(template)
     except MeshError as exc:
         return None, f"build_oqr fails on the rigged frame 0 ({exc})"
-    path = Path(work) / f"manifold-{template.name}-{template_digest(template)[:8]}.npz"
+    key = settings_key(template_digest(template), list(capture.indices), n_poses, n_components)
+    path = Path(work) / f"manifold-{capture.path.name}-{key}.npz"
     if path.is_file():
         pm = PoseManifold.load(path)
         pm.check(template, oqr, source=path)
@@ -311,12 +139,14 @@ def mesh_manifold(
 def bench_manifold(manifold: Any, template: Template, work: str | os.PathLike) -> Any:
     """The pose manifold shared by every cage method (:data:`MANIFOLD_METHODS`), resolved
     once and checked against ``template``: ``manifold`` as given (GPLVM, PoseManifold or
-    path), or None: learned on the fly from the procedural motions
+    path), or None: learned on the fly as the cage tracker learns it
     (:func:`~meshmocap.trackers.manifold.resolve_manifold`) and cached as
-    ``work/manifold-<template>.npz``. Returns the fitted GPLVM."""
+    ``work/manifold-<template>-<key>.npz`` (the key: the template and the tracking code).
+    Returns the fitted GPLVM."""
     from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
 
-    path = Path(work) / f"manifold-{template.name}.npz"
+    key = settings_key(template_digest(template), "default manifold")
+    path = Path(work) / f"manifold-{template.name}-{key}.npz"
     if manifold is None and path.is_file():
         manifold = path
     pm = resolve_manifold(manifold, template)
@@ -375,8 +205,8 @@ class _Run:
         method ``label``. The track folder is named by a digest of the tracker's options,
         the template, ``salt`` (e.g. the manifold's) and the tracking code
         (:func:`code_digest`); scores are cached beside it."""
-        opts = [tracker.name, tracker.options(), template.name, salt, code_digest()]
-        digest = hashlib.sha1(json.dumps(opts, sort_keys=True).encode()).hexdigest()[:8]
+        digest = settings_key(tracker.name, tracker.options(), template.name,
+                              template_digest(template), salt)  # fmt: skip
         out = self.work / "tracks" / capture.path.name / f"{label.split('[')[0]}-{digest}"
         key = f"{capture.path.name}/{out.name}"
         before = len(done_frames(out)) if (out / "frames").is_dir() else 0
@@ -396,6 +226,13 @@ class _Run:
         return row
 
 
+def settings_key(*parts: Any) -> str:
+    """Digest (8 hex digits) of everything that makes a cached result: the settings (any
+    JSON-ready values) and the tracking code (:func:`code_digest`)."""
+    text = json.dumps([*parts, code_digest()], sort_keys=True, default=str)
+    return hashlib.sha1(text.encode()).hexdigest()[:8]
+
+
 @functools.cache
 def code_digest() -> str:
     """Digest (8 hex digits) of the package's source outside ``analysis/`` and ``apps/``:
@@ -408,6 +245,30 @@ def code_digest() -> str:
         if not rel.startswith(("analysis/", "apps/")):
             h.update(rel.encode() + b"\0" + p.read_bytes())
     return h.hexdigest()[:8]
+
+
+def _versions() -> dict[str, str]:
+    """Versions of meshmocap, Python and the numerical libraries (for settings.json)."""
+    import platform
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for name in ("meshmocap", "numpy", "scipy", "scikit-learn", "pykdtree", "trimesh"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _machine() -> dict[str, Any]:
+    """Where the timings come from: the platform, cores and load average."""
+    import platform
+
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (math.nan,) * 3
+    return {"platform": platform.platform(), "processor": platform.processor(),
+            "cores": os.cpu_count(), "load_average": [round(x, 2) for x in load],
+            "date": time.strftime("%Y-%m-%d %H:%M:%S %Z")}  # fmt: skip
 
 
 def _stamp(track: Path) -> str:
@@ -555,6 +416,17 @@ def run_bench(
                 r = run.track_and_score(spec.name, f"patch[keep={f:g}]", t, tmpl, capture)
                 tradeoff.append(TradeoffPoint(float(f), r))
     files = write_report(out, rows, tradeoff, sweep_on, skipped=skipped, template=template)
+    settings = {
+        "captures": [asdict(s) for s in specs], "skipped": skipped, "methods": methods,
+        "method_options": method_options, "template": template,
+        "template_digest": template_digest(tmpl), "keep_fractions": list(keep_fractions),
+        "tradeoff_capture": sweep_on, "tracks": {f"{r.capture}/{r.method}": r.track
+                                                  for r in [*rows, *(t.row for t in tradeoff)]},
+        "manifolds": {k: v for k, v in salt.items()}, "code_digest": code_digest(),
+        "versions": _versions(), "machine": _machine(),
+    }  # fmt: skip
+    write_text_atomic(out / "settings.json", json.dumps(settings, indent=2, default=str) + "\n")
+    files.append(out / "settings.json")
     return BenchResult(
         tuple(rows), tuple(tradeoff), sweep_on, tuple(files), tuple(skipped),
         tuple(run.tracked), tuple(run.evaluated), time.perf_counter() - t0,

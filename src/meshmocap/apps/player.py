@@ -1,20 +1,25 @@
-"""The 3D player of HTML reports: its data, gathered from tracks and their capture, and its
-encoding for ``report_assets/player.js`` (a dependency-free canvas-2D viewer).
+"""The 3D player of HTML reports: what it shows of tracks and their capture, encoded for
+``report_assets/player.js``, a three.js viewer (three.js is vendored as
+``report_assets/three.min.js``, MIT licence in ``report_assets/three.LICENSE.txt``).
 
-The player shows, frame by frame, every track's template mesh (painter's algorithm, flat
-Lambert shading), its evaluation skeleton, the ground-truth joints when the capture has
-them and the observed visual hull as translucent points (surface voxels of
-``hulls/NNNNN.npz``, else vertices of the frame's mesh). Controls: play/pause, frame slider,
-speed, layer switches, side-by-side or overlaid tracks; drag to orbit, shift-drag to pan,
-wheel to zoom, double-click to reset. With ``?screenshot`` in the page address only the
-first player's canvas shows, at 800 × 600 pixels (for headless screenshots); ``frame=N``
-(``?screenshot&frame=3``) opens the players at their frame N (counted from 0).
+Each track is shown as **what a user exports**: the template as a skinned mesh with the
+skeleton animation of :func:`meshmocap.apps.export.track_gltf` (the same GLB as
+``meshmocap export --out x.glb``), with its 15 tracked joints as a skeleton, the
+ground-truth joints when the capture has them, and the observed visual hull as points
+(surface voxels of ``hulls/NNNNN.npz``, else vertices of the frame's mesh). Tracks sit side
+by side (one lane each, with its own copy of the truth and the hull) or overlaid. Controls:
+play/pause, frame slider, speed, layer switches; drag to orbit, right-drag to pan, wheel
+to zoom. With ``?screenshot`` in the page address only the first player's canvas shows,
+at 800 × 600 pixels (for headless screenshots); ``frame=N`` (``?screenshot&frame=3``)
+opens the players at their frame N (counted from 0). The page records its errors in
+``<html data-mm-errors>`` and each player sets ``data-mm-ready`` once it has drawn.
 
-Data size: positions are quantised to int16 around a shared origin (step = largest
-half-extent / 32000, e.g. 0.03 mm for a 2 m scene) and base64-encoded; a player keeps at
-most ``max_frames`` frames (a regular stride over long tracks) and at most
-``max_megabytes`` of encoded data (default 30 MB; the stride grows to fit). A 60-frame,
-two-track player on a 5000-vertex template is about 6 MB.
+Everything is Y up (glTF's frame: the library's (x, y, z) → (x, z, −y)), metres.
+Data size: joints and hull points are quantised to int16 around a shared origin (step =
+largest half-extent / 32000, e.g. 0.03 mm for a 2 m scene) and base64-encoded; each
+track's GLB is a few hundred kB whatever the number of frames (31 int16 quaternions per
+frame). A player keeps at most ``max_frames`` frames (a regular stride over long tracks)
+and at most ``max_megabytes`` of encoded data (the stride grows to fit).
 """
 
 from __future__ import annotations
@@ -28,12 +33,17 @@ from pathlib import Path
 
 import numpy as np
 
+from meshmocap.apps.export import track_fps, track_gltf, track_template
+from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, frame_name, read_hull
+from meshmocap.io.gltf import Z_UP_TO_Y_UP, gltf_bytes, morph_gltf
 from meshmocap.io.results import Track
 
-#: Mesh colours of the player's tracks (RGB), in order; the hull is orange, the truth green.
-PALETTE = ((80, 130, 210), (150, 100, 200), (40, 160, 150), (200, 90, 130), (150, 120, 70))
+#: Colours of the player's tracks (RGB), in order: blue, crimson, amber, purple, dark cyan.
+PALETTE = ((50, 100, 220), (210, 50, 110), (225, 150, 20), (130, 70, 200), (0, 140, 170))
+#: Colour of the ground-truth joints and of the hull points.
+TRUTH_COLOR, HULL_COLOR = (20, 160, 60), (120, 120, 120)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,21 +53,22 @@ class PlayerTrack:
     Attributes
     ----------
     name : str
-    faces : (m, 3) int64, triangles, oriented outwards when the mesh is closed
-    vertices : (R, n, 3) float32, metres, world frame (Z up), one row per shown frame
-    joints : (R, K, 3) float32, evaluation joints, same frames
-    rows : (T,) int64, row of each player frame in ``vertices``/``joints``; -1: not tracked
+    glb : bytes, the skinned template and its animation (time 0 at ``first``), Y up
+    first : int, capture frame number at the animation's time 0
+    joints : (R, K, 3) float32, tracked evaluation joints, metres, Y up, one row per shown
+        frame that the track has
+    rows : (T,) int64, row of each player frame in ``joints``; -1: not tracked
     parents : tuple of int or None, parent of each joint (-1: root)
-    closed : bool, every edge has two faces (the player then culls back faces)
+    vertex_error_mm : float, mean distance of the shown mesh to the tracked one
     """
 
     name: str
-    faces: np.ndarray
-    vertices: np.ndarray
+    glb: bytes
+    first: int
     joints: np.ndarray
     rows: np.ndarray
     parents: tuple[int, ...] | None
-    closed: bool
+    vertex_error_mm: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,31 +79,22 @@ class Player:
     ----------
     title : str
     frames : (T,) int64, capture frame numbers shown
-    fps : float, playback rate, frames per second of the capture divided by the stride
+    fps : float, playback rate: the capture's frame rate divided by the stride
+    capture_fps : float, the capture's frame rate (the animations' clock)
     tracks : tuple of PlayerTrack
-    truth : (T, K, 3) float32 or None, ground-truth evaluation joints, metres
+    truth : (T, K, 3) float32 or None, ground-truth evaluation joints, metres, Y up
     truth_parents : tuple of int or None
-    hull : tuple of T arrays (P_t, 3) float32, or None, observed hull points, metres
+    hull : tuple of T arrays (P_t, 3) float32, or None, observed hull points, metres, Y up
     """
 
     title: str
     frames: np.ndarray
     fps: float
+    capture_fps: float
     tracks: tuple[PlayerTrack, ...]
     truth: np.ndarray | None = None
     truth_parents: tuple[int, ...] | None = None
     hull: tuple[np.ndarray, ...] | None = None
-
-
-def _closed_outward(faces: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Faces oriented outwards (by the signed volume) and whether the mesh is closed."""
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    closed = bool(len(counts)) and bool(np.all(counts == 2))
-    a, b, c = (V[faces[:, k]].astype(np.float64) for k in range(3))
-    if np.einsum("ij,ij->", a, np.cross(b, c)) < 0:
-        faces = faces[:, [0, 2, 1]]
-    return faces, closed
 
 
 def surface_voxels(occupancy: np.ndarray) -> np.ndarray:
@@ -111,7 +113,7 @@ def surface_voxels(occupancy: np.ndarray) -> np.ndarray:
 
 
 def _hull_points(capture, pos: int, limit: int) -> np.ndarray:
-    """Up to ``limit`` points of the observed hull of capture frame position ``pos``."""
+    """Up to ``limit`` points (Z up) of the observed hull of capture frame position ``pos``."""
     frame = capture[pos]
     npz = Path(capture.path) / "hulls" / f"{frame_name(frame.index)}.npz"
     if isinstance(capture, Capture) and npz.is_file():  # surface voxels: faster than the .ply
@@ -128,6 +130,19 @@ def _hull_points(capture, pos: int, limit: int) -> np.ndarray:
     return P.astype(np.float32)
 
 
+def _rig(track: Track, template) -> Template | None:
+    """The template that skins ``track``, or None when it cannot be had (a template file
+    that is not bundled and was not given, another vertex count)."""
+    try:
+        return track_template(track, template)
+    except (MeshmocapFileNotFoundError, InputError):
+        return None
+
+
+def _y_up(X: np.ndarray) -> np.ndarray:
+    return (np.asarray(X, dtype=np.float64) @ Z_UP_TO_Y_UP.T).astype(np.float32)
+
+
 def player_from_tracks(
     capture: Capture | SequenceCapture,
     tracks: Sequence[Track],
@@ -135,9 +150,10 @@ def player_from_tracks(
     names: Sequence[str] | None = None,
     title: str = "",
     max_frames: int = 120,
-    max_megabytes: float = 30.0,
-    hull_points: int = 2500,
+    max_megabytes: float = 8.0,
+    hull_points: int = 1500,
     truth: bool = True,
+    templates: Sequence[Template | str | None] | None = None,
 ) -> Player:
     """Gather what the player shows of ``tracks`` over ``capture``.
 
@@ -149,12 +165,16 @@ def player_from_tracks(
     max_frames : int
         Frames kept: a regular stride over the union of the tracks' frames.
     max_megabytes : float
-        Budget of the encoded data (base64); the stride grows until it fits (one frame
-        is always kept, whatever its size).
+        Budget of the per-frame data (joints, hull points; base64); the stride grows
+        until it fits (one frame is always kept).
     hull_points : int
         Hull points kept per frame (0: no hull layer).
     truth : bool
         Include the ground-truth joints when every shown frame has them.
+    templates : sequence, optional
+        Each track's template when it is not the bundled one named in its ``track.json``.
+        A track whose template cannot be had is shown as its tracked meshes (morph
+        targets, 12 bytes per vertex and frame, counted in ``max_megabytes``).
 
     Raises
     ------
@@ -168,52 +188,56 @@ def player_from_tracks(
         names = [str(t.meta.get("method", f"track {k}")) for k, t in enumerate(tracks)]
     if len(names) != len(tracks):
         raise InputError(f"names: expected {len(tracks)} names, found {len(names)}")
+    templates = templates or [None] * len(tracks)
     position = {int(i): k for k, i in enumerate(capture.indices)}
     for name, t in zip(names, tracks, strict=True):
         missing = sorted(set(t.frames.tolist()) - set(position))
         if missing:
             raise InputError(f"track {name!r}: frames {missing[:5]} are not in the capture")
     every = np.unique(np.concatenate([t.frames for t in tracks]))
-    per_frame = sum(6 * (t.vertices.shape[1] + t.joints.shape[1]) + 4 for t in tracks)
-    per_frame += 6 * (hull_points + tracks[0].joints.shape[1])
-    fixed = sum((2 if t.vertices.shape[1] < 65536 else 4) * t.faces.size for t in tracks)
-    budget = max_megabytes * 1e6 * 3 / 4 - fixed
-    fit = max(1, int(budget // per_frame))
+    rigs = [_rig(t, tpl) for t, tpl in zip(tracks, templates, strict=True)]
+    per_frame = 8 * (sum(t.joints.shape[1] for t in tracks) + hull_points + 15) + 8
+    per_frame += sum(
+        16 * t.vertices.shape[1] for t, r in zip(tracks, rigs, strict=True) if r is None
+    )
+    fit = max(1, int(max_megabytes * 1e6 // per_frame))
     stride = math.ceil(len(every) / min(max_frames, fit))
     frames = every[::stride]
+    fps = float(getattr(capture, "fps", 0.0) or track_fps(tracks[0])[0])
     ptracks = []
-    for name, t in zip(names, tracks, strict=True):
-        sel = np.isin(t.frames, frames)
-        rows = np.full(len(frames), -1, np.int64)
-        rows[np.searchsorted(frames, t.frames[sel])] = np.arange(int(sel.sum()))
-        V = t.vertices[sel].astype(np.float32)
-        faces, closed = _closed_outward(np.asarray(t.faces, np.int64), t.vertices[0])
+    for k, (name, t) in enumerate(zip(names, tracks, strict=True)):
+        rows = np.flatnonzero(np.isin(t.frames, frames))
+        player_rows = np.full(len(frames), -1, np.int64)
+        player_rows[np.searchsorted(frames, t.frames[rows])] = np.arange(len(rows))
+        glb, first, err = b"", int(frames[0]), float("nan")
+        color = tuple(c / 255.0 for c in PALETTE[k % len(PALETTE)])
+        if len(rows) and rigs[k] is not None:
+            g, fitted = track_gltf(t, rigs[k], rows, fps, color=color, name=name)
+            glb, first = gltf_bytes(g), int(t.frames[rows[0]])
+            err = float(fitted.vertex_error.mean() * 1e3)
+        elif len(rows):  # no template to skin: the tracked meshes themselves, as morph targets
+            times = (t.frames[rows] - t.frames[rows[0]]) / fps
+            g = morph_gltf(t.vertices[rows], t.faces, times, name=name, color=color)
+            glb, first, err = gltf_bytes(g), int(t.frames[rows[0]]), 0.0
         parents = t.meta.get("eval_parents")
         ptracks.append(
-            PlayerTrack(
-                name,
-                faces,
-                V,
-                t.joints[sel].astype(np.float32),
-                rows,
-                tuple(int(p) for p in parents) if parents else None,
-                closed,
-            )
-        )
+            PlayerTrack(name, glb, first, _y_up(t.joints[rows]), player_rows,
+                        tuple(int(p) for p in parents) if parents else None, err)
+        )  # fmt: skip
     true_J = parents = None
     if truth:
         truths = [capture[position[int(i)]].truth for i in frames]
         if all(x is not None and x.joints is not None for x in truths):
-            true_J = np.stack([x.joints for x in truths]).astype(np.float32)
+            true_J = _y_up(np.stack([x.joints for x in truths]))
             K = true_J.shape[1]
             parents = next((p.parents for p in ptracks if p.joints.shape[1] == K), None)
     hull = None
     if hull_points > 0:
-        hull = tuple(_hull_points(capture, position[int(i)], hull_points) for i in frames)
+        hull = tuple(_y_up(_hull_points(capture, position[int(i)], hull_points)) for i in frames)
         if not any(len(h) for h in hull):
             hull = None
-    fps = float(getattr(capture, "fps", 30.0)) / stride
-    return Player(title, frames.astype(np.int64), fps, tuple(ptracks), true_J, parents, hull)
+    return Player(title, frames.astype(np.int64), fps / stride, fps, tuple(ptracks), true_J,
+                  parents, hull)  # fmt: skip
 
 
 def encode_array(a: np.ndarray, *, origin: np.ndarray | None = None, step: float = 0.0) -> dict:
@@ -246,9 +270,8 @@ def decode_array(entry: dict) -> np.ndarray:
 
 
 def player_payload(player: Player) -> dict:
-    """The JSON-ready data of ``player`` that ``player.js`` reads (arrays encoded)."""
-    parts = [t.vertices.reshape(-1, 3) for t in player.tracks]
-    parts += [t.joints.reshape(-1, 3) for t in player.tracks]
+    """The JSON-ready data of ``player`` that ``player.js`` reads (arrays encoded; Y up)."""
+    parts = [t.joints.reshape(-1, 3) for t in player.tracks]
     parts += [player.truth.reshape(-1, 3)] if player.truth is not None else []
     parts += list(player.hull or ())
     P = np.concatenate(parts).astype(np.float64)
@@ -256,29 +279,22 @@ def player_payload(player: Player) -> dict:
     lo, hi = P.min(axis=0), P.max(axis=0)
     origin = (lo + hi) / 2
     step = max(float((hi - lo).max()) / 2 / 32000, 1e-9)
-    shown = [t for t in player.tracks if len(t.vertices)]  # a track may miss every frame
-    same = len({t.vertices.shape[1] for t in shown}) == 1  # templates of one size
-    V = np.concatenate([t.vertices for t in shown]) if same else shown[0].vertices
-    floor = float(np.nanmin(np.concatenate([t.vertices[..., 2].ravel() for t in shown])))
-    height = float(np.nanmax(np.ptp(V[..., 2], axis=1)))
-    root = shown[0].joints[:, 0, :2].astype(np.float64)
+    shown = [t for t in player.tracks if len(t.joints)]
+    root = shown[0].joints[:, 0, [0, 2]].astype(np.float64)  # the pelvis on the floor plane
     travel = root[-1] - root[0]
     axis = travel / np.linalg.norm(travel) if np.linalg.norm(travel) > 0.2 else np.array([1.0, 0])
-    spacing = float(np.nanmax(np.ptp(V[..., :2] @ axis, axis=1))) + 0.3
-    centre = [float(origin[0]), float(origin[1]), floor + height / 2]
+    lane = np.array([-axis[1], axis[0]])  # side by side: across the direction of travel,
+    lane = lane if lane[0] - 0.5 * lane[1] >= 0 else -lane  # left to right seen from the camera
     tracks = []
     for k, t in enumerate(player.tracks):
-        small = t.vertices.shape[1] < 65536
         tracks.append(
             {
                 "name": t.name,
                 "color": list(PALETTE[k % len(PALETTE)]),
-                "cull": t.closed,
-                "n_vertices": int(t.vertices.shape[1]),
+                "glb": base64.b64encode(t.glb).decode("ascii"),
+                "first": t.first,
                 "n_joints": int(t.joints.shape[1]),
                 "parents": list(t.parents) if t.parents else None,
-                "faces": encode_array(t.faces.astype(np.uint16 if small else np.uint32)),
-                "vertices": encode_array(t.vertices, origin=origin, step=step),
                 "joints": encode_array(t.joints, origin=origin, step=step),
                 "rows": encode_array(t.rows.astype(np.int32)),
             }
@@ -287,14 +303,15 @@ def player_payload(player: Player) -> dict:
         "title": player.title,
         "frames": [int(i) for i in player.frames],
         "fps": player.fps,
-        "center": centre,
-        "floor": floor,
-        "height": height,
-        "spacing": spacing,
-        "axis": [float(axis[0]), float(axis[1])],
+        "capture_fps": player.capture_fps,
+        "center": [float(x) for x in origin],
+        "floor": float(lo[1]),
+        "extent": float((hi - lo).max()),
+        "lane": [float(x) for x in lane],
         "tracks": tracks,
         "truth": None,
         "hull": None,
+        "colors": {"truth": list(TRUTH_COLOR), "hull": list(HULL_COLOR)},
     }
     if player.truth is not None:
         out["truth"] = {
@@ -311,7 +328,11 @@ def player_payload(player: Player) -> dict:
     return out
 
 
+def _asset(name: str) -> str:
+    return resources.files("meshmocap.apps").joinpath(f"report_assets/{name}").read_text("utf-8")
+
+
 def player_js() -> str:
-    """The player's JavaScript source (``report_assets/player.js``)."""
-    src = resources.files("meshmocap.apps").joinpath("report_assets/player.js")
-    return src.read_text(encoding="utf-8")
+    """The player's JavaScript: the vendored three.js build (with its licence notice), then
+    ``report_assets/player.js``."""
+    return f"{_asset('three.min.js')}\n{_asset('player.js')}"

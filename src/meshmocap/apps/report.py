@@ -1,9 +1,10 @@
 """Self-contained HTML reports: tables, embedded plots and a 3D player of tracked meshes.
 
 A report is one ``.html`` file that works offline: PNG/JPEG images are embedded as
-``data:`` URIs and the player (:mod:`meshmocap.apps.player`, a dependency-free
-canvas-2D viewer) is inlined with its data; the page refers to no URL at all. Its size is
-about the player's (≤ ``max_megabytes``, 30 MB by default) plus the images'.
+``data:`` URIs and the player (:mod:`meshmocap.apps.player`, three.js playing each track's
+exported glTF) is inlined with its data; the page refers to no URL at all. Its size is
+about the player's (0.7 MB of three.js, a few hundred kB per track, the per-frame data ≤
+``max_megabytes``) plus the images'.
 
 :func:`report_html` (pure) and :func:`write_report` assemble players, tables and images;
 :func:`build_report` evaluates tracks on their capture and writes the whole report (the
@@ -30,7 +31,9 @@ from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.analysis.tables import _summary
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.player import (
+    HULL_COLOR,
     PALETTE,
+    TRUTH_COLOR,
     Player,
     player_from_tracks,
     player_js,
@@ -258,14 +261,15 @@ def _player_html(player: Player, k: int) -> str:
         f"</span>{_esc(t.name)}</span>"
         for i, t in enumerate(player.tracks)
     )
-    if player.truth is not None:
-        legend += (
-            '<span><span class="mm-swatch" style="background:rgb(20,150,60)"></span>truth</span>'
-        )
-    if player.hull is not None:
-        legend += (
-            '<span><span class="mm-swatch" style="background:rgb(230,140,40)"></span>hull</span>'
-        )
+    for shown, rgb, what in (
+        (player.truth, TRUTH_COLOR, "truth"),
+        (player.hull, HULL_COLOR, "hull"),
+    ):
+        if shown is not None:
+            legend += (
+                f'<span><span class="mm-swatch" style="background:rgb{rgb}"></span>{what}</span>'
+            )
+
     speeds = "".join(
         f'<option value="{s}"{" selected" if s == 1 else ""}>{s:g}×</option>'
         for s in (0.1, 0.25, 0.5, 1, 2)

@@ -15,11 +15,11 @@ import sys
 from collections.abc import Sequence
 
 from meshmocap import __version__
-from meshmocap.cli import batch, capture, demo, evaluation, motion, subject, track
+from meshmocap.cli import batch, capture, demo, evaluation, export, motion, subject, track
 from meshmocap.errors import MeshmocapError
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, subject, track, evaluation, batch)
+COMMANDS = (demo, motion, capture, subject, track, evaluation, batch, export)
 
 
 def build_parser() -> argparse.ArgumentParser:

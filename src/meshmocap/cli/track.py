@@ -90,8 +90,11 @@ def _cmd_learn(args: argparse.Namespace) -> int:
 
 
 def _cmd_transfer(args: argparse.Namespace) -> int:
+    import json
     import warnings
+    from pathlib import Path
 
+    from meshmocap.apps.export import capture_fps
     from meshmocap.body.template import bundled_templates, load_template
     from meshmocap.io.meshes import read_mesh
     from meshmocap.trackers.transfer import read_cage_track, write_transfer
@@ -103,20 +106,24 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
         V, F = body.V, body.F
     else:
         V, F = read_mesh(args.mesh, up=args.up)
+    fps, _ = capture_fps(json.loads((Path(args.track) / "track.json").read_text()))
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = write_transfer(track, V, F, args.out, fit=args.fit, outside=args.outside,
                              tolerance=args.tolerance, ext=f".{args.format}",
-                             resume=not args.restart, name=args.mesh)  # fmt: skip
+                             resume=not args.restart, name=args.mesh, fps=fps)  # fmt: skip
     for w in caught:
         print(f"meshmocap: warning: {w.message}", file=sys.stderr)
     s = res.placement.scale
-    print(f"transferred {len(res.files)} frames of {args.track} to {args.mesh!r} ({len(V)} "
+    animated = args.format in ("glb", "gltf")
+    where = f"animation in {res.files[0]}" if animated else f"meshes in {res.out}"
+    print(f"transferred {res.written + res.skipped} frames of {args.track} to {args.mesh!r} "
+          f"({len(V)} "
           f"vertices, fit {args.fit}: scale {'/'.join(f'{v:.3f}' for v in s)}) in "
           f"{time.perf_counter() - t0:.1f} s: {res.written} written, {res.skipped} already "
           f"there; {res.n_outside} vertices outside the rest cage (up to "
-          f"{res.max_outside * 1000:.0f} mm); meshes in {res.out}")  # fmt: skip
+          f"{res.max_outside * 1000:.0f} mm); {where}")  # fmt: skip
     return 0
 
 
@@ -165,7 +172,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     x = sub.add_parser("transfer", help="replay a cage track with another mesh (motion transfer)")
     x.add_argument("track", help="track folder written by 'meshmocap track --method cage'")
     x.add_argument("mesh", help="a bundled template name or a mesh file (.obj, .ply, ...)")
-    x.add_argument("--out", required=True, help="folder for one mesh per frame")
+    x.add_argument("--out", required=True, help="folder for one mesh per frame, or for one "
+                   "animated glTF (--format glb/gltf: transfer.glb, Y up)")  # fmt: skip
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
     x.add_argument(
         "--fit",
@@ -174,7 +182,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="place the mesh where the template stands (default: as it is)",
     )
     x.add_argument("--up", default="z", choices=["z", "y"], help="the mesh file's up axis")
-    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb"])
+    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb", "gltf"],
+                   help="obj, ply, off, stl: one mesh per frame; glb, gltf: one "
+                   "animation")  # fmt: skip
     x.add_argument(
         "--outside",
         default="warn",

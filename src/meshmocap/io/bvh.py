@@ -423,7 +423,9 @@ def write_bvh(
     Joints are written depth first from the root, so a reader sees them in that order (the
     order of ``motion`` when parents precede children along each branch, as in BVH files).
     The root has 6 channels (``Xposition Yposition Zposition`` then rotations), other joints
-    3. Leaves get an ``End Site`` at ``end_offsets`` (those of other joints are not written).
+    3; its ``OFFSET`` is zero and its position channels are absolute, so readers that add
+    the root's offset to them (this library's) and readers that ignore it (Blender's) agree.
+    Leaves get an ``End Site`` at ``end_offsets`` (those of other joints are not written).
     Numbers are written with 8 decimals.
     """
     if not isinstance(motion, Motion):
@@ -449,7 +451,7 @@ def write_bvh(
             if j == 0
             else ("JOINT", f"3 {axes}")
         )
-        x, y, z = sk.offsets[j]
+        x, y, z = sk.offsets[j] if j else (0.0, 0.0, 0.0)  # root: absolute positions
         lines.extend(
             [f"{pad}{kw} {sk.names[j]}", f"{pad}{{", f"{pad}\tOFFSET {x:.8f} {y:.8f} {z:.8f}"]
         )
@@ -470,7 +472,7 @@ def write_bvh(
     with warnings.catch_warnings():  # gimbal lock: scipy zeroes the third angle, still exact
         warnings.simplefilter("ignore", UserWarning)
         angles = matrix_to_euler(R, order, degrees=True)
-    table = np.concatenate([m.root_positions - sk.offsets[0], angles.reshape(T, -1)], axis=1)
+    table = np.concatenate([m.root_positions, angles.reshape(T, -1)], axis=1)
     row = " ".join(["%.8f"] * table.shape[1])
     lines += ["MOTION", f"Frames: {T}", f"Frame Time: {1.0 / m.fps:.10g}"]
     text = "\n".join(lines) + "\n" + ("\n".join([row] * T) % tuple(table.ravel().tolist())) + "\n"

@@ -47,6 +47,7 @@ from meshmocap.errors import (
 )
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.proximity import closest_points_on_triangles
+from meshmocap.io.gltf import morph_gltf, write_gltf
 from meshmocap.io.results import done_frames, read_state
 
 __all__ = [
@@ -318,7 +319,7 @@ class TransferResult:
     out : Path
         The output folder.
     files : tuple of Path
-        One mesh per track frame, in frame order.
+        One mesh per track frame, in frame order (or the one animated glTF file).
     written, skipped : int
         Frames written now, and frames already there (a resumed run).
     placement : Placement
@@ -350,9 +351,14 @@ def write_transfer(
     ext: str = ".obj",
     resume: bool = True,
     name: str = "mesh",
+    fps: float = 30.0,
 ) -> TransferResult:
-    """Write one mesh per frame of ``track`` (``out/frame_NNNNN.obj``), ``V`` (n, 3) and
-    ``F`` (m, 3) replaying the motion (:func:`transfer_motion`; same options).
+    """Write ``V`` (n, 3) and ``F`` (m, 3) replaying the motion of ``track``
+    (:func:`transfer_motion`; same options): one mesh per frame
+    (``out/frame_NNNNN.obj``, ``.ply``, ``.off``, ``.stl``), or, for ``ext`` ``.glb`` or
+    ``.gltf``, one animated glTF file ``out/transfer.glb`` (Y up as glTF's specification
+    says; every frame a morph target, timed at ``fps`` from the track's first frame;
+    :func:`meshmocap.io.gltf.morph_gltf`).
 
     Files are written atomically; ``out/transfer.json`` records the settings, and a
     resumed run (``resume``, same settings) skips the frames already written. Other
@@ -362,8 +368,12 @@ def write_transfer(
     from meshmocap.io.meshes import write_mesh
 
     func = "write_transfer"
-    if ext not in (".obj", ".ply", ".off", ".stl", ".glb"):
-        raise InputError(f"{func}: ext must be one of .obj, .ply, .off, .stl, .glb, found {ext!r}")
+    exts = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
+    if ext not in exts:
+        raise InputError(f"{func}: ext must be one of {', '.join(exts)}, found {ext!r}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise InputError(f"{func}: fps must be a positive number, found {fps!r}")
+    animated = ext in (".glb", ".gltf")
     Fa = np.asarray(F)
     if Fa.ndim != 2 or Fa.shape[1] != 3 or Fa.dtype.kind not in "iu":
         raise InputError(f"{func}: F must be (m, 3) integers, found {Fa.shape} {Fa.dtype}")
@@ -377,17 +387,34 @@ def write_transfer(
                 "mesh_digest": h.hexdigest()[:16], "fit": fit if isinstance(fit, str) else
                 {"scale": placement.scale.tolist(), "offset": placement.offset.tolist()},
                 "ext": ext, "frames": track.frames.tolist()}  # fmt: skip
+    if animated:
+        settings["fps"] = float(fps)
     meta = out / "transfer.json"
-    files = [out / f"frame_{i:05d}{ext}" for i in track.frames]
+    files = (
+        [out / f"transfer{ext}"]
+        if animated
+        else [out / f"frame_{i:05d}{ext}" for i in track.frames]
+    )
     if meta.is_file() and resume:
         if json.loads(meta.read_text()) != json.loads(json.dumps(settings)):
             raise FormatError(f"{meta}: holds a transfer made with other settings; use another "
                               "folder or start over")  # fmt: skip
     else:
-        for p in out.glob(f"frame_*{ext}"):
+        for p in out.glob(f"transfer{ext}" if animated else f"frame_*{ext}"):
             p.unlink()
     deformer, _, d = _encode(track, V, fit, outside, tolerance, func)
     write_text_atomic(meta, json.dumps(settings, indent=2) + "\n")
+    if animated:
+        T = len(track.frames)
+        if files[0].is_file():
+            written, skipped = 0, T
+        else:
+            X = transfer_motion(track, V, fit=placement, outside="ignore")
+            times = (track.frames - track.frames[0]) / fps
+            write_gltf(files[0], morph_gltf(X, Fa, times, name=Path(name).stem or "mesh"))
+            written, skipped = T, 0
+        return TransferResult(out, tuple(files), written, skipped, placement,
+                              int(deformer.outside_.sum()), float(d.max()))  # fmt: skip
     todo = [k for k, p in enumerate(files) if not p.is_file()]
     for start in range(0, len(todo), _CHUNK):
         ks = todo[start : start + _CHUNK]

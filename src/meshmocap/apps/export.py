@@ -1,0 +1,339 @@
+"""Tracks out of the tool (``meshmocap export``): BVH, C3D, TRC, glTF/GLB and CSV.
+
+One function, :func:`export_track`, turns a track folder into one file; the format comes
+from the file's extension unless given. What each format holds, in which units and axes,
+is documented in its writer's module:
+
+========  ======================================================  ============================
+format    content                                                 writer
+========  ======================================================  ============================
+``bvh``   the template's 31-bone rig, rotations solved from the   :mod:`meshmocap.io.bvh`
+          tracked surface; Y up, centimetres, the capture's rate
+``glb``   the template as a skinned mesh with the same            :mod:`meshmocap.io.gltf`
+``gltf``  animation; Y up, metres (one file, buffer embedded)
+``c3d``   the 15 evaluation joints (plus virtual markers) as      :mod:`meshmocap.io.c3d`
+          labelled points; Z up, millimetres
+``trc``   the same points for OpenSim; its Y-up frame, mm         :mod:`meshmocap.io.trc`
+``csv``   the evaluation joints per frame (or per frame and       :mod:`meshmocap.io.joints_csv`
+          joint), health and flags; Z up, metres
+========  ======================================================  ============================
+
+The rig rotations (BVH, glTF) come from :func:`meshmocap.body.pose_fit.pose_from_surface`:
+per frame, the pose whose skinning of the template reproduces the tracked vertices and
+joints; the result reports how closely (``vertex_error_mm``, ``joint_error_mm``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, get_args
+
+import numpy as np
+
+from meshmocap._validate import check_choice
+from meshmocap.body.markers import MARKER_SETS, marker_vertices
+from meshmocap.body.motion import Motion
+from meshmocap.body.pose_fit import PoseFit, pose_from_surface
+from meshmocap.body.template import Template, load_template
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.io.bvh import LengthUnit, write_bvh
+from meshmocap.io.c3d import write_c3d
+from meshmocap.io.gltf import skinned_gltf, write_gltf
+from meshmocap.io.joints_csv import write_joints_csv
+from meshmocap.io.results import Track, read_track
+from meshmocap.io.trc import write_trc
+
+__all__ = [
+    "ExportFormat",
+    "ExportResult",
+    "capture_fps",
+    "export_format",
+    "export_track",
+    "track_fps",
+    "track_gltf",
+    "track_motion",
+    "track_rows",
+    "track_template",
+]
+
+ExportFormat = Literal["bvh", "c3d", "trc", "gltf", "glb", "csv"]
+#: Marker options: none, or a set of :data:`meshmocap.body.markers.MARKER_SETS`.
+Markers = Literal["none", "lower_body"]
+#: Frame rate assumed when neither the track nor its capture states one.
+DEFAULT_FPS = 30.0
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export_track` wrote.
+
+    Attributes
+    ----------
+    path : Path; format : str; n_frames : int; fps : float
+    size_bytes : int; seconds : float, wall time of the whole export
+    vertex_error_mm, joint_error_mm : float
+        Mean distance between the re-skinned template and the tracked vertices / joints
+        (BVH and glTF; NaN for the point formats, which copy the track's values)
+    points : tuple of str, the labelled points written (C3D, TRC, CSV)
+    fps_source : str, where the frame rate came from (``capture.json``, ``given``, ...)
+    """
+
+    path: Path
+    format: str
+    n_frames: int
+    fps: float
+    size_bytes: int
+    seconds: float
+    vertex_error_mm: float = float("nan")
+    joint_error_mm: float = float("nan")
+    points: tuple[str, ...] = ()
+    fps_source: str = ""
+
+
+def export_format(path: str | os.PathLike, format: str | None = None) -> str:
+    """The format of ``path``: ``format`` when given (checked), else its extension."""
+    choices = get_args(ExportFormat)
+    if format is not None:
+        check_choice("export", "format", format, choices)
+        return format
+    ext = Path(path).suffix.lower().lstrip(".")
+    if ext not in choices:
+        raise InputError(
+            f"export: cannot tell the format of {Path(path).name!r} from its extension; "
+            f"use one of {['.' + c for c in choices]} or give format="
+        )
+    return ext
+
+
+def capture_fps(meta: dict, fps: float | None = None) -> tuple[float, str]:
+    """The frame rate of a track from its ``track.json`` contents ``meta`` and where it
+    comes from: ``fps`` when given, else ``meta["fps"]``, else its capture's
+    ``capture.json``, else :data:`DEFAULT_FPS`."""
+    if fps is not None:
+        if not (np.isfinite(fps) and fps > 0):
+            raise InputError(f"export: fps must be a positive number, found {fps!r}")
+        return float(fps), "given"
+    if meta.get("fps"):
+        return float(meta["fps"]), "track.json"
+    cap = meta.get("capture")
+    if cap:
+        try:
+            value = json.loads((Path(cap) / "capture.json").read_text()).get("fps")
+        except (OSError, ValueError, AttributeError):
+            value = None
+        if value:
+            return float(value), "capture.json"
+    return DEFAULT_FPS, "default"
+
+
+def track_fps(track: Track, fps: float | None = None) -> tuple[float, str]:
+    """The frame rate of ``track`` and where it comes from (:func:`capture_fps`)."""
+    return capture_fps(track.meta, fps)
+
+
+def track_template(track: Track, template: Template | str | None = None) -> Template:
+    """The template ``track`` deformed: ``template`` when given, else the one named in
+    ``track.json``; its vertex count must match the track's."""
+    if template is None or isinstance(template, str | os.PathLike):
+        name = template if template is not None else track.meta.get("template")
+        try:
+            template = load_template(str(name))
+        except MeshmocapFileNotFoundError:
+            raise MeshmocapFileNotFoundError(
+                f"export: the track was made with template {name!r}, which is not bundled; "
+                "pass its file (template=, --template)"
+            ) from None
+    if template.n_vertices != track.vertices.shape[1]:
+        raise InputError(
+            f"export: template {template.name!r} has {template.n_vertices} vertices, the track "
+            f"{track.vertices.shape[1]}"
+        )
+    return template
+
+
+def track_rows(track: Track, frames: slice | None = None) -> np.ndarray:
+    """Rows of ``track`` whose frame numbers lie in ``frames`` (a slice over capture frame
+    numbers, ``slice(0, 60, 2)``; all rows when None)."""
+    rows = np.arange(len(track.frames))
+    if frames is not None:
+        stop = int(track.frames.max()) + 1
+        wanted = np.arange(*frames.indices(stop))
+        rows = rows[np.isin(track.frames, wanted)]
+    if len(rows) == 0:
+        raise InputError(
+            f"export: no track frame in {frames} (the track has frames "
+            f"{int(track.frames[0])}..{int(track.frames[-1])})"
+        )
+    return rows
+
+
+def _step(track: Track, rows: np.ndarray, fmt: str) -> int:
+    """The constant spacing of the selected frame numbers (formats with a fixed rate)."""
+    d = np.diff(track.frames[rows])
+    if len(d) and not np.all(d == d[0]):
+        raise InputError(
+            f"export: {fmt} needs evenly spaced frames, found gaps in "
+            f"{track.frames[rows][:8].tolist()}...; select a run with --frames"
+        )
+    return int(d[0]) if len(d) else 1
+
+
+def track_motion(
+    track: Track, template: Template, rows: np.ndarray, fps: float, *, joint_weight: float = 2.0
+) -> tuple[Motion, PoseFit]:
+    """The template's rig animated by the poses fitted to the track's rows (frame rate
+    ``fps`` divided by the rows' spacing), and the fit.
+
+    The motion's skeleton is the template's (:func:`~meshmocap.io.bvh.write_bvh` writes
+    the root's positions absolute, as every BVH reader understands them).
+    """
+    fit = pose_from_surface(
+        template, track.vertices[rows], joints=track.joints[rows], joint_weight=joint_weight
+    )
+    step = _step(track, rows, "a motion")
+    return Motion(template.skeleton, fit.rotations, fit.root_positions, fps / step), fit
+
+
+def track_gltf(
+    track: Track,
+    template: Template,
+    rows: np.ndarray,
+    fps: float,
+    *,
+    fit: PoseFit | None = None,
+    color: tuple[float, float, float] = (0.7, 0.7, 0.7),
+    name: str | None = None,
+):
+    """The skinned template animated by the track's rows as a ``pygltflib.GLTF2`` (times:
+    frame number minus the first row's, over ``fps``) and the fit it comes from."""
+    if fit is None:
+        fit = pose_from_surface(template, track.vertices[rows], joints=track.joints[rows])
+    times = (track.frames[rows] - track.frames[rows[0]]) / fps
+    g = skinned_gltf(
+        template.V, template.F, template.skeleton, template.weights, fit.rotations,
+        fit.root_positions, times, name=name or template.name, color=color,
+    )  # fmt: skip
+    return g, fit
+
+
+def _points(track: Track, rows, joints, markers, template_arg):
+    names = list(
+        track.meta.get("eval_names") or [f"joint{k}" for k in range(track.joints.shape[1])]
+    )
+    keep = list(range(len(names)))
+    if joints is not None:
+        unknown = [j for j in joints if j not in names]
+        if unknown:
+            raise InputError(f"export: unknown joints {unknown}; the track has {names}")
+        keep = [names.index(j) for j in joints]
+    X = track.joints[rows][:, keep]
+    labels = [names[k] for k in keep]
+    if markers != "none":
+        template = track_template(track, template_arg)
+        mnames, idx = marker_vertices(template, MARKER_SETS[markers])
+        X = np.concatenate([X, track.vertices[rows][:, idx]], axis=1)
+        labels += list(mnames)
+    return X, labels
+
+
+def export_track(
+    track: str | os.PathLike | Track,
+    out: str | os.PathLike,
+    *,
+    format: ExportFormat | None = None,
+    frames: slice | None = None,
+    joints: Sequence[str] | None = None,
+    markers: Markers = "none",
+    long: bool = False,
+    fps: float | None = None,
+    template: Template | str | None = None,
+    bvh_unit: LengthUnit = "cm",
+    joint_weight: float = 2.0,
+) -> ExportResult:
+    """Write a track (a folder or a read :class:`~meshmocap.io.results.Track`) as ``out``.
+
+    Parameters
+    ----------
+    format : {"bvh", "c3d", "trc", "gltf", "glb", "csv"}, optional
+        Default: ``out``'s extension.
+    frames : slice, optional
+        Capture frame numbers to keep (``slice(0, 60, 2)``).
+    joints : sequence of str, optional
+        Evaluation joints to keep (C3D, TRC, CSV; the rig formats always hold the rig).
+    markers : {"none", "lower_body"}
+        Virtual markers added to C3D and TRC (:mod:`meshmocap.body.markers`).
+    long : bool
+        CSV: one row per frame and joint.
+    fps : float, optional
+        Frame rate (default: the track's capture's, see :func:`track_fps`).
+    template : Template or name or path, optional
+        The tracking template when it is not the bundled one named in ``track.json``.
+    bvh_unit : {"m", "cm", "mm", "inch", "cmu"}
+        Length unit of a BVH file.
+    joint_weight : float
+        Weight of the tracked joints in the pose fit (BVH, glTF; see
+        :func:`~meshmocap.body.pose_fit.pose_from_surface`).
+
+    Raises
+    ------
+    InputError
+        An unknown format or extension, joints, markers or frames; options that do not
+        apply to the format; unevenly spaced frames for BVH, C3D, TRC.
+    MeshmocapFileNotFoundError
+        No track, or an output folder that does not exist.
+    """
+    t0 = time.perf_counter()
+    out = Path(out)
+    fmt = export_format(out, format)
+    check_choice("export", "markers", markers, get_args(Markers))
+    if not out.parent.is_dir():
+        raise MeshmocapFileNotFoundError(f"export: folder {out.parent} does not exist")
+    if fmt in ("bvh", "gltf", "glb") and (joints is not None or markers != "none"):
+        raise InputError(f"export: joints and markers select points of c3d, trc and csv, not {fmt}")
+    if fmt == "csv" and markers != "none":
+        raise InputError("export: markers go to c3d and trc, not csv")
+    if long and fmt != "csv":
+        raise InputError(f"export: long applies to csv, not {fmt}")
+    tr = track if isinstance(track, Track) else read_track(track)
+    rows = track_rows(tr, frames)
+    rate, source = track_fps(tr, fps)
+    idx = tr.frames[rows]
+    verr = jerr = float("nan")
+    labels: list[str] = []
+    if fmt in ("bvh", "gltf", "glb"):
+        tpl = track_template(tr, template)
+        if fmt == "bvh":
+            motion, fit = track_motion(tr, tpl, rows, rate, joint_weight=joint_weight)
+            write_bvh(out, motion, unit=bvh_unit)
+        else:
+            fit = pose_from_surface(
+                tpl, tr.vertices[rows], joints=tr.joints[rows], joint_weight=joint_weight
+            )
+            g, _ = track_gltf(tr, tpl, rows, rate, fit=fit)
+            write_gltf(out, g)
+        verr, jerr = float(fit.vertex_error.mean() * 1e3), float(fit.joint_error.mean() * 1e3)
+    elif fmt in ("c3d", "trc"):
+        step = _step(tr, rows, fmt)
+        X, labels = _points(tr, rows, joints, markers, template)
+        if fmt == "c3d":
+            write_c3d(out, X, labels, rate / step, first_frame=int(idx[0]), valid=tr.healthy[rows])
+        else:
+            write_trc(
+                out, X, labels, rate / step, first_frame=int(idx[0]), start_time=idx[0] / rate
+            )
+    else:
+        X, labels = _points(tr, rows, joints, "none", template)
+        write_joints_csv(
+            out, X, labels, idx, rate, healthy=tr.healthy[rows],
+            flags=[tr.flags[r] for r in rows] if tr.flags else None,
+            messages=[tr.messages[r] for r in rows] if tr.messages else None, long=long,
+        )  # fmt: skip
+    return ExportResult(
+        out, fmt, len(rows), rate, out.stat().st_size, time.perf_counter() - t0,
+        verr, jerr, tuple(labels), source,
+    )  # fmt: skip
