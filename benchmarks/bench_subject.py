@@ -130,7 +130,7 @@ def crane_row(args) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--clips", default="05_01,09_01,01_01")
+    ap.add_argument("--clips", default="05_01,09_01,01_01", help="clips, or none")
     ap.add_argument("--subjects", default="heavy_male,small_female")
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--compare", default="neutral,true", help="comparison templates or none")
@@ -152,7 +152,7 @@ def main() -> None:
     print("| " + " | ".join(head) + " |")
     print("|---|---|" + "--:|" * (len(head) - 2))
     rows = []
-    for clip in args.clips.split(","):
+    for clip in [c for c in args.clips.split(",") if c != "none"]:
         for subject in args.subjects.split(","):
             r = subject_row(clip, subject, args)
             rows.append(r)

@@ -31,15 +31,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     frames = range(len(capture))[args.frames] if args.frames else None
     t0 = time.perf_counter()
-    track = track_sequence(
-        tracker,
-        template,
-        capture,
-        args.out,
-        frames=frames,
-        resume=not args.restart,
-        template_info=choice.info,
-    )
+    track = track_sequence(tracker, template, capture, args.out, frames=frames,
+                           resume=not args.restart, template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
     bad = int((~track.healthy).sum())
     print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
