@@ -93,7 +93,7 @@ def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
          "a manifold is only used by"),
         (["learn", "walkk", "--out", str(tmp_path / "m.npz")], "expected one of"),
         (["learn", "walk", "--samples", "0", "--out", str(tmp_path / "m.npz")],
-         "n must be a positive int"),
+         "argument --samples: expected an integer from 3 to 100000, found '0'"),
         (["learn", "walk", "--out", str(tmp_path / "no" / "m.npz")], "in an existing folder"),
         (["transfer", str(tmp_path / "none"), "heavy_male", "--out", str(tmp_path / "x")],
          "has no track.json"),

@@ -129,7 +129,7 @@ def test_degrade_streams_are_independent():
 
 def test_bad_arguments():
     m = _disc()
-    with pytest.raises(InputError, match="jitter must be ≥ 0"):
+    with pytest.raises(InputError, match="jitter must be from 0 to 20 pixels"):
         Degradation(jitter=-1.0)
     with pytest.raises(InputError, match="holes must be a whole number"):
         Degradation(holes=1.5)

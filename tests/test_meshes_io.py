@@ -18,11 +18,10 @@ from meshmocap.errors import (
     MeshmocapFileNotFoundError,
     MeshmocapWarning,
 )
+from meshmocap.io.archives import _GzipIndex, _GzipReader
 from meshmocap.io.meshes import (
     Frame,
     MeshSequence,
-    _GzipIndex,
-    _GzipReader,
     natural_key,
     read_mesh,
     read_points,

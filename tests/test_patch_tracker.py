@@ -164,7 +164,10 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
     assert meta["options"]["joint_readout"] == "skeleton"
     bad = [*args[:-1], str(tmp_path / "bad"), "--outlier-sigmas", "0"]
     assert main(bad) == 2
-    assert "outlier_sigmas must be > 0, found 0.0" in capsys.readouterr().err
+    assert (
+        "--outlier-sigmas: expected a number above 0 up to 100, found '0'"
+        in capsys.readouterr().err
+    )
     assert main(["eval", str(cap.path), str(out), "--surface-frames", "1"]) == 0
     assert "3D joint error" in capsys.readouterr().out
     assert main(["track", str(cap.path), "--method", "nope", "--out", str(out)]) == 2

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from PIL import Image
 
-from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.errors import FormatError, GreyMaskWarning, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
 from meshmocap.geometry.raster import coverage, rasterize
 from meshmocap.geometry.silhouette import fill_triangles, silhouette
@@ -172,7 +172,19 @@ def test_reads_any_png_at_half_scale(tmp_path):
     rgba[..., :3], rgba[..., 3] = 255, grey  # white cut-out on transparency
     Image.fromarray(rgba, "RGBA").save(tmp_path / "rgba.png")
     for name in ("l", "rgb", "i16", "p", "rgba"):
-        assert np.array_equal(read_mask(tmp_path / f"{name}.png"), expect), name
+        with pytest.warns(GreyMaskWarning, match=f"{name}.png: mask is not binary"):
+            assert np.array_equal(read_mask(tmp_path / f"{name}.png"), expect), name
+
+
+def test_binary_masks_read_without_warning_and_0_1_masks_are_binary(tmp_path):
+    m = np.array([[0, 1, 1, 0]], dtype=np.uint8)
+    Image.fromarray(m, "L").save(tmp_path / "01.png")  # 0/1, not 0/255
+    Image.fromarray(m * 255, "L").save(tmp_path / "0255.png")
+    rgba = np.zeros((1, 4, 4), np.uint8)
+    rgba[..., :3], rgba[..., 3] = 255, m * 255
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "cut.png")
+    for name in ("01", "0255", "cut"):  # filterwarnings = error: no warning is raised
+        assert np.array_equal(read_mask(tmp_path / f"{name}.png"), m.astype(bool)), name
 
 
 def test_unreadable_masks_raise_one_line_errors(tmp_path):

@@ -75,9 +75,13 @@ def test_hull_command_recomputes_from_silhouettes(walk_capture, tmp_path):
     shutil.copytree(
         walk_capture.path, out, ignore=shutil.ignore_patterns("truth", "hulls", "capture.json")
     )
-    cap = compute_hulls(out, show_progress=False)
-    assert len(cap) == 6
+    run = compute_hulls(out, show_progress=False)
+    cap = run.capture
+    assert len(cap) == 6 and run.carved == 6 and not run.partial and not run.missing
     assert np.array_equal(cap[3].hull.occupancy, walk_capture[3].hull.occupancy)  # deterministic
+    V, F = cap[3].hull_mesh
+    V0, F0 = walk_capture[3].hull_mesh
+    assert np.array_equal(V, V0) and np.array_equal(F, F0)
 
 
 def test_hull_input_errors(walk_capture, tmp_path):
@@ -85,11 +89,10 @@ def test_hull_input_errors(walk_capture, tmp_path):
     shutil.copytree(
         walk_capture.path, out, ignore=shutil.ignore_patterns("truth", "hulls", "capture.json")
     )
-    (out / "silhouettes" / "C3" / "00002.png").unlink()
-    with pytest.raises(
-        InputError, match="frame 2 has a silhouette for camera 'C1' but not for 'C3'"
-    ):
+    (out / "silhouettes" / "C9").mkdir()
+    with pytest.raises(InputError, match=r"holds 5 camera folders but the camera file lists 4"):
         compute_hulls(out)
+    (out / "silhouettes" / "C9").rmdir()
     shutil.rmtree(out / "silhouettes" / "C3")
     with pytest.raises(MeshmocapFileNotFoundError, match="camera 'C3' has no silhouette folder"):
         compute_hulls(out)
@@ -98,7 +101,8 @@ def test_hull_input_errors(walk_capture, tmp_path):
         compute_hulls(out)
 
 
-def test_empty_silhouette_is_a_one_line_error(walk_capture, tmp_path):
+def test_a_dropped_camera_frame_is_carved_from_the_others(walk_capture, tmp_path):
+    from meshmocap.errors import MissingFrameWarning
     from meshmocap.io.silhouettes import write_mask
 
     out = tmp_path / "empty"
@@ -106,11 +110,23 @@ def test_empty_silhouette_is_a_one_line_error(walk_capture, tmp_path):
         walk_capture.path, out, ignore=shutil.ignore_patterns("truth", "hulls", "capture.json")
     )
     write_mask(out / "silhouettes" / "C2" / "00000.png", np.zeros((480, 640), bool))
-    with pytest.raises(InputError, match="C2") as info:
-        compute_hulls(out)
-    assert "\n" not in str(info.value)
-    # frames finished before the failing one stay on disk: none here, frame 0 failed first
-    assert not list((out / "hulls").glob("*.npz"))
+    (out / "silhouettes" / "C3" / "00002.png").unlink()
+    for cam in ("C1", "C2", "C4"):  # frame 4: only C3 sees the subject
+        write_mask(out / "silhouettes" / cam / "00004.png", np.zeros((480, 640), bool))
+    with pytest.warns(MissingFrameWarning, match="1 frames without hull") as info:
+        run = compute_hulls(out)
+    assert "\n" not in str(info[0].message)
+    assert run.partial == {0: "carved from 3 of 4 cameras (C2: empty mask)",
+                           2: "carved from 3 of 4 cameras (C3: no silhouette file)"}  # fmt: skip
+    assert run.missing == {4: "only 1 of 4 cameras see the subject (C1: empty mask, C2: empty "
+                              "mask, C4: empty mask); at least 2 needed"}  # fmt: skip
+    cap = run.capture
+    assert len(cap) == 6 and cap[4].missing and cap[0].missing is None
+    assert cap.notes() == {**run.partial, **run.missing}
+    # three cameras carve a larger hull than four, never a smaller one
+    assert np.count_nonzero(cap[0].hull.occupancy) >= np.count_nonzero(
+        walk_capture[0].hull.occupancy
+    )
 
 
 def test_capture_loading_errors(tmp_path):

@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Literal
 
-from meshmocap.errors import MeshmocapFileNotFoundError
+from meshmocap.errors import FolderBusyError, MeshmocapFileNotFoundError
 
 
 @contextmanager
@@ -50,3 +50,44 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_open(path, "wb") as f:
         f.write(data)
     return Path(path)
+
+
+#: The lock file :func:`folder_lock` holds in the folder it guards.
+LOCK_NAME = ".meshmocap.lock"
+
+
+@contextmanager
+def folder_lock(folder: str | os.PathLike, what: str) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` while writing into it.
+
+    The lock is ``fcntl.flock`` on ``folder/.meshmocap.lock``: the kernel releases it when
+    the process ends, however it ends (``kill -9`` included), so a crashed run never leaves
+    a stuck lock; the file stays, holding the last writer's process id. Where ``fcntl`` is
+    not available (Windows) nothing is locked.
+
+    Raises
+    ------
+    FolderBusyError
+        Another process holds the lock (the message names its process id).
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover (Windows)
+        yield
+        return
+    path = Path(folder) / LOCK_NAME
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            pid = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            raise FolderBusyError(
+                f"{what}: {folder} is being written by another meshmocap process (pid {pid}); "
+                "wait for it to finish or write to another folder"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock

@@ -16,16 +16,31 @@ def check_choice(func: str, name: str, value: object, choices: Sequence[str]) ->
 def frame_slice(text: str, *, what: str = "frames") -> slice:
     """Parse ``START:STOP[:STEP]`` (any part optional; ``N`` alone is frame N) into a slice.
 
+    START and STOP are frame numbers (≥ 0), STEP ≥ 1 and START < STOP when both are given:
+    negative numbers are refused (``-3`` would otherwise silently mean "the third frame
+    from the end"), and so are empty ranges.
+
     Raises :class:`InputError` naming ``what`` when ``text`` is not of that form.
     """
     parts = text.split(":")
     try:
         if len(parts) > 3:
             raise ValueError
-        if len(parts) == 1:
-            return slice(int(text), int(text) + 1)
-        return slice(*(int(p) if p.strip() else None for p in parts))
+        values = [int(p) if p.strip() else None for p in parts]
     except ValueError:
         raise InputError(
             f"{what}: expected START:STOP[:STEP] with integers, found {text!r}"
         ) from None
+    if len(values) == 1 and values[0] is None:
+        raise InputError(f"{what}: expected START:STOP[:STEP] or N, found {text!r}")
+    if any(v is not None and v < 0 for v in values):
+        raise InputError(
+            f"{what}: expected frame numbers ≥ 0 (START:STOP[:STEP] or N), found {text!r}"
+        )
+    if len(values) == 3 and values[2] is not None and values[2] < 1:
+        raise InputError(f"{what}: expected STEP ≥ 1, found {text!r}")
+    if len(values) == 1:
+        return slice(values[0], values[0] + 1)
+    if values[0] is not None and values[1] is not None and values[1] <= values[0]:
+        raise InputError(f"{what}: expected START < STOP, found {text!r} (an empty range)")
+    return slice(*values)

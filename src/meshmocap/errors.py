@@ -33,8 +33,20 @@ class MeshmocapFileNotFoundError(MeshmocapError, FileNotFoundError):
     """A file or folder the user named does not exist."""
 
 
+class FolderBusyError(MeshmocapError, BlockingIOError):
+    """Another process is writing into the folder (its lock is held)."""
+
+
 class MeshmocapWarning(UserWarning):
     """Base class of the warnings meshmocap emits."""
+
+
+class GreyMaskWarning(MeshmocapWarning):
+    """A silhouette image is not binary (grey levels) and was thresholded."""
+
+
+class MissingFrameWarning(MeshmocapWarning):
+    """A frame was dropped or carved from fewer cameras; the rest of the capture is kept."""
 
 
 def where(path: object, line: int | None = None) -> str:

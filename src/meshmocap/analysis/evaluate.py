@@ -124,11 +124,14 @@ def evaluate(
         meshes = ((V, track.faces) for V in track.vertices)
         sil = mesh_silhouette_errors(meshes, (f.silhouettes for f in frames), capture.cameras)
     surf = None
-    if surface_frames > 0:
+    F_true = capture.truth_faces
+    against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"
+    usable = _surface_frames(frames, truths, against)
+    if surface_frames > 0 and len(usable):
         pick = np.linspace(0, len(frames) - 1, min(surface_frames, len(frames))).round()
-        pick = np.unique(pick.astype(int))
-        F_true = capture.truth_faces
-        against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"
+        # a pick the cameras did not see (or without hull) moves to the nearest usable frame
+        nearest = np.abs(usable[None, :] - pick.astype(int)[:, None]).argmin(axis=1)
+        pick = np.unique(usable[nearest])
         means, hd = [], []
         for k in pick:
             Vb, Fb = (truths[k].vertices, F_true) if against == "truth" else frames[k].hull_mesh
@@ -153,6 +156,16 @@ def evaluate(
         out_of_view=track.frames[hidden] if len(hidden) else np.zeros(0, np.int64),
         template=template_label(track.meta),
     )
+
+
+def _surface_frames(frames: list, truths: list, against: str) -> np.ndarray:
+    """Positions of the frames whose surface can be compared: the truth in view (not set to
+    NaN), or a hull mesh that exists (not a dropped frame, not a point cloud)."""
+    if against == "truth":
+        ok = [np.isfinite(t.vertices).all() for t in truths]
+    else:
+        ok = [getattr(f, "missing", None) is None and f.hull_mesh[1] is not None for f in frames]
+    return np.flatnonzero(ok)
 
 
 def _out_of_view(truths: list, cameras: list) -> np.ndarray:

@@ -19,6 +19,7 @@ the fixed connectivity of the crane sequence (Table I's data).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -233,19 +234,29 @@ class SilhouetteErrors:
 
     @property
     def errors(self) -> np.ndarray:
-        return self.xor_pixels / self.true_pixels
+        """(T, C) ratios; NaN where the camera does not see the subject (empty true mask)."""
+        seen = self.true_pixels > 0
+        return np.divide(self.xor_pixels, self.true_pixels, out=np.full(seen.shape, np.nan),
+                         where=seen)  # fmt: skip
 
     @property
     def per_camera(self) -> np.ndarray:
-        return self.errors.mean(axis=0)
+        return np.array([nan_mean(e) for e in self.errors.T])
 
     @property
     def overall(self) -> float:
-        return float(self.errors.mean())
+        return nan_mean(self.errors)
 
     @property
     def pooled(self) -> float:
         return float(self.xor_pixels.sum() / self.true_pixels.sum())
+
+
+def nan_mean(x: np.ndarray) -> float:
+    """Mean of the finite entries of ``x`` (NaN when there is none), without a warning."""
+    x = np.asarray(x, dtype=np.float64)
+    ok = ~np.isnan(x)
+    return float(x.mean()) if ok.all() else float(x[ok].mean()) if ok.any() else math.nan
 
 
 def silhouette_errors(
@@ -269,7 +280,9 @@ def silhouette_errors(
         if len(mp) != len(mt) or (counts and len(mp) != len(counts[0])):
             want = len(counts[0]) if counts else len(mt)
             raise InputError(f"frame {t}: {len(mp)} predicted, {len(mt)} true masks; want {want}")
-        counts.append([_xor_true(a, b) for a, b in zip(mp, mt, strict=True)])
+        # a camera that does not see the subject (empty true mask) is not scored: (0, 0)
+        counts.append([_xor_true(a, b) if np.any(b) else (0, 0)
+                       for a, b in zip(mp, mt, strict=True)])  # fmt: skip
     if not counts or not counts[0]:
         raise InputError("silhouette_errors: no frames or no cameras given")
     X = np.array(counts, dtype=np.int64)  # (T, C, 2)

@@ -67,6 +67,12 @@ def _stats_row(label: object, s: Stats) -> list[object]:
     return [label, s.mean, s.median, s.std, s.max]
 
 
+def _finite_stat(f, x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    x = x[~np.isnan(x)]
+    return float(f(x)) if x.size else math.nan
+
+
 def _counts(r: JointErrors | CorrespondenceErrors) -> str:
     return f"{len(r.frames)} frames, {len(r.failed)} failed, {len(r.skipped)} skipped"
 
@@ -83,10 +89,10 @@ def _summary(r: Result) -> tuple[str, list[str], list[list[object]], float]:
         heads = ["vertices", "mean_mm", "median_mm", "std_mm", "max_mm"]
         return title, heads, [_stats_row(r.errors.shape[1], r.overall)], 1.0
     if isinstance(r, SilhouetteErrors):
-        E = r.errors
-        rows = [[c, *(float(f(E[:, i])) for f in (np.mean, np.median, np.max))]
+        E = r.errors  # NaN where a camera does not see the subject: not scored
+        rows = [[c, *(_finite_stat(f, E[:, i]) for f in (np.mean, np.median, np.max))]
                 for i, c in enumerate(r.cameras)]  # fmt: skip
-        rows.append(["all", r.overall, float(np.median(E)), float(E.max())])
+        rows.append(["all", r.overall, _finite_stat(np.median, E), _finite_stat(np.max, E)])
         rows.append(["pooled", r.pooled, math.nan, math.nan])
         title = f"Silhouette overlap error, % of true pixels ({len(E)} frames)"
         return title, ["camera", "mean_ratio", "median_ratio", "max_ratio"], rows, 100.0

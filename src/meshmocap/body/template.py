@@ -31,6 +31,7 @@ eval_weights           (K, J) float rig weights carrying each evaluation joint
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
@@ -40,9 +41,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshmocap._atomic import atomic_open
+from meshmocap._npz import read_npz
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import apply_skinning, skinning_operator, skinning_transforms
-from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
+from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError, SkeletonError
 from meshmocap.geometry.mesh import mesh_problems
 
 FORMAT = "meshmocap-template-1"
@@ -211,44 +213,49 @@ def load_template(name_or_path: str | os.PathLike = "neutral") -> Template:
 
 
 def _read(path: Path) -> Template:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise MeshError(f"{path}: not a readable .npz template ({exc})") from None
+    d = read_npz(path, "template", error=MeshError)
     if str(d.get("format", "")) != FORMAT:
         raise MeshError(
             f"{path}: expected format {FORMAT!r}, found {str(d.get('format', 'none'))!r}"
         )
     try:
-        names = tuple(str(s) for s in d["joint_names"])
-        parents = d["joint_parents"].astype(np.int64)
-        P = d["joint_positions"].astype(np.float64)
-        off = P - np.where((parents >= 0)[:, None], P[np.maximum(parents, 0)], 0.0)
-        skel = Skeleton(names, parents, off, d["end_positions"].astype(np.float64) - P)
-        V = d["V"].astype(np.float64)
-        W = sp.csr_matrix(
-            (d["weights_data"].astype(np.float64), d["weights_indices"], d["weights_indptr"]),
-            shape=(len(V), len(names)),
-        )
-        rows = np.asarray(W.sum(axis=1)).ravel()
-        if np.all(rows > 0):  # exact partition of unity in float64 (files may store float32)
-            W = sp.csr_matrix(sp.diags(1.0 / rows) @ W)
-        ev = EvalSkeleton(
-            tuple(str(s) for s in d["eval_names"]),
-            d["eval_parents"].astype(np.int64),
-            d["eval_rest_positions"].astype(np.float64),
-            d["eval_weights"].astype(np.float64),
-        )
-        t = Template(str(d["name"]), V, d["F"].astype(np.int64), skel, W,
-                     d["part_labels"].astype(np.int64), ev)  # fmt: skip
+        with np.errstate(invalid="raise", over="raise"), warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            t = _from_arrays(d)
     except KeyError as exc:
         raise MeshError(f"{path}: template is missing key {exc}") from None
-    except ValueError as exc:
-        raise MeshError(f"{path}: template arrays are inconsistent ({exc})") from None
+    except (ValueError, TypeError, IndexError, ArithmeticError, np.exceptions.ComplexWarning,
+            InputError, SkeletonError) as exc:  # fmt: skip
+        why = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
+        raise MeshError(f"{path}: template arrays are inconsistent ({why})") from None
     problems = template_problems(t)
     if problems:
         raise MeshError(f"{path}: invalid template: {'; '.join(problems)}")
+    return t
+
+
+def _from_arrays(d: dict[str, np.ndarray]) -> Template:
+    names = tuple(str(s) for s in d["joint_names"])
+    parents = d["joint_parents"].astype(np.int64)
+    P = d["joint_positions"].astype(np.float64)
+    off = P - np.where((parents >= 0)[:, None], P[np.maximum(parents, 0)], 0.0)
+    skel = Skeleton(names, parents, off, d["end_positions"].astype(np.float64) - P)
+    V = d["V"].astype(np.float64)
+    W = sp.csr_matrix(
+        (d["weights_data"].astype(np.float64), d["weights_indices"], d["weights_indptr"]),
+        shape=(len(V), len(names)),
+    )
+    rows = np.asarray(W.sum(axis=1)).ravel()
+    if np.all(rows > 0):  # exact partition of unity in float64 (files may store float32)
+        W = sp.csr_matrix(sp.diags(1.0 / rows) @ W)
+    ev = EvalSkeleton(
+        tuple(str(s) for s in d["eval_names"]),
+        d["eval_parents"].astype(np.int64),
+        d["eval_rest_positions"].astype(np.float64),
+        d["eval_weights"].astype(np.float64),
+    )
+    t = Template(str(d["name"]), V, d["F"].astype(np.int64), skel, W,
+                 d["part_labels"].astype(np.int64), ev)  # fmt: skip
     return t
 
 

@@ -12,19 +12,31 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Sequence
+from typing import NoReturn
 
 from meshmocap import __version__
 from meshmocap.cli import batch, capture, demo, evaluation, export, motion, subject, track
-from meshmocap.errors import MeshmocapError
+from meshmocap.errors import MeshmocapError, MeshmocapWarning
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
 COMMANDS = (demo, motion, capture, subject, track, evaluation, batch, export)
 
 
+class _Parser(argparse.ArgumentParser):
+    """Parse errors in one line, ``meshmocap: error: COMMAND: ...`` (status 2), like every
+    other user mistake, instead of argparse's usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        command = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        print(f"meshmocap: error: {command}{message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of the ``meshmocap`` command."""
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="meshmocap", description="Markerless human performance capture from 3D mesh sequences."
     )
     p.add_argument("--version", action="version", version=f"meshmocap {__version__}")
@@ -36,9 +48,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``meshmocap`` command; return its exit status."""
-    args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a parse error already printed
+        return exc.code if isinstance(exc.code, int) else 2
+    try:
+        with warnings.catch_warnings():  # the library's warnings: one line each, on stderr
+            warnings.simplefilter("default", MeshmocapWarning)
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except MeshmocapError as exc:
         print(f"meshmocap: error: {exc}", file=sys.stderr)
         return 2
@@ -49,3 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # keep the interpreter's final flush from raising again on the closed pipe
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"meshmocap: warning: {message}", file=sys.stderr)

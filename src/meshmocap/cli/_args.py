@@ -1,16 +1,52 @@
-"""Argument types shared by the commands."""
+"""Argument types shared by the commands: frame ranges and numbers with their valid range.
+
+A value outside its range is refused when the arguments are parsed, in one line naming
+the flag, the range and what was found (``argument --jitter: expected a number from 0 to
+20 (pixels), found '1e9'``), before any work starts.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+from collections.abc import Callable
 
 from meshmocap._validate import frame_slice
 from meshmocap.errors import InputError
 
 
 def frame_range(text: str) -> slice:
-    """Parse ``START:STOP[:STEP]`` (any part optional) into a slice."""
+    """Parse ``START:STOP[:STEP]`` (any part optional) or a single frame ``N`` into a slice
+    (:func:`meshmocap._validate.frame_slice`: frame numbers ≥ 0, STEP ≥ 1, START < STOP)."""
     try:
         return frame_slice(text)
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("frames: ")) from None
+
+
+def number(
+    lo: float, hi: float, unit: str = "", *, integer: bool = False, open_lo: bool = False
+) -> Callable[[str], float | int]:
+    """An argparse type: a finite number in ``[lo, hi]`` (``(lo, hi]`` with ``open_lo``),
+    an integer with ``integer``; ``unit`` is named in the message."""
+    kind = "an integer" if integer else "a number"
+    rng = f"above {lo:g} up to {hi:g}" if open_lo else f"from {lo:g} to {hi:g}"
+    what = f"{kind} {rng}" + (f" ({unit})" if unit else "")
+
+    def parse(text: str) -> float | int:
+        try:
+            value: float | int = int(text) if integer else float(text)
+        except ValueError:
+            value = math.nan
+        ok = math.isfinite(value) and (value > lo if open_lo else value >= lo) and value <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f"expected {what}, found {text!r}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # argparse names the type on errors
+    return parse
+
+
+def flag(name: str) -> str:
+    """``--n-patches`` for the option ``n_patches``."""
+    return "--" + name.replace("_", "-")

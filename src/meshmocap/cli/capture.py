@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import frame_range, number
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
@@ -32,8 +32,11 @@ def _cmd_hull(args: argparse.Namespace) -> int:
     from meshmocap.studio.hulls import compute_hulls
 
     t0 = time.perf_counter()
-    cap = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
-    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({time.perf_counter() - t0:.1f} s)")
+    run = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
+    cap = run.capture
+    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
+          f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "
+          f"{time.perf_counter() - t0:.1f} s)")  # fmt: skip
     return 0
 
 
@@ -45,17 +48,46 @@ def register(sub: argparse._SubParsersAction) -> None:
     y.add_argument("--template", default="neutral", help="tracking template (name or .npz)")
     y.add_argument("--subject", help="body that performs, if not the template (e.g. heavy_male)")
     y.add_argument("--rig", default="humaneva4", help="humaneva4, ring8 or a camera file")
-    y.add_argument("--fps", type=float, default=60.0, help="frame rate (default: %(default)s)")
+    y.add_argument(
+        "--fps",
+        type=number(0, 1000, "frames per second", open_lo=True),
+        default=60.0,
+        help="frame rate (default: %(default)s)",
+    )
     y.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
-    y.add_argument("--voxel-size", type=float, default=0.01, help="hull voxel edge, metres")
-    y.add_argument("--jitter", type=float, default=0.0, help="silhouette boundary jitter, pixels")
-    y.add_argument("--holes", type=int, default=0, help="holes punched per silhouette")
-    y.add_argument("--blobs", type=int, default=0, help="spurious blobs per silhouette")
+    y.add_argument(
+        "--voxel-size",
+        type=number(0.002, 0.1, "metres"),
+        default=0.01,
+        help="hull voxel edge, metres",
+    )
+    y.add_argument(
+        "--jitter",
+        type=number(0, 20, "pixels"),
+        default=0.0,
+        help="silhouette boundary jitter, pixels",
+    )
+    y.add_argument(
+        "--holes", type=number(0, 100, integer=True), default=0, help="holes punched per silhouette"
+    )
+    y.add_argument(
+        "--blobs",
+        type=number(0, 100, integer=True),
+        default=0,
+        help="spurious blobs per silhouette",
+    )
     y.add_argument("--missed-limb", action="store_true", help="cut a limb from each silhouette")
-    y.add_argument("--seed", type=int, default=0, help="seed of the degradations")
+    y.add_argument(
+        "--seed",
+        type=number(0, 2**32 - 1, integer=True),
+        default=0,
+        help="seed of the degradations",
+    )
     y.set_defaults(func=_cmd_synth)
     h = sub.add_parser("hull", help="carve visual hulls from a capture's silhouettes")
     h.add_argument("capture", help="folder with cameras.json and silhouettes/<camera>/NNNNN.png")
-    h.add_argument("--voxel-size", type=float, default=0.01, help="voxel edge, metres")
+    h.add_argument(
+        "--voxel-size", type=number(0.002, 0.1, "metres"), default=0.01, help="voxel edge, metres"
+    )
     h.add_argument("--overwrite", action="store_true", help="recompute existing hulls")
     h.set_defaults(func=_cmd_hull)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from meshmocap.cli._args import number
+
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from meshmocap.apps.demo import run_demo
@@ -23,7 +25,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the parsers of this module's commands to ``sub``."""
     d = sub.add_parser("demo", help="run the main job on the bundled defaults")
     d.add_argument("--out", default="meshmocap-demo", help="output folder (default: %(default)s)")
-    d.add_argument("--seconds", type=float, default=4.0, help="length of the demo walk")
+    d.add_argument(
+        "--seconds", type=number(0.1, 600, "seconds"), default=4.0, help="length of the demo walk"
+    )
     d.add_argument("--clip", help="also retarget and render this BVH/AMC clip")
-    d.add_argument("--track-frames", type=int, default=120, help="frames tracked (0: skip)")
+    d.add_argument(
+        "--track-frames",
+        type=number(0, 100_000, integer=True),
+        default=120,
+        help="frames tracked (0: skip)",
+    )
     d.set_defaults(func=_cmd_demo)

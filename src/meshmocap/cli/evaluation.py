@@ -5,14 +5,16 @@ from __future__ import annotations
 import argparse
 import time
 
+from meshmocap.cli._args import number
+
 
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap.analysis.evaluate import evaluate, summary
     from meshmocap.apps.evaluation_files import write_evaluation
-    from meshmocap.io.capture import Capture
+    from meshmocap.io.capture import open_capture
     from meshmocap.io.results import read_track
 
-    track, capture = read_track(args.track), Capture(args.capture)
+    track, capture = read_track(args.track), open_capture(args.capture)
     ev = evaluate(
         track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
     )
@@ -83,7 +85,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("track", help="track folder written by 'meshmocap track'")
     e.add_argument("--out", help="folder for CSV tables and PNG plots")
     e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
-    e.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
+    e.add_argument(
+        "--surface-frames",
+        type=number(0, 10_000, integer=True),
+        default=8,
+        help="frames for surface distances",
+    )
     e.set_defaults(func=_cmd_eval)
     o = sub.add_parser("report", help="write an HTML report: scores, plots and a 3D player")
     o.add_argument("capture", help="capture folder, or a batch folder (meshmocap batch)")
@@ -91,9 +98,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--out", required=True, help="HTML file to write (one self-contained file)")
     o.add_argument("--eval-dir", action="append", help="keep each track's CSV/PNG evaluation "
                    "here (repeat once per track, in order)")  # fmt: skip
-    o.add_argument("--max-frames", type=int, default=120, help="frames in the 3D player")
+    o.add_argument(
+        "--max-frames",
+        type=number(1, 100_000, integer=True),
+        default=120,
+        help="frames in the 3D player",
+    )
     o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
-    o.add_argument("--surface-frames", type=int, default=8, help="frames for surface distances")
+    o.add_argument(
+        "--surface-frames",
+        type=number(0, 10_000, integer=True),
+        default=8,
+        help="frames for surface distances",
+    )
     o.set_defaults(func=_cmd_report)
     b = sub.add_parser(
         "bench",
@@ -110,7 +127,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--data", help="shared data folder (CMU clips, crane), e.g. ../shared/data")
     b.add_argument("--work", help="cache of captures and tracks (default: OUT/work); resumes")
     b.add_argument("--out", required=True, help="report folder")
-    b.add_argument("--max-frames", type=int, help="at most N frames per capture")
+    b.add_argument(
+        "--max-frames", type=number(1, 1_000_000, integer=True), help="at most N frames per capture"
+    )
     b.add_argument("--keep-fractions", nargs="+", help="Fig. 8 sweep of the patch tracker")
     b.add_argument("--template", default="neutral_5k", help="tracking template")
     b.set_defaults(func=_cmd_bench)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import frame_range, number
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -43,11 +43,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="add virtual markers on the template's surface (c3d, trc): "
                    "lower_body is the conventional lower-body set (LASI ... RTOE)")  # fmt: skip
     x.add_argument("--long", action="store_true", help="csv: one row per frame and joint")
-    x.add_argument("--fps", type=float, help="frame rate (default: the capture's)")
+    x.add_argument("--fps", type=number(0, 1000, "frames per second", open_lo=True),
+                   help="frame rate (default: the capture's)")  # fmt: skip
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
     x.add_argument("--bvh-unit", default="cm", choices=["m", "cm", "mm", "inch"],
                    help="length unit of a BVH file (default cm)")  # fmt: skip
-    x.add_argument("--joint-weight", type=float, default=2.0,
+    x.add_argument("--joint-weight", type=number(0, 1000), default=2.0,
                    help="bvh, gltf: weight of the tracked joints against the tracked surface "
                    "in the pose fit (default 2; 0 fits the surface alone)")  # fmt: skip
     x.set_defaults(func=_cmd_export)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import frame_range, number
 
 
 def _cmd_templates(args: argparse.Namespace) -> int:
@@ -77,7 +77,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "clip", help="a .bvh or .amc file (its .asf beside it) or a procedural motion name"
     )
     r.add_argument("--template", default="neutral", help="bundled template name or .npz path")
-    r.add_argument("--fps", type=float, help="resample to this frame rate")
+    r.add_argument(
+        "--fps",
+        type=number(0, 1000, "frames per second", open_lo=True),
+        help="resample to this frame rate",
+    )
     r.add_argument("--out", required=True, help="BVH file to write")
     r.set_defaults(func=_cmd_retarget)
     v = sub.add_parser(
@@ -88,15 +92,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     v.add_argument("--template", default="neutral", help="bundled template name or .npz path")
     v.add_argument("--out", required=True, help="output folder")
-    v.add_argument("--fps", type=float, help="resample the clip to this frame rate first")
+    v.add_argument(
+        "--fps",
+        type=number(0, 1000, "frames per second", open_lo=True),
+        help="resample the clip to this frame rate first",
+    )
     v.add_argument(
         "--frames", type=frame_range, help="frame range START:STOP[:STEP] (after resampling)"
     )
-    v.add_argument("--step", type=int, default=1, help="render every STEP-th frame")
-    v.add_argument("--width", type=int, default=320)
-    v.add_argument("--height", type=int, default=400)
     v.add_argument(
-        "--azimuth", type=float, default=30.0, help="camera angle around Z, degrees (0 = front)"
+        "--step",
+        type=number(1, 100_000, integer=True),
+        default=1,
+        help="render every STEP-th frame",
+    )
+    v.add_argument("--width", type=number(16, 8192, "pixels", integer=True), default=320)
+    v.add_argument("--height", type=number(16, 8192, "pixels", integer=True), default=400)
+    v.add_argument(
+        "--azimuth",
+        type=number(-360, 360, "degrees"),
+        default=30.0,
+        help="camera angle around Z, degrees (0 = front)",
     )
     v.add_argument("--sheet-only", action="store_true", help="write only the contact sheet")
     v.set_defaults(func=_cmd_render)

@@ -5,23 +5,70 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
-from meshmocap.cli._args import frame_range
+from meshmocap.cli._args import flag, frame_range, number
+
+#: Tracking options the command line offers (each taken only by the methods that have it).
+TRACK_OPTIONS = ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
+                 "fast_iter_scale", "joint_readout")  # fmt: skip
+
+
+def _tracker_options(args: argparse.Namespace) -> dict:
+    from meshmocap.errors import InputError
+    from meshmocap.trackers.registry import METHODS, method_options
+
+    given = {n: getattr(args, n) for n in TRACK_OPTIONS if getattr(args, n) is not None}
+    if args.method not in METHODS:  # the registry's one-line error
+        method_options(args.method)
+    takes = method_options(args.method)
+    unused = [n for n in given if n not in takes]
+    if unused:
+        users = [m for m in METHODS if unused[0] in method_options(m)]
+        offered = [flag(n) for n in TRACK_OPTIONS if n in takes]
+        raise InputError(
+            f"track: {flag(unused[0])} is not an option of --method {args.method} (it is of "
+            f"{', '.join(users)}); {args.method} takes {', '.join(offered) or 'none of them'}"
+        )
+    return given
+
+
+def _capture_source(sources: list[str]):
+    """One capture folder, or several mesh files/folders (the shell expands an unquoted
+    glob into many arguments)."""
+    from meshmocap.errors import InputError
+    from meshmocap.io.capture import open_capture
+    from meshmocap.io.meshes import frame_files
+
+    if len(sources) == 1:
+        return open_capture(sources[0])
+    capture_dirs = [s for s in sources if (Path(s) / "capture.json").is_file()
+                    or (Path(s) / "hulls").is_dir()]  # fmt: skip
+    if capture_dirs:
+        raise InputError(f"track: give one capture folder, or several mesh files and folders; "
+                         f"{capture_dirs[0]} is a capture folder")  # fmt: skip
+    return open_capture(frame_files(sources))
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
-    from meshmocap.io.capture import open_capture
+    from meshmocap.io.results import done_frames
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
-    options = {}
-    for name in ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
-                 "fast_iter_scale", "joint_readout"):  # fmt: skip
-        value = getattr(args, name)
-        if value is not None:
-            options[name] = value
-    capture = open_capture(args.capture)
+    options = _tracker_options(args)
+    capture = _capture_source(args.capture)
+    frames = None
+    if args.frames:
+        frames = range(len(capture))[args.frames]
+        if not frames:
+            raise InputError(f"track: --frames {_text(args.frames)} selects none of the "
+                             f"{len(capture)} frames of {args.capture[0]}")  # fmt: skip
+        if args.frames.stop is not None and args.frames.stop > len(capture):
+            print(f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
+                  f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                  f"{len(frames)}", file=sys.stderr)  # fmt: skip
     choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
     template = choice.template
     print(choice.note)
@@ -29,16 +76,33 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
-    frames = range(len(capture))[args.frames] if args.frames else None
+    before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(tracker, template, capture, args.out, frames=frames,
-                           resume=not args.restart, template_info=choice.info)  # fmt: skip
+                           resume=not args.restart, vertices=False,
+                           template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
+    resumed = len(before & set(track.frames.tolist()))
+    new = len(track.frames) - resumed
     bad = int((~track.healthy).sum())
-    print(f"tracked {len(track.frames)} frames with {args.method} in {dt:.1f} s "
-          f"({track.seconds[1:].mean() if len(track.seconds) > 1 else 0:.3f} s per frame); "
-          f"{bad} flagged unhealthy; results in {args.out}")  # fmt: skip
+    missing = sum("missing" in f for f in track.flags)
+    fresh = [s for i, s in zip(track.frames, track.seconds, strict=True) if int(i) not in before]
+    per = sum(fresh[1:]) / (len(fresh) - 1) if len(fresh) > 1 else 0.0
+    done = f"tracked {new} frames"
+    done += f" ({resumed} resumed from an earlier run)" if resumed else ""
+    flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
+    print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); {flagged}; "
+          f"results in {args.out}")  # fmt: skip
+    if missing:
+        first = next(k for k, f in enumerate(track.flags) if "missing" in f)
+        print(f"meshmocap: warning: {missing} frames had no observation and were coasted "
+              f"across, first {int(track.frames[first])}: {track.messages[first]}",
+              file=sys.stderr)  # fmt: skip
     return 0
+
+
+def _text(s: slice) -> str:
+    return ":".join("" if v is None else str(v) for v in (s.start, s.stop, s.step)).rstrip(":")
 
 
 def _cmd_learn(args: argparse.Namespace) -> int:
@@ -125,7 +189,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     k = sub.add_parser(
         "track", help="track a capture: skeleton joints and template shape per frame"
     )
-    k.add_argument("capture", help="capture folder (meshmocap synth/hull) or folder/glob of meshes")
+    k.add_argument("capture", nargs="+", help="capture folder (meshmocap synth/hull), or mesh "
+                   "or point-cloud files, folders or a quoted glob or archive of them")  # fmt: skip
     k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
                    "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
     k.add_argument("--template", help="tracking template: a name or .npz, or auto to estimate "
@@ -133,15 +198,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "an estimate is cached as subject.npz in --out)")  # fmt: skip
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
-    k.add_argument("--n-patches", type=int, help="patch tracker: number of patches")
+    k.add_argument(
+        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+    )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
-    k.add_argument("--keep-fraction", type=float, help="patch tracker: on-bone points kept")
-    k.add_argument("--outlier-sigmas", type=float, help="patch tracker: a point this many σ "
+    k.add_argument(
+        "--keep-fraction",
+        type=number(0, 1, open_lo=True),
+        help="patch tracker: on-bone points kept",
+    )
+    k.add_argument("--outlier-sigmas", type=number(0, 100, open_lo=True),
+                   help="patch tracker: a point this many σ "
                    "from the model is as likely an outlier (default 3; 2 rejects more of a "
                    "few-camera hull's phantom volumes, but also true points where the subject's "
                    "surface differs from the template's)")  # fmt: skip
-    k.add_argument("--max-iter", type=int, help="iterations per frame")
-    k.add_argument("--fast-iter-scale", type=float, help="patch tracker: iterations of a frame "
+    k.add_argument("--max-iter", type=number(1, 10_000, integer=True), help="iterations per frame")
+    k.add_argument("--fast-iter-scale", type=number(1, 100),
+                   help="patch tracker: iterations of a frame "
                    "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
                    "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
     k.add_argument("--joint-readout", help="patch tracker: joints reported: blend (default: "
@@ -156,11 +229,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    ".bvh/.amc/.mat mocap or a hand-labelled .npz pose file")  # fmt: skip
     m.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
     m.add_argument("--out", required=True, help="manifold file to write (.npz)")
-    m.add_argument("--latent-dim", type=int, default=2, help="latent dimension q")
-    m.add_argument("--samples", type=int, default=120, help="training poses (default: 120)")
+    m.add_argument(
+        "--latent-dim", type=number(1, 20, integer=True), default=2, help="latent dimension q"
+    )
+    m.add_argument(
+        "--samples",
+        type=number(3, 100_000, integer=True),
+        default=120,
+        help="training poses (default: 120)",
+    )
     m.add_argument("--asf", help="ASF skeleton of .amc/.mat sources (default: found beside)")
     m.add_argument("--plot", help="also draw the latent space (.png, .pdf or .svg)")
-    m.add_argument("--seed", type=int, default=0, help="random seed")
+    m.add_argument("--seed", type=number(0, 2**32 - 1, integer=True), default=0, help="random seed")
     m.set_defaults(func=_cmd_learn)
     x = sub.add_parser("transfer", help="replay a cage track with another mesh (motion transfer)")
     x.add_argument("track", help="track folder written by 'meshmocap track --method cage'")
@@ -184,6 +264,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=["warn", "raise", "ignore"],
         help="vertices outside the rest cage: warn, fail or ignore",
     )
-    x.add_argument("--tolerance", type=float, default=0.005, help="outside tolerance, metres")
+    x.add_argument(
+        "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
+    )
     x.add_argument("--restart", action="store_true", help="start over instead of resuming")
     x.set_defaults(func=_cmd_transfer)

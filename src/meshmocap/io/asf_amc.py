@@ -379,7 +379,7 @@ def _read_table(path: str | os.PathLike[str], asf: AsfSkeleton) -> tuple[np.ndar
     if bad_f.size:
         f, b = int(bad_f[0]), int(bad_b[0])
         k = np.flatnonzero(is_frame)[f]
-        label = tokens[first[k]].decode()
+        label = tokens[first[k]].decode("utf-8", errors="replace")
         if seen[f, b] > 1:
             problem = f"repeats bone {asf.bones[b]!r}"
         else:

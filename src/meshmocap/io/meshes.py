@@ -18,15 +18,13 @@ the archive costs a few MiB of decompression, not a pass over the archive.
 
 from __future__ import annotations
 
-import bisect
 import copy
 import glob as globlib
 import io
+import logging
 import os
 import re
-import tarfile
 import warnings
-import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,8 +34,10 @@ import numpy as np
 import trimesh
 
 from meshmocap._atomic import write_bytes_atomic
+from meshmocap._npz import NPY_ERRORS
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapWarning
 from meshmocap.errors import MeshmocapFileNotFoundError as NotFound
+from meshmocap.io.archives import TarArchive
 from meshmocap.io.ply import binary_ply_arrays
 
 Up = Literal["z", "y"]
@@ -82,17 +82,66 @@ def _finite(X: np.ndarray, label: str, what: str) -> None:
 
 
 def _load_scene(data: bytes, ext: str, label: str):
+    _check_header(data, ext, label)
     kwargs = {"maintain_order": True, "skip_materials": True} if ext == ".obj" else {}
+    log = logging.getLogger("trimesh")
+    level, log.level = log.level, logging.CRITICAL  # trimesh logs tracebacks of bad files
     try:
-        return trimesh.load_scene(io.BytesIO(data), file_type=ext[1:], process=False, **kwargs)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")  # its parsers warn on what they then reject
+            return trimesh.load_scene(io.BytesIO(data), file_type=ext[1:], process=False,
+                                      **kwargs)  # fmt: skip
     except Exception as exc:  # trimesh raises anything from KeyError to IndexError
         raise MeshError(f"{label}: cannot read {ext[1:].upper()} file ({_one_line(exc)})") from None
+    finally:
+        log.level = level
+
+
+#: Largest mesh or point-cloud file read, bytes (1 GiB: a binary PLY of about 25 million
+#: vertices; a 2.6-million-vertex visual hull takes about 100 MB). ``MESHMOCAP_MAX_MESH_MB``
+#: changes it. Archive members are held to the same limit.
+MAX_MESH_BYTES = 1 << 30
+#: Largest vertex or face count a file header may declare.
+MAX_MESH_ELEMENTS = 50_000_000
+
+
+def max_mesh_bytes() -> int:
+    """The file-size limit in force (``MESHMOCAP_MAX_MESH_MB`` megabytes, else 1 GiB)."""
+    env = os.environ.get("MESHMOCAP_MAX_MESH_MB", "")
+    return int(float(env) * 1e6) if env.replace(".", "", 1).isdigit() else MAX_MESH_BYTES
+
+
+def _check_size(size: int, label: str) -> None:
+    cap = max_mesh_bytes()
+    if size > cap:
+        raise MeshError(
+            f"{label}: {size / 1e6:.0f} MB, above the {cap / 1e6:.0f} MB limit of one mesh "
+            "file (about 25 million vertices; MESHMOCAP_MAX_MESH_MB raises it)"
+        )
+
+
+def _check_header(data: bytes, ext: str, label: str) -> None:
+    """Refuse headers declaring more elements than :data:`MAX_MESH_ELEMENTS` or than the
+    file could hold (a reader would allocate for them before finding out)."""
+    if ext == ".ply":
+        counts = [int(n) for n in re.findall(rb"element \w+ (\d{1,30})", data[:4096])]
+    elif ext == ".off":
+        m = re.match(rb"\s*(?:#[^\n]*\n\s*)*[A-Z]*OFF\s+(?:#[^\n]*\n\s*)*(\d{1,30})\s+(\d{1,30})",
+                     data[:4096])  # fmt: skip
+        counts = [int(n) for n in m.groups()] if m else []
+    else:
+        return
+    big = max(counts, default=0)
+    if big > MAX_MESH_ELEMENTS or big > len(data):
+        raise MeshError(f"{label}: header declares {big} elements in a file of {len(data)} "
+                        f"bytes (at most {MAX_MESH_ELEMENTS} are read)")  # fmt: skip
 
 
 def _read_bytes(path: Path) -> bytes:
     if not path.is_file():
         raise NotFound(f"{path}: no such file")
     try:
+        _check_size(path.stat().st_size, str(path))
         return path.read_bytes()
     except OSError as exc:
         raise MeshError(f"{path}: cannot read ({_one_line(exc)})") from None
@@ -109,13 +158,23 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
     meshes = [g for g in scene.geometry.values() if isinstance(g, trimesh.Trimesh)]
     if not meshes:
         raise MeshError(f"{label}: no triangles (empty, or a point cloud: use read_points)")
-    mesh = scene.to_mesh()  # parts concatenated in order, scene transforms applied
-    if ext == ".stl":
-        mesh.merge_vertices()
-    V = np.asarray(mesh.vertices, dtype=np.float64)
-    F = np.asarray(mesh.faces, dtype=np.int64)
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            mesh = scene.to_mesh()  # parts concatenated in order, scene transforms applied
+            if ext == ".stl":
+                mesh.merge_vertices()
+            V = np.asarray(mesh.vertices, dtype=np.float64)
+            F = np.asarray(mesh.faces, dtype=np.int64)
+    except Exception as exc:  # trimesh's post-processing of a damaged file
+        raise MeshError(f"{label}: cannot read {ext[1:].upper()} file ({_one_line(exc)})") from None
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+        raise MeshError(f"{label}: malformed mesh: vertices {V.shape}, faces {F.shape}")
     if len(V) == 0 or len(F) == 0:
         raise MeshError(f"{label}: empty mesh ({len(V)} vertices, {len(F)} faces)")
+    if F.min() < 0 or F.max() >= len(V):
+        raise MeshError(f"{label}: face indices must lie in [0, {len(V) - 1}], found "
+                        f"[{F.min()}, {F.max()}]")  # fmt: skip
     _finite(V, label, "vertices")
     if ext == ".obj":
         n_file = len(re.findall(rb"(?m)^v[ \t]", data))
@@ -163,7 +222,7 @@ def _parse_points(
     if ext == ".npy":
         try:
             A = np.load(io.BytesIO(data), allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
+        except NPY_ERRORS as exc:
             raise FormatError(f"{label}: not a readable .npy array ({_one_line(exc)})") from None
         A = np.asarray(A, dtype=np.float64) if A.dtype.kind in "fiu" else A
     elif ext in (".xyz", ".pcd"):
@@ -173,12 +232,18 @@ def _parse_points(
         geoms = list(scene.geometry.values())
         if not geoms:
             raise MeshError(f"{label}: empty point cloud (0 points)")
-        g = geoms[0] if len(geoms) == 1 else scene.to_mesh()  # mesh parts: all vertices
-        A = np.asarray(g.vertices, dtype=np.float64)
-        raw = g.metadata.get("_ply_raw", {}).get("vertex", {}).get("data", {})
-        if isinstance(raw, dict) and all(k in raw for k in ("nx", "ny", "nz")):
-            N = np.column_stack([np.ravel(raw[k]) for k in ("nx", "ny", "nz")]).astype(float)
-            N = N if len(N) == len(A) else None
+        try:
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                warnings.simplefilter("ignore")
+                g = geoms[0] if len(geoms) == 1 else scene.to_mesh()  # mesh parts: all vertices
+                A = np.asarray(g.vertices, dtype=np.float64)
+                raw = g.metadata.get("_ply_raw", {}).get("vertex", {}).get("data", {})
+                if isinstance(raw, dict) and all(k in raw for k in ("nx", "ny", "nz")):
+                    N = np.column_stack([np.ravel(raw[k]) for k in ("nx", "ny", "nz")])
+                    N = N.astype(np.float64) if N.shape == A.shape else None
+        except Exception as exc:  # trimesh's post-processing of a damaged file
+            raise MeshError(f"{label}: cannot read {ext[1:].upper()} points "
+                            f"({_one_line(exc)})") from None  # fmt: skip
     else:
         ok = list(dict.fromkeys(POINT_EXTENSIONS + MESH_EXTENSIONS))
         raise InputError(f"{label}: point files must end in {ok}, found {ext!r}")
@@ -200,7 +265,9 @@ def _parse_text_points(data: bytes, ext: str, label: str) -> np.ndarray:
         head, sep, body = data.partition(b"\nDATA ")
         fmt = body.split(b"\n", 1)[0].strip() if sep else b""
         if fmt != b"ascii":
-            raise FormatError(f"{label}: only ASCII PCD is supported, found DATA {fmt.decode()!r}")
+            raise FormatError(
+                f"{label}: only ASCII PCD is supported, found DATA {fmt.decode(errors='replace')!r}"
+            )
         fields = next((ln.split()[1:] for ln in head.splitlines() if ln[:6] == b"FIELDS"), [])
         if not fields or fields[:3] != [b"x", b"y", b"z"]:
             raise FormatError(f"{label}: PCD FIELDS must start with x y z, found {fields}")
@@ -215,6 +282,9 @@ def _parse_text_points(data: bytes, ext: str, label: str) -> np.ndarray:
     except ValueError as exc:
         raise FormatError(f"{label}: not a table of numbers ({_one_line(exc)})") from None
     if A.size == 0 or cols is not None:
+        if A.size and A.shape[1] <= max(cols):
+            raise FormatError(f"{label}: PCD FIELDS name {len(fields)} columns, the data has "
+                              f"{A.shape[1]}")  # fmt: skip
         return A[:, cols] if A.size else np.zeros((0, 3))
     return A[:, :6] if A.shape[1] >= 6 else A[:, :3] if A.shape[1] >= 3 else A
 
@@ -356,7 +426,7 @@ class MeshSequence:
         _check_choice("kind", kind, Kind)
         _check_choice("up", up, Up)
         self._kind, self._up = kind, up
-        self._archive: _TarArchive | None = None
+        self._archive: TarArchive | None = None
         if isinstance(source, str | os.PathLike):
             self._source = os.fspath(source)
             self._names = self._list(self._source)
@@ -372,7 +442,7 @@ class MeshSequence:
     def _list(self, source: str) -> list[str]:
         path, what = Path(source), "folder"
         if source.lower().endswith(_ARCHIVE_SUFFIXES) and path.is_file():
-            self._archive, what = _TarArchive(path), "archive"
+            self._archive, what = TarArchive(path, _check_size), "archive"
             names = [n for n in self._archive.names if _is_frame(n)]
         elif path.is_dir():
             names = [str(p) for p in path.iterdir() if p.is_file() and _is_frame(p.name)]
@@ -446,6 +516,33 @@ class MeshSequence:
         return Frame(int(i), label, P, None, N)
 
 
+def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
+    """The frame files of several sources (files, folders, globs), one list, sorted
+    naturally (``mesh_2`` before ``mesh_10``), as a quoted glob would list them: what a
+    shell passes for an unquoted ``my-meshes/*.ply``.
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError : a source that does not exist, or no frame files at all.
+    InputError : a file that is not a frame file, or frame files of several formats.
+    """
+    names: list[str] = []
+    for source in map(os.fspath, sources):
+        path = Path(source)
+        if path.is_file():
+            if not _is_frame(path.name):
+                raise InputError(f"{source}: not a frame file {list(_FRAME_EXTENSIONS)}")
+            names.append(source)
+        elif path.is_dir() or globlib.has_magic(source):
+            names += MeshSequence(source).paths
+        else:
+            raise NotFound(f"{source}: no such file or folder")
+    exts = sorted({_ext(n) for n in names})
+    if len(exts) > 1:
+        raise InputError(f"frame files of several formats {exts}; give one format")
+    return sorted(dict.fromkeys(names), key=natural_key)
+
+
 def _is_frame(name: str) -> bool:
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
@@ -462,131 +559,3 @@ def _selection(frames: range | slice | Sequence[int] | None, n: int) -> list[int
             f"({n} frame files), found {frames!r}"
         )
     return idx.tolist()
-
-
-# --------------------------------------------------------------------------- archives
-
-
-class _TarArchive:
-    """Members of a ``.tar`` or ``.tar.gz`` file, read by offset without unpacking."""
-
-    def __init__(self, path: Path) -> None:
-        self.path, self.gz = path, not str(path).lower().endswith(".tar")
-        self._index = _GzipIndex() if self.gz else None
-        try:
-            with open(path, "rb") as f, tarfile.open(fileobj=self._raw(f), mode="r:") as tf:
-                members = [m for m in tf.getmembers() if m.isreg()]
-        except (tarfile.TarError, zlib.error, EOFError, OSError) as exc:
-            raise FormatError(f"{path}: not a readable tar archive ({_one_line(exc)})") from None
-        self.names = [m.name for m in members]
-        self._where = {m.name: (m.offset_data, m.size) for m in members}
-
-    def _raw(self, f):
-        return _GzipReader(f, self._index) if self.gz else f
-
-    def read(self, name: str) -> bytes:
-        offset, size = self._where[name]
-        try:
-            with open(self.path, "rb") as f:
-                (raw := self._raw(f)).seek(offset)
-                data = raw.read(size)
-        except (zlib.error, EOFError, OSError) as exc:
-            raise FormatError(f"{self.path}::{name}: cannot read ({_one_line(exc)})") from None
-        if len(data) != size:
-            raise FormatError(f"{self.path}::{name}: truncated ({len(data)} of {size} bytes)")
-        return data
-
-    def __getstate__(self) -> dict:  # zlib states do not pickle: the index is rebuilt
-        return {**self.__dict__, "_index": _GzipIndex() if self.gz else None}
-
-
-class _GzipIndex:
-    """Decompressor snapshots ``(uncompressed offset, compressed offset, zlib state)``.
-
-    One is taken every ``spacing`` uncompressed bytes the first time the stream is
-    decompressed that far; past ``max_points`` every other one is dropped and the spacing
-    doubled (each holds ~40 KiB: zlib's 32 KiB window and state).
-    """
-
-    def __init__(self, spacing: int = 4 << 20, max_points: int = 1024) -> None:
-        self.spacing, self.max_points = spacing, max_points
-        self.points: list[tuple[int, int, object]] = [(0, 0, None)]
-
-    def add(self, u: int, c: int, d) -> None:
-        if u - self.points[-1][0] >= self.spacing:
-            self.points.append((u, c, d.copy()))
-            if len(self.points) > self.max_points:
-                self.points, self.spacing = self.points[::2], 2 * self.spacing
-
-    def best(self, u: int) -> tuple[int, int, object]:
-        return self.points[bisect.bisect_right([p[0] for p in self.points], u) - 1]
-
-
-class _GzipReader:
-    """A seekable, read-only file over a (multi-member) gzip file, through a :class:`_GzipIndex`.
-
-    ``_buf`` holds the uncompressed bytes ``[_u, _u + len(_buf))``; ``_c`` is the compressed
-    offset of the next input byte; ``_d`` has consumed all input before ``_c``.
-    """
-
-    _CHUNK = 1 << 18
-
-    def __init__(self, f, index: _GzipIndex) -> None:
-        self._f, self._index, self._pos = f, index, 0
-        self._restore(index.points[0])
-
-    def _restore(self, point) -> None:
-        u, c, d = point
-        self._d = d.copy() if d is not None else zlib.decompressobj(31)
-        self._c, self._u, self._buf, self._end = c, u, b"", False
-
-    def _step(self) -> None:
-        self._u += len(self._buf)
-        self._f.seek(self._c)
-        chunk = self._f.read(self._CHUNK)
-        self._c += len(chunk)
-        if not chunk:
-            if not self._d.eof:
-                raise EOFError("gzip stream ends early (truncated archive)")
-            self._buf, self._end = b"", True
-            return
-        out = [self._d.decompress(chunk)]
-        while self._d.eof:  # end of a gzip member: another may follow
-            rest = self._d.unused_data
-            if len(rest) < 2:  # the next member's magic may straddle the chunk
-                more = self._f.read(2 - len(rest))
-                self._c, rest = self._c + len(more), rest + more
-            if not rest.startswith(b"\x1f\x8b"):  # padding or nothing: the stream ends
-                self._end = True
-                break
-            self._d = zlib.decompressobj(31)
-            out.append(self._d.decompress(rest))
-        self._buf = b"".join(out)
-        if not self._end:
-            self._index.add(self._u + len(self._buf), self._c, self._d)
-
-    def tell(self) -> int:
-        return self._pos
-
-    def seek(self, offset: int, whence: int = 0) -> int:
-        if whence == 2:
-            while not self._end:
-                self._step()
-        base = {0: 0, 1: self._pos, 2: self._u + len(self._buf)}[whence]
-        self._pos = max(0, base + offset)
-        return self._pos
-
-    def read(self, n: int = -1) -> bytes:
-        point = self._index.best(self._pos)
-        if self._pos < self._u or point[0] > self._u + len(self._buf):
-            self._restore(point)
-        end, parts = self._pos + n if n >= 0 else 1 << 62, []
-        while self._pos < end:
-            while self._pos >= self._u + len(self._buf) and not self._end:
-                self._step()
-            piece = self._buf[self._pos - self._u : end - self._u]
-            if not piece:
-                break
-            parts.append(piece)
-            self._pos += len(piece)
-        return b"".join(parts)

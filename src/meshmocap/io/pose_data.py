@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open
+from meshmocap._npz import read_npz
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import (
     N_QUADS,
@@ -357,11 +358,7 @@ def read_poses(path: str | os.PathLike, template: Template, *, oqr: OQR | None =
     path = Path(path)
     if not path.is_file():
         raise MeshmocapFileNotFoundError(f"{path}: no such pose file")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{path}: not a readable .npz pose file ({exc})") from None
+    d = read_npz(path, "pose file")
     if str(d.get("format", "")) != POSES_FORMAT:
         raise FormatError(f"{path}: expected format {POSES_FORMAT!r}, "
                           f"found {str(d.get('format', 'none'))!r}")  # fmt: skip

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
+from meshmocap._npz import read_npz
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 
 FORMAT = "meshmocap-track-1"
@@ -134,7 +135,7 @@ def start_track(
     meta_path = path / "track.json"
     full = {"format": FORMAT, **meta}
     if meta_path.is_file() and resume:
-        old = json.loads(meta_path.read_text())
+        old = _read_json(meta_path)
         if old != json.loads(json.dumps(full)):
             raise FormatError(
                 f"{meta_path}: holds a track made with other settings; use another folder"
@@ -167,50 +168,104 @@ def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
 
 def read_state(path: str | os.PathLike, index: int) -> dict[str, np.ndarray]:
     """The tracker state stored with frame ``index`` (empty if the tracker stored none)."""
-    try:
-        with np.load(frame_path(path, index), allow_pickle=False) as z:
-            return {k[6:]: z[k] for k in z.files if k.startswith("state_")}
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{frame_path(path, index)}: unreadable frame result ({exc})") from None
+    z = read_npz(frame_path(path, index), "frame result")
+    return {k[6:]: v for k, v in z.items() if k.startswith("state_")}
 
 
-def read_track(path: str | os.PathLike) -> Track:
-    """Read every frame of a track folder, stacked in frame order."""
+def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
+    """Read every frame of a track folder, stacked in frame order.
+
+    ``vertices=False`` leaves the tracked vertices out (``Track.vertices`` is (T, 0, 3)):
+    a 10,000-frame track of a 12k-vertex template holds 3 GB of them.
+    """
     path = Path(path)
     meta_path = path / "track.json"
     if not meta_path.is_file():
         raise MeshmocapFileNotFoundError(f"track: {path} has no track.json")
-    meta = json.loads(meta_path.read_text())
+    meta = _read_json(meta_path)
     if meta.get("format") != FORMAT:
         raise FormatError(f"{meta_path}: expected format {FORMAT!r}, found {meta.get('format')!r}")
     frames = done_frames(path)
     if not frames:
         raise MeshmocapFileNotFoundError(f"track: {path / 'frames'} holds no frame results")
-    rows = []
-    for i in frames:
-        try:
-            with np.load(frame_path(path, i), allow_pickle=False) as z:
-                rows.append({k: z[k] for k in z.files})
-        except (OSError, ValueError, KeyError) as exc:
-            raise FormatError(f"{frame_path(path, i)}: unreadable frame result ({exc})") from None
+    rows = [read_frame_arrays(path, i) for i in frames]
+    if not vertices:
+        for r in rows:
+            r["vertices"] = r["vertices"][:0]
     keys = sorted({k for r in rows for k in r if k.startswith("energy_")})
-    faces_path = path / "faces.npy"
-    if not faces_path.is_file():
-        raise MeshmocapFileNotFoundError(f"track: {path} has no faces.npy")
+    faces = _read_faces(path / "faces.npy")
+    shapes = {(r["joints"].shape, r["vertices"].shape) for r in rows}
+    if len(shapes) > 1:
+        raise FormatError(f"track: {path / 'frames'} holds frames of different shapes {shapes}")
+    n = rows[0]["vertices"].shape[0]
+    if vertices and len(faces) and (faces.min() < 0 or faces.max() >= n):
+        raise FormatError(f"{path / 'faces.npy'}: face indices outside the {n} vertices")
+    try:
+        energies = {k[7:]: np.array([float(r.get(k, 0.0)) for r in rows]) for k in keys}
+        scalars = {key: np.array([cast(r[key]) for r in rows]) for key, cast in _SCALARS.items()}
+    except (TypeError, ValueError) as exc:
+        raise FormatError(f"track: {path / 'frames'}: a frame holds a bad value ({exc})") from None
     return Track(
         meta=meta,
-        faces=np.load(faces_path).astype(np.int64),
+        faces=faces,
         frames=np.array(frames),
         joints=np.stack([r["joints"] for r in rows]).astype(np.float64),
         vertices=np.stack([r["vertices"] for r in rows]).astype(np.float64),
         # 0 where a frame has no such term (the initial frame, a baseline without it)
-        energies={k[7:]: np.array([float(r.get(k, 0.0)) for r in rows]) for k in keys},
-        n_iter=np.array([int(r["n_iter"]) for r in rows]),
-        seconds=np.array([float(r["seconds"]) for r in rows]),
-        healthy=np.array([bool(r["healthy"]) for r in rows]),
+        energies=energies,
+        **scalars,
         flags=tuple(frame_flags(r) for r in rows),
         messages=tuple(str(r["message"]) for r in rows),
     )
+
+
+_SCALARS = {"n_iter": int, "seconds": float, "healthy": bool}
+_FRAME_KEYS = ("index", "joints", "vertices", "n_iter", "seconds", "healthy", "message")
+
+
+def read_frame_arrays(path: str | os.PathLike, index: int) -> dict[str, np.ndarray]:
+    """The arrays of frame ``index``'s result file in the track folder ``path``, checked:
+    finite (K, 3) joints and (n, 3) vertices, scalar counts.
+
+    Raises
+    ------
+    FormatError
+        Not a readable frame file, a missing key, a bad shape or a NaN.
+    """
+    p = frame_path(path, index)
+    z = read_npz(p, "frame result", keys=_FRAME_KEYS)
+    for key in ("joints", "vertices"):
+        a = z[key]
+        if a.ndim != 2 or a.shape[1] != 3 or a.dtype.kind not in "fiu" or not len(a):
+            raise FormatError(f"{p}: {key} must be (n, 3) numbers, found {a.shape} {a.dtype}")
+        if not np.isfinite(a).all():
+            raise FormatError(f"{p}: {key} hold NaN or infinite values")
+    for key in (*_SCALARS, "message", "index"):
+        if z[key].ndim != 0:
+            raise FormatError(f"{p}: {key} must be a scalar, found shape {z[key].shape}")
+    return z
+
+
+def _read_faces(path: Path) -> np.ndarray:
+    if not path.is_file():
+        raise MeshmocapFileNotFoundError(f"track: {path.parent} has no faces.npy")
+    try:
+        F = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        raise FormatError(f"{path}: not a readable .npy array ({exc})") from None
+    if F.ndim != 2 or F.shape[1] != 3 or F.dtype.kind not in "iu":
+        raise FormatError(f"{path}: expected (m, 3) integer triangles, found {F.shape} {F.dtype}")
+    return F.astype(np.int64)
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise FormatError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise FormatError(f"{path}: expected a JSON object, found {type(meta).__name__}")
+    return meta
 
 
 def frame_flags(z: dict | np.lib.npyio.NpzFile) -> tuple[str, ...]:
@@ -218,5 +273,6 @@ def frame_flags(z: dict | np.lib.npyio.NpzFile) -> tuple[str, ...]:
     for an unhealthy frame, else none)."""
     if "flags" in z:
         text = str(z["flags"])
-        return tuple(text.split(",")) if text else ()
+        flags = tuple(text.split(",")) if text else ()
+        return tuple(f for f in flags if f in FRAME_FLAGS)
     return () if bool(z["healthy"]) else ("failed",)

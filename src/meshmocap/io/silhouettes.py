@@ -3,7 +3,8 @@
 Masks are (height, width) bool arrays, row 0 at the top of the image (the pixel grid of
 :mod:`meshmocap.geometry.camera`). :func:`write_mask` writes 1-bit (smallest) or 8-bit
 (0/255, what most tools expect) greyscale PNGs; :func:`read_mask` reads any PNG (or other
-image Pillow opens) and thresholds it at 50 % of full scale:
+image Pillow opens) and thresholds it at 50 % of full scale, with a :class:`GreyMaskWarning`
+when the image is not binary (a mask stored as 0 and 1 rather than 0 and 255 is binary):
 
 * greyscale (1, 2, 4, 8 or 16 bits): the grey value;
 * RGB or palette: the luma (ITU-R 601, Pillow's ``convert("L")``);
@@ -22,7 +23,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from meshmocap._atomic import atomic_open
-from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.errors import FormatError, GreyMaskWarning, InputError, MeshmocapFileNotFoundError
 
 #: Bit depths :func:`write_mask` writes.
 MaskBits = Literal[1, 8]
@@ -59,12 +60,18 @@ def read_mask(path: str | os.PathLike[str], *, shape: tuple[int, int] | None = N
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             with Image.open(p) as img:
                 img.load()
-                mask = _threshold(img)
+                mask, binary = _threshold(img)
     except (UnidentifiedImageError, Image.DecompressionBombWarning, Image.DecompressionBombError):
         raise FormatError(f"{path}: not a readable image, expected a PNG mask") from None
-    except (OSError, SyntaxError, ValueError) as e:  # truncated or corrupt data
+    except (OSError, SyntaxError, ValueError, TypeError, MemoryError) as e:  # corrupt data
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FormatError(f"{path}: corrupt image, expected a PNG mask ({msg})") from None
+    if not binary:
+        warnings.warn(
+            f"{path}: mask is not binary (grey levels); thresholded at 50 % of full scale",
+            GreyMaskWarning,
+            stacklevel=2,
+        )
     if shape is not None and mask.shape != tuple(shape):
         raise FormatError(
             f"{path}: mask of {mask.shape[1]}×{mask.shape[0]} pixels, expected "
@@ -73,23 +80,30 @@ def read_mask(path: str | os.PathLike[str], *, shape: tuple[int, int] | None = N
     return mask
 
 
-def _threshold(img: Image.Image) -> np.ndarray:
+def _threshold(img: Image.Image) -> tuple[np.ndarray, bool]:
+    """The mask and whether the image was binary (0 and full scale, or 0 and 1 only)."""
     mode = img.mode
     if mode == "1":
-        return np.asarray(img, dtype=bool).copy()
+        return np.asarray(img, dtype=bool).copy(), True
     if mode.startswith("I") or mode == "F":  # 16-bit PNG greyscale (I;16 or I)
         full = 65535.0 if mode != "F" else 1.0
-        return np.asarray(img, dtype=np.float64) > 0.5 * full
-    if mode == "P":
-        img = img.convert("RGBA")
-        mode = "RGBA"
-    alpha = None
-    if mode in ("LA", "RGBA", "PA", "La", "RGBa"):
-        alpha = np.asarray(img.getchannel("A"), dtype=np.float64) / 255.0
-    grey = np.asarray(img.convert("L") if mode != "L" else img, dtype=np.float64)
-    if alpha is not None:
-        grey = grey * alpha
-    return grey > 127.5
+        grey = np.asarray(img, dtype=np.float64)
+    else:
+        if mode == "P":
+            img = img.convert("RGBA")
+            mode = "RGBA"
+        alpha = None
+        if mode in ("LA", "RGBA", "PA", "La", "RGBa"):
+            alpha = np.asarray(img.getchannel("A"), dtype=np.float64) / 255.0
+        grey = np.asarray(img.convert("L") if mode != "L" else img, dtype=np.float64)
+        if alpha is not None:
+            grey = grey * alpha
+        full = 255.0
+    if grey.ndim != 2:
+        raise ValueError(f"expected one channel, found shape {grey.shape}")
+    if grey.size and grey.max() == 1.0 and np.isin(grey, (0.0, 1.0)).all():
+        full = 1.0  # a mask stored as 0 and 1 rather than 0 and full scale
+    return grey > 0.5 * full, bool(np.isin(grey, (0.0, full)).all())
 
 
 def write_mask(path: str | os.PathLike[str], mask: np.ndarray, *, bits: MaskBits = 8) -> None:

@@ -57,6 +57,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from meshmocap._atomic import atomic_open
+from meshmocap._npz import read_npz
 from meshmocap._validate import check_choice
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import chol_inverse, rbf, sqdist
@@ -557,13 +558,17 @@ class GPLVM:
         path = Path(path)
         if not path.is_file():
             raise MeshmocapFileNotFoundError(f"{path}: no such GPLVM file")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                d = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise FormatError(f"{path}: not a GPLVM .npz file ({e})") from None
+        d = read_npz(path, "GPLVM file")
         if str(d.get("kind", "")) != _KIND:
             raise FormatError(f"{path}: not a meshmocap GPLVM file")
+        try:
+            return cls._from_arrays(d, path)
+        except (KeyError, ValueError, TypeError, IndexError, np.linalg.LinAlgError) as e:
+            why = f"{type(e).__name__}: {e}".splitlines()[0][:160]
+            raise FormatError(f"{path}: corrupt GPLVM file ({why})") from None
+
+    @classmethod
+    def _from_arrays(cls, d: dict, path: Path) -> GPLVM:
         version = int(d["format_version"])
         if version != FORMAT_VERSION:
             raise FormatError(f"{path}: GPLVM format version {version}, "
@@ -577,6 +582,13 @@ class GPLVM:
             int(nit),
             bool(conv),
         )
+        keys = ["X_", "Y_", "Y_mean_", "history", "Kinv_", "KinvY_", "A_",
+                *(f"mlp{i}" for i in range(4))]  # fmt: skip
+        for key in (k for k in keys if k in d):
+            a = d[key]
+            if a.dtype.kind not in "fiu" or not np.isfinite(a).all():
+                raise ValueError(f"{key} must hold finite real numbers, found {a.dtype}")
+            d[key] = a.astype(np.float64)
         self.X_, self.Y_, self.Y_mean_ = d["X_"], d["Y_"], d["Y_mean_"]
         self.log_likelihood_history_ = d["history"]
         self.A_ = d.get("A_")

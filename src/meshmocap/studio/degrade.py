@@ -24,6 +24,9 @@ from scipy import ndimage
 
 from meshmocap.errors import InputError
 
+#: Largest boundary jitter, pixels: beyond it the silhouette is noise, not a body.
+MAX_JITTER = 20.0
+
 #: What ``seed`` arguments accept.
 Seed = int | np.random.SeedSequence | np.random.Generator
 
@@ -55,16 +58,18 @@ class Degradation:
     blob_radius: float = 6.0
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.jitter) and self.jitter >= 0):
-            raise InputError(f"Degradation: jitter must be ≥ 0 pixels, found {self.jitter}")
+        if not (np.isfinite(self.jitter) and 0 <= self.jitter <= MAX_JITTER):
+            raise InputError(f"Degradation: jitter must be from 0 to {MAX_JITTER:g} pixels, "
+                             f"found {self.jitter}")  # fmt: skip
         for name in ("holes", "blobs"):
             v = getattr(self, name)
-            if not isinstance(v, int | np.integer) or isinstance(v, bool) or v < 0:
-                raise InputError(f"Degradation: {name} must be a whole number ≥ 0, found {v!r}")
+            if not isinstance(v, int | np.integer) or isinstance(v, bool) or not 0 <= v <= 100:
+                raise InputError(f"Degradation: {name} must be a whole number from 0 to 100, "
+                                 f"found {v!r}")  # fmt: skip
         for name in ("hole_radius", "blob_radius"):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 1):
-                raise InputError(f"Degradation: {name} must be ≥ 1 pixel, found {v}")
+            if not (np.isfinite(v) and 1 <= v <= 100):
+                raise InputError(f"Degradation: {name} must be from 1 to 100 pixels, found {v}")
 
 
 def degrade(mask: np.ndarray, spec: Degradation, *, seed: Seed) -> np.ndarray:

@@ -11,31 +11,31 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
 from meshmocap.body.template import Template, load_template
-from meshmocap.errors import InputError
+from meshmocap.errors import InputError, MeshmocapWarning, MissingFrameWarning
 from meshmocap.geometry.camera import Camera
-from meshmocap.geometry.carving import carve, hull_mesh
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.io.cameras import read_cameras, write_cameras
 from meshmocap.io.capture import (
     Capture,
     Truth,
     frame_name,
-    write_hull,
     write_meta,
     write_truth,
     write_truth_faces,
 )
 from meshmocap.io.clips import clip_on
-from meshmocap.io.meshes import write_mesh
 from meshmocap.io.silhouettes import write_mask
 from meshmocap.studio.degrade import Degradation, degrade
+from meshmocap.studio.hulls import carve_seen, frames_note, write_carved
 from meshmocap.studio.rigs import camera_rig
 
 
@@ -78,6 +78,21 @@ class SynthSpec:
     seed: int = 0
     voxel_size: float = 0.01
 
+    def __post_init__(self) -> None:
+        checks = (("fps", self.fps, 0.0, 1000.0, "frames per second"),
+                  ("voxel_size", self.voxel_size, 0.002, 0.1, "metres"))  # fmt: skip
+        for name, v, lo, hi, unit in checks:
+            ok = isinstance(v, int | float) and not isinstance(v, bool) and lo < v <= hi
+            if not ok:
+                raise InputError(f"synth: {name} must be above {lo:g} up to {hi:g} {unit}, "
+                                 f"found {v!r}")  # fmt: skip
+        if not (isinstance(self.seed, int) and 0 <= self.seed < 2**32):
+            raise InputError(f"synth: seed must be an integer from 0 to 2**32 - 1, found "
+                             f"{self.seed!r}")  # fmt: skip
+        if not isinstance(self.degradation, Degradation):
+            raise InputError(f"synth: degradation must be a Degradation, found "
+                             f"{type(self.degradation).__name__}")  # fmt: skip
+
     def as_dict(self) -> dict:
         """JSON-ready parameters."""
         d = dataclasses.asdict(self)
@@ -107,12 +122,7 @@ def synthesize(
     out = Path(out)
     subject = load_template(spec.subject or spec.template)
     motion = clip_on(subject, spec.motion, fps=spec.fps)
-    frames = list(range(motion.n_frames))[slice(spec.start, spec.stop, spec.step)]
-    if not frames:
-        raise InputError(
-            f"synth: frame range {spec.start}:{spec.stop}:{spec.step} selects none of the "
-            f"{motion.n_frames} frames"
-        )
+    frames = _check_range(spec, motion.n_frames, os.fspath(spec.motion))
     cameras = _cameras(spec.rig)
     meta = {
         "fps": motion.fps / (spec.step or 1),
@@ -135,9 +145,46 @@ def synthesize(
     write_meta(meta_path, meta)
     write_truth_faces(out, subject.F)
     todo = [f for f in frames if not (out / "truth" / f"{frame_name(f)}.npz").is_file()]
-    for f in progress(todo, label="synth", enabled=show_progress):
-        synth_frame(out, subject, motion.rotations[f], motion.root_positions[f], cameras, f, spec)
+    notes = {}
+    with folder_lock(out, "synth"):
+        for f in progress(todo, label="synth", enabled=show_progress):
+            R, root = motion.rotations[f], motion.root_positions[f]
+            notes[f] = synth_frame(out, subject, R, root, cameras, f, spec)
+    _warn_notes(notes)
     return Capture(out)
+
+
+def _warn_notes(notes: dict[int, str]) -> None:
+    """One warning for the frames carved from fewer cameras or left without hull."""
+    partial = {f: n for f, n in notes.items() if n.startswith("carved from")}
+    missing = {f: n for f, n in notes.items() if n and f not in partial}
+    if partial or missing:
+        warnings.warn(f"synth: {frames_note(partial, missing)}", MissingFrameWarning,
+                      stacklevel=3)  # fmt: skip
+
+
+def _check_range(spec: SynthSpec, n_frames: int, source: str) -> list[int]:
+    """The frames of ``spec``'s range; warns when STOP asks for more than the motion has."""
+    for name in ("start", "stop"):
+        v = getattr(spec, name)
+        if v is not None and (not isinstance(v, int) or v < 0):
+            raise InputError(f"synth: {name} must be a frame number ≥ 0, found {v!r}")
+    if spec.step is not None and (not isinstance(spec.step, int) or spec.step < 1):
+        raise InputError(f"synth: step must be an integer ≥ 1, found {spec.step!r}")
+    frames = list(range(n_frames))[slice(spec.start, spec.stop, spec.step)]
+    if not frames:
+        raise InputError(
+            f"synth: frame range {spec.start}:{spec.stop}:{spec.step} selects none of the "
+            f"{n_frames} frames of {source}"
+        )
+    if spec.stop is not None and spec.stop > n_frames:
+        warnings.warn(
+            f"synth: frames {spec.start or 0}:{spec.stop} asked, but {source} has {n_frames} "
+            f"frames at {spec.fps:g} fps: writing {len(frames)}",
+            MeshmocapWarning,
+            stacklevel=3,
+        )
+    return frames
 
 
 def synth_frame(
@@ -148,11 +195,11 @@ def synth_frame(
     cameras: list[Camera],
     index: int,
     spec: SynthSpec,
-) -> None:
+) -> str:
     """Pose the subject for one frame and write it (see :func:`write_frame`)."""
     posed = subject.pose(R, root)
     truth = Truth(posed.V, posed.eval_joints, R, root)
-    write_frame(
+    return write_frame(
         out,
         posed.V,
         subject.F,
@@ -176,9 +223,10 @@ def write_frame(
     degradation: Degradation,
     seed: int,
     voxel_size: float,
-) -> None:
+) -> str:
     """Render the silhouettes of mesh ``(V, F)``, degrade them, carve the hull and write the
-    frame; the truth file is written last (it marks the frame complete)."""
+    frame; the truth file is written last (it marks the frame complete). Returns the hull's
+    note (cameras left out because the subject left their view; empty when none)."""
     masks = []
     for c, cam in enumerate(cameras):
         mask = silhouette(V, F, cam, assume_closed=True)
@@ -186,11 +234,12 @@ def write_frame(
             mask = degrade(mask, degradation, seed=np.random.SeedSequence([seed, index, c]))
         write_mask(out / "silhouettes" / cam.name / f"{frame_name(index)}.png", mask)
         masks.append(mask)
-    hull = carve(masks, cameras, voxel_size=voxel_size)
+    # a subject that walks out of a camera's view is carved from the cameras that see it
+    carved = carve_seen(masks, cameras, voxel_size=voxel_size)
     name = frame_name(index)
-    write_mesh(out / "hulls" / f"{name}.ply", *hull_mesh(hull))
-    write_hull(out / "hulls" / f"{name}.npz", hull)
+    write_carved(out / "hulls" / f"{name}.npz", carved)
     write_truth(out / "truth" / f"{name}.npz", truth)
+    return carved.note
 
 
 def synthesize_from_meshes(
@@ -259,10 +308,11 @@ def synthesize_from_meshes(
         for k, i in enumerate(seq.indices)
         if not (out / "truth" / f"{frame_name(int(i))}.npz").is_file()
     ]
+    notes = {}
     for k in progress(todo, label="synth", enabled=show_progress):
         fr = seq[k]
         V = fr.V + offset
-        write_frame(
+        notes[fr.index] = write_frame(
             out,
             V,
             fr.F,
@@ -273,4 +323,5 @@ def synthesize_from_meshes(
             seed=seed,
             voxel_size=voxel_size,
         )
+    _warn_notes(notes)
     return Capture(out)

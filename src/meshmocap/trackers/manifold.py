@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshmocap._npz import read_npz
 from meshmocap.body.motion import Motion
 from meshmocap.body.oqr import OQR, build_oqr, configuration_vector, quads_from_pose
 from meshmocap.body.template import Template
@@ -180,18 +181,24 @@ class PoseManifold:
         if not path.is_file():
             raise MeshmocapFileNotFoundError(f"{path}: no such manifold file")
         gp = GPLVM.load(path)
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files if k.startswith("manifold_")}
+        d = read_npz(path, "pose manifold")
         if str(d.get("manifold_format", "")) != MANIFOLD_FORMAT:
             raise FormatError(
                 f"{path}: a GPLVM without the template it was built for; make pose manifolds "
                 "with 'meshmocap learn' (or PoseManifold.save)"
             )
-        n_poses, seconds = d["manifold_stats"].tolist()
-        return cls(gp, str(d["manifold_template"]), str(d["manifold_digest"]),
-                   d["manifold_rest_cage"], d["manifold_trials"], d["manifold_groups"],
-                   tuple(str(s) for s in d["manifold_sources"]), int(n_poses),
-                   float(seconds))  # fmt: skip
+        try:
+            cage = d["manifold_rest_cage"]
+            if cage.dtype.kind != "f" or cage.shape != (85, 3) or not np.isfinite(cage).all():
+                raise ValueError(f"rest cage must be finite (85, 3) floats, found {cage.shape}")
+            n_poses, seconds = d["manifold_stats"].tolist()
+            return cls(gp, str(d["manifold_template"]), str(d["manifold_digest"]),
+                       d["manifold_rest_cage"], d["manifold_trials"], d["manifold_groups"],
+                       tuple(str(s) for s in d["manifold_sources"]), int(n_poses),
+                       float(seconds))  # fmt: skip
+        except (KeyError, ValueError, TypeError) as e:
+            why = f"{type(e).__name__}: {e}".splitlines()[0][:160]
+            raise FormatError(f"{path}: corrupt pose manifold ({why})") from None
 
 
 def learn_manifold(

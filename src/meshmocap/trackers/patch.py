@@ -232,7 +232,8 @@ class PatchTracker:
         o = self.opts
         rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
         V, F = frame.hull_mesh
-        N = vertex_normals(V, F)
+        # a point cloud carries its normals (estimated by the capture where the file has none)
+        N = vertex_normals(V, F) if F is not None else np.asarray(frame.normals, dtype=float)
         if len(V) > o.max_points:
             pick = rng.choice(len(V), o.max_points, replace=False)
             V, N = V[pick], N[pick]

@@ -92,3 +92,15 @@ def make_tracker(
             named = isinstance(manifold, str | os.PathLike)
             pm.check(template, tracker.oqr, source=manifold if named else None)
     return tracker
+
+
+def method_options(method: str) -> tuple[str, ...]:
+    """The options ``method`` takes (fields of its options dataclass, less those the method
+    fixes), for front ends that offer only what a method uses."""
+    import dataclasses
+
+    if method not in METHODS:
+        raise InputError(f"track: method must be one of {sorted(METHODS)}, found {method!r}")
+    module, _, opts_cls, fixed = METHODS[method]
+    opts = getattr(importlib.import_module(module), opts_cls)
+    return tuple(f.name for f in dataclasses.fields(opts) if f.name not in fixed)

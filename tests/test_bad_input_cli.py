@@ -1,0 +1,716 @@
+"""A malformed-input corpus against every command, run in-process: each case ends in one line
+``meshmocap: error: ...`` naming the flag or file and what was expected (status 2), never a
+traceback, a hang or a silent success. Inputs are made on the fly in ``tmp_path``."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory) -> Path:
+    """A 3-frame synthetic capture (neutral_5k walk, 2 cm voxels)."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    out = tmp_path_factory.mktemp("badcli") / "cap"
+    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=3, voxel_size=0.02)
+    synthesize(out, spec, show_progress=False)
+    return out
+
+
+def _bytes(path: Path, data: bytes) -> str:
+    path.write_bytes(data)
+    return str(path)
+
+
+def _npz(path: Path, **arrays) -> str:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return _bytes(path, buf.getvalue())
+
+
+def _template_file(tmp: Path, how: str) -> str:
+    from importlib import resources
+
+    src = (resources.files("meshmocap.body") / "data" / "neutral_5k.npz").read_bytes()
+    if how == "random":
+        return _bytes(
+            tmp / "t.npz", bytes(np.random.default_rng(0).integers(0, 256, 300, np.uint8))
+        )
+    if how == "truncated":
+        return _bytes(tmp / "t.npz", src[: len(src) // 2])
+    if how == "flipped":
+        b = bytearray(src)
+        b[len(b) // 3] ^= 0xFF
+        return _bytes(tmp / "t.npz", bytes(b))
+    if how == "no_key":
+        with np.load(io.BytesIO(src)) as z:
+            d = {k: z[k] for k in z.files if k != "weights_data"}
+        return _npz(tmp / "t.npz", **d)
+    if how == "other_format":
+        return _npz(tmp / "t.npz", format=np.str_("something-else"))
+    return _bytes(tmp / "t.npz", b"")  # empty
+
+
+def _manifold_file(tmp: Path, how: str) -> str:
+    if how == "random":
+        return _bytes(tmp / "m.npz", b"PK\x03\x04" + bytes(200))
+    if how == "npz_not_gplvm":
+        return _npz(tmp / "m.npz", kind=np.str_("other"))
+    return _bytes(tmp / "m.npz", b"")
+
+
+def _silhouette_only(tmp: Path, cap: Path) -> str:
+    out = tmp / "sil"
+    shutil.copytree(cap, out, ignore=shutil.ignore_patterns("hulls", "truth", "capture.json"))
+    return str(out)
+
+
+def _hull_layout(tmp: Path, cap: Path, how: str) -> str:
+    out = tmp / "real"
+    shutil.copytree(cap, out, ignore=shutil.ignore_patterns("hulls", "truth", "capture.json"))
+    cams = json.loads((out / "cameras.json").read_text())
+    if how == "two_cameras":
+        cams["cameras"] = cams["cameras"][:2]
+        (out / "cameras.json").write_text(json.dumps(cams))
+    elif how == "no_cameras":
+        (out / "cameras.json").unlink()
+    elif how == "bad_json":
+        (out / "cameras.json").write_text('{"cameras": [')
+    elif how == "lost_folder":
+        shutil.rmtree(out / "silhouettes" / "C2")
+    elif how == "corrupt_png":
+        (out / "silhouettes" / "C1" / "00001.png").write_bytes(b"\x89PNG\r\n\x1a\nxx")
+    elif how == "small_png":
+        from meshmocap.io.silhouettes import write_mask
+
+        write_mask(out / "silhouettes" / "C1" / "00001.png", np.ones((10, 10), bool))
+    elif how == "no_masks":
+        for p in (out / "silhouettes").rglob("*.png"):
+            p.unlink()
+    return str(out)
+
+
+def _mesh_folder(tmp: Path, cap: Path, how: str) -> list[str]:
+    from meshmocap.io.capture import Capture
+    from meshmocap.io.meshes import write_mesh
+
+    out = tmp / "meshes"
+    out.mkdir()
+    for f in Capture(cap):
+        write_mesh(out / f"m_{f.index}.ply", *f.hull_mesh)
+    if how == "mixed":
+        (out / "m_9.obj").write_text("v 0 0 0\n")
+        return [str(out / "m_0.ply"), str(out / "m_9.obj")]
+    if how == "empty":
+        shutil.rmtree(out)
+        out.mkdir()
+        (out / "notes.txt").write_text("hello")
+    return [str(out)]
+
+
+def _locked(tmp: Path, cap: Path) -> str:
+    import fcntl
+    import os
+
+    out = tmp / "busy"
+    out.mkdir()
+    fd = os.open(out / ".meshmocap.lock", os.O_RDWR | os.O_CREAT)
+    os.write(fd, b"4242\n")
+    fcntl.flock(fd, fcntl.LOCK_EX)  # held by this test's open file (another description)
+    _LOCKS.append(fd)
+    return str(out)
+
+
+_LOCKS: list[int] = []
+
+
+def _other_settings(tmp: Path, cap: Path) -> str:
+    out = tmp / "t"
+    assert (
+        main(
+            [
+                "track",
+                str(cap),
+                "--method",
+                "articulated_icp",
+                "--max-iter",
+                "1",
+                "--frames",
+                "0:2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    return str(out)
+
+
+def _synth_other(tmp: Path, cap: Path) -> str:
+    out = tmp / "s"
+    shutil.copytree(cap, out)
+    return str(out)
+
+
+def _bad_bvh(tmp: Path) -> str:
+    return _bytes(tmp / "bad.bvh", b"HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n")
+
+
+def _amc_without_asf(tmp: Path) -> str:
+    (tmp / "lone").mkdir()
+    return _bytes(tmp / "lone" / "01_01.amc", b":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 0 0 0 0\n")
+
+
+def _track_with(tmp: Path, cap: Path, how: str) -> str:
+    out = tmp / "t"
+    assert (
+        main(
+            ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1", "--out", str(out)]
+        )
+        == 0
+    )
+    if how == "corrupt_frame":
+        (out / "frames" / "00001.npz").write_bytes(b"PK\x03\x04garbage")
+    elif how == "nan_frame":
+        with np.load(out / "frames" / "00001.npz") as z:
+            d = {k: z[k] for k in z.files}
+        d["joints"][0, 0] = np.nan
+        _npz(out / "frames" / "00001.npz", **d)
+    elif how == "no_faces":
+        (out / "faces.npy").unlink()
+    elif how == "bad_json":
+        (out / "track.json").write_text("{")
+    elif how == "foreign_frame":
+        shutil.copy(out / "frames" / "00001.npz", out / "frames" / "00099.npz")
+    return str(out)
+
+
+# ----------------------------------------------------------------------------- the corpus
+
+Case = tuple[str, Callable[[Path, Path], list[str]], str]
+C = "CAP"  # replaced by the capture folder
+
+
+def _args(*argv: str) -> Callable[[Path, Path], list[str]]:
+    return lambda tmp, cap: [str(cap) if a == C else a.replace("TMP", str(tmp)) for a in argv]
+
+
+#: Flags with a valid range: (command and arguments, flag value, expected message)
+RANGES: list[tuple[list[str], str]] = [
+    (
+        ["synth", "TMP/s", "--jitter", "1e9"],
+        "argument --jitter: expected a number from 0 to 20 (pixels), found '1e9'",
+    ),
+    (["synth", "TMP/s", "--jitter", "-1"], "argument --jitter: expected a number from 0 to 20"),
+    (["synth", "TMP/s", "--jitter", "nan"], "argument --jitter: expected a number from 0 to 20"),
+    (["synth", "TMP/s", "--fps", "0"], "argument --fps: expected a number above 0 up to 1000"),
+    (["synth", "TMP/s", "--fps", "1e9"], "argument --fps: expected a number above 0 up to 1000"),
+    (
+        ["synth", "TMP/s", "--voxel-size", "0"],
+        "argument --voxel-size: expected a number from 0.002 to 0.1 (metres)",
+    ),
+    (
+        ["synth", "TMP/s", "--voxel-size", "5"],
+        "argument --voxel-size: expected a number from 0.002 to 0.1",
+    ),
+    (["synth", "TMP/s", "--holes", "-1"], "argument --holes: expected an integer from 0 to 100"),
+    (["synth", "TMP/s", "--holes", "1.5"], "argument --holes: expected an integer from 0 to 100"),
+    (["synth", "TMP/s", "--blobs", "1000"], "argument --blobs: expected an integer from 0 to 100"),
+    (
+        ["synth", "TMP/s", "--seed", "-1"],
+        "argument --seed: expected an integer from 0 to 4.29497e+09",
+    ),
+    (["synth", "TMP/s", "--frames", "-3"], "argument --frames: expected frame numbers ≥ 0"),
+    (
+        ["synth", "TMP/s", "--frames", "5:2"],
+        "argument --frames: expected START < STOP, found '5:2'",
+    ),
+    (["synth", "TMP/s", "--frames", "1:9:0"], "argument --frames: expected STEP ≥ 1"),
+    (
+        ["synth", "TMP/s", "--frames", "a:b"],
+        "argument --frames: expected START:STOP[:STEP] with integers",
+    ),
+    (["synth", "TMP/s", "--frames", "1:2:3:4"], "argument --frames: expected START:STOP[:STEP]"),
+    (
+        ["hull", "TMP", "--voxel-size", "0"],
+        "argument --voxel-size: expected a number from 0.002 to 0.1",
+    ),
+    (["hull", "TMP", "--voxel-size", "inf"], "argument --voxel-size: expected a number from 0.002"),
+    (
+        ["track", C, "--out", "TMP/t", "--max-iter", "0"],
+        "argument --max-iter: expected an integer from 1 to 10000",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--max-iter", "2.5"],
+        "argument --max-iter: expected an integer",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--n-patches", "0"],
+        "argument --n-patches: expected an integer from 1",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--keep-fraction", "0"],
+        "argument --keep-fraction: expected a number above 0 up to 1",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--keep-fraction", "1.5"],
+        "argument --keep-fraction: expected a number above 0 up to 1",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--outlier-sigmas", "-1"],
+        "argument --outlier-sigmas: expected a number above 0",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--fast-iter-scale", "0.5"],
+        "argument --fast-iter-scale: expected a number from 1 to 100",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--frames", "-3"],
+        "argument --frames: expected frame numbers ≥ 0 (START:STOP[:STEP] or N), found '-3'",
+    ),
+    (["track", C, "--out", "TMP/t", "--frames", "3:1"], "argument --frames: expected START < STOP"),
+    (
+        ["eval", C, "TMP/t", "--surface-frames", "-1"],
+        "argument --surface-frames: expected an integer from 0 to 10000",
+    ),
+    (
+        ["report", C, "TMP/t", "--out", "TMP/r.html", "--max-frames", "0"],
+        "argument --max-frames: expected an integer from 1",
+    ),
+    (
+        ["report", C, "TMP/t", "--out", "TMP/r.html", "--surface-frames", "-2"],
+        "argument --surface-frames: expected an integer",
+    ),
+    (
+        ["bench", "--out", "TMP/b", "--max-frames", "0"],
+        "argument --max-frames: expected an integer from 1",
+    ),
+    (
+        ["learn", "walk", "--out", "TMP/m.npz", "--latent-dim", "0"],
+        "argument --latent-dim: expected an integer from 1 to 20",
+    ),
+    (
+        ["learn", "walk", "--out", "TMP/m.npz", "--samples", "0"],
+        "argument --samples: expected an integer from 3 to 100000",
+    ),
+    (
+        ["learn", "walk", "--out", "TMP/m.npz", "--seed", "-1"],
+        "argument --seed: expected an integer from 0",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--width", "0"],
+        "argument --width: expected an integer from 16 to 8192 (pixels)",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--height", "100000"],
+        "argument --height: expected an integer from 16 to 8192",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--fps", "0"],
+        "argument --fps: expected a number above 0 up to 1000",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--step", "0"],
+        "argument --step: expected an integer from 1",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--azimuth", "1e9"],
+        "argument --azimuth: expected a number from -360 to 360 (degrees)",
+    ),
+    (
+        ["render", "walk", "--out", "TMP/r", "--frames", "-1"],
+        "argument --frames: expected frame numbers ≥ 0",
+    ),
+    (
+        ["retarget", "walk", "--out", "TMP/w.bvh", "--fps", "-1"],
+        "argument --fps: expected a number above 0 up to 1000",
+    ),
+    (
+        ["transfer", "TMP/t", "heavy_male", "--out", "TMP/x", "--tolerance", "-1"],
+        "argument --tolerance: expected a number from 0 to 1 (metres)",
+    ),
+    (
+        ["demo", "--out", "TMP/d", "--seconds", "0"],
+        "argument --seconds: expected a number from 0.1 to 600",
+    ),
+    (
+        ["demo", "--out", "TMP/d", "--track-frames", "-1"],
+        "argument --track-frames: expected an integer from 0",
+    ),
+    (
+        ["export", "TMP/t", "--format", "bvh", "--out", "TMP/e.bvh", "--fps", "0"],
+        "argument --fps: expected a number above 0 up to 1000",
+    ),
+    (
+        ["export", "TMP/t", "--format", "bvh", "--out", "TMP/e.bvh", "--joint-weight", "-1"],
+        "argument --joint-weight: expected a number from 0 to 1000",
+    ),
+    (["track", C], "the following arguments are required: --out"),
+    (["nope"], "argument COMMAND: invalid choice: 'nope'"),
+]
+
+#: Inputs that are wrong: (id, arguments built in tmp, expected message)
+INPUTS: list[Case] = [
+    (
+        "track_method",
+        _args("track", C, "--method", "nope", "--out", "TMP/t"),
+        "track: method must be one of",
+    ),
+    (
+        "track_max_iter_cage",
+        _args("track", C, "--method", "cage", "--max-iter", "5", "--out", "TMP/t"),
+        "track: --max-iter is not an option of --method cage (it is of patch, patch_svc, "
+        "patch_noclf, articulated_icp); cage takes none of them",
+    ),
+    (
+        "track_patches_icp",
+        _args("track", C, "--method", "articulated_icp", "--n-patches", "5", "--out", "TMP/t"),
+        "track: --n-patches is not an option of --method articulated_icp (it is of patch, "
+        "patch_svc, patch_noclf); articulated_icp takes --max-iter",
+    ),
+    (
+        "track_classifier_cage",
+        _args("track", C, "--method", "cage_quads", "--classifier", "svc", "--out", "TMP/t"),
+        "track: --classifier is not an option of --method cage_quads",
+    ),
+    (
+        "track_readout",
+        _args("track", C, "--joint-readout", "elbows", "--out", "TMP/t"),
+        "joint_readout must be one of",
+    ),
+    (
+        "track_classifier_name",
+        _args("track", C, "--classifier", "forest", "--out", "TMP/t"),
+        "classifier must be one of",
+    ),
+    *[
+        (
+            f"track_template_{how}",
+            (
+                lambda how: (
+                    lambda tmp, cap: [
+                        "track",
+                        str(cap),
+                        "--out",
+                        str(tmp / "t"),
+                        "--template",
+                        _template_file(tmp, how),  # noqa: B023 (bound by the outer lambda)
+                    ]
+                )
+            )(how),
+            msg,
+        )
+        for how, msg in [
+            ("random", "t.npz: not a readable .npz template (BadZipFile: File is not a zip file)"),
+            ("truncated", "t.npz: not a readable .npz template (BadZipFile"),
+            ("flipped", "t.npz: not a readable .npz template ("),
+            ("empty", "t.npz: not a readable .npz template (BadZipFile"),
+            ("no_key", "t.npz: template is missing key 'weights_data'"),
+            (
+                "other_format",
+                "t.npz: expected format 'meshmocap-template-1', found 'something-else'",
+            ),
+        ]
+    ],
+    (
+        "track_template_name",
+        _args("track", C, "--template", "nobody", "--out", "TMP/t"),
+        "'nobody' is neither a bundled template",
+    ),
+    *[
+        (
+            f"track_manifold_{how}",
+            (
+                lambda how: (
+                    lambda tmp, cap: [
+                        "track",
+                        str(cap),
+                        "--method",
+                        "cage",
+                        "--out",
+                        str(tmp / "t"),
+                        "--manifold",
+                        _manifold_file(tmp, how),  # noqa: B023 (bound by the outer lambda)
+                    ]
+                )
+            )(how),
+            msg,
+        )
+        for how, msg in [
+            ("random", "m.npz: not a readable .npz GPLVM file (BadZipFile"),
+            ("npz_not_gplvm", "m.npz: not a meshmocap GPLVM file"),
+            ("empty", "m.npz: not a readable .npz GPLVM file (BadZipFile"),
+        ]
+    ],
+    (
+        "track_manifold_patch",
+        _args("track", C, "--manifold", "TMP/m.npz", "--out", "TMP/t"),
+        "a manifold is only used by",
+    ),
+    (
+        "track_missing",
+        _args("track", "TMP/nothing", "--out", "TMP/t"),
+        "TMP/nothing: no such folder, file or archive",
+    ),
+    ("track_glob_nothing", _args("track", "TMP/*.ply", "--out", "TMP/t"), "glob matches no files"),
+    (
+        "track_silhouettes_only",
+        lambda tmp, cap: ["track", _silhouette_only(tmp, cap), "--out", str(tmp / "t")],
+        "has silhouettes but no hulls; run 'meshmocap hull",
+    ),
+    (
+        "track_two_captures",
+        lambda tmp, cap: ["track", str(cap), str(cap), "--out", str(tmp / "t")],
+        "track: give one capture folder, or several mesh files and folders",
+    ),
+    (
+        "track_mixed_formats",
+        lambda tmp, cap: ["track", *_mesh_folder(tmp, cap, "mixed"), "--out", str(tmp / "t")],
+        "frame files of several formats ['.obj', '.ply']; give one format",
+    ),
+    (
+        "track_empty_folder",
+        lambda tmp, cap: ["track", *_mesh_folder(tmp, cap, "empty"), "--out", str(tmp / "t")],
+        "folder holds no frame files",
+    ),
+    (
+        "track_not_a_frame",
+        lambda tmp, cap: [
+            "track",
+            _bytes(tmp / "a.txt", b"x"),
+            _bytes(tmp / "b.txt", b"y"),
+            "--out",
+            str(tmp / "t"),
+        ],
+        "a.txt: not a frame file",
+    ),
+    (
+        "track_frames_outside",
+        _args("track", C, "--frames", "100:200", "--out", "TMP/t"),
+        "track: --frames 100:200 selects none of the 3 frames",
+    ),
+    (
+        "track_other_settings",
+        lambda tmp, cap: [
+            "track",
+            str(cap),
+            "--out",
+            _other_settings(tmp, cap),
+            "--method",
+            "articulated_icp",
+            "--frames",
+            "0:3",
+        ],
+        "track.json: holds a track made with other settings; use another folder",
+    ),
+    (
+        "track_locked",
+        lambda tmp, cap: [
+            "track",
+            str(cap),
+            "--out",
+            _locked(tmp, cap),
+            "--method",
+            "articulated_icp",
+        ],
+        "track: TMP/busy is being written by another meshmocap process (pid 4242); wait for it "
+        "to finish or write to another folder",
+    ),
+    (
+        "synth_motion",
+        _args("synth", "TMP/s", "--motion", "moonwalk"),
+        "clip: expected a .bvh or .amc file or one of",
+    ),
+    (
+        "synth_motion_bvh",
+        lambda tmp, cap: ["synth", str(tmp / "s"), "--motion", _bad_bvh(tmp)],
+        "bad.bvh",
+    ),
+    ("synth_rig", _args("synth", "TMP/s", "--rig", "dome99"), "dome99"),
+    (
+        "synth_rig_file",
+        lambda tmp, cap: ["synth", str(tmp / "s"), "--rig", _bytes(tmp / "r.json", b"[{]")],
+        "r.json",
+    ),
+    (
+        "synth_template",
+        lambda tmp, cap: ["synth", str(tmp / "s"), "--template", _template_file(tmp, "random")],
+        "t.npz: not a readable .npz template",
+    ),
+    (
+        "synth_frames_none",
+        _args("synth", "TMP/s", "--template", "neutral_5k", "--frames", "5000:6000"),
+        "synth: frame range 5000:6000:None selects none of the 241 frames of walk",
+    ),
+    (
+        "synth_other_params",
+        lambda tmp, cap: [
+            "synth",
+            _synth_other(tmp, cap),
+            "--motion",
+            "squat",
+            "--template",
+            "neutral_5k",
+        ],
+        "holds a capture made with other parameters; use a new folder",
+    ),
+    (
+        "hull_two_cameras",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "two_cameras")],
+        "hull: TMP/real/silhouettes holds 4 camera folders but the camera file lists 2 "
+        "(['C1', 'C2']); not in it: ['C3', 'C4']",
+    ),
+    (
+        "hull_no_cameras",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "no_cameras")],
+        "has no cameras.json or cameras.yml",
+    ),
+    (
+        "hull_bad_json",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "bad_json")],
+        "cameras.json",
+    ),
+    (
+        "hull_lost_folder",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "lost_folder")],
+        "hull: camera 'C2' has no silhouette folder",
+    ),
+    (
+        "hull_corrupt_png",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "corrupt_png")],
+        "C1/00001.png: not a readable image, expected a PNG mask",
+    ),
+    (
+        "hull_small_png",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "small_png")],
+        "C1/00001.png: mask of 10×10 pixels, expected 640×480",
+    ),
+    (
+        "hull_no_masks",
+        lambda tmp, cap: ["hull", _hull_layout(tmp, cap, "no_masks")],
+        "holds no <camera>/NNNNN.png masks",
+    ),
+    ("hull_missing", _args("hull", "TMP/none"), "hull: TMP/none is not a folder"),
+    ("eval_no_track", _args("eval", C, "TMP/none"), "track: TMP/none has no track.json"),
+    (
+        "eval_no_capture",
+        lambda tmp, cap: ["eval", str(tmp / "none"), _track_with(tmp, cap, "")],
+        "TMP/none: no such folder, file or archive",
+    ),
+    (
+        "eval_corrupt_frame",
+        lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "corrupt_frame")],
+        "frames/00001.npz: not a readable .npz frame result (BadZipFile",
+    ),
+    (
+        "eval_nan_frame",
+        lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "nan_frame")],
+        "frames/00001.npz: joints hold NaN or infinite values",
+    ),
+    (
+        "eval_no_faces",
+        lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "no_faces")],
+        "has no faces.npy",
+    ),
+    (
+        "eval_bad_json",
+        lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "bad_json")],
+        "track.json: not valid JSON",
+    ),
+    (
+        "eval_foreign_frame",
+        lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "foreign_frame")],
+        "evaluate: track frames [99] are not in the capture",
+    ),
+    ("report_no_track", _args("report", C, "TMP/none", "--out", "TMP/r.html"), "has no track.json"),
+    (
+        "retarget_bvh",
+        lambda tmp, cap: ["retarget", _bad_bvh(tmp), "--out", str(tmp / "o.bvh")],
+        "bad.bvh",
+    ),
+    (
+        "retarget_amc_alone",
+        lambda tmp, cap: ["retarget", _amc_without_asf(tmp), "--out", str(tmp / "o.bvh")],
+        "no ASF skeleton found beside it",
+    ),
+    ("retarget_missing", _args("retarget", "TMP/none.amc", "--out", "TMP/o.bvh"), "none.amc"),
+    (
+        "render_template",
+        lambda tmp, cap: [
+            "render",
+            "--template",
+            _template_file(tmp, "truncated"),
+            "--out",
+            str(tmp / "r"),
+        ],
+        "t.npz: not a readable .npz template",
+    ),
+    (
+        "learn_source",
+        lambda tmp, cap: ["learn", _bytes(tmp / "p.npz", b"junk"), "--out", str(tmp / "m.npz")],
+        "p.npz: not a readable .npz pose file",
+    ),
+    (
+        "learn_out",
+        _args("learn", "walk", "--out", "TMP/m.txt"),
+        "learn: --out must be a .npz file in an existing folder",
+    ),
+    (
+        "batch_frames",
+        _args("batch", C, "--out", "TMP/b", "--serial", "--frames", "-3"),
+        "expected frame numbers ≥ 0 (START:STOP[:STEP] or N), found '-3'",
+    ),
+    ("batch_missing", _args("batch", "TMP/none", "--out", "TMP/b", "--serial"), "no such capture"),
+    (
+        "batch_workers",
+        _args("batch", C, "--out", "TMP/b", "--workers", "0"),
+        "batch: --workers must be an integer ≥ 1, found 0",
+    ),
+    (
+        "transfer_no_track",
+        _args("transfer", "TMP/none", "heavy_male", "--out", "TMP/x"),
+        "has no track.json",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"), RANGES, ids=[" ".join(a[:1] + a[-2:]) for a, _ in RANGES]
+)
+def test_values_out_of_range_are_refused_in_one_line(tmp_path, cap, capsys, argv, message):
+    args = [str(cap) if a == C else a.replace("TMP", str(tmp_path)) for a in argv]
+    assert main(args) == 2
+    _one_error_line(capsys, message, tmp_path)
+
+
+@pytest.mark.parametrize(("name", "build", "message"), INPUTS, ids=[c[0] for c in INPUTS])
+def test_wrong_inputs_give_one_line(tmp_path, cap, capsys, name, build, message):
+    args = build(tmp_path, cap)
+    capsys.readouterr()
+    try:
+        assert main(args) == 2
+    finally:
+        while _LOCKS:
+            import os
+
+            os.close(_LOCKS.pop())
+    _one_error_line(capsys, message, tmp_path)
+
+
+def _one_error_line(capsys, message: str, tmp: Path) -> None:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("meshmocap: error: "), err
+    assert "Traceback" not in err
+    assert message.replace("TMP", str(tmp)) in err, err

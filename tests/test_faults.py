@@ -1,0 +1,390 @@
+"""Faults a studio meets, with their exact outcomes: a dropped frame is carved from the
+cameras that see the subject or recorded as missing; tracking coasts across a missing frame
+and flags it; an unreadable frame of a mesh sequence is skipped, not fatal; a second run
+into the same folder is refused, and a killed run leaves no stuck lock; reruns say what was
+resumed; long runs log to a pipe; hulls are stored compactly and old captures still read."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshmocap.cli import main
+from meshmocap.errors import FolderBusyError
+from meshmocap.io.capture import Capture, read_hull_mesh
+from meshmocap.io.results import read_track
+from meshmocap.io.silhouettes import write_mask
+
+ICP = ["--method", "articulated_icp", "--max-iter", "2"]
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory) -> Path:
+    """A 5-frame synthetic capture (neutral_5k walk at 30 fps, 2 cm voxels)."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    out = tmp_path_factory.mktemp("faults") / "cap"
+    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=5, voxel_size=0.02)
+    synthesize(out, spec, show_progress=False)
+    return out
+
+
+def _real(cap: Path, tmp: Path) -> Path:
+    """The capture as a studio delivers it: cameras and silhouettes only."""
+    out = tmp / "real"
+    shutil.copytree(cap, out, ignore=shutil.ignore_patterns("hulls", "truth", "capture.json"))
+    return out
+
+
+def test_a_dropped_frame_is_carved_from_the_others_and_tracked_through(cap, tmp_path, capsys):
+    real = _real(cap, tmp_path)
+    empty = np.zeros((480, 640), bool)
+    write_mask(real / "silhouettes" / "C1" / "00001.png", empty)  # C1 lost the subject
+    for cam in ("C1", "C2", "C3"):  # frame 3 dropped: only C4 has a mask
+        write_mask(real / "silhouettes" / cam / "00003.png", empty)
+    assert main(["hull", str(real)]) == 0
+    out, err = capsys.readouterr()
+    assert "hulls of 5 frames" in out
+    assert err == (
+        "meshmocap: warning: 1 frames without hull (trackers coast across them), "
+        "first 00003: only 1 of 4 cameras see the subject (C1: empty mask, C2: empty "
+        "mask, C3: empty mask); at least 2 needed; 1 frames carved from fewer "
+        "cameras, first 00001: carved from 3 of 4 cameras (C1: empty mask)\n"
+    )
+    c = Capture(real)
+    assert c.notes() == {
+        1: "carved from 3 of 4 cameras (C1: empty mask)",
+        3: "only 1 of 4 cameras see the subject (C1: empty mask, C2: empty "
+        "mask, C3: empty mask); at least 2 needed",
+    }
+    assert main(["track", str(real), *ICP, "--out", str(tmp_path / "t")]) == 0
+    out, err = capsys.readouterr()
+    assert (
+        "tracked 5 frames with articulated_icp" in out and "1 flagged unhealthy (1 missing)" in out
+    )
+    assert err.startswith(
+        "meshmocap: warning: 1 frames had no observation and were coasted "
+        "across, first 3: only 1 of 4 cameras"
+    )
+    t = read_track(tmp_path / "t")
+    assert t.flags == ((), (), (), ("missing",), ())
+    assert t.messages[3] == c.notes()[3] and not t.healthy[3] and t.healthy[4]
+    assert np.array_equal(t.vertices[3], t.vertices[2])  # coasted: the last state, kept
+    assert not np.array_equal(t.vertices[4], t.vertices[3])  # the next real frame is fitted
+    assert np.isfinite(t.joints).all()
+
+
+def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
+    from meshmocap.body.template import load_template
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    (c / "hulls" / "00002.npz").unlink()  # an old run died before this hull was written
+    t = track_sequence(
+        make_tracker("articulated_icp", max_iter=2),
+        load_template("neutral_5k"),
+        Capture(c),
+        tmp_path / "t",
+        show_progress=False,
+    )
+    assert t.flags[2] == ("missing",) and t.flags[3] == ()
+    assert t.messages[2].startswith("MeshmocapFileNotFoundError: ")
+    assert "hulls/00002.npz" in t.messages[2]
+
+
+def test_an_unreadable_frame_of_a_mesh_sequence_is_skipped(cap, tmp_path, capsys):
+    from meshmocap.io.meshes import write_mesh
+
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    for f in Capture(cap):
+        write_mesh(seq / f"mesh_{f.index}.ply", *f.hull_mesh)
+    (seq / "mesh_0.ply").write_bytes(b"ply\nformat ascii 1.0\nend_header\n")  # no vertices
+    (seq / "mesh_2.ply").write_bytes(b"ply\x00\x00garbage")
+    assert (
+        main(["track", *map(str, sorted(seq.glob("*.ply"))), *ICP, "--out", str(tmp_path / "t")])
+        == 0
+    )
+    t = read_track(tmp_path / "t")
+    assert t.flags == (("missing",), (), ("missing",), (), ())
+    assert "mesh_0.ply" in t.messages[0] and "mesh_2.ply" in t.messages[2]
+    assert np.array_equal(t.vertices[0], t.vertices[1])  # before the first readable frame
+    assert "2 flagged unhealthy (2 missing)" in capsys.readouterr().out
+    for p in seq.glob("*.ply"):
+        p.write_bytes(b"not a mesh")
+    assert main(["track", str(seq), *ICP, "--out", str(tmp_path / "t2")]) == 2
+    assert "track: no frame of" in capsys.readouterr().err
+
+
+def test_synth_keeps_frames_when_the_subject_leaves_a_camera(tmp_path, capsys):
+    from meshmocap.geometry.camera import Camera
+    from meshmocap.io.cameras import write_cameras
+    from meshmocap.studio.rigs import camera_rig
+
+    cams = camera_rig("humaneva4")
+    c = cams[0]  # a camera looking 3 m to the side of the studio: it never sees the walk
+    away = Camera(c.K, c.R, c.t + np.array([30.0, 0.0, 0.0]), c.width, c.height, c.dist, "C1")
+    write_cameras(tmp_path / "rig.json", [away, *cams[1:]])
+    argv = [
+        "synth",
+        str(tmp_path / "s"),
+        "--template",
+        "neutral_5k",
+        "--fps",
+        "30",
+        "--frames",
+        "0:2",
+        "--voxel-size",
+        "0.02",
+        "--rig",
+        str(tmp_path / "rig.json"),
+    ]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert "wrote" in out and "2 frames" in out
+    assert (
+        "meshmocap: warning: synth: 2 frames carved from fewer cameras, first 00000: "
+        "carved from 3 of 4 cameras (C1: empty mask)" in err
+    )
+
+
+def test_a_motion_asked_for_more_frames_than_it_has_says_so(tmp_path, capsys):
+    argv = [
+        "synth",
+        str(tmp_path / "s"),
+        "--motion",
+        "jumping_jacks",
+        "--template",
+        "neutral_5k",
+        "--fps",
+        "5",
+        "--frames",
+        "18:1500",
+        "--voxel-size",
+        "0.03",
+    ]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    n = len(Capture(tmp_path / "s"))
+    assert f"wrote {tmp_path / 's'}: {n} frames" in out and 0 < n < 10
+    assert (
+        f"meshmocap: warning: synth: frames 18:1500 asked, but jumping_jacks has {18 + n} "
+        f"frames at 5 fps: writing {n}"
+    ) in err
+    assert (
+        main(["track", str(tmp_path / "s"), *ICP, "--frames", "0:50", "--out", str(tmp_path / "t")])
+        == 0
+    )
+    assert (
+        f"--frames 0:50 asks for frames up to 49; the capture has {n}: tracking {n}"
+        in capsys.readouterr().err
+    )
+
+
+def test_grey_masks_are_thresholded_with_one_warning(cap, tmp_path, capsys):
+    from PIL import Image
+
+    real = _real(cap, tmp_path)
+    for p in (real / "silhouettes" / "C2").glob("*.png"):  # anti-aliased edges, as JPEG-ish
+        m = np.asarray(Image.open(p), dtype=np.float64)
+        Image.fromarray((0.9 * m + 10).astype(np.uint8), "L").save(p)
+    assert main(["hull", str(real), "--voxel-size", "0.02"]) == 0
+    err = capsys.readouterr().err
+    assert err == (
+        f"meshmocap: warning: hull: 5 masks in {real / 'silhouettes'} are not binary "
+        "(grey levels); thresholded at 50 % of full scale\n"
+    )
+    assert np.array_equal(Capture(real)[2].hull.occupancy, Capture(cap)[2].hull.occupancy)
+
+
+def test_a_rerun_says_what_was_resumed(cap, tmp_path, capsys):
+    argv = ["track", str(cap), *ICP, "--out", str(tmp_path / "t")]
+    assert main([*argv, "--frames", "0:3"]) == 0
+    assert "tracked 3 frames with articulated_icp" in capsys.readouterr().out
+    shutil.rmtree(tmp_path / "t")
+    assert main(argv) == 0
+    (tmp_path / "t" / "frames" / "00004.npz").unlink()  # as if killed before the last frame
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "tracked 1 frames (4 resumed from an earlier run)" in capsys.readouterr().out
+    assert main(argv) == 0
+    assert "tracked 0 frames (5 resumed from an earlier run)" in capsys.readouterr().out
+
+
+_HOLD = """
+import sys, time
+from meshmocap._atomic import folder_lock
+with folder_lock(sys.argv[1], "track"):
+    print("locked", flush=True)
+    time.sleep(60)
+"""
+
+
+def test_one_writer_per_folder_and_a_killed_run_leaves_no_stuck_lock(tmp_path):
+    from meshmocap._atomic import folder_lock
+
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(tmp_path)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with (
+            pytest.raises(
+                FolderBusyError, match=f"another meshmocap process \\(pid {holder.pid}\\)"
+            ),
+            folder_lock(tmp_path, "track"),
+        ):
+            pass
+    finally:
+        holder.send_signal(signal.SIGKILL)  # kill -9: no clean-up runs in the holder
+        holder.wait(10)
+        holder.stdout.close()
+    with folder_lock(tmp_path, "track"):  # the kernel released it with the process
+        assert (tmp_path / ".meshmocap.lock").read_text().strip() == str(os.getpid())
+
+
+def test_long_runs_log_progress_lines_when_stderr_is_not_a_terminal(monkeypatch, capsys):
+    from meshmocap._progress import progress
+
+    monkeypatch.setenv("MESHMOCAP_PROGRESS_SECONDS", "0")
+    assert list(progress(range(3), label="track")) == [0, 1, 2]
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 3 and lines[0].startswith("track: 1/3 (33 %), ")
+    assert lines[2].startswith("track: 3/3 (100 %)") and lines[2].endswith("left")
+    monkeypatch.setenv("MESHMOCAP_PROGRESS_SECONDS", "3600")
+    assert list(progress(range(3), label="track")) == [0, 1, 2]
+    assert capsys.readouterr().err == ""  # a short run stays quiet
+
+
+def test_eval_takes_a_mesh_folder_that_track_accepts(cap, tmp_path, capsys):
+    from meshmocap.io.meshes import write_mesh
+
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    for f in Capture(cap):
+        write_mesh(seq / f"mesh_{f.index}.obj", *f.hull_mesh)
+    assert main(["track", str(seq), *ICP, "--frames", "0:2", "--out", str(tmp_path / "t")]) == 0
+    assert main(["eval", str(seq), str(tmp_path / "t"), "--surface-frames", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "Surface distance to the hull" in out and "nan" not in out.lower()
+
+
+def test_point_clouds_without_normals_are_tracked_by_the_patch_tracker(cap, tmp_path, capsys):
+    import trimesh
+
+    seq = tmp_path / "pc"
+    seq.mkdir()
+    for f in Capture(cap):  # PLY point clouds: vertices, no faces, no normals
+        (seq / f"{f.index:03d}.ply").write_bytes(
+            trimesh.PointCloud(f.hull_mesh[0][::2]).export(file_type="ply")
+        )
+    argv = ["track", str(seq), "--frames", "0:2", "--max-iter", "2", "--n-patches", "40"]
+    assert main([*argv, "--out", str(tmp_path / "t")]) == 0
+    t = read_track(tmp_path / "t")
+    assert np.isfinite(t.vertices).all() and t.healthy.all()
+
+
+def test_point_normals_point_outwards_on_a_sphere():
+    from meshmocap.geometry.normals import point_normals
+
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(3000, 3))
+    P /= np.linalg.norm(P, axis=1, keepdims=True)
+    N = point_normals(0.5 * P + [1.0, 2.0, 0.3])
+    cos = np.einsum("ij,ij->i", N, P)
+    assert np.all(cos > 0.95)  # every normal outward, within 18° of the radius
+
+
+def test_hull_storage_is_compact_lossless_and_old_captures_read_unchanged(cap, tmp_path):
+    from meshmocap.geometry.carving import hull_mesh
+    from meshmocap.io.meshes import write_mesh
+
+    npz = cap / "hulls" / "00002.npz"
+    hull = Capture(cap)[2].hull
+    V0, F0 = hull_mesh(hull)
+    V, F = read_hull_mesh(npz)
+    assert np.array_equal(F, F0) and np.array_equal(V, V0.astype(np.float32).astype(np.float64))
+    old = tmp_path / "old"  # a capture written the old way: PLY beside an occupancy-only npz
+    shutil.copytree(cap, old)
+    for p in (old / "hulls").glob("*.npz"):
+        with np.load(p) as z:
+            np.savez_compressed(p, **{k: z[k] for k in ("bits", "shape", "origin", "voxel_size")})
+        write_mesh(p.with_suffix(".ply"), *hull_mesh(Capture(cap)[int(p.stem)].hull))
+    Vo, Fo = Capture(old)[2].hull_mesh
+    assert np.array_equal(Vo, V) and np.array_equal(Fo, F)
+    with np.load(old / "hulls" / "00002.npz") as z:
+        assert "mesh_dK" not in z.files  # it was read from the PLY
+    old_bytes = (old / "hulls" / "00002.ply").stat().st_size + (
+        old / "hulls" / "00002.npz"
+    ).stat().st_size
+    assert npz.stat().st_size * 4 <= old_bytes
+    from meshmocap.io.capture import write_hull
+
+    write_hull(old / "hulls" / "00002.npz", hull)  # re-carved (hull --overwrite): PLY is stale
+    assert not (old / "hulls" / "00002.ply").exists()
+    assert np.array_equal(Capture(old)[2].hull_mesh[1], F)
+
+
+def test_size_limits_give_one_line(monkeypatch, tmp_path, cap):
+    from meshmocap.errors import FormatError, MeshError
+    from meshmocap.io.meshes import read_mesh, write_mesh
+
+    write_mesh(tmp_path / "m.ply", *Capture(cap)[0].hull_mesh)
+    monkeypatch.setenv("MESHMOCAP_MAX_MESH_MB", "0.01")
+    with pytest.raises(MeshError, match=r"m\.ply: 0 MB, above the 0 MB limit of one mesh file"):
+        read_mesh(tmp_path / "m.ply")
+    monkeypatch.setenv("MESHMOCAP_MAX_NPZ_MB", "0.001")
+    with pytest.raises(FormatError, match=r"00000\.npz: meshmocap frame file arrays unpack to"):
+        _ = Capture(cap)[0].hull
+    (tmp_path / "bomb.ply").write_bytes(
+        b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nend_header\n"
+    )
+    monkeypatch.delenv("MESHMOCAP_MAX_MESH_MB")
+    with pytest.raises(MeshError, match="header declares 99999999999 elements in a file of"):
+        read_mesh(tmp_path / "bomb.ply")
+
+
+def test_eval_of_a_capture_partly_out_of_view_scores_surfaces_on_frames_in_view(cap, tmp_path):
+    from meshmocap.analysis.evaluate import evaluate
+    from meshmocap.io.capture import Truth, read_truth, write_truth
+    from meshmocap.io.results import FrameResult, start_track, write_frame
+
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    meta = {"method": "truth", "eval_names": Capture(c).meta["eval_names"]}
+    start_track(tmp_path / "t", meta, Capture(c).truth_faces)
+    for f in Capture(c):
+        write_frame(tmp_path / "t", FrameResult(f.index, f.truth.joints, f.truth.vertices))
+    for i in (0, 1):  # the subject of frames 0 and 1 stands 50 m away: out of every view
+        tr = read_truth(c / "truth" / f"{i:05d}.npz")
+        write_truth(
+            c / "truth" / f"{i:05d}.npz",
+            Truth(tr.vertices + [50.0, 0, 0], tr.joints, tr.rotations, tr.root),
+        )
+    ev = evaluate(read_track(tmp_path / "t"), Capture(c), silhouettes=False, surface_frames=8)
+    assert ev.out_of_view.tolist() == [0, 1]
+    assert ev.surface.frames.tolist() == [2, 3, 4] and np.isfinite(ev.surface.mean).all()
+
+
+def test_a_camera_that_does_not_see_the_subject_is_not_scored():
+    from meshmocap.analysis.metrics import silhouette_errors
+    from meshmocap.analysis.tables import table
+
+    true = np.zeros((2, 2, 4, 4), bool)
+    true[:, :, 1:3, 1:3] = True
+    true[1, 1] = False  # frame 1: camera B lost the subject (synth kept the frame)
+    pred = true.copy()
+    pred[0, 0, 0, 0] = True
+    se = silhouette_errors(pred, true, cameras=["A", "B"])
+    assert np.isnan(se.errors[1, 1]) and se.errors[0, 0] == 0.25
+    assert se.per_camera.tolist() == [0.125, 0.0] and se.overall == pytest.approx(0.25 / 3)
+    assert "nan" not in table(se).split("pooled")[0].lower()
