@@ -92,10 +92,15 @@ def subject_kind(capture) -> str:
 
 
 def whole_in_view(frame) -> bool:
-    """Whether the performer is whole in every camera of a frame: no silhouette touches its
-    image border (a body cut by the border carves a cut hull). True without silhouettes."""
-    masks = frame.silhouettes or []
-    return not any(m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any() for m in masks)
+    """Whether the performer is whole in every camera of a frame: every silhouette holds it
+    and none touches its image border (a body cut by the border carves a cut hull). True
+    without silhouettes."""
+    try:
+        masks = frame.silhouettes or []
+    except (OSError, ValueError):  # a missing or unreadable mask: not a frame to fit
+        return False
+    return not any(m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any() or not m.any()
+                   for m in masks)  # fmt: skip
 
 
 def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
@@ -113,14 +118,18 @@ def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
     if len(pos) <= n:
         return pos
     desc = []
-    for k in pos:
-        V = capture[k].hull_mesh[0]
+    for k in list(pos):
+        try:
+            V = capture[k].hull_mesh[0]
+        except (OSError, ValueError):  # a frame without a hull (dropped): skipped
+            pos.remove(k)
+            continue
         ev = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov((V - V.mean(0)).T)), 0.0))
         desc.append([*ev, np.ptp(V[:, 2])])
     D = np.asarray(desc)
     chosen = [0]
     dist = np.linalg.norm(D - D[0], axis=1)
-    while len(chosen) < n:
+    while len(chosen) < min(n, len(pos)):
         k = int(np.argmax(dist))
         chosen.append(k)
         dist = np.minimum(dist, np.linalg.norm(D - D[k], axis=1))
