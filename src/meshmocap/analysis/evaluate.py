@@ -34,7 +34,7 @@ from meshmocap.analysis.tables import format_table, table
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture
-from meshmocap.io.results import Track
+from meshmocap.io.results import Track, template_label
 
 
 @dataclass(frozen=True)
@@ -73,17 +73,15 @@ class Evaluation:
     init: str = ""
     lost: int = 0
     reinit: int = 0
-    #: (frame, flags, message) of every flagged frame, in order: the track's timeline of
-    #: failures, missing frames, lost limbs and re-initialisations
-    flagged: tuple[tuple[int, tuple[str, ...], str], ...] = ()
+    template: str = ""
 
 
 def track_init(track: Track) -> str:
     """How a track's first pose was found: ``"truth"``, or ``"auto"`` with the search's
     winner (tracks made before ``init`` existed started from ground truth)."""
-    first = track.messages[0] if track.messages else ""
-    if first.startswith("init "):
-        return first[len("init ") :]
+    for m in track.messages:  # the first observed frame's (frames before it are missing)
+        if m.startswith("init "):
+            return m[len("init ") :]
     return str(track.meta.get("init", "truth"))
 
 
@@ -173,9 +171,8 @@ def evaluate(
         init=track_init(track),
         lost=sum("lost" in f for f in track.flags),
         reinit=sum("reinit" in f for f in track.flags),
-        flagged=tuple((int(i), f, m) for i, f, m in zip(track.frames, track.flags,
-                                                         track.messages, strict=True) if f),
-    )  # fmt: skip
+        template=template_label(track.meta),
+    )
 
 
 def _surface_frames(frames: list, truths: list, against: str) -> np.ndarray:
@@ -201,7 +198,8 @@ def _out_of_view(truths: list, cameras: list) -> np.ndarray:
 
 def summary(ev: Evaluation) -> str:
     """A short plain-text report of an evaluation."""
-    out = [f"method {ev.method}: {ev.n_frames} frames, {ev.unhealthy} flagged unhealthy, "
+    out = [f"method {ev.method}, template {ev.template}: {ev.n_frames} frames, "
+           f"{ev.unhealthy} flagged unhealthy, "
            f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"]  # fmt: skip
     if ev.init:
         out[0] += f"; init {ev.init}"

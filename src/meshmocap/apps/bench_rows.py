@@ -40,6 +40,7 @@ class BenchRow:
     track : str, the track folder
     init : str, how the first pose was found (``truth``, or ``auto`` and the winner)
     lost : int, frames flagged ``lost`` (a limb or the body off the observations)
+    template : str, the tracking template and how it was chosen (``io.results.template_label``)
     """
 
     capture: str
@@ -64,6 +65,7 @@ class BenchRow:
     track: str = ""
     init: str = ""
     lost: int = 0
+    template: str = ""
 
     def to_json(self) -> dict:
         """JSON-ready fields (NaN as None)."""
@@ -119,5 +121,5 @@ def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Pat
         bone_names=bones.names if bones is not None else (),
         bone_mean_mm=bones.mean if bones is not None else np.zeros(0),
         bone_std_mm=bones.std if bones is not None else np.zeros(0),
-        track=str(track), init=ev.init, lost=ev.lost,
+        track=str(track), init=ev.init, lost=ev.lost, template=ev.template,
     )  # fmt: skip

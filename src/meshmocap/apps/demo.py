@@ -12,16 +12,26 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from meshmocap._atomic import atomic_open
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.player import player_from_tracks
 from meshmocap.apps.render import render_motion
-from meshmocap.apps.report import Section, comparison_table, evaluation_section, write_report
+from meshmocap.apps.report import (
+    Section,
+    comparison_table,
+    evaluation_section,
+    gait_section,
+    write_report,
+)
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import load_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
+from meshmocap.io.results import done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -29,6 +39,9 @@ from meshmocap.trackers.registry import make_tracker
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
 #: cage tracker's pose manifold is learned on the spot from the procedural walk and jog.
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
+#: Why the demo's comparison has no silhouette error (rendering every frame in every camera
+#: would double its run time).
+NO_SILHOUETTES = "the demo skips it to save time; `meshmocap report CAPTURE TRACK...` measures it"
 
 
 @dataclass(frozen=True)
@@ -97,7 +110,7 @@ def run_demo(
         template = load_template("neutral_5k")
         spec = SynthSpec(motion="walk", template="neutral_5k", rig="humaneva4", stop=track_frames)
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4 hulls)", cap.path))
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4)", cap.path))
         for method in DEMO_METHODS:
             tracker = (
                 make_tracker(method, template=template)
@@ -114,15 +127,46 @@ def run_demo(
             tracks.append(track)
             evaluations.append(ev)
             plots = [p for p in written if p.suffix == ".png"]
-            sections.append(evaluation_section(ev, images=plots))
+            sections.append(evaluation_section(ev, images=plots, track=track))
+            drop_resume_state(out / f"track_{method}")
+        sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
+        drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(
         out / "report.html", title="meshmocap demo", players=players,
-        tables=[comparison_table(evaluations)] if evaluations else [],
+        tables=[comparison_table(evaluations, no_silhouettes=NO_SILHOUETTES)] * bool(evaluations),
         sections=[*sections, Section("Motions rendered (contact sheets)", images=sheets)],
         intro="procedural motions, retargeting and a synthetic capture tracked and scored",
     )  # fmt: skip
     files.append(("report (tables, plots, 3D player; open in a browser)", report))
     return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0)
+
+
+def drop_resume_state(track: str | os.PathLike) -> int:
+    """Rewrite a finished track's frame files without the tracker state stored to resume an
+    interrupted run (``state_*`` arrays: 45 kB a frame for the patch tracker), except the
+    last frame's, from which tracking can still be extended. Returns the files rewritten."""
+    files = [frame_path(track, i) for i in done_frames(track)][:-1]
+    return sum(_drop_arrays(p, "state_") for p in files)
+
+
+def drop_hull_meshes(capture: str | os.PathLike) -> int:
+    """Rewrite a capture's hull files (``hulls/NNNNN.npz``) without their surface mesh
+    (``mesh_*`` arrays, 0.22 MB a frame at 1 cm), keeping the voxel occupancy (12 kB) from
+    which reading the capture rebuilds the same mesh by marching cubes
+    (:func:`~meshmocap.io.capture.read_hull_mesh`). Returns the files rewritten."""
+    return sum(_drop_arrays(p, "mesh_") for p in sorted((Path(capture) / "hulls").glob("*.npz")))
+
+
+def _drop_arrays(path: Path, prefix: str) -> bool:
+    """Rewrite the ``.npz`` at ``path`` without its arrays named ``prefix…``, atomically;
+    whether there were any."""
+    with np.load(path, allow_pickle=False) as z:
+        keep = {k: z[k] for k in z.files if not k.startswith(prefix)}
+        if len(keep) == len(z.files):
+            return False
+    with atomic_open(path) as f:
+        np.savez_compressed(f, **keep)
+    return True

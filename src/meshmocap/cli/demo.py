@@ -18,6 +18,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(f"\n{'tracker':<18} {'mean joint error':>17} {'worst frame':>12} {'s/frame':>8}")
         for s in res.scores:
             print(f"{s.method:<18} {s.mean_mm:>14.1f} mm {s.max_mm:>9.1f} mm {s.seconds:>8.2f}")
+        print("worst frame: the frame with the largest mean error over the 15 joints")
     return 0
 
 

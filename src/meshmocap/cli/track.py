@@ -53,8 +53,9 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from meshmocap.body.template import load_template
+    from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
+    from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
@@ -74,24 +75,18 @@ def _cmd_track(args: argparse.Namespace) -> int:
             print(f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
                   f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
                   f"{len(frames)}", file=sys.stderr)  # fmt: skip
-    template = load_template(args.template)
+    choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
+    template = choice.template
+    print(choice.note)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
-    track = track_sequence(
-        tracker,
-        template,
-        capture,
-        args.out,
-        frames=frames,
-        resume=not args.restart,
-        vertices=False,
-        init=args.init,
-        recover=not args.no_recover,
-    )
+    track = track_sequence(tracker, template, capture, args.out, frames=frames,
+                           resume=not args.restart, vertices=False, init=args.init,
+                           recover=not args.no_recover, template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
@@ -103,19 +98,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
     done += f" ({resumed} resumed from an earlier run)" if resumed else ""
     flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
     print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
-          f"{_started(track)}; {flagged}{_lost(track)}; results in {args.out}")  # fmt: skip
+          f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}")  # fmt: skip
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
         print(f"meshmocap: warning: {missing} frames had no observation and were coasted "
               f"across, first {int(track.frames[first])}: {track.messages[first]}",
               file=sys.stderr)  # fmt: skip
     return 0
-
-
-def _started(track) -> str:
-    """How the track's first pose was found (its first frame's message)."""
-    first = track.messages[0] if track.messages else ""
-    return first if first.startswith("init ") else f"init {track.meta.get('init', 'truth')}"
 
 
 def _lost(track) -> str:
@@ -221,7 +210,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "or point-cloud files, folders or a quoted glob or archive of them")  # fmt: skip
     k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
                    "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
-    k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    k.add_argument("--template", help="tracking template: a name or .npz, or auto to estimate "
+                   "the performer's body (default: the template capture.json names, else auto; "
+                   "an estimate is cached as subject.npz in --out)")  # fmt: skip
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
     k.add_argument(

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshmocap.errors import InputError
+from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, open_capture
 
 __all__ = [
@@ -144,6 +144,20 @@ def open_oriented(
             raise InputError(f"track: {source} is a capture folder: metres, Z up; "
                              "--up and --units apply to mesh and point-cloud files")  # fmt: skip
         return raw, None
-    V = raw.seq[0].V
-    axes = detect_axes(V, up=up, units=units, source=str(source))
+    axes = detect_axes(_first_readable(raw, source), up=up, units=units, source=str(source))
     return SequenceCapture(source, up=axes.up, scale=UNITS[axes.units]), axes
+
+
+def _first_readable(raw: SequenceCapture, source) -> np.ndarray:
+    """The raw vertices of the sequence's first frame that can be read (an unreadable or
+    empty frame is the driver's ``missing`` frame, not a reason to refuse the sequence)."""
+    first = None
+    for k in range(len(raw.seq)):
+        try:
+            V = raw.seq[k].V
+        except (MeshmocapFileNotFoundError, FormatError, MeshError) as exc:
+            first = first or f"{exc}".splitlines()[0]
+            continue
+        if len(V) >= 10:
+            return V
+    raise InputError(f"track: no frame of {source} has a body to read ({first or 'no points'})")

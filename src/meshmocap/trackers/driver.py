@@ -75,6 +75,7 @@ def track_sequence(
     vertices: bool = True,
     init: Init = "auto",
     recover: bool = True,
+    template_info: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -101,6 +102,10 @@ def track_sequence(
         ``track.json`` records which, the first frame's message the search's winner.
     recover : bool
         Score every frame, flag lost limbs and re-initialise them (module docstring).
+    template_info : dict, optional
+        How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
+        ``"capture"`` or ``"estimated"``; ``template_file``); see
+        :func:`meshmocap.estimate.tracking_template.tracking_template`.
 
     Returns
     -------
@@ -122,6 +127,7 @@ def track_sequence(
         "options": tracker.options(),
         "init": init,
         "recover": bool(recover),
+        **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "track"):  # a second run into the same folder is refused
