@@ -40,9 +40,10 @@ def _frame(V, F=None, index=0):
 
 
 def test_a_point_cloud_frame_has_outward_normals_and_a_signed_distance():
-    rng = np.random.default_rng(0)
-    d = rng.normal(size=(20000, 3))
-    P = 0.3 * d / np.linalg.norm(d, axis=1, keepdims=True) + [1.0, 2.0, 0.5]
+    k = np.arange(20000) + 0.5  # a sphere sampled evenly (Fibonacci lattice), 7.5 mm apart
+    z, phi = 1 - 2 * k / len(k), np.pi * (1 + 5**0.5) * k
+    d = np.stack([np.sqrt(1 - z**2) * np.cos(phi), np.sqrt(1 - z**2) * np.sin(phi), z], 1)
+    P = 0.3 * d + [1.0, 2.0, 0.5]
     obs = _frame(P)  # a cloud without normals: estimated (geometry.normals)
     Q, N = obs.points
     radial = (Q - [1.0, 2.0, 0.5]) / 0.3
@@ -117,11 +118,14 @@ def test_a_limb_the_observations_miss_is_lost_until_seen_again(body):
     t, R, root, posed = body
     names = t.eval_skeleton.names
     arm = np.isin(t.part_labels, [names.index(n) for n in ("left_elbow", "left_wrist")])
+    down = R.copy()
+    down[t.skeleton.index("LeftArm")] = np.eye(3)
+    hanging = t.pose(down, root).V  # where a tracker pulls an arm the observations miss
     rec = Recovery(t, R, root)
-    whole, armless = _frame(posed.V, index=0), _frame(posed.V[~arm], index=1)
-    assert rec.assess(whole, posed.V).lost == ()
-    for i in (1, 2):  # the tracked mesh still has the arm, the observations do not
-        q = rec.assess(_frame(posed.V[~arm], index=i), posed.V)
-        assert q.lost == ("left_arm",) and "not observed" in q.describe()
-    assert rec.reinitialise(armless, posed.V, q) is None  # nothing to fit it to
+    assert rec.assess(_frame(posed.V, index=0), posed.V).lost == ()
+    for i in (1, 2):  # the observations miss the forearm and hand; the tracked arm hangs
+        q = rec.assess(_frame(posed.V[~arm], index=i), hanging)
+        assert "left_arm" in q.lost and "not observed where it was last seen" in q.describe()
+    held = rec.coast_pose()[t.skeleton.index("LeftArm")]
+    assert np.abs(held - R[t.skeleton.index("LeftArm")]).max() < 0.05  # held as last seen
     assert rec.assess(_frame(posed.V, index=3), posed.V).lost == ()  # seen again

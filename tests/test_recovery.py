@@ -28,7 +28,7 @@ def gap(tmp_path_factory):
     return synthesize(tmp_path_factory.mktemp("gap"), spec, show_progress=False)
 
 
-def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path):
+def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path, capsys):
     R = np.tile(np.eye(3), (2, 3, 1, 1))
     root = np.array([[1.0, 0.0, 0.9], [0.0, 2.0, 0.9]])
     R2, root2 = placed_motion(R, root, heading=90.0, offset=(0.5, -0.3))
@@ -45,8 +45,10 @@ def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path):
     plain = SynthSpec().as_dict()  # captures made before heading/offset keep their spec
     assert "heading" not in plain and "offset" not in plain
     assert "missed_limb_frames" not in plain["degradation"]
-    with pytest.raises(SystemExit):  # argparse: usage and one error line
-        main(["synth", str(tmp_path / "d"), "--offset", "1;2"])
+    capsys.readouterr()
+    assert main(["synth", str(tmp_path / "d"), "--offset", "1;2"]) == 2
+    err = capsys.readouterr().err
+    assert "expected X,Y with two numbers, found '1;2'" in err and err.count("\n") == 1
 
 
 def test_the_hull_misses_the_limb_only_on_its_frames(gap):
