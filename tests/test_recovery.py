@@ -2,7 +2,9 @@
 flags and re-seating, point clouds, and the one-line refusals of inputs that cannot be
 tracked as given."""
 
+import functools
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -10,9 +12,12 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError
+from meshmocap.estimate import tracking_template as tt
+from meshmocap.estimate.subject import estimate_subject
 from meshmocap.geometry.carving import distance_grid
 from meshmocap.io.capture import SequenceFrame
 from meshmocap.io.meshes import write_mesh
+from meshmocap.io.results import read_track
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
 from meshmocap.trackers.articulated_icp import ArticulatedICP
@@ -125,3 +130,33 @@ def test_inputs_that_cannot_be_tracked_as_given_are_refused_in_one_line(gap, tmp
         assert main(args) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1
+
+
+def test_a_capture_without_truth_or_template_is_tracked_from_itself(tmp_path, monkeypatch, capsys):
+    """A user's default path, ``meshmocap track CAPTURE``: no ground truth, no capture.json,
+    the performer turned 200° and 0.86 m from the origin. The body is estimated (1 frame, 8
+    iterations here: the default's accuracy is bench_subject's) and the first pose found from
+    the hull. About 20 s of CPU (the subject fit and the first-pose search on its 12k
+    vertices): the one end-to-end check of track's defaults."""
+    spec = SynthSpec(motion="walk", template="neutral_5k", stop=2, heading=200.0,
+                     offset=(0.7, -0.5), voxel_size=0.02)  # fmt: skip
+    cap = synthesize(tmp_path / "cap", spec, show_progress=False)
+    real, out = tmp_path / "real", tmp_path / "t"
+    shutil.copytree(cap.path, real, ignore=shutil.ignore_patterns("truth", "capture.json"))
+    quick = functools.partial(estimate_subject, n_frames=1, iterations=8)
+    monkeypatch.setattr(tt, "estimate_subject", quick)
+    assert main(["track", str(real), "--method", "articulated_icp", "--max-iter", "2",
+                 "--out", str(out)]) == 0  # fmt: skip
+    said = capsys.readouterr().out
+    assert "template estimated from the capture" in said and "; init auto: " in said
+    meta = json.loads((out / "track.json").read_text())
+    assert meta["init"] == "auto" and meta["template_source"] == "estimated"
+    assert meta["template"] == "subject" and (out / meta["template_file"]).is_file()
+    track = read_track(out)
+    truth = cap[0].truth.joints
+    assert np.linalg.norm(truth[0, :2]) > 0.8  # the rest pose at the origin is ~1 m off
+    err = np.linalg.norm(track.joints[0] - truth, axis=1)
+    assert err.mean() < 0.04 and err.max() < 0.1  # measured 23 and 55 mm
+    assert main(["eval", str(cap.path), str(out), "--no-silhouettes", "--surface-frames", "0"]) == 0
+    said = capsys.readouterr().out
+    assert "template subject (estimated from the capture)" in said and "; init auto: " in said
