@@ -2,11 +2,11 @@
 a user runs it, in-process (``meshmocap.cli.main``), default options.
 
 **Real meshes.** ``meshmocap track ../shared/data/meshes/crane/crane_mesh_0000-0174.tar.gz
---up y --template crane_rigged.npz --method M --out t`` for the clean MIT crane meshes
-(175 frames, 10,002 vertices, Y up, metres). The template is frame 0 rigged by
-:func:`~meshmocap.body.autorig.rig_mesh` (reference ``neutral``, no decimation; the
-``subject`` helper makes this the default template of a mesh capture); the first pose is
-found automatically (``--init auto``, the default). Per-vertex error: each tracked template
+--up y --method M --out t`` for the clean MIT crane meshes (175 frames, 10,002 vertices, Y
+up, metres), default options: the template is the capture's own first frame rigged
+(:func:`~meshmocap.estimate.subject.estimate_subject`, mesh kind:
+:func:`~meshmocap.body.autorig.rig_mesh`), the first pose found automatically
+(``--init auto``). Per-vertex error: each tracked template
 vertex against the same vertex of the crane's frame (fixed connectivity; mm: mean, median,
 95th percentile, worst frame's mean), as in ``bench_crane.py``. Acceptance: ≤ 20 mm for
 ``patch`` and ``cage``.
@@ -39,8 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.body.autorig import rig_mesh
-from meshmocap.body.template import load_template, save_template
+from meshmocap.body.template import load_template
 from meshmocap.cli import main as cli
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.io.meshes import MeshSequence, write_mesh
@@ -67,10 +66,6 @@ def run(args: list[str]) -> tuple[int, str, float]:
 
 def crane(args, work: Path) -> list[str]:
     """The real-meshes table (module docstring)."""
-    path = work / "crane_rigged.npz"
-    if not path.is_file():
-        f0 = MeshSequence(CRANE, frames=[0], up="y")[0]
-        save_template(path, rig_mesh(f0.V, f0.F, name="crane_rigged"))
     n = min(args.crane_frames, 175)
     truth = np.stack([f.V for f in MeshSequence(CRANE, frames=range(n), up="y")])
     rows = ["| method | status | mean mm | median mm | p95 mm | worst frame mm | flagged lost "
@@ -78,8 +73,8 @@ def crane(args, work: Path) -> list[str]:
             "|---|--:|--:|--:|--:|--:|--:|--:|---|"]  # fmt: skip
     for m in args.methods:
         out = work / "tracks" / f"crane-{m}-{n}"
-        status, last, _ = run(["track", str(CRANE), "--up", "y", "--template", str(path),
-                               "--method", m, "--frames", f"0:{n}", "--out", str(out)])  # fmt: skip
+        status, last, _ = run(["track", str(CRANE), "--up", "y", "--method", m,
+                               "--frames", f"0:{n}", "--out", str(out)])  # fmt: skip
         if status != 0:
             rows.append(f"| {m} | {status} | | | | | | | {last} |")
             continue
