@@ -116,7 +116,9 @@ def test_cage_tracks_a_folder_of_meshes_in_millimetres(setup, tmp_path, capsys):
     for f in cap:
         write_mesh(folder / f"f{f.index:03d}.obj", f.truth.vertices * 1000, t.F)
     out = tmp_path / "t"
-    args = ["track", str(folder), "--method", "cage_nolocal", "--manifold", str(manifold)]
+    # the manifold's body (the default would estimate one)
+    args = ["track", str(folder), "--method", "cage_nolocal", "--manifold", str(manifold),
+            "--template", "neutral_5k"]  # fmt: skip
     assert main([*args, "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "Z up, mm, a body 1.7" in text and "tracked 3 frames with cage_nolocal" in text

@@ -7,7 +7,8 @@ every capture of a named set; each (capture, method) pair is scored by
 
 Protocol: synthetic captures from the studio at 60 fps, tracking template ``neutral_5k``,
 subject = template unless a variant names another body, first frame initialised from
-ground truth (``init="auto"``: found from the capture alone; the crane always is), visual
+ground truth (``init="auto"``: found from the capture alone; the crane starts in its
+template's rest pose, its frame 0), visual
 hulls carved at 1 cm; joint errors over the 15 evaluation joints,
 bone-length spread over the tracked evaluation skeleton, silhouette overlap error against
 the input silhouettes, seconds per frame as timed by the driver on this machine (frame 0,
@@ -331,8 +332,8 @@ def run_bench(
         from the procedural motions and cached in ``work`` (:func:`bench_manifold`).
     init : {"truth", "auto"}
         First pose of the synthetic captures: from ground truth (the papers' protocol) or
-        found from the capture (:func:`~meshmocap.trackers.driver.track_sequence`); mesh
-        captures (the crane) have no true pose and always start ``"auto"``. Each row says
+        found from the capture (:func:`~meshmocap.trackers.driver.track_sequence`); a mesh
+        capture (the crane) starts in its template's rest pose, its frame 0. Each row says
         which (``BenchRow.init``).
     show_progress : bool, optional
         Progress bars on stderr (default: when stderr is a terminal).
@@ -417,9 +418,8 @@ def run_bench(
                 rows.append(not_applicable(spec.name, m, why))
                 continue
             run.log(f"  {m}")
-            how = init if spec.kind == "synthetic" else "auto"  # a mesh capture has no true pose
             rows.append(run.track_and_score(spec.name, m, trackers[m], track_template, capture,
-                                            salt=track_salt.get(m, ""), init=how))  # fmt: skip
+                                            salt=track_salt.get(m, ""), init=init))  # fmt: skip
         if spec.name == sweep_on:
             for f in keep_fractions:
                 run.log(f"  patch, kept fraction {f:g} (Fig. 8)")

@@ -269,6 +269,10 @@ def first_pose(
     ``capture``'s frame for the rest of the process."""
     if init == "truth":
         truth = _truth(frame)
+        if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
+            rest = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
+            how = "init truth: the template is this frame, in its rest pose"
+            return rest, template.skeleton.rest_positions[0], how
         if truth is None or truth.rotations is None:
             raise InputError(
                 "track: --init truth needs a capture with ground-truth poses "
@@ -292,6 +296,14 @@ def first_pose(
     if key is not None:
         _FOUND[key] = found
     return found
+
+
+def _is_rest(template: Template, truth) -> bool:
+    """Whether a truth without pose is the template's own rest mesh (within 1 mm)."""
+    if truth is None or truth.rotations is not None or truth.vertices is None:
+        return False
+    V = np.asarray(truth.vertices)
+    return V.shape == template.V.shape and float(np.abs(V - template.V).max()) < 1e-3
 
 
 def recovered(tracker: Tracker, recovery: Recovery, frame, r: FrameResult) -> FrameResult:
