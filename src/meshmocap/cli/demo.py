@@ -41,6 +41,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--performer", default="heavy_male", help="bundled body that performs in "
                    "the capture (default: %(default)s)")  # fmt: skip
-    d.add_argument("--template", default="auto", help="tracking template: auto estimates the "
-                   "performer's body from the hulls (default), or a bundled name or .npz")  # fmt: skip
+    d.add_argument("--template", default="auto", help="tracking template: auto estimates "
+                   "the performer's body from the hulls (default), or a name or .npz")  # fmt: skip
     d.set_defaults(func=_cmd_demo)
