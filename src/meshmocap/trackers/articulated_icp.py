@@ -41,6 +41,7 @@ The articulated model (model points, lever arms, increments, correspondences) li
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 from typing import Literal, get_args
 
@@ -71,6 +72,11 @@ from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 
 Correspondences = Literal["model_to_data", "both"]
+
+#: Stages of :attr:`ArticulatedICP.stage_seconds`: reading and sampling the hull with its
+#: normals, closest points both ways, assembling the normal equations (posing included),
+#: solving and updating the pose, the output (posing the whole template).
+STAGES = ("observations", "correspondences", "system", "solve", "output")
 
 
 @dataclass(frozen=True)
@@ -167,6 +173,13 @@ class ArticulatedICP:
     Parameters
     ----------
     options : ICPOptions
+
+    Attributes
+    ----------
+    stage_seconds : dict of str → float
+        Wall time spent in each of :data:`STAGES` over all :meth:`step` calls, seconds.
+    n_steps : int
+        Number of :meth:`step` calls.
     """
 
     name = "articulated_icp"
@@ -177,6 +190,13 @@ class ArticulatedICP:
         self.opts = options
         self.template: Template | None = None
         self.model: ArticulatedModel | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        self.n_steps = 0
+
+    def _lap(self, stage: str) -> None:
+        t = time.perf_counter()
+        self.stage_seconds[stage] += t - self._t
+        self._t = t
 
     def options(self) -> dict:
         """JSON-ready settings."""
@@ -261,6 +281,8 @@ class ArticulatedICP:
         """
         o = self.opts
         sk = self.template.skeleton
+        self._t = time.perf_counter()
+        self.n_steps += 1
         Y, NY = self.observations(frame)
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
@@ -272,6 +294,7 @@ class ArticulatedICP:
         self.prev = last
         R_ref, root_ref = last  # the regulariser pulls towards the previous pose
         data_tree = KDTree(Y)
+        self._lap("observations")
         n = 3 + 3 * sk.n_joints
         act = self.active
         diag = np.diag_indices(len(act))
@@ -284,15 +307,19 @@ class ArticulatedICP:
             H, g = H[np.ix_(act, act)], g[act]
             H[diag] *= 1 + o.damping
             H[diag] += 1e-12
+            self._lap("system")
             delta = np.zeros(n)
             delta[act] = -np.linalg.solve(H, g)
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
             self.R, self.root = apply_increment(sk, self.R, self.root, delta, G=posed.G)
             move = point_motion(self.plan, posed, delta)
+            self._lap("solve")
             if np.max(np.einsum("mc,mc->m", move, move)) < o.tol * o.tol:
                 break
-        return self._result(frame.index, energies, n_iter)
+        out = self._result(frame.index, energies, n_iter)
+        self._lap("output")
+        return out
 
     def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref):
         """Gauss–Newton system ``H δ = −g`` at the current pose, and the energy terms."""
@@ -304,6 +331,7 @@ class ArticulatedICP:
         if o.correspondences == "both":
             k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
             parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
+        self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
             raise FloatingPointError("no compatible correspondences")
         # every pair weighs 1/len of its direction: the mean over pairs, metres² whatever
