@@ -296,3 +296,43 @@ def rotation_error_kernel(R, R_ref, G, parents):  # pragma: no cover - compiled
             for a in range(3):
                 out[j, a] = (G[p, a, 0] * e0 + G[p, a, 1] * e1) + G[p, a, 2] * e2
     return out
+
+
+@njit(cache=True, nogil=True)
+def compatible_kernel(idx, n_tree, n_q, normal_cos, n):  # pragma: no cover - compiled
+    """For the nearest tree point ``idx`` (q,) of each query (``n``: none within range):
+    ``partner`` (q,) int64, that point when its normal agrees (``n_tree · n_q >
+    normal_cos``), else −1; and the queries whose nearest point disagrees (to search
+    further), in order."""
+    q = idx.shape[0]
+    partner = np.empty(q, dtype=np.int64)
+    retry = np.empty(q, dtype=np.int64)
+    r = 0
+    for t in range(q):
+        j = idx[t]
+        partner[t] = -1
+        if j >= n:
+            continue
+        c = (n_tree[j, 0] * n_q[t, 0] + n_tree[j, 1] * n_q[t, 1]) + n_tree[j, 2] * n_q[t, 2]
+        if c > normal_cos:
+            partner[t] = j
+        else:
+            retry[r] = t
+            r += 1
+    return partner, retry[:r]
+
+
+@njit(cache=True, nogil=True)
+def first_compatible_kernel(idx, n_tree, n_q, rows, normal_cos, n, partner):  # pragma: no cover
+    """``partner[rows[t]]`` ← the first of the k nearest tree points ``idx[t]`` (k,) (by
+    distance; ``n``: none) whose normal agrees with the query's ``n_q[rows[t]]``."""
+    for t in range(rows.shape[0]):
+        u = rows[t]
+        for c in range(idx.shape[1]):
+            j = idx[t, c]
+            if j >= n:
+                break
+            d = (n_tree[j, 0] * n_q[u, 0] + n_tree[j, 1] * n_q[u, 1]) + n_tree[j, 2] * n_q[u, 2]
+            if d > normal_cos:
+                partner[u] = j
+                break

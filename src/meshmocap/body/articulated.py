@@ -242,24 +242,18 @@ def nearest_compatible(
 
     Returns the indices of the queries that found one (q,) and of their partners (q,).
     """
+    from meshmocap.body._articulated_kernels import compatible_kernel, first_compatible_kernel
+
     k = min(k, tree.n)
+    n_tree = np.ascontiguousarray(n_tree, dtype=np.float64)
+    n_q = np.ascontiguousarray(n_q, dtype=np.float64)
     # the nearest point first (4× cheaper than k of them): most queries stop there; the
     # others search their k nearest, with the same result as one search of k for all
     _, idx = tree.query(q, k=1, distance_upper_bound=max_distance)
-    idx = idx.astype(np.int64)
-    found = idx < tree.n  # pykdtree marks "none within the bound" with index n
-    ok = found.copy()
-    ok[found] = np.einsum("qc,qc->q", n_tree[idx[found]], n_q[found]) > normal_cos
-    partner = np.where(ok, idx, -1)
-    retry = np.flatnonzero(found & ~ok)
+    partner, retry = compatible_kernel(idx.astype(np.int64), n_tree, n_q, normal_cos, tree.n)
     if len(retry) and k > 1:
         _, idx = tree.query(q[retry], k=k, distance_upper_bound=max_distance)
         idx = idx.reshape(len(retry), k).astype(np.int64)
-        found = idx < tree.n
-        safe = np.where(found, idx, 0)
-        good = found & (np.einsum("qkc,qc->qk", n_tree[safe], n_q[retry]) > normal_cos)
-        first = np.argmax(good, axis=1)
-        has = good[np.arange(len(retry)), first]
-        partner[retry[has]] = safe[has, first[has]]
+        first_compatible_kernel(idx, n_tree, n_q, retry, normal_cos, tree.n, partner)
     queries = np.flatnonzero(partner >= 0)
     return queries, partner[queries]
