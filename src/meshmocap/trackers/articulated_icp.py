@@ -128,7 +128,7 @@ class ICPOptions:
     normal_cos: float = 0.3
     k_neighbours: int = 8
     max_iter: int = 20
-    tol: float = 5e-4
+    tol: float = 1e-3
     lambda_pose: float = 1e-3
     lambda_root: float = 1e-4
     damping: float = 1e-3
