@@ -1,6 +1,7 @@
 """Live tracking (``track FOLDER --follow``): a writer thread plays a studio writing frames
 into a folder while the tracker follows it, in-process."""
 
+import json
 import os
 import shutil
 import signal
@@ -71,6 +72,8 @@ def test_follow_tracks_frames_as_written_and_resumes(walk, offline, tmp_path, ca
     assert [f"frame {i}:" in text for i in range(1, 4)] == [True] * 3
     assert "latency" in text and "no new frame for 1.5 s: tracked 4 frames" in text
     assert done_frames(out) == [0, 1, 2, 3]
+    meta = json.loads((out / "track.json").read_text())  # the capture's own template
+    assert meta["frames"] == "follow" and meta["template_source"] == "capture"
     th = _studio(walk.path, live, range(4, N))
     assert main([*args, "--idle", "1.5"]) == 0  # resumes
     th.join()
@@ -140,5 +143,9 @@ def test_follow_needs_one_folder_and_idle_needs_follow(walk, tmp_path, capsys):
     assert "--idle goes with --follow" in capsys.readouterr().err
     assert main(["track", str(walk.path), "--follow", "--frames", "0:2", "--out", out]) == 2
     assert "give one folder" in capsys.readouterr().err
-    assert main(["track", str(tmp_path / "none"), "--follow", "--out", out]) == 2
+    assert main(["track", str(tmp_path / "none"), "--follow", "--out", out,
+                 "--template", "neutral_5k"]) == 2  # fmt: skip
     assert "is not a folder" in capsys.readouterr().err
+    (tmp_path / "meshes").mkdir()  # no capture.json naming a template, no frame yet
+    assert main(["track", str(tmp_path / "meshes"), "--follow", "--out", out]) == 2
+    assert "give --template" in capsys.readouterr().err

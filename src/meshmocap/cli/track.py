@@ -105,7 +105,6 @@ def _cmd_track(args: argparse.Namespace) -> int:
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
     """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
-    from meshmocap.body.template import load_template
     from meshmocap.errors import InputError
     from meshmocap.trackers.follow import follow_sequence
     from meshmocap.trackers.registry import make_tracker
@@ -114,7 +113,9 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
         raise InputError("track: --idle goes with --follow")
     if len(args.capture) != 1 or args.frames:
         raise InputError("track --follow: give one folder (a capture or meshes) and no --frames")
-    template = load_template(args.template)
+    choice = _follow_template(args)
+    template = choice.template
+    print(choice.note)
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     seen: list[float] = []
 
@@ -129,13 +130,37 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     how = f"no new frame for {args.idle:g} s" if args.idle else "stopped"
     try:
         follow_sequence(tracker, template, args.capture[0], args.out, idle=args.idle,
-                        resume=not args.restart, report=report)  # fmt: skip
+                        resume=not args.restart, report=report,
+                        template_info=choice.info)  # fmt: skip
     except KeyboardInterrupt:
         how = "Ctrl-C"
     per = sorted(seen)[len(seen) // 2] if seen else 0.0
     print(f"{how}: tracked {len(seen)} frames (median {1000 * per:.0f} ms per frame); "
           f"results in {args.out}")  # fmt: skip
     return 0
+
+
+def _follow_template(args: argparse.Namespace):
+    """The template of a folder being written: as ``track`` chooses it, except that a
+    folder with no frames yet cannot have the performer's body estimated from it."""
+    import json
+    from types import SimpleNamespace
+
+    from meshmocap.errors import InputError
+    from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
+
+    meta_file = Path(args.capture[0]) / "capture.json"
+    try:
+        meta = json.loads(meta_file.read_text()) if meta_file.is_file() else {}
+    except (OSError, ValueError):
+        meta = {}
+    named = isinstance(meta, dict) and (meta.get("spec") or {}).get("template")
+    cached = (Path(args.out) / SUBJECT_FILE).is_file() and not args.restart
+    if args.template in (None, "auto") and not (named and args.template is None) and not cached:
+        raise InputError("track --follow: give --template NAME|FILE (a folder being written "
+                         "has no frames yet to estimate the performer's body from)")  # fmt: skip
+    capture = SimpleNamespace(meta=meta if isinstance(meta, dict) else {})
+    return tracking_template(capture, args.template, args.out, refresh=args.restart)
 
 
 def _text(s: slice) -> str:

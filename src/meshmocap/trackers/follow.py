@@ -90,6 +90,7 @@ def follow_sequence(
     resume: bool = True,
     stop: Callable[[], bool] | None = None,
     report: Callable[[FollowedFrame], None] | None = None,
+    template_info: dict | None = None,
 ) -> list[int]:
     """Track the frames written into the folder ``source`` as they arrive.
 
@@ -113,6 +114,9 @@ def follow_sequence(
         Called between frames and while waiting; tracking ends when it returns True.
     report : callable, optional
         Called with a :class:`FollowedFrame` after each frame is written.
+    template_info : dict, optional
+        How the template was chosen, kept in ``track.json`` (as for
+        :func:`~meshmocap.trackers.driver.track_sequence`).
 
     Returns
     -------
@@ -130,6 +134,7 @@ def follow_sequence(
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
+        **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
     tracked: list[int] = []
