@@ -202,7 +202,7 @@ def _carry(
 
 
 def _initialise(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init
+    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds (its message says how). Frames before it are written as copies of it, flagged
