@@ -14,7 +14,8 @@ frames:
   dance) and 60_01 (salsa).
 
 Each capture is tracked from its ground-truth first pose (the papers' protocol: recovery is
-measured apart from initialisation) by each ``--methods`` with recovery (the default) and
+measured apart from initialisation) by each ``--methods`` with recovery (``reseat=True``: lost
+limbs flagged and re-initialised) and
 without (``recover=False``). Per track: the mean joint error; the frames where a joint is
 more than 150 mm off and how many of them are flagged ``lost`` with that joint's limb
 (:data:`~meshmocap.estimate.quality.LIMB_PARTS`; "body" counts for every limb) named in the
@@ -135,7 +136,8 @@ def main() -> None:
                     make_tracker(m, template=template) if m.startswith("cage") else make_tracker(m)
                 )
                 track = track_sequence(tracker, template, cap, out, init="truth",
-                                       recover=recover, show_progress=True)  # fmt: skip
+                                       recover=recover, reseat=recover,
+                                       show_progress=True)  # fmt: skip
                 r = score(track, cap, gap_abs, names)
                 rows.append((name, m, recover, len(track.frames), r))
                 print(f"    mean {r['mean']:.1f} mm, >150: {r['named']}/{r['joints150']} named, "

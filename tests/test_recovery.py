@@ -85,6 +85,13 @@ def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     quiet = track_sequence(PatchTracker(), t, gap, tmp_path / "quiet", init="truth",
                            recover=False, show_progress=False)  # fmt: skip
     assert not any(quiet.flags) and "fit_outside" not in quiet.energies
+    # the default flags and never moves the track; reseat acts on the lost limb
+    assert not any("reinit" in f for f in track.flags)
+    assert not any("held as last seen" in m for m in track.messages)
+    acted = track_sequence(PatchTracker(), t, gap, tmp_path / "acted", init="truth",
+                           reseat=True, show_progress=False)  # fmt: skip
+    assert any("held as last seen" in m or "re-initialised" in m for m in acted.messages)
+    assert json.loads((tmp_path / "acted" / "track.json").read_text())["reseat"] is True
 
 
 @pytest.mark.parametrize("tracker", [ArticulatedICP, PatchTracker])

@@ -88,7 +88,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     track = track_sequence(tracker, template, capture, args.out, frames=frames,
                            resume=not args.restart, vertices=False, init=args.init,
-                           recover=not args.no_recover, template_info=choice.info)  # fmt: skip
+                           recover=not args.no_recover, reseat=args.reseat,
+                           template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
@@ -312,6 +313,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=["auto", "m", "cm", "mm"],
         help="mesh/point-cloud files: their length unit (default: detected)",
     )
+    k.add_argument("--reseat", action="store_true", help="re-initialise a lost limb where a "
+                   "better pose is found and hold one the hulls miss as last seen (rescues a "
+                   "limb lost behind a hole; can mistake a fast limb for a lost one)")  # fmt: skip
     k.add_argument("--no-recover", action="store_true", help="do not score frames, flag lost "
                    "limbs or re-initialise them")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")

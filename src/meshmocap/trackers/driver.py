@@ -15,8 +15,12 @@ The first frame's pose comes from the capture alone (``init="auto"``,
 :func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground
 truth (``init="truth"``). With ``recover``, every fitted frame is scored
 (:class:`~meshmocap.estimate.reinit.Recovery`): a frame with a limb lost is flagged
-``lost`` (the message names the limbs), and where a better pose is found from the frame
-the tracker is re-seated there (``Tracker.reseat``) and the frame also flagged ``reinit``.
+``lost`` (the message names the limbs). With ``reseat`` too, where a better pose is found
+from the frame the tracker is re-seated there (``Tracker.reseat``) and the frame also
+flagged ``reinit``, and a limb the observations miss is held as last seen. Re-seating is
+off by default: it rescues a limb lost behind a hole in the hull (CMU 05_01 with a forearm
+missed for 10 frames: worst joint 342 → 62 mm) but mistakes a fast limb for a lost one on
+a run (CMU 09_01, patch, 55 frames: 13.5 → 35.8 mm mean; ``benchmarks/bench_recovery.py``).
 """
 
 from __future__ import annotations
@@ -75,6 +79,7 @@ def track_sequence(
     vertices: bool = True,
     init: Init = "auto",
     recover: bool = True,
+    reseat: bool = False,
     template_info: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
@@ -101,7 +106,10 @@ def track_sequence(
         copied from its ground truth (the papers' protocol; the capture must have it).
         ``track.json`` records which, the first frame's message the search's winner.
     recover : bool
-        Score every frame, flag lost limbs and re-initialise them (module docstring).
+        Score every frame and flag lost limbs (module docstring).
+    reseat : bool
+        With ``recover``, also re-initialise lost limbs where a better pose is found and
+        hold unobserved ones as last seen (module docstring: off by default).
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
@@ -127,6 +135,7 @@ def track_sequence(
         "options": tracker.options(),
         "init": init,
         "recover": bool(recover),
+        "reseat": bool(recover and reseat),
         **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
@@ -161,7 +170,7 @@ def track_sequence(
                         if not _finite(r):
                             raise FloatingPointError("non-finite joints or vertices")
                         if recovery is not None:
-                            r = recovered(tracker, recovery, frame, r)
+                            r = recovered(tracker, recovery, frame, r, reseat=reseat)
                         r = replace(r, index=index, seconds=time.perf_counter() - t0)
                         good = index
                 except NUMERICAL_ERRORS as exc:
@@ -306,16 +315,19 @@ def _is_rest(template: Template, truth) -> bool:
     return V.shape == template.V.shape and float(np.abs(V - template.V).max()) < 1e-3
 
 
-def recovered(tracker: Tracker, recovery: Recovery, frame, r: FrameResult) -> FrameResult:
-    """``r`` scored against ``frame``; flagged ``lost`` with the limbs concerned, and where a
-    better pose is found, the tracker re-seated there (flag ``reinit``). The frame's quality
-    (``fit_outside``, ``fit_unexplained``) joins its energies, the articulated pose of the
-    tracked mesh its state (``pose_R``, ``pose_root``)."""
+def recovered(
+    tracker: Tracker, recovery: Recovery, frame, r: FrameResult, *, reseat: bool = False
+) -> FrameResult:
+    """``r`` scored against ``frame``; flagged ``lost`` with the limbs concerned, and with
+    ``reseat``, where a better pose is found, the tracker re-seated there (flag ``reinit``).
+    The frame's quality (``fit_outside``, ``fit_unexplained``) joins its energies, the
+    articulated pose of the tracked mesh its state (``pose_R``, ``pose_root``)."""
     q = recovery.assess(frame, r.vertices)
     flags, message = tuple(r.flags), r.message
     if q.lost:
         flags += ("lost",)
         message = f"lost {q.describe()}"
+    if q.lost and reseat:
         found = recovery.reinitialise(frame, r.vertices, q)
         held = [n for n in q.lost if n in recovery.missing]
         if found is not None:
