@@ -44,10 +44,12 @@ from meshmocap.trackers.patch_solver import (
     add_plane_terms,
     add_point_terms,
     add_rigidity,
+    group_basis,
     length_residuals,
     normal_pattern,
     rigidity_moments,
 )
+from meshmocap.trackers.patch_terms import add_joint_prior, add_silhouette, silhouette_rays
 
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
@@ -88,6 +90,8 @@ SURFACE_JOINT_ERROR = 0.01
 FLOOR_POSE_STEP = 4
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
+#: Template vertices (every k-th) whose projections must cover the silhouettes.
+COVERAGE_SAMPLES = 6000
 
 
 class PatchTracker:
@@ -139,6 +143,10 @@ class PatchTracker:
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
         self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
+        # coverage vertices and the radius each covers: 1.5 × their median spacing at rest
+        self.cover_sample = np.arange(0, n, max(1, n // COVERAGE_SAMPLES))
+        d, _ = KDTree(self.model.V0[self.cover_sample]).query(self.model.V0[self.cover_sample], k=2)
+        self.cover_radius = 1.5 * float(np.median(d[:, 1]))
         # Joint read-out (joint_readout): share of each reported joint taken from the surface
         self.regressor = None
         self.surface_weight = np.zeros(len(template.eval_skeleton.names))
@@ -165,6 +173,7 @@ class PatchTracker:
         self.model = rebind_bones(m, self.R, self.c, self.X)
         self.sigma = o.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
+        self.X_prev2 = self.X.copy()  # joints two frames back (accel_gate)
         self.logits = None
         return self._result(frame.index, {}, 0)
 
@@ -176,6 +185,7 @@ class PatchTracker:
         # the last classifier fit, the next fit's starting point (absent in older tracks)
         self.logits = (state["clf_coef"], state["clf_intercept"]) if "clf_coef" in state else None
         self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
+        self.X_prev2 = state.get("X_prev2", state["X_prev"]).copy()  # absent in older tracks
         self.model = replace(
             self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
         )
@@ -185,7 +195,7 @@ class PatchTracker:
         state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
                  "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
                  "delta0": self.model.delta0, "bone_w": self.model.bone_w,
-                 "lengths": self.lengths}  # fmt: skip
+                 "lengths": self.lengths, "X_prev2": self.X_prev2}  # fmt: skip
         if self.logits is not None:
             state["clf_coef"], state["clf_intercept"] = self.logits
         V = self.vertices()
@@ -257,6 +267,7 @@ class PatchTracker:
             max_distance=o.max_distance, random_state=rng.integers(1 << 31),
         )  # fmt: skip
         keep = part.keep
+        self.last_partition = part  # for diagnostics (benchmarks/diag_patch.py)
         if o.part_matching == "none":
             return V[keep], N[keep], None
         labels = part.labels.copy()
@@ -276,6 +287,7 @@ class PatchTracker:
         # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
+        budget += o.coarse_iter
         if o.prediction == "bones":
             self._predict_by_bones()
         elif o.prediction == "patches":
@@ -287,6 +299,7 @@ class PatchTracker:
             self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
             w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
             self.R = so3_exp(w) @ self.R
+        self.X_prev2 = self.prev[2].copy()
         self.prev = last
         # Re-acquisition after a lost frame: if the model stands far from the data (the
         # driver restored an old state), move it horizontally onto the observations' centre.
@@ -294,13 +307,18 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
+        X_hat = self.X.copy()  # the temporal prior's prediction (lambda_temporal)
+        rays = None
+        cameras = getattr(frame, "cameras", [])
+        if o.lambda_silhouette > 0 and cameras:
+            masks = _masks(frame)
+            rays = silhouette_rays(cameras, masks) if masks else None
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
         self._lap("classify")
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
-        cameras = getattr(frame, "cameras", [])
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         energies: dict[str, float] = {}
         n_iter = 0
@@ -330,8 +348,22 @@ class PatchTracker:
             if o.lambda_length > 0:
                 e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths,
                                          o.lambda_length / len(self.pairs))  # fmt: skip
+            e_sil = e_tmp = 0.0
+            if rays is not None:
+                s = self.cover_sample
+                qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
+                e_sil, _ = add_silhouette(sys, rays, Vc[s], m.labels[s], qs,
+                                          radius=self.cover_radius, scale=o.silhouette_scale,
+                                          weight=o.lambda_silhouette)  # fmt: skip
+            if o.lambda_temporal > 0:
+                K = len(self.X)
+                e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
             self._lap("system")
-            delta = sys.solve(o.damping)
+            if n_iter <= o.coarse_iter:  # body parts as rigid groups first (coarse_iter)
+                S = group_basis(m.bone_of_patch, self.c, len(self.X))
+                delta = sys.solve_grouped(o.damping, S)
+            else:
+                delta = sys.solve(o.damping)
             self._lap("solve")
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
@@ -340,10 +372,11 @@ class PatchTracker:
             self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
             energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
                         "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma,
-                        "length": e_len / max(len(self.pairs), 1), "reverse": e_rev}  # fmt: skip
+                        "length": e_len / max(len(self.pairs), 1), "reverse": e_rev,
+                        "silhouette": e_sil, "temporal": e_tmp}  # fmt: skip
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
-            if move < o.tol:
+            if move < o.tol and n_iter > o.coarse_iter:
                 break
         energies["total"] = (
             o.lambda_data * energies["data"]
@@ -351,7 +384,11 @@ class PatchTracker:
             + o.lambda_bone * BONE_SCALE * energies["bone"]
             + o.lambda_length * energies["length"]
             + o.lambda_reverse * energies["reverse"]
+            + o.lambda_silhouette * energies["silhouette"]
+            + o.lambda_temporal * energies["temporal"]
         )
+        # the last E-step and the kept points, for diagnostics (benchmarks/diag_patch.py)
+        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": (patch, v, w, y)}
         self._check_divergence(Y, last[2])
         result = self._result(frame.index, energies, n_iter)
         self._lap("output")
@@ -365,7 +402,13 @@ class PatchTracker:
         many patches, so a patch that slipped last frame is not thrown further."""
         m = self.model
         _, _, Xp = self.prev
-        X_new = self.X + _clip_rows(self.X - Xp, MAX_BONE_PREDICTION)
+        v = self.X - Xp
+        gate = self.opts.accel_gate
+        if gate > 0:  # no extrapolation of a velocity that just jumped
+            v_old = Xp - self.X_prev2
+            jump = np.linalg.norm(v - v_old, axis=1)
+            v = v * (jump <= np.maximum(gate, 0.5 * np.linalg.norm(v_old, axis=1)))[:, None]
+        X_new = self.X + _clip_rows(v, MAX_BONE_PREDICTION)
         j, ch, g = m.bone_j, m.bone_child, m.gamma[:, None]
         a, b = self.X[ch] - self.X[j], X_new[ch] - X_new[j]
         R_b = _rotation_between(a, b)
@@ -442,6 +485,15 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _masks(frame: CaptureFrame) -> list[np.ndarray]:
+    """The frame's silhouettes, one per camera, or [] where the capture has none."""
+    try:
+        masks = frame.silhouettes
+    except (OSError, AttributeError, ValueError):
+        return []
+    return masks if len(masks) == len(frame.cameras) else []
 
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:

@@ -87,6 +87,13 @@ class PatchOptions:
         mm); CMU 09_01 (a run at 60 fps, all frames fast; 20 iterations throughout) 12.5 →
         11.2 mm, worst frame 26.2 → 17.8 mm. Slow captures hardly pay: 16 % of CMU 05_01's
         frames are fast, 2 % of 01_01's.
+    coarse_iter : int
+        EM iterations at the start of each frame (added to its budget) in which the
+        patches of each body part move as one rigid group (a reduced Gauss–Newton step,
+        :func:`~meshmocap.trackers.patch_solver.group_basis`) before every patch moves on
+        its own; 0 turns it off. A limb that moved far since the last frame is pulled back
+        whole by the points it still reaches, instead of patch by patch onto the nearest
+        wrong points.
     k_neighbours : int
         Candidate vertices per observed point.
     damping : float
@@ -95,6 +102,11 @@ class PatchOptions:
         Warm start of each frame: constant-velocity extrapolation of the joints, each patch
         carried rigidly by its bone ("bones"); of every patch transform and joint on its
         own ("patches"); or the last frame as it is ("none"). Steps are clipped.
+    accel_gate : float
+        With ``prediction="bones"``: a joint whose velocity changed in the last frame by
+        more than this (metres per frame) or half its speed is not extrapolated (0: every
+        joint is). A velocity that just jumped comes from an abrupt start or a fit that
+        slipped; extrapolating it throws the joint further off.
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -115,6 +127,19 @@ class PatchOptions:
         which no patch follows rigidly (floors 30–40 mm), come from the surface; the
         limbs mostly from the skeleton. Both read-outs are then moved the least that keeps
         the skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
+    lambda_silhouette : float
+        Weight of the silhouette coverage term (not in the paper; 0 turns it off; used
+        where the capture has cameras and silhouettes): silhouette pixels that no model
+        vertex covers pull their nearest projected vertex onto their viewing ray
+        (:mod:`~meshmocap.trackers.patch_terms`). The hull's points cannot tell a limb on
+        the true surface from one in a phantom wedge beside it; the silhouettes can.
+    silhouette_scale : float
+        Cauchy scale (metres) of the coverage term's weights: a pixel that far from the
+        model pulls half as hard (spurious blobs far from the body pull little).
+    lambda_temporal : float
+        Weight of the temporal prior (not in the paper; 0 turns it off): mean squared
+        distance of the joints from their constant-velocity prediction (an acceleration
+        penalty), so that a limb coasts through a few frames without data.
     seed : int
         Patches and subsampling seed.
     """
@@ -143,12 +168,17 @@ class PatchOptions:
     sigma_min: float = 0.005
     sigma_max: float = 0.05
     outlier_sigmas: float = 3.0
+    coarse_iter: int = 0
     k_neighbours: int = 8
     normal_cos: float = 0.0
     residual: Residual = "point_to_point"
     damping: float = 1e-4
     prediction: Prediction = "bones"
+    accel_gate: float = 0.0
     joint_readout: JointReadout = "blend"
+    lambda_silhouette: float = 0.0
+    silhouette_scale: float = 0.05
+    lambda_temporal: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -163,14 +193,20 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
             )
+        if self.coarse_iter < 0:
+            raise InputError(f"PatchOptions: coarse_iter must be ≥ 0, found {self.coarse_iter}")
         if self.max_iter < 1:
             raise InputError(f"PatchOptions: max_iter must be ≥ 1, found {self.max_iter}")
         if not self.fast_iter_scale >= 1:
             raise InputError(
                 f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
             )
+        for name in ("lambda_silhouette", "lambda_temporal", "accel_gate"):
+            if not getattr(self, name) >= 0:  # also rejects NaN
+                raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
         for name, unit in (("outlier_sigmas", ""), ("fast_motion", " metres"),
-                           ("reverse_cap", " metres"), ("reverse_scale", " metres")):  # fmt: skip
+                           ("reverse_cap", " metres"), ("reverse_scale", " metres"),
+                           ("silhouette_scale", " metres")):  # fmt: skip
             if not getattr(self, name) > 0:  # also rejects NaN
                 raise InputError(
                     f"PatchOptions: {name} must be > 0{unit}, found {getattr(self, name)}"

@@ -1,0 +1,128 @@
+"""The patch tracker's extensions (issue 20): silhouette coverage and the temporal prior —
+pixels and rays, gradients against float64 finite differences, and their effect."""
+
+import numpy as np
+import pytest
+
+from meshmocap.body.template import load_template
+from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.coverage import mask_samples, pixel_rays, uncovered
+from meshmocap.geometry.rotations import so3_exp
+from meshmocap.trackers.patch_model import build_patch_model
+from meshmocap.trackers.patch_solver import System, normal_pattern
+from meshmocap.trackers.patch_terms import add_joint_prior, add_silhouette, silhouette_rays
+
+RNG = np.random.default_rng(3)
+
+
+def _camera(dist=None) -> Camera:
+    R, t = look_at(np.array([0.0, -3.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    return Camera(intrinsics(160, 120, 60.0), R, t, 160, 120, dist=dist)
+
+
+@pytest.mark.parametrize("dist", [None, np.array([-0.2, 0.05, 0.001, -0.002, 0.0])])
+def test_pixel_rays_pass_through_their_pixels(dist):
+    """A point on the ray of pixel uv projects back to uv (to 1e-6 px, distortion
+    included: the inverse is a fixed-point iteration)."""
+    cam = _camera(dist)
+    uv = RNG.uniform([10, 10], [150, 110], size=(50, 2))
+    o, d = pixel_rays(cam, uv)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    back, depth = cam.project(o + 2.5 * d)
+    assert np.all(depth > 0) and np.abs(back - uv).max() < 1e-6
+
+
+def test_mask_samples_and_uncovered_pixels():
+    """A disc of surface points covers the disc's pixels; pixels of a larger silhouette
+    beyond it are uncovered, with their gap measured in metres at the points' depth."""
+    cam = _camera()
+    mask = np.zeros((120, 160), bool)
+    mask[40:80, 60:100] = True  # silhouette: a square
+    uv = mask_samples(mask, 2)
+    assert len(uv) == 20 * 20 and mask[uv[:, 1].astype(int), uv[:, 0].astype(int)].all()
+    # points on a dense grid filling the left half of the square, at 3 m
+    o, d = pixel_rays(cam, uv[uv[:, 0] < 80])
+    X = o + 3.0 * d / d[:, [1]]  # on the plane y = 0
+    f = cam.K[0, 0]
+    radius = 2.5 * 3.0 / f  # 2.5 px at 3 m (the grid spacing is 2 px)
+    pix, j, gap = uncovered(cam, uv, X, radius=radius)
+    assert set(pix) == set(np.flatnonzero(uv[:, 0] >= 82))  # 80 is 2 px from a point: covered
+    right = uv[pix, 0]
+    assert np.allclose(gap, (right - 78) * 3.0 / f, rtol=1e-6)  # nearest point: column 78
+    assert np.all(X[j, 0] > X[:, 0].max() - 1e-9)  # pulled points are on the right edge
+
+
+@pytest.fixture(scope="module")
+def patch_setup():
+    t = load_template("neutral_5k")
+    m = build_patch_model(t, n_patches=60, seed=1)
+    R = so3_exp(RNG.normal(scale=0.2, size=(m.P, 3)))
+    c = m.centres0 + RNG.normal(scale=0.02, size=(m.P, 3))
+    return t, m, R, c
+
+
+def _vertices(m, R, c):
+    return np.einsum("nij,nj->ni", R[m.labels], m.V0 - m.centres0[m.labels]) + c[m.labels]
+
+
+def test_silhouette_gradient_matches_finite_differences(patch_setup):
+    """The coverage term's gradient against central differences of Σ w |P⊥(v − o)|² with
+    its pixels, vertices and weights held (float64, h = 1e-6)."""
+    t, m, R, c = patch_setup
+    cam = _camera()
+    V = _vertices(m, R, c)
+    # a silhouette wider than the body's projection: its outer pixels are uncovered
+    uvb, depth = cam.project(V)
+    mask = np.zeros(cam.shape, bool)
+    lo, hi = np.floor(uvb.min(0)).astype(int) - 6, np.ceil(uvb.max(0)).astype(int) + 6
+    mask[max(lo[1], 0) : hi[1], max(lo[0], 0) : hi[0]] = True
+    rays = silhouette_rays([cam], [mask])
+    q = np.einsum("nij,nj->ni", R[m.labels], m.V0 - m.centres0[m.labels])
+    sys = System.empty(normal_pattern(m, 15))
+    radius, scale = 0.02, 0.05
+    e, share = add_silhouette(sys, rays, V, m.labels, q, radius=radius, scale=scale, weight=1.0)
+    pix, j, gap = uncovered(cam, rays.uv[0], V, radius=radius)
+    keep = gap < 0.3
+    pix, j, gap = pix[keep], j[keep], gap[keep]
+    w = 1 / (1 + (gap / scale) ** 2)
+    assert 0 < share < 1 and len(pix) > 20
+    o, d = rays.origin[0], rays.dirs[0][pix]
+
+    def energy(R, c):
+        v = _vertices(m, R, c)[j] - o
+        r = v - d * np.sum(v * d, axis=1, keepdims=True)
+        return np.sum(w * np.sum(r * r, axis=1)) / rays.n
+
+    assert e == pytest.approx(energy(R, c), rel=1e-12)
+    h = 1e-6
+    touched = np.unique(m.labels[j])
+    for k in RNG.choice(touched, 8, replace=False):
+        for a in range(6):
+            i = 6 * k + a
+            dl = np.zeros(6 * m.P)
+            dl[i] = h
+            dd = dl.reshape(m.P, 6)
+            fp = energy(so3_exp(dd[:, :3]) @ R, c + dd[:, 3:])
+            fm = energy(so3_exp(-dd[:, :3]) @ R, c - dd[:, 3:])
+            assert (fp - fm) / (2 * h) == pytest.approx(2 * sys.g[i], rel=1e-5, abs=1e-9), i
+
+
+def test_joint_prior_gradient_and_step(patch_setup):
+    """The temporal prior: value, gradient against finite differences, and one
+    Gauss–Newton step of it alone puts every joint on its prediction."""
+    t, m, _, _ = patch_setup
+    X = t.eval_skeleton.rest_positions.copy()
+    X_hat = X + RNG.normal(scale=0.05, size=X.shape)
+    sys = System.empty(normal_pattern(m, 15))
+    value = add_joint_prior(sys, X, X_hat, 2.0)
+    assert value == pytest.approx(np.sum((X - X_hat) ** 2), rel=1e-12)
+    g = sys.g[6 * m.P :]
+    h = 1e-6
+    for i in range(45):
+        d = np.zeros(45)
+        d[i] = h
+        ep = 2.0 * np.sum((X + d.reshape(15, 3) - X_hat) ** 2)
+        em = 2.0 * np.sum((X - d.reshape(15, 3) - X_hat) ** 2)
+        assert (ep - em) / (2 * h) == pytest.approx(2 * g[i], rel=1e-6, abs=1e-10)
+    step = sys.solve(0.0)[6 * m.P :].reshape(15, 3)
+    assert np.abs(X + step - X_hat).max() < 2e-3 * np.abs(X - X_hat).max()
