@@ -84,13 +84,17 @@ def table_of(result: object, *, digits: int = 1) -> Table:
     return Table(title, tuple(heads), shown, digits)
 
 
+def _seconds(ev: Evaluation) -> tuple[float, float]:
+    return ev.seconds.mean, ev.seconds.median
+
+
 def evaluation_tables(ev: Evaluation) -> list[Table]:
     """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables."""
     out = [
         Table(
             "Overview",
-            ("method", "frames", "unhealthy", "s/frame mean", "s/frame median"),
-            ((ev.method, ev.n_frames, ev.unhealthy, ev.seconds.mean, ev.seconds.median),),
+            ("method", "template", "frames", "unhealthy", "s/frame mean", "s/frame median"),
+            ((ev.method, ev.template, ev.n_frames, ev.unhealthy, *_seconds(ev)),),
             digits=3,
         )
     ]

@@ -109,6 +109,18 @@ def frame_path(track: str | os.PathLike, index: int) -> Path:
     return Path(track) / "frames" / f"{index:05d}.npz"
 
 
+#: How a track's template was chosen (``track.json``'s ``template_source``; absent: given).
+TEMPLATE_SOURCES = {"given": "given", "capture": "named by capture.json",
+                    "estimated": "estimated from the capture"}  # fmt: skip
+
+
+def template_label(meta: dict) -> str:
+    """``"NAME (how it was chosen)"`` of the template a track used, from its ``track.json``
+    (e.g. ``"subject (estimated from the capture)"``; ``"neutral_5k (given)"``)."""
+    source = str(meta.get("template_source", "given"))
+    return f"{meta.get('template', '?')} ({TEMPLATE_SOURCES.get(source, source)})"
+
+
 def start_track(
     path: str | os.PathLike, meta: dict, faces: np.ndarray, *, resume: bool = True
 ) -> list[int]:
