@@ -51,7 +51,10 @@ def capture_of(args):
     if not motion.replace("_", "").isalpha():
         hits = sorted((DATA / "mocap" / "cmu").glob(f"{motion}.*"))
         motion = str(next(h for h in hits if h.suffix in (".amc", ".bvh")))
-    spec = SynthSpec(motion=motion, template=args.template, rig=args.rig, fps=60.0,
+    # a file whose header misstates its rate (16_01: 30 for 120 fps) is resampled so that
+    # its true motion plays at 60 fps
+    fps = 60.0 * (args.header_fps / args.source_fps if args.source_fps else 1.0)
+    spec = SynthSpec(motion=motion, template=args.template, rig=args.rig, fps=fps,
                      start=args.start, stop=args.stop, step=args.step,
                      degradation=DEGRADED if args.degrade else Degradation())  # fmt: skip
     name = f"{Path(args.motion).stem}-{args.rig}-{args.start}-{args.stop}-{args.step}"
@@ -117,6 +120,8 @@ def main() -> None:
     ap.add_argument("--stop", type=int, default=300)
     ap.add_argument("--step", type=int, default=None)
     ap.add_argument("--rig", default="humaneva4")
+    ap.add_argument("--source-fps", type=float, default=None, help="true rate of the file")
+    ap.add_argument("--header-fps", type=float, default=30.0, help="rate its header states")
     ap.add_argument("--template", default="neutral_5k")
     ap.add_argument("--degrade", action="store_true")
     ap.add_argument("--phantom", type=float, default=0.02, help="metres off the true surface")

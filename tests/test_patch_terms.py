@@ -126,3 +126,21 @@ def test_joint_prior_gradient_and_step(patch_setup):
         assert (ep - em) / (2 * h) == pytest.approx(2 * g[i], rel=1e-6, abs=1e-10)
     step = sys.solve(0.0)[6 * m.P :].reshape(15, 3)
     assert np.abs(X + step - X_hat).max() < 2e-3 * np.abs(X - X_hat).max()
+
+
+def test_bench_ablation_table_reports_each_change_against_patch():
+    """One row per ablation present, one column per capture with a ``patch`` row; each
+    cell is the ablation's mean and its change against ``patch``."""
+    from meshmocap.apps.bench_report import ablation_table
+    from meshmocap.apps.bench_rows import BenchRow, not_applicable
+
+    rows = [BenchRow("walk", "patch", mean_mm=10.0), BenchRow("walk", "patch_nosil", mean_mm=12.5),
+            BenchRow("jog", "patch", mean_mm=20.0), BenchRow("jog", "patch_paper", mean_mm=19.0),
+            BenchRow("crane", "articulated_icp", mean_mm=30.0),
+            not_applicable("jog", "patch_nosil", "no silhouettes")]  # fmt: skip
+    table = ablation_table(rows).splitlines()
+    assert table[0] == "| method | without | walk | jog |"
+    assert table[2] == "| patch | — | 10.0 | 20.0 |"
+    assert table[3] == "| patch_nosil | silhouette coverage | 12.5 (+2.5) |  |"
+    assert table[4] == "| patch_paper | all four extensions |  | 19.0 (-1.0) |"
+    assert ablation_table(rows[:1]) == ""

@@ -66,6 +66,26 @@ def markdown_table(rows: Sequence[BenchRow]) -> str:
     return "\n".join(lines)
 
 
+def ablation_table(rows: Sequence[BenchRow]) -> str:
+    """The patch tracker's ablations (:data:`~meshmocap.trackers.registry.PATCH_ABLATIONS`)
+    as a table like the papers': one row per method, one column per capture, each cell the
+    mean error and its change against ``patch`` (mm); empty when no capture has both."""
+    from meshmocap.trackers.registry import PATCH_ABLATIONS
+
+    ok = {(r.capture, r.method): r.mean_mm for r in rows if r.status == "ok"}
+    caps = [c for c in dict.fromkeys(r.capture for r in rows) if (c, "patch") in ok]
+    methods = [m for m in PATCH_ABLATIONS if any((c, m) in ok for c in caps)]
+    if not methods:
+        return ""
+    lines = ["| method | without | " + " | ".join(caps) + " |", "|---|---|" + "--:|" * len(caps)]
+    lines.append("| patch | — | " + " | ".join(_num(ok[c, "patch"], 1) for c in caps) + " |")
+    for m in methods:
+        cells = [f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, 'patch']:+.1f})" if (c, m) in ok
+                 else "" for c in caps]  # fmt: skip
+        lines.append(f"| {m} | {PATCH_ABLATIONS[m]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def tradeoff_table(points: Sequence[TradeoffPoint]) -> str:
     """Fig. 8's numbers as a markdown table."""
     lines = ["| kept fraction | s/frame | mean mm | silhouette % | flagged |"]
@@ -149,6 +169,10 @@ def write_report(
         "",
         markdown_table(rows),
     ]
+    ablations = ablation_table(rows)
+    if ablations:
+        md += ["", "## Ablations of the patch tracker (mean mm; change against `patch`)", "",
+               ablations]  # fmt: skip
     if skipped:
         md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
     if tradeoff:

@@ -32,12 +32,42 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         "PatchOptions",
         {"classifier": "none"},
     ),
+    # the patch tracker without each of its extensions beyond the paper (issue 20), and
+    # without all four (the paper's method with the earlier sessions' fixes)
+    **{
+        name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
+        for name, fixed in (
+            ("patch_nosil", {"lambda_silhouette": 0.0}),
+            ("patch_nocoarse", {"coarse_iter": 0}),
+            ("patch_nogate", {"accel_gate": 0.0}),
+            ("patch_notemporal", {"lambda_temporal": 0.0}),
+            (
+                "patch_paper",
+                {
+                    "lambda_silhouette": 0.0,
+                    "coarse_iter": 0,
+                    "accel_gate": 0.0,
+                    "lambda_temporal": 0.0,
+                },
+            ),
+        )
+    },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
     # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1)
     "cage": (*_CAGE, {}),
     "cage_quads": (*_CAGE, {"space": "quads"}),
     "cage_noreg": (*_CAGE, {"variance_weight": 0.0}),
     "cage_nolocal": (*_CAGE, {"local_iters": 0}),
+}
+
+#: The patch tracker's ablations (bench's ablation table): method → what it leaves out.
+PATCH_ABLATIONS: dict[str, str] = {
+    "patch_noclf": "body-part classifier (§III-B)",
+    "patch_nosil": "silhouette coverage",
+    "patch_nocoarse": "part-rigid first iterations",
+    "patch_nogate": "acceleration gate of the prediction",
+    "patch_notemporal": "temporal prior",
+    "patch_paper": "all four extensions",
 }
 
 #: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
