@@ -50,6 +50,7 @@ def capture_of(args):
     motion = args.motion
     if not motion.replace("_", "").isalpha():
         hits = sorted((DATA / "mocap" / "cmu").glob(f"{motion}.*"))
+        hits += sorted((DATA / "mocap" / "cmu" / "library").glob(f"{motion}.*"))
         motion = str(next(h for h in hits if h.suffix in (".amc", ".bvh")))
     # a file whose header misstates its rate (16_01: 30 for 120 fps) is resampled so that
     # its true motion plays at 60 fps

@@ -144,3 +144,34 @@ def test_bench_ablation_table_reports_each_change_against_patch():
     assert table[3] == "| patch_nosil | silhouette coverage | 12.5 (+2.5) |  |"
     assert table[4] == "| patch_paper | all four extensions |  | 19.0 (-1.0) |"
     assert ablation_table(rows[:1]) == ""
+
+
+def test_hull_points_deep_inside_the_model_fall_to_the_outlier_class():
+    """``interior_scale``: points 5 cm behind the model surface (a silhouette hole's tunnel
+    through the hull) keep under 10 % of their E-step weight, points on it all of theirs;
+    without the option both keep most of it."""
+    from types import SimpleNamespace
+
+    from pykdtree.kdtree import KDTree
+
+    from meshmocap.trackers.patch import PatchOptions, PatchTracker
+
+    t = load_template("neutral_5k")
+    R = np.broadcast_to(np.eye(3), (t.skeleton.n_joints, 3, 3)).copy()
+    weights = {}
+    for scale in (0.0, 0.01):
+        tr = PatchTracker(PatchOptions(n_patches=60, interior_scale=scale,
+                                       joint_readout="skeleton"))  # fmt: skip
+        tr.init(t, SimpleNamespace(index=0), R, np.zeros(3))
+        Vc, Nc = tr.own_vertices()
+        inside = Vc - 0.05 * Nc
+        depth, _ = KDTree(Vc).query(inside, k=1)  # 5 cm deep: in the torso, not a thin limb
+        deep = np.flatnonzero(depth > 0.045)
+        on, ins = RNG.choice(len(Vc), 200, replace=False), RNG.choice(deep, 200, replace=False)
+        Y, NY = np.vstack([Vc[on] + 0.002 * Nc[on], inside[ins]]), np.vstack([Nc[on], Nc[ins]])
+        tr.sigma = 0.03
+        _, _, w, y, _ = tr._assign(Y, NY, None, Vc, Nc)
+        is_in = np.isin(y, inside[ins]).all(axis=1)
+        weights[scale] = (w[~is_in].sum() / 200, w[is_in].sum() / 200)
+    assert weights[0.0][0] > 0.95 and weights[0.0][1] > 0.5
+    assert weights[0.01][0] > 0.95 and weights[0.01][1] < 0.1

@@ -90,6 +90,9 @@ SURFACE_JOINT_ERROR = 0.01
 FLOOR_POSE_STEP = 4
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
+#: Depth (metres) inside the model below which a hull point is not yet suspect
+#: (``interior_scale``): hull boundaries eroded by silhouette jitter, a model a little fat.
+INTERIOR_MARGIN = 0.01
 #: Template vertices (every k-th) whose projections must cover the silhouettes.
 COVERAGE_SAMPLES = 6000
 
@@ -325,7 +328,9 @@ class PatchTracker:
         while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
-            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
+            coarse = n_iter <= o.coarse_iter
+            labels = ycls if o.coarse_labels or not coarse else None
+            patch, v, w, y, ny = self._assign(Y, NY, labels, Vc, Nc)
             self._lap("assign")
             sys = System.empty(self.pattern)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
@@ -359,7 +364,7 @@ class PatchTracker:
                 K = len(self.X)
                 e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
             self._lap("system")
-            if n_iter <= o.coarse_iter:  # body parts as rigid groups first (coarse_iter)
+            if coarse:  # body parts as rigid groups first (coarse_iter)
                 S = group_basis(m.bone_of_patch, self.c, len(self.X))
                 delta = sys.solve_grouped(o.damping, S)
             else:
@@ -448,6 +453,10 @@ class PatchTracker:
         _, first = np.unique(key, return_index=True)  # nearest compatible vertex per patch
         i, j, patch = i[first], j[first], patch[first]
         d2 = d[i, j].astype(np.float64) ** 2
+        if o.interior_scale > 0:  # hull points deep inside the model: holes' tunnels
+            vx = idx[i, j]
+            depth = np.einsum("ij,ij->i", Vc[vx] - Y[i], Nc[vx]) - INTERIOR_MARGIN
+            d2 = d2 + (np.maximum(depth, 0.0) / o.interior_scale * self.sigma) ** 2
         p = np.exp(-0.5 * d2 / self.sigma**2)
         p_out = np.exp(-0.5 * o.outlier_sigmas**2)
         denom = np.bincount(i, p, minlength=len(Y)) + p_out

@@ -94,6 +94,11 @@ class PatchOptions:
         its own; 0 turns it off. A limb that moved far since the last frame is pulled back
         whole by the points it still reaches, instead of patch by patch onto the nearest
         wrong points.
+    coarse_labels : bool
+        Whether the coarse iterations keep the classifier's part matching
+        (``part_matching``); False: they match every kept point to its nearest patches,
+        as articulated ICP does, so a limb the classifier mislabels (after an abrupt
+        start the previous fit's parts are in the wrong places) is still found.
     k_neighbours : int
         Candidate vertices per observed point.
     damping : float
@@ -107,6 +112,15 @@ class PatchOptions:
         more than this (metres per frame) or half its speed is not extrapolated (0: every
         joint is). A velocity that just jumped comes from an abrupt start or a fit that
         slipped; extrapolating it throws the joint further off.
+    interior_scale : float
+        Hull points inside the model (not in the paper; 0 turns it off). A visual hull
+        contains the body, so a hull point deeper than
+        :data:`~meshmocap.trackers.patch.INTERIOR_MARGIN` behind the model surface comes
+        from a silhouette hole (which carves a tunnel through the hull: 16 % of the hull
+        points of CMU 05_01 with the ``degraded`` silhouettes lie over 1 cm inside the
+        true body, none with clean ones) or a model out of place. Each metre of depth
+        beyond the margin counts as ``1 / interior_scale`` σ of distance in the E-step,
+        so deep points fall to the outlier class.
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -169,7 +183,9 @@ class PatchOptions:
     sigma_max: float = 0.05
     outlier_sigmas: float = 3.0
     coarse_iter: int = 0
+    coarse_labels: bool = True
     k_neighbours: int = 8
+    interior_scale: float = 0.0
     normal_cos: float = 0.0
     residual: Residual = "point_to_point"
     damping: float = 1e-4
@@ -201,7 +217,7 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
             )
-        for name in ("lambda_silhouette", "lambda_temporal", "accel_gate"):
+        for name in ("lambda_silhouette", "lambda_temporal", "accel_gate", "interior_scale"):
             if not getattr(self, name) >= 0:  # also rejects NaN
                 raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
         for name, unit in (("outlier_sigmas", ""), ("fast_motion", " metres"),
