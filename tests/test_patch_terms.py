@@ -130,20 +130,24 @@ def test_joint_prior_gradient_and_step(patch_setup):
 
 def test_bench_ablation_table_reports_each_change_against_patch():
     """One row per ablation present, one column per capture with a ``patch`` row; each
-    cell is the ablation's mean and its change against ``patch``."""
+    cell is the ablation's mean and its change against ``patch``; another tracker's
+    ablations against that tracker."""
     from meshmocap.apps.bench_report import ablation_table
     from meshmocap.apps.bench_rows import BenchRow, not_applicable
 
-    rows = [BenchRow("walk", "patch", mean_mm=10.0), BenchRow("walk", "patch_nosil", mean_mm=12.5),
+    rows = [BenchRow("walk", "patch", mean_mm=10.0), BenchRow("walk", "patch_sil", mean_mm=12.5),
             BenchRow("jog", "patch", mean_mm=20.0), BenchRow("jog", "patch_paper", mean_mm=19.0),
             BenchRow("crane", "articulated_icp", mean_mm=30.0),
-            not_applicable("jog", "patch_nosil", "no silhouettes")]  # fmt: skip
+            not_applicable("jog", "patch_sil", "no silhouettes")]  # fmt: skip
     table = ablation_table(rows).splitlines()
-    assert table[0] == "| method | without | walk | jog |"
+    assert table[0] == "| method | change | walk | jog |"
     assert table[2] == "| patch | — | 10.0 | 20.0 |"
-    assert table[3] == "| patch_nosil | silhouette coverage | 12.5 (+2.5) |  |"
-    assert table[4] == "| patch_paper | all four extensions |  | 19.0 (-1.0) |"
+    assert table[3] == "| patch_sil | + silhouette coverage | 12.5 (+2.5) |  |"
+    assert table[4] == "| patch_paper | − every extension beyond the paper |  | 19.0 (-1.0) |"
     assert ablation_table(rows[:1]) == ""
+    rows.append(BenchRow("crane", "patch", mean_mm=20.0))
+    other = ablation_table(rows, "articulated_icp", {"patch": "the patch tracker"})
+    assert other.splitlines()[3] == "| patch | the patch tracker | 20.0 (-10.0) |"
 
 
 def test_hull_points_deep_inside_the_model_fall_to_the_outlier_class():

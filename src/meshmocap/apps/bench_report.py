@@ -66,24 +66,41 @@ def markdown_table(rows: Sequence[BenchRow]) -> str:
     return "\n".join(lines)
 
 
-def ablation_table(rows: Sequence[BenchRow]) -> str:
-    """The patch tracker's ablations (:data:`~meshmocap.trackers.registry.PATCH_ABLATIONS`)
-    as a table like the papers': one row per method, one column per capture, each cell the
-    mean error and its change against ``patch`` (mm); empty when no capture has both."""
-    from meshmocap.trackers.registry import PATCH_ABLATIONS
-
+def ablation_table(
+    rows: Sequence[BenchRow], base: str = "patch", ablations: dict[str, str] | None = None
+) -> str:
+    """A tracker's ablations as a table like the papers': one row per variant of
+    ``ablations`` (method → what it changes against ``base``; default the patch tracker's,
+    :data:`~meshmocap.trackers.registry.PATCH_ABLATIONS`), one column per capture, each
+    cell the variant's mean error and its change against ``base`` (mm); empty when no
+    capture has both."""
+    if ablations is None:
+        from meshmocap.trackers.registry import PATCH_ABLATIONS as ablations
     ok = {(r.capture, r.method): r.mean_mm for r in rows if r.status == "ok"}
-    caps = [c for c in dict.fromkeys(r.capture for r in rows) if (c, "patch") in ok]
-    methods = [m for m in PATCH_ABLATIONS if any((c, m) in ok for c in caps)]
+    caps = [c for c in dict.fromkeys(r.capture for r in rows) if (c, base) in ok]
+    methods = [m for m in ablations if any((c, m) in ok for c in caps)]
     if not methods:
         return ""
-    lines = ["| method | without | " + " | ".join(caps) + " |", "|---|---|" + "--:|" * len(caps)]
-    lines.append("| patch | — | " + " | ".join(_num(ok[c, "patch"], 1) for c in caps) + " |")
+    lines = ["| method | change | " + " | ".join(caps) + " |", "|---|---|" + "--:|" * len(caps)]
+    lines.append(f"| {base} | — | " + " | ".join(_num(ok[c, base], 1) for c in caps) + " |")
     for m in methods:
-        cells = [f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, 'patch']:+.1f})" if (c, m) in ok
+        cells = [f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, base]:+.1f})" if (c, m) in ok
                  else "" for c in caps]  # fmt: skip
-        lines.append(f"| {m} | {PATCH_ABLATIONS[m]} | " + " | ".join(cells) + " |")
+        lines.append(f"| {m} | {ablations[m]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _ablation_sections(rows: Sequence[BenchRow]) -> list[str]:
+    """One ablation table per tracker that registers its ablations (``registry``'s
+    ``<TRACKER>_ABLATIONS``)."""
+    from meshmocap.trackers import registry
+
+    md = []
+    for base in ("patch", "cage"):
+        table = ablation_table(rows, base, getattr(registry, f"{base.upper()}_ABLATIONS", {}))
+        if table:
+            md += ["", f"## Ablations of `{base}` (mean mm; change against `{base}`)", "", table]
+    return md
 
 
 def tradeoff_table(points: Sequence[TradeoffPoint]) -> str:
@@ -169,10 +186,7 @@ def write_report(
         "",
         markdown_table(rows),
     ]
-    ablations = ablation_table(rows)
-    if ablations:
-        md += ["", "## Ablations of the patch tracker (mean mm; change against `patch`)", "",
-               ablations]  # fmt: skip
+    md += _ablation_sections(rows)
     if skipped:
         md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
     if tradeoff:

@@ -329,8 +329,7 @@ class PatchTracker:
             n_iter += 1
             Vc, Nc = self.own_vertices()
             coarse = n_iter <= o.coarse_iter
-            labels = ycls if o.coarse_labels or not coarse else None
-            patch, v, w, y, ny = self._assign(Y, NY, labels, Vc, Nc)
+            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
             self._lap("assign")
             sys = System.empty(self.pattern)
             q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])

@@ -32,24 +32,21 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         "PatchOptions",
         {"classifier": "none"},
     ),
-    # the patch tracker without each of its extensions beyond the paper (issue 20), and
-    # without all four (the paper's method with the earlier sessions' fixes)
+    # the patch tracker with or without each of its extensions beyond the paper (issue 20;
+    # PATCH_ABLATIONS), and with none of them (the paper's method with earlier fixes)
     **{
         name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
         for name, fixed in (
-            ("patch_nosil", {"lambda_silhouette": 0.0}),
-            ("patch_nocoarse", {"coarse_iter": 0}),
             ("patch_nogate", {"accel_gate": 0.0}),
-            ("patch_notemporal", {"lambda_temporal": 0.0}),
+            ("patch_interior", {"interior_scale": 0.01}),
+            ("patch_sil", {"lambda_silhouette": 10.0}),
+            ("patch_coarse", {"coarse_iter": 2}),
+            ("patch_temporal", {"lambda_temporal": 1.0}),
             (
                 "patch_paper",
-                {
-                    "lambda_silhouette": 0.0,
-                    "coarse_iter": 0,
-                    "accel_gate": 0.0,
-                    "lambda_temporal": 0.0,
-                },
-            ),
+                {"accel_gate": 0.0, "interior_scale": 0.0, "lambda_silhouette": 0.0,
+                 "coarse_iter": 0, "lambda_temporal": 0.0},
+            ),  # fmt: skip
         )
     },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
@@ -60,14 +57,15 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
     "cage_nolocal": (*_CAGE, {"local_iters": 0}),
 }
 
-#: The patch tracker's ablations (bench's ablation table): method → what it leaves out.
+#: The patch tracker's ablations (bench's ablation table): method → what it changes.
 PATCH_ABLATIONS: dict[str, str] = {
-    "patch_noclf": "body-part classifier (§III-B)",
-    "patch_nosil": "silhouette coverage",
-    "patch_nocoarse": "part-rigid first iterations",
-    "patch_nogate": "acceleration gate of the prediction",
-    "patch_notemporal": "temporal prior",
-    "patch_paper": "all four extensions",
+    "patch_noclf": "− body-part classifier (§III-B)",
+    "patch_nogate": "− acceleration gate of the prediction",
+    "patch_interior": "+ hull points inside the model as outliers",
+    "patch_sil": "+ silhouette coverage",
+    "patch_coarse": "+ part-rigid first iterations",
+    "patch_temporal": "+ temporal prior on the joints",
+    "patch_paper": "− every extension beyond the paper",
 }
 
 #: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
