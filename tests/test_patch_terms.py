@@ -68,11 +68,11 @@ def _vertices(m, R, c):
 def test_silhouette_gradient_matches_finite_differences(patch_setup):
     """The coverage term's gradient against central differences of Σ w |P⊥(v − o)|² with
     its pixels, vertices and weights held (float64, h = 1e-6)."""
-    t, m, R, c = patch_setup
+    _, m, R, c = patch_setup
     cam = _camera()
     V = _vertices(m, R, c)
     # a silhouette wider than the body's projection: its outer pixels are uncovered
-    uvb, depth = cam.project(V)
+    uvb, _ = cam.project(V)
     mask = np.zeros(cam.shape, bool)
     lo, hi = np.floor(uvb.min(0)).astype(int) - 6, np.ceil(uvb.max(0)).astype(int) + 6
     mask[max(lo[1], 0) : hi[1], max(lo[0], 0) : hi[0]] = True

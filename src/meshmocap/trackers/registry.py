@@ -44,9 +44,11 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
             ("patch_temporal", {"lambda_temporal": 1.0}),
             (
                 "patch_paper",
-                {"accel_gate": 0.0, "interior_scale": 0.0, "lambda_silhouette": 0.0,
-                 "coarse_iter": 0, "lambda_temporal": 0.0},
-            ),  # fmt: skip
+                dict.fromkeys(
+                    ("accel_gate", "interior_scale", "lambda_silhouette", "lambda_temporal"), 0.0
+                )
+                | {"coarse_iter": 0},
+            ),
         )
     },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
