@@ -179,3 +179,25 @@ def test_hull_points_deep_inside_the_model_fall_to_the_outlier_class():
         weights[scale] = (w[~is_in].sum() / 200, w[is_in].sum() / 200)
     assert weights[0.0][0] > 0.95 and weights[0.0][1] > 0.5
     assert weights[0.01][0] > 0.95 and weights[0.01][1] < 0.1
+
+
+def test_acceleration_gate_stops_extrapolating_a_velocity_that_just_jumped():
+    """``accel_gate`` (m/s²): the whole body starting to move at 3 cm a frame from rest
+    (1.8 m/s at 60 fps: 108 m/s² > 72) is not extrapolated; at 30 fps (27 m/s²) or with
+    the gate off it is, each patch carried along."""
+    from types import SimpleNamespace
+
+    from meshmocap.trackers.patch import PatchOptions, PatchTracker
+
+    t = load_template("neutral_5k")
+    R = np.broadcast_to(np.eye(3), (t.skeleton.n_joints, 3, 3)).copy()
+    step = np.array([0.03, 0.0, 0.0])
+    for gate, fps, moved in ((72.0, 60.0, False), (72.0, 30.0, True), (0.0, 60.0, True)):
+        tr = PatchTracker(PatchOptions(n_patches=60, accel_gate=gate, joint_readout="skeleton"))
+        tr.init(t, SimpleNamespace(index=0), R, np.zeros(3))
+        X0, c0 = tr.X.copy(), tr.c.copy()
+        tr.X, tr.c = X0 + step, c0 + step  # the last frame moved 3 cm, the one before not
+        tr._predict_by_bones(fps)
+        expect = 2 * step if moved else step
+        assert np.abs(tr.X - X0 - expect).max() < 1e-9
+        assert np.abs(tr.c - c0 - expect).max() < 1e-9

@@ -71,6 +71,11 @@ MAX_PREDICTION_ANGLE = 0.3
 #: Largest predicted displacement (metres) of a joint when patches follow their bones
 #: (a running foot moves ~13 cm per frame at 60 fps).
 MAX_BONE_PREDICTION = 0.15
+#: ``accel_gate``: a joint's velocity change beyond this multiple of its last speed (and
+#: beyond ``accel_gate``) stops its extrapolation.
+GATE_RATIO = 0.5
+#: Frame rate assumed where a capture states none (``accel_gate``).
+DEFAULT_FPS = 60.0
 #: Largest rotation (radians) of a patch in one Gauss–Newton step.
 MAX_STEP_ANGLE = 0.3
 #: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
@@ -292,7 +297,9 @@ class PatchTracker:
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
         budget += o.coarse_iter
         if o.prediction == "bones":
-            self._predict_by_bones()
+            self._predict_by_bones(
+                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
+            )
         elif o.prediction == "patches":
             # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
             # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
@@ -399,7 +406,7 @@ class PatchTracker:
         self.n_steps += 1
         return result
 
-    def _predict_by_bones(self) -> None:
+    def _predict_by_bones(self, fps: float = DEFAULT_FPS) -> None:
         """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
         every patch moved rigidly with its bone: the rotation turning the bone's old
         direction into its new one, about the patch's bone point Δ (Eq. 8). Joints average
@@ -407,11 +414,11 @@ class PatchTracker:
         m = self.model
         _, _, Xp = self.prev
         v = self.X - Xp
-        gate = self.opts.accel_gate
+        gate = self.opts.accel_gate / fps**2  # m/s² → metres per frame²
         if gate > 0:  # no extrapolation of a velocity that just jumped
             v_old = Xp - self.X_prev2
             jump = np.linalg.norm(v - v_old, axis=1)
-            v = v * (jump <= np.maximum(gate, 0.5 * np.linalg.norm(v_old, axis=1)))[:, None]
+            v = v * (jump <= np.maximum(gate, GATE_RATIO * np.linalg.norm(v_old, axis=1)))[:, None]
         X_new = self.X + _clip_rows(v, MAX_BONE_PREDICTION)
         j, ch, g = m.bone_j, m.bone_child, m.gamma[:, None]
         a, b = self.X[ch] - self.X[j], X_new[ch] - X_new[j]

@@ -96,6 +96,25 @@ class PatchOptions:
         wrong points. (Matching every kept point freely in these iterations, as
         articulated ICP does, instead of by the classifier's parts: CMU 08_05 from its
         T-pose 12.7 → 43.6 mm.)
+    k_neighbours : int
+        Candidate vertices per observed point.
+    damping : float
+        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
+    prediction : {"bones", "patches", "none"}
+        Warm start of each frame: constant-velocity extrapolation of the joints, each patch
+        carried rigidly by its bone ("bones"); of every patch transform and joint on its
+        own ("patches"); or the last frame as it is ("none"). Steps are clipped.
+    accel_gate : float
+        With ``prediction="bones"``: a joint whose velocity changed in the last frame by
+        more than this acceleration (m/s², at the capture's frame rate) and more than
+        half its speed is not extrapolated (0: every joint is). A velocity that just jumped
+        comes from an abrupt start or a fit that slipped; extrapolating it throws the joint
+        further off. Clips that start from a T-pose (60 frames at 60 fps, 4 cameras,
+        ``benchmarks/sweep_patch.py``): CMU 13_32 31.8 → 21.5 mm, 08_05 56.5 → 12.7 mm
+        (without it the left forearm is thrown 0.5 m at frame 2 and then gets all its data
+        from phantom volumes and other parts' points); smooth clips unchanged (05_07 11.4
+        → 11.4 mm). In metres per frame² it would gate ordinary motion at 30 fps (05_05
+        at 30 fps: 14.1 → 21.8 mm with 0.02 m/frame²).
     interior_scale : float
         Hull points inside the model (not in the paper; 0 turns it off). A visual hull
         contains the body, so a hull point deeper than
@@ -173,7 +192,7 @@ class PatchOptions:
     residual: Residual = "point_to_point"
     damping: float = 1e-4
     prediction: Prediction = "bones"
-    accel_gate: float = 0.02
+    accel_gate: float = 72.0
     joint_readout: JointReadout = "blend"
     lambda_silhouette: float = 0.0
     silhouette_scale: float = 0.05
