@@ -62,6 +62,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--captures", nargs="+", required=True)
     ap.add_argument("--variants", nargs="+", default=["base"])
+    ap.add_argument("--frames", type=int, default=None, help="track only the first N")
     ap.add_argument("--template", default="neutral_5k")
     ap.add_argument("--work", default="/tmp/meshmocap-sweep")
     ap.add_argument("--out", default="/tmp/meshmocap-sweep/sweep.csv")
@@ -77,7 +78,8 @@ def main() -> None:
                          "worst_joint_mm", "frames_over_60", "s_per_frame", "load"])  # fmt: skip
         for name in args.captures:
             cap = capture_of(name, work, args.template)
-            true = np.stack([cap[i].truth.joints for i in range(len(cap))])
+            n = len(cap) if args.frames is None else min(args.frames, len(cap))
+            true = np.stack([cap[i].truth.joints for i in range(n)])
             for v in args.variants:
                 vname, _, rest = v.partition(":")
                 opts = {k: ast.literal_eval(x) for k, x in
@@ -88,9 +90,9 @@ def main() -> None:
                     tracker = PatchTracker(PatchOptions(**opts))
                 t0 = time.perf_counter()
                 track = track_sequence(tracker, t, cap, work / "tracks" / f"{name}-{v}",
-                                       resume=False, show_progress=False,
+                                       frames=range(n), resume=False, show_progress=False,
                                        vertices=False)  # fmt: skip
-                sec = (time.perf_counter() - t0) / max(len(cap) - 1, 1)
+                sec = (time.perf_counter() - t0) / max(n - 1, 1)
                 e = np.linalg.norm(track.joints - true, axis=2)[1:] * 1000
                 ef = np.nan_to_num(e, nan=1e4).mean(axis=1)
                 row = [name, v, len(e), f"{np.nanmean(e):.1f}", f"{ef.max():.1f}",
