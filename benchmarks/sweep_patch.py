@@ -12,8 +12,30 @@ at frame 0: an abrupt start), e.g. ``13_32:0:80`` or ``05_01:0:160:2+deg``. Vari
 ``NAME`` or ``NAME:opt=value,opt=value`` (PatchOptions fields). Held-out clips 05_03,
 60_01 and 61_01 are for checking, never for choosing.
 
+Results (2026-11-25, 60 frames each unless stated, mean/worst frame/worst joint in mm;
+2-core machine at load 6–10; "gate" = ``accel_gate`` 0.02 m/frame² at 60 fps, i.e. the
+default 72 m/s²). Library trials, for choosing (13_32 and 08_05 start in a T-pose):
+
+| capture | no gate | gate | gate + interior | gate + silhouette | articulated ICP |
+|---|---|---|---|---|---|
+| 13_32 | 31.8/39/233 | 21.5/39/176 | | | |
+| 08_05 | 56.5/165/682 | 12.7/54/246 | 13.0/57/262 | 27.1/48/441 | 23.5/88/401 |
+| 05_07 | 11.4/22/109 | 11.4/21/103 | 11.5/21/104 | | |
+| 61_03+deg | 24.7/33/92 | 23.8/35/114 | 25.5/38/116 | 24.7/38/124 | 19.6/27/97 |
+| 05_05, 30 fps | 14.1/26/83 | 14.1/26/83 | | | 39.3/106/882 |
+
+Without the gate: ``coarse_iter=2`` 13_32 31.8 → 30.8, 08_05 56.5 → 55.8 (2 more iterations
+a frame); ``lambda_temporal=10`` 13_32 31.8 → 100.5. With it: coarse iterations matching
+freely (no part labels) 08_05 12.7 → 43.6; 05_01 with degraded silhouettes (first 80 frames)
+23.8, with ``lambda_temporal=1`` 27.7, with ``interior_scale=0.01`` 21.8; a gate of 0.02
+m/frame² at 30 fps (05_05) 14.1 → 21.8 (hence m/s²). Held-out trials, checked after
+choosing: 05_03 gate 31.0 / 87 / 655, no gate 24.6 / 41 / 152, ICP 23.6 / 46 / 256 (within a
+few mm of each other to frame 50, then the gated run loses a right-side joint); 60_01 19.9 /
+20.2 / ICP 12.8 (means: gate / no gate / ICP); 61_01 12.4 / 13.0 / ICP 18.6. The crane
+through ring8 hulls (bench protocol, 30 fps): 31.2 mm per vertex with the gate, as without.
+
 Run: ``python benchmarks/sweep_patch.py --captures 13_32:0:60 ... --variants base
-gate:accel_gate=0.03 ...``. Captures are made once in ``--work``; one CSV row per capture
+nogate:accel_gate=0 icp``. Captures are made once in ``--work``; one CSV row per capture
 and variant is appended to ``--out``.
 """
 
