@@ -201,3 +201,20 @@ def test_acceleration_gate_stops_extrapolating_a_velocity_that_just_jumped():
         expect = 2 * step if moved else step
         assert np.abs(tr.X - X0 - expect).max() < 1e-9
         assert np.abs(tr.c - c0 - expect).max() < 1e-9
+
+
+def test_bench_says_where_patch_loses_to_its_baseline():
+    """The report names each capture where ``patch`` has a larger mean than articulated
+    ICP, with both means and worst frames; nothing where it wins."""
+    from meshmocap.apps.bench_report import baseline_losses
+    from meshmocap.apps.bench_rows import BenchRow
+
+    rows = [BenchRow("walk", "patch", mean_mm=10.0, worst_frame_mm=20.0),
+            BenchRow("walk", "articulated_icp", mean_mm=12.0, worst_frame_mm=25.0),
+            BenchRow("jog", "patch", mean_mm=22.0, worst_frame_mm=60.0),
+            BenchRow("jog", "articulated_icp", mean_mm=18.0, worst_frame_mm=30.5)]  # fmt: skip
+    assert baseline_losses(rows) == (
+        "**`patch` is worse than `articulated_icp` on:** `jog` "
+        "(22.0 against 18.0 mm, worst frame 60.0 against 30.5)."
+    )
+    assert baseline_losses(rows[:2]) == ""

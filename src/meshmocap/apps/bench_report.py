@@ -90,6 +90,24 @@ def ablation_table(
     return "\n".join(lines)
 
 
+def baseline_losses(
+    rows: Sequence[BenchRow], method: str = "patch", baseline: str = "articulated_icp"
+) -> str:
+    """One line saying plainly on which captures ``method`` has a larger mean error than
+    ``baseline`` (the papers claim it never does), with both means and worst frames, mm;
+    empty when it wins everywhere both ran."""
+    ok = {(r.capture, r.method): r for r in rows if r.status == "ok"}
+    lost = [(c, ok[c, method], ok[c, baseline]) for c in dict.fromkeys(r.capture for r in rows)
+            if (c, method) in ok and (c, baseline) in ok
+            and ok[c, method].mean_mm > ok[c, baseline].mean_mm]  # fmt: skip
+    if not lost:
+        return ""
+    cells = [f"`{c}` ({_num(a.mean_mm, 1)} against {_num(b.mean_mm, 1)} mm, worst frame "
+             f"{_num(a.worst_frame_mm, 1)} against {_num(b.worst_frame_mm, 1)})"
+             for c, a, b in lost]  # fmt: skip
+    return f"**`{method}` is worse than `{baseline}` on:** " + "; ".join(cells) + "."
+
+
 def _ablation_sections(rows: Sequence[BenchRow]) -> list[str]:
     """One ablation table per tracker that registers its ablations (``registry``'s
     ``<TRACKER>_ABLATIONS``)."""
@@ -186,6 +204,8 @@ def write_report(
         "",
         markdown_table(rows),
     ]
+    losses = baseline_losses(rows)
+    md += ["", losses] if losses else []
     md += _ablation_sections(rows)
     if skipped:
         md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
