@@ -95,7 +95,7 @@ class PatchOptions:
         whole by the points it still reaches, instead of patch by patch onto the nearest
         wrong points. (Matching every kept point freely in these iterations, as
         articulated ICP does, instead of by the classifier's parts: CMU 08_05 from its
-        T-pose 12.7 → 43.6 mm.)
+        T-pose, with ``accel_gate=72``, 11.7 → 43.7 mm.)
     k_neighbours : int
         Candidate vertices per observed point.
     damping : float
@@ -109,12 +109,14 @@ class PatchOptions:
         more than this acceleration (m/s², at the capture's frame rate) and more than
         half its speed is not extrapolated (0: every joint is). A velocity that just jumped
         comes from an abrupt start or a fit that slipped; extrapolating it throws the joint
-        further off. Clips that start from a T-pose (60 frames at 60 fps, 4 cameras,
-        ``benchmarks/sweep_patch.py``): CMU 13_32 31.8 → 21.5 mm, 08_05 56.5 → 12.7 mm
-        (without it the left forearm is thrown 0.5 m at frame 2 and then gets all its data
-        from phantom volumes and other parts' points); smooth clips unchanged (05_07 11.4
-        → 11.4 mm). In metres per frame² it would gate ordinary motion at 30 fps (05_05
-        at 30 fps: 14.1 → 21.8 mm with 0.02 m/frame²).
+        further off. Off by default: at 72 m/s² (``--method patch_gate``) clips that start
+        from a T-pose gain (60 frames at 60 fps, 4 cameras, ``benchmarks/sweep_patch.py``:
+        CMU 13_32 31.8 → 21.5 mm, 08_05 55.1 → 11.7 mm; without it the left forearm is
+        thrown 0.5 m at frame 2 and then gets all its data from phantom volumes and other
+        parts' points), but a run loses its feet (09_01: 13.6 → 34.5 mm, the right ankle
+        up to 94 mm off for 25 frames: a foot's push-off exceeds the gate, and without
+        its prediction the foot is left behind) and the held-out 05_03 loses (24.6 →
+        31.0). In metres per frame² it would also gate ordinary motion at 30 fps.
     interior_scale : float
         Hull points inside the model (not in the paper; 0 turns it off). A visual hull
         contains the body, so a hull point deeper than
@@ -192,7 +194,7 @@ class PatchOptions:
     residual: Residual = "point_to_point"
     damping: float = 1e-4
     prediction: Prediction = "bones"
-    accel_gate: float = 72.0
+    accel_gate: float = 0.0
     joint_readout: JointReadout = "blend"
     lambda_silhouette: float = 0.0
     silhouette_scale: float = 0.05

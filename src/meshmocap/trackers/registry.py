@@ -37,7 +37,7 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
     **{
         name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
         for name, fixed in (
-            ("patch_nogate", {"accel_gate": 0.0}),
+            ("patch_gate", {"accel_gate": 72.0}),
             ("patch_interior", {"interior_scale": 0.01}),
             ("patch_sil", {"lambda_silhouette": 10.0}),
             ("patch_coarse", {"coarse_iter": 2}),
@@ -62,7 +62,7 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
 #: The patch tracker's ablations (bench's ablation table): method → what it changes.
 PATCH_ABLATIONS: dict[str, str] = {
     "patch_noclf": "− body-part classifier (§III-B)",
-    "patch_nogate": "− acceleration gate of the prediction",
+    "patch_gate": "+ acceleration gate of the prediction",
     "patch_interior": "+ hull points inside the model as outliers",
     "patch_sil": "+ silhouette coverage",
     "patch_coarse": "+ part-rigid first iterations",
