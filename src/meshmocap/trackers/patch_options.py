@@ -113,7 +113,7 @@ class PatchOptions:
         from a T-pose gain (60 frames at 60 fps, 4 cameras, ``benchmarks/sweep_patch.py``:
         CMU 13_32 31.8 → 21.5 mm, 08_05 55.1 → 11.7 mm; without it the left forearm is
         thrown 0.5 m at frame 2 and then gets all its data from phantom volumes and other
-        parts' points), but a run loses its feet (09_01: 13.6 → 34.5 mm, the right ankle
+        parts' points), but a run loses its feet (09_01: 11.9 → 34.5 mm, the right ankle
         up to 94 mm off for 25 frames: a foot's push-off exceeds the gate, and without
         its prediction the foot is left behind) and the held-out 05_03 loses (24.6 →
         31.0). In metres per frame² it would also gate ordinary motion at 30 fps.
