@@ -38,6 +38,14 @@ few mm of each other to frame 50, then the gated run loses a right-side joint); 
 20.2 / ICP 12.8 (means: gate / no gate / ICP); 61_01 12.4 / 13.0 / ICP 18.6. The crane
 through ring8 hulls (bench protocol, 30 fps): 31.2 mm per vertex with the gate, as without.
 
+Issue 20's clips (default options, i.e. no gate, as ``main``'s patch tracker bit for bit;
+articulated ICP beside it): 05_01 frames 1–149 13.9/33/196 (ICP 12.5/20/51; the right hip
+~100 mm off in frames 104–114, 60–69 % of its thigh's data weight on phantom hull points,
+the data term pulling away from the truth, the classifier right); 09_01 1–56 11.9/21/64
+(15.8/23/51); 01_01 1–99 12.2/17/57 (11.6/18/56); 49_18 1–99 10.0/12/32 (12.8/17/37); 16_01
+at its true 120 fps 1–99 10.8/19/56 (11.2/18/44); 05_01 with degraded silhouettes 1–99
+27.4/54/166.
+
 Run: ``python benchmarks/sweep_patch.py --captures 13_32:0:60 ... --variants base
 nogate:accel_gate=0 icp``. Captures are made once in ``--work``; one CSV row per capture
 and variant is appended to ``--out``.
