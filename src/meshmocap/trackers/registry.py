@@ -32,12 +32,42 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         "PatchOptions",
         {"classifier": "none"},
     ),
+    # the patch tracker with or without each of its extensions beyond the paper (issue 20;
+    # PATCH_ABLATIONS), and with none of them (the paper's method with earlier fixes)
+    **{
+        name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
+        for name, fixed in (
+            ("patch_gate", {"accel_gate": 72.0}),
+            ("patch_interior", {"interior_scale": 0.01}),
+            ("patch_sil", {"lambda_silhouette": 10.0}),
+            ("patch_coarse", {"coarse_iter": 2}),
+            ("patch_temporal", {"lambda_temporal": 1.0}),
+            (
+                "patch_paper",
+                dict.fromkeys(
+                    ("accel_gate", "interior_scale", "lambda_silhouette", "lambda_temporal"), 0.0
+                )
+                | {"coarse_iter": 0},
+            ),
+        )
+    },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
     # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1)
     "cage": (*_CAGE, {}),
     "cage_quads": (*_CAGE, {"space": "quads"}),
     "cage_noreg": (*_CAGE, {"variance_weight": 0.0}),
     "cage_nolocal": (*_CAGE, {"local_iters": 0}),
+}
+
+#: The patch tracker's ablations (bench's ablation table): method → what it changes.
+PATCH_ABLATIONS: dict[str, str] = {
+    "patch_noclf": "− body-part classifier (§III-B)",
+    "patch_gate": "+ acceleration gate of the prediction",
+    "patch_interior": "+ hull points inside the model as outliers",
+    "patch_sil": "+ silhouette coverage",
+    "patch_coarse": "+ part-rigid first iterations",
+    "patch_temporal": "+ temporal prior on the joints",
+    "patch_paper": "− every extension beyond the paper",
 }
 
 #: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
