@@ -64,6 +64,9 @@ class SynthSpec:
         Seed of the degradations.
     voxel_size : float
         Visual-hull voxel edge, metres.
+    source_fps : float or None
+        The motion file's true frame rate where its header is wrong (CMU ``16_01.bvh``:
+        30 in the header, 120 in fact); None: the header's.
     """
 
     motion: str = "walk"
@@ -77,6 +80,7 @@ class SynthSpec:
     degradation: Degradation = field(default_factory=Degradation)
     seed: int = 0
     voxel_size: float = 0.01
+    source_fps: float | None = None
 
     def __post_init__(self) -> None:
         checks = (("fps", self.fps, 0.0, 1000.0, "frames per second"),
@@ -97,6 +101,8 @@ class SynthSpec:
         """JSON-ready parameters."""
         d = dataclasses.asdict(self)
         d["motion"] = os.fspath(self.motion)
+        if d["source_fps"] is None:  # captures made before it existed keep their parameters
+            del d["source_fps"]
         return d
 
 
@@ -121,7 +127,8 @@ def synthesize(
     """
     out = Path(out)
     subject = load_template(spec.subject or spec.template)
-    motion = clip_on(subject, spec.motion, fps=spec.fps)
+    fix = {"source_fps": spec.source_fps} if spec.source_fps is not None else {}
+    motion = clip_on(subject, spec.motion, fps=spec.fps, **fix)
     frames = _check_range(spec, motion.n_frames, os.fspath(spec.motion))
     cameras = _cameras(spec.rig)
     meta = {
