@@ -110,7 +110,7 @@ def test_a_folded_first_cage_falls_back_to_the_rest_cage(setup):
 
 def test_vertices_the_cage_cannot_place_leave_the_data_term(setup):
     t, gp, cap = setup
-    tr = CageTracker(gp)
+    tr = CageTracker(gp, CageOptions(surface="green"))
     I = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
     root = t.skeleton.rest_positions[0]
     tr.init(t, cap[0], I, root)  # rest pose: Green coordinates reproduce every vertex
@@ -122,7 +122,7 @@ def test_vertices_the_cage_cannot_place_leave_the_data_term(setup):
     head = part == t.skeleton.index("Head")
     neck = np.isin(part, [t.skeleton.index(n) for n in ("Head", "Neck", "Neck1")])
     assert neck[~tr._keep].all() and (~tr._keep[head]).mean() > 0.5
-    again = CageTracker(gp)
+    again = CageTracker(gp, CageOptions(surface="green"))
     again.setup(t)
     again.set_state(state)  # a resumed run keeps the same data term
     assert np.array_equal(again._keep, tr._keep)

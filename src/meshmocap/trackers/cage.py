@@ -72,6 +72,7 @@ from dataclasses import asdict
 import numpy as np
 
 from meshmocap.body.oqr import (
+    N_QUADS,
     build_oqr,
     cage_vertices,
     configuration_from_vector,
@@ -79,6 +80,7 @@ from meshmocap.body.oqr import (
     quads_from_pose,
 )
 from meshmocap.body.template import Template
+from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import cross, skew, so3_exp, so3_log
@@ -88,6 +90,7 @@ from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage_energy import (
     Articulation,
     HullCoverage,
+    SilhouetteCoverage,
     placement_errors,
     surface_sample,
 )
@@ -101,6 +104,7 @@ from meshmocap.trackers.cage_math import (
     rig,
 )
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
+from meshmocap.trackers.cage_surface import GreenSurface, SkinnedSurface
 from meshmocap.trackers.manifold import learn_manifold
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
@@ -158,12 +162,11 @@ class CageTracker:
         o = self.opts
         self.template = template
         self.oqr = build_oqr(template)
-        rest = self.oqr.rest_vertices
-        self.deform_all = GreenDeformer(rest, self.oqr.faces, template.V)
         self.sample = surface_sample(template.V, template.F, o.n_sample, seed=o.seed)
-        self.deform_sample = GreenDeformer(rest, self.oqr.faces, template.V[self.sample])
-        self._set_keep(np.ones(len(self.sample), dtype=bool))
-        self._coverage: HullCoverage | None = None  # this frame's (step)
+        surface = SkinnedSurface if o.surface == "skinned" else GreenSurface
+        self.surface = surface(self.oqr, template, self.sample)
+        self._set_keep(self.surface.fitted)
+        self._coverage: tuple = ()  # this step's coverage terms and weights
         self._memo: list = []  # _distance's last results
         q, sk = self.oqr.quads, template.skeleton
         self._articulation = Articulation(q.centres, q.rotations, q.joint_indices,
@@ -171,12 +174,6 @@ class CageTracker:
         c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
         self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
         self.joint_deformer: GreenDeformer | None = None
-        # each quad's cage vertices, padded to the largest count (mask 0 on the padding)
-        quad = self.oqr.vertex_quad
-        slots = [np.flatnonzero(quad == k) for k in range(1, quad.max() + 1)]
-        width = max(len(v) for v in slots)
-        self._slots = np.array([np.resize(v, width) for v in slots])  # (20, width)
-        self._slot_mask = np.array([np.arange(width) < len(v) for v in slots], dtype=float)
         # joints="quads": the quad following each evaluation joint's rig joint, and the
         # joint in that quad's frame (constant: quads follow their joints rigidly)
         ev, jq = template.eval_skeleton, self.oqr.quads.joint_indices
@@ -208,8 +205,9 @@ class CageTracker:
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
-        err = placement_errors(self.deform_sample.deform(cage0), posed.V[self.sample])
-        keep = err <= self.opts.max_model_error
+        model = self.surface.points(configuration_vector(c, Q), Q[0], c[0])
+        keep = placement_errors(model, posed.V[self.sample]) <= self.opts.max_model_error
+        keep &= self.surface.fitted
         self._set_keep(keep if keep.any() else np.ones_like(keep))
         self._set_joints(cage0, joints)
         if np.abs(self.joint_deformer.deform(cage0) - joints).max() > _REPRODUCED:
@@ -256,17 +254,19 @@ class CageTracker:
                  "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
                  "velocity_w": self._velocity[1], "velocity_c": self._velocity[2],
                  "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS])}  # fmt: skip
-        return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
-                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+        V = self.surface.vertices(self.local, self.pelvis_R, self.pelvis_c)
+        return FrameResult(index=index, joints=joints, vertices=V, energies=energies,
+                           n_iter=n_iter, state=state)  # fmt: skip
 
     # -------------------------------------------------------------- the model
     def _rig(self, y, Rp, cp, *, derivatives=False):
         """The cage, quad rotations and dV/dy of :func:`~meshmocap.trackers.cage_math.rig`."""
         return rig(y, Rp, cp, self.oqr.vertex_quad, self.oqr.vertex_local, derivatives)
 
-    def _residuals(self, field, cage):
-        """:meth:`_distance` at the sampled template vertices of ``cage``, and the points."""
-        P = self.deform_sample.deform(cage)
+    def _residuals(self, field, y, Rp, cp):
+        """:meth:`_distance` at the sampled template vertices of configuration ``y`` with
+        the pelvis at ``Rp, cp``, and the points."""
+        P = self.surface.points(y, Rp, cp)
         return (*self._distance(field, P), P)
 
     def _distance(self, field, P, sub=slice(None)):
@@ -277,7 +277,7 @@ class CageTracker:
         (:meth:`~meshmocap.trackers.cage_energy.HullCoverage.residuals`). ``sub``: the
         sampled vertices ``P`` holds, when not all (comparing candidates). The last few
         results are kept: the stages hand over the same points (to rounding)."""
-        key = (id(self._coverage), str(sub))  # the memo is emptied each frame (step)
+        key = (tuple(id(t) for t, _ in self._coverage), str(sub))  # emptied each frame
         for k, Q, out in self._memo:
             if k == key and abs(Q[0, 0] - P[0, 0]) < _SAME and np.abs(Q - P).max() < _SAME:
                 return out
@@ -285,15 +285,45 @@ class CageTracker:
         self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
         return out
 
+    def _coverage_terms(self, frame, field) -> list:
+        """This frame's coverage terms: the hull's (:class:`HullCoverage`, pose and shape
+        steps) and the silhouettes' (:class:`SilhouetteCoverage`, every step) where the
+        frame has cameras and masks; samples seeded by the frame (the same on a resumed
+        run)."""
+        o, out = self.opts, []
+        if o.coverage_weight > 0:  # hull surface samples
+            B = field.boundary
+            pick = np.random.default_rng([o.seed, frame.index]).choice(
+                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
+            out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
+        if o.silhouette_weight > 0:
+            try:
+                cams, masks = frame.cameras, frame.silhouettes
+            except (MeshmocapFileNotFoundError, FormatError):
+                cams, masks = [], None
+            if cams and masks and len(masks) == len(cams):
+                sil = SilhouetteCoverage(cams, masks, o.n_silhouette, o.silhouette_margin,
+                                         seed=[o.seed, frame.index, 1])  # fmt: skip
+                if len(sil):
+                    out.append((sil, o.silhouette_weight, True))
+        return out
+
     def _distance_terms(self, field, P, sub):
         r, g = field.value_and_gradient(P)
+        m = self.opts.outside_margin
+        if m:  # outside: only beyond the margin
+            r = np.where(r > 0, np.maximum(r - m, 0.0), r)
         w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w[sub]
         r, g = r * w, g * w[:, None]
-        if self._coverage is None:
+        if not self._coverage:
             return r, g
-        rc, ac = self._coverage.residuals(P)
-        s = np.sqrt(self.opts.coverage_weight / len(self._coverage))
-        return np.concatenate([r, s * rc]), np.concatenate([g, s * ac])
+        rs, gs = [r], [g]
+        for term, weight in self._coverage:
+            rc, ac = term.residuals(P)
+            s = np.sqrt(weight / len(term))
+            rs.append(s * rc)
+            gs.append(s * ac)
+        return np.concatenate(rs), np.concatenate(gs)
 
     @staticmethod
     def _pose_jacobian(P: np.ndarray, g: np.ndarray, cp: np.ndarray) -> np.ndarray:
@@ -302,14 +332,6 @@ class CageTracker:
         of the cage exactly (x' = R x + t), so a rigid motion of the cage moves the points
         ``P`` rigidly: dx = ω × (x − cp) + dt, and dr = g·dx."""
         return np.concatenate([cross(P - cp, g), g], axis=1).T
-
-    def _config_directions(self, M: np.ndarray, dy: np.ndarray) -> np.ndarray:
-        """(k, 85, 3): cage derivatives along configuration directions ``dy`` (180, k)."""
-        quad = self.oqr.vertex_quad
-        on = quad > 0
-        D = np.zeros((len(quad), 3, dy.shape[1]))
-        D[on] = M[on] @ dy.reshape(-1, 9, dy.shape[1])[quad[on] - 1]
-        return D.transpose(2, 0, 1)
 
     # -------------------------------------------------------------- optimisation
     def _lm(self, state, n_iter, evaluate, linearise, update, key=None):
@@ -352,7 +374,7 @@ class CageTracker:
         """Eq. (11): the pelvis transform ``(R, c)`` with the quads at ``y``. Green
         coordinates follow rigid motions of the cage exactly, so the points are deformed
         once in the pelvis frame and then moved rigidly."""
-        P0 = self.deform_sample.deform(self._rig(y, np.eye(3), np.zeros(3))[0])
+        P0 = self.surface.points(y, np.eye(3), np.zeros(3))
 
         def evaluate(s):
             P = P0 @ s[0].T + s[1]
@@ -373,7 +395,7 @@ class CageTracker:
 
         def evaluate(x):
             mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
-            r, g, _ = self._residuals(field, self._rig(mean, self.pelvis_R, self.pelvis_c)[0])
+            r, g, _ = self._residuals(field, mean, self.pelvis_R, self.pelvis_c)
             # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the noise
             # variance: Eq. (9) alone vanishes at training points, where its log is a
             # singular well of rounding noise (K is near singular) that traps the latent point
@@ -382,8 +404,7 @@ class CageTracker:
 
         def linearise(x, cache):
             r, g, mean, dmean, var, dvar = cache
-            cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
-            dx = self.deform_sample.jvp(cage, self._config_directions(M, dmean))  # Eq. (6)
+            dx = self.surface.directions(mean, self.pelvis_R, self.pelvis_c, dmean)  # Eq. (6)
             J = np.einsum("kpa,spa->ksp", dx, g.reshape(-1, *dx.shape[1:])).reshape(len(dx), -1)
             grad = J @ r + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
             return grad, J @ J.T + lam * np.outer(dvar, dvar) / var**2
@@ -398,13 +419,14 @@ class CageTracker:
         quads ablation."""
         w = self.opts.local_damping if anchor is not None else 0.0
         wa = self.opts.articulation if anchor is not None else 0.0
-        loc, slots = self.oqr.vertex_local, self._slots
+        nq = N_QUADS - 1
         I0 = np.eye(3)[None]
 
         def evaluate(s):
             y, Rp, cp = s
-            cage, _, R = self._rig(y, Rp, cp)
-            r, g, P = self._residuals(field, cage)
+            Y = y.reshape(-1, 3, 3)
+            R = _gs(Y[:, 1], Y[:, 2])  # pelvis-relative quad rotations
+            r, g, P = self._residuals(field, y, Rp, cp)
             e = y - anchor if w else 0.0
             E = 0.5 * (r @ r + w * np.sum(e * e))
             quads = None
@@ -413,24 +435,14 @@ class CageTracker:
                          np.concatenate([I0, R]))  # fmt: skip
                 a = self._articulation.residuals(*quads)
                 E += 0.5 * wa * a @ a
-            return E, (r, g, P, cage, R, e, quads)
+            return E, (r, g, P, e, quads)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, cage, R, e, quads = cache
-            n = len(P)
-            # each vertex of quad q: dV = Rp (dc + ω × R_q l): columns Rp [I | −[R_q l]×]
-            arm = np.einsum("qij,qvj->qvi", R, loc[slots])  # (20, w, 3)
-            M6 = np.concatenate([np.broadcast_to(Rp, (*arm.shape[:2], 3, 3)), Rp @ -skew(arm)], 3)
-            M6 *= self._slot_mask[..., None, None]
-            nq, k = slots.shape
-            J = []
-            for gs in g.reshape(-1, n, 3):  # data rows, then coverage rows
-                W = self.deform_sample.pointwise_vjp(cage, gs).transpose(1, 2, 0)  # (85, 3, n)
-                Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
-                               W[slots].reshape(nq, 3 * k, n))  # (20, 6, n)  # fmt: skip
-                J.append(np.concatenate([Jq.reshape(6 * nq, n), self._pose_jacobian(P, gs, cp)]))
-            J = np.concatenate(J, axis=1)
+            r, g, P, e, quads = cache
+            G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
+            J = np.concatenate([self.surface.quad_rows(y, Rp, cp, G),
+                                self._pose_jacobian(np.tile(P, (len(G), 1)), g, cp)])  # fmt: skip
             grad, H = J @ r, J @ J.T
             if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
                 Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
@@ -478,12 +490,8 @@ class CageTracker:
         it, anchor, self._memo = 0, None, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
         self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
-        self._coverage = None
-        if o.coverage_weight > 0:  # hull surface samples, the same on a resumed run
-            B = field.boundary
-            pick = np.random.default_rng([o.seed, frame.index]).choice(
-                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
-            self._coverage = HullCoverage(B[pick], o.coverage_margin)
+        terms = self._coverage_terms(frame, field)  # [(term, weight, in the local step)]
+        self._coverage = tuple(t[:2] for t in terms)
         pelvis = (self.pelvis_R, self.pelvis_c)
         previous = (_orthonormal(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
@@ -527,7 +535,7 @@ class CageTracker:
                 r = fit((y, *state[1:]))[1][0]
                 if r @ r < E:
                     state, E = (y, *state[1:]), r @ r
-        coverage, self._coverage = self._coverage, None  # local: data term (module notes)
+        self._coverage = tuple(t[:2] for t in terms if t[2])  # local: silhouettes only
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
             state, n_local, *self._local_problem(field, anchor)
         )
@@ -536,15 +544,17 @@ class CageTracker:
         self._velocity = (self.local - previous[0], so3_log(self.pelvis_R @ previous[1].T),
                           self.pelvis_c - previous[2])  # fmt: skip
         it += n
-        r, P = cache[0], cache[2]
+        P = cache[2]
+        r = cache[0][: len(P)]
         # the sampled points where this frame ended and, moved on as from the last frame,
         # where the next one may: ~80 % of the grid points its lookups will touch
         self._trail = P if self._last_P is None else np.concatenate([P, 2 * P - self._last_P])
         self._last_P = P
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
         energies = {"distance": float(r @ r), "variance": var}
-        if coverage is not None:  # mean ρ² (m²) of the final fit
-            energies["coverage"] = float(np.sum(coverage.residuals(P)[0] ** 2)) / len(coverage)
+        for t, _, _ in terms:  # mean ρ² (m²) of the final fit
+            name = "silhouette" if isinstance(t, SilhouetteCoverage) else "coverage"
+            energies[name] = float(np.sum(t.residuals(P)[0] ** 2)) / len(t)
         clock.lap("local")
         out = self._result(frame.index, energies, it)
         clock.lap("output")
@@ -564,8 +574,7 @@ class CageTracker:
             cands += list(gp.X_[np.argsort(d2)[: self.opts.restarts]])
         X = np.array(cands)
         Y, var = gp.predict(X, return_var=True)
-        cages = np.stack([self._rig(y, self.pelvis_R, self.pelvis_c)[0] for y in Y])
-        P = self.deform_sample.deform(cages)  # one pass over the coordinates for all
+        P = self.surface.points_batch(Y, self.pelvis_R, self.pelvis_c)
         field.prefetch(P[:, _SUB])  # and one batch of new grid points (speed only)
         r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
         noise = gp.Y_scale_**2 / gp.beta_

@@ -15,6 +15,7 @@ from meshmocap.models.gplvm import GPLVM
 
 Space = Literal["latent", "quads"]
 Joints = Literal["green", "quads"]
+Surface = Literal["skinned", "green"]
 
 
 def manifold_digest(gp: GPLVM) -> str:
@@ -73,10 +74,15 @@ class CageOptions:
     inside_weight : float
         Weight, in (0, 1], of the squared distance of points inside the hull (module
         notes; 1: symmetric).
-    joints : {"green", "quads"}
-        Joints from the cage through Green coordinates (§6.2), or carried rigidly by the
-        quad that follows their rig joint (the quads sit at the joints, §3; joints of no
-        quad keep Green coordinates).
+    joints : {"quads", "green"}
+        Joints carried rigidly by the quad that follows their rig joint (the quads sit at
+        the joints, §3; joints of no quad keep Green coordinates), or from the cage through
+        Green coordinates (§6.2), which misplace them by 11–21 mm at the true quads (CMU
+        05_01, 09_01, 01_01 on ``neutral_5k``).
+    surface : {"skinned", "green"}
+        The template surface the data term fits (:mod:`~meshmocap.trackers.cage_surface`):
+        posed by its own skinning from the quads' joint frames, or deformed by the cage's
+        Green coordinates (the paper's Eq. (1), 16–44 mm from the skinned body).
     n_sample : int
         Template vertices in the energy, drawn by area (the output deforms all of them).
     max_model_error : float
@@ -111,12 +117,17 @@ class CageOptions:
     shape_iters: int = 2
     restarts: int = 3
     inside_weight: float = 0.05
-    joints: Joints = "green"
+    outside_margin: float = 0.0
+    joints: Joints = "quads"
+    surface: Surface = "skinned"
     n_sample: int = 800
     max_model_error: float = 0.03
     coverage_weight: float = 0.3
     coverage_margin: float = 0.02
     n_coverage: int = 500
+    silhouette_weight: float = 0.0
+    silhouette_margin: float = 1.0
+    n_silhouette: int = 200
     field_spacing: float = 0.02
     damping: float = 1e-3
     seed: int = 0
@@ -124,6 +135,7 @@ class CageOptions:
     def __post_init__(self) -> None:
         check_choice("CageOptions", "space", self.space, get_args(Space))
         check_choice("CageOptions", "joints", self.joints, get_args(Joints))
+        check_choice("CageOptions", "surface", self.surface, get_args(Surface))
         if self.variance_weight < 0 or self.n_sample < 10:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:
