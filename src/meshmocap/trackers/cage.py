@@ -286,16 +286,11 @@ class CageTracker:
         return out
 
     def _coverage_terms(self, frame, field) -> list:
-        """This frame's coverage terms: the hull's (:class:`HullCoverage`, pose and shape
-        steps) and the silhouettes' (:class:`SilhouetteCoverage`, every step) where the
-        frame has cameras and masks; samples seeded by the frame (the same on a resumed
-        run)."""
+        """This frame's coverage terms, ``[(term, weight, in the local step)]``: the
+        silhouettes' (:class:`SilhouetteCoverage`, every step) where the frame has cameras
+        and masks, else the hull's (:class:`HullCoverage`, pose and shape steps); samples
+        seeded by the frame (the same on a resumed run)."""
         o, out = self.opts, []
-        if o.coverage_weight > 0:  # hull surface samples
-            B = field.boundary
-            pick = np.random.default_rng([o.seed, frame.index]).choice(
-                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
-            out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
         if o.silhouette_weight > 0:
             try:
                 cams, masks = frame.cameras, frame.silhouettes
@@ -306,6 +301,11 @@ class CageTracker:
                                          seed=[o.seed, frame.index, 1])  # fmt: skip
                 if len(sil):
                     out.append((sil, o.silhouette_weight, True))
+        if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)
+            B = field.boundary
+            pick = np.random.default_rng([o.seed, frame.index]).choice(
+                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
+            out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
         return out
 
     def _distance_terms(self, field, P, sub):
@@ -411,13 +411,14 @@ class CageTracker:
 
         return evaluate, linearise, lambda x, d: x + d
 
-    def _local_problem(self, field, anchor):
+    def _local_problem(self, field, anchor, *, pull=True):
         """Eq. (12): every quad's centre and orientation (6 numbers: no Gram–Schmidt gauge)
         and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration,
-        weight ``local_damping``) and held together by soft joints (``articulation``,
+        weight ``local_damping``; not when ``pull`` is False: off the manifold) and held
+        together by soft joints (``articulation``,
         :class:`~meshmocap.trackers.cage_energy.Articulation`); ``anchor`` None: free, the
         quads ablation."""
-        w = self.opts.local_damping if anchor is not None else 0.0
+        w = self.opts.local_damping if anchor is not None and pull else 0.0
         wa = self.opts.articulation if anchor is not None else 0.0
         nq = N_QUADS - 1
         I0 = np.eye(3)[None]
@@ -487,7 +488,7 @@ class CageTracker:
         if self._trail is not None:  # speed only: the grid cells this frame will likely
             field.prefetch(self._trail)  # need, in one batch (LazyDistanceGrid.prefetch)
         clock.lap("distance")
-        it, anchor, self._memo = 0, None, []
+        it, anchor, off, self._memo = 0, None, False, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
         self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
         terms = self._coverage_terms(frame, field)  # [(term, weight, in the local step)]
@@ -529,15 +530,20 @@ class CageTracker:
                 it += n
             fit = self._local_problem(field, None)[0]
             E = [(r := fit(s)[1][0]) @ r for s in starts]
-            state, E = starts[int(np.argmin(E))], min(E)
+            state, best = starts[int(np.argmin(E))], min(E)
+            # off the manifold: its configuration explains the frame far worse than the
+            # tracked quads do; then no pull back to it and a wider adjustment
+            off = o.off_manifold > 0 and E[0] > o.off_manifold * best
             for base, quads in _LIMBS:  # the manifold's limbs, each tried on that start
                 y = graft(state[0], anchor, base, quads)
                 r = fit((y, *state[1:]))[1][0]
-                if r @ r < E:
-                    state, E = (y, *state[1:]), r @ r
+                if r @ r < best:
+                    state, best = (y, *state[1:]), r @ r
+        if off:
+            n_local *= 2
         self._coverage = tuple(t[:2] for t in terms if t[2])  # local: silhouettes only
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
-            state, n_local, *self._local_problem(field, anchor)
+            state, n_local, *self._local_problem(field, anchor, pull=not off)
         )
         U, _, Vt = np.linalg.svd(self.pelvis_R)  # no rounding drift from a rotation
         self.pelvis_R = U @ Vt
@@ -551,7 +557,7 @@ class CageTracker:
         self._trail = P if self._last_P is None else np.concatenate([P, 2 * P - self._last_P])
         self._last_P = P
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
-        energies = {"distance": float(r @ r), "variance": var}
+        energies = {"distance": float(r @ r), "variance": var, "off_manifold": float(off)}
         for t, _, _ in terms:  # mean ρ² (m²) of the final fit
             name = "silhouette" if isinstance(t, SilhouetteCoverage) else "coverage"
             energies[name] = float(np.sum(t.residuals(P)[0] ** 2)) / len(t)

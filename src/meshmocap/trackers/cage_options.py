@@ -63,6 +63,11 @@ class CageOptions:
         Pull of the local adjustment towards the manifold's configuration (weight of half
         its squared distance, metres and unit axis vectors): weak, the adjustment tracks
         from the previous frame (:mod:`~meshmocap.trackers.cage` notes).
+    off_manifold : float
+        A frame is off the manifold when the manifold's configuration fits it (data and
+        silhouette terms) more than this many times worse than the best tracked start of the
+        local adjustment; there the adjustment is not pulled towards the manifold and runs
+        twice ``local_iters`` (0: never; energy ``off_manifold`` of each frame says).
     articulation : float
         Weight of the local adjustment's soft joints between consecutive quads (half
         their squared gaps, m²; :class:`~meshmocap.trackers.cage_energy.Articulation`).
@@ -90,14 +95,27 @@ class CageOptions:
         skinned position in the first frame's known pose get no data term (Eq. 4): the
         cage cannot follow them (:mod:`~meshmocap.trackers.cage_energy`); ``inf``: keep
         all.
+    outside_margin : float
+        Distance, metres, outside the hull that the data term tolerates (0: none).
     coverage_weight : float
         λc of the hull coverage term (0: none), against the data term: both are mean half
-        squared distances (m²).
+        squared distances (m²). Used only in frames without a silhouette term (no cameras
+        or masks, or ``silhouette_weight`` 0): the hull's phantom volumes drag the model
+        (:class:`~meshmocap.trackers.cage_energy.SilhouetteCoverage`).
     coverage_margin : float
         Distance, metres, from a hull surface sample to the nearest sampled model point
         that the coverage term tolerates.
     n_coverage : int
         Hull surface samples of the coverage term per frame.
+    silhouette_weight : float
+        Weight of the silhouette coverage term
+        (:class:`~meshmocap.trackers.cage_energy.SilhouetteCoverage`; 0: none), in every
+        step where the frame has cameras and silhouettes (as ``coverage_weight``: mean half
+        squared distances, m²).
+    silhouette_margin : float
+        Pixels a silhouette contour sample may lie from the nearest projected model point.
+    n_silhouette : int
+        Contour samples per camera and frame.
     field_spacing : float
         Spacing, metres, of the distance field's grid: the nearest multiple of the hull's
         voxel (:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid` ``stride``).
@@ -112,6 +130,7 @@ class CageOptions:
     local_iters: int = 3
     local_damping: float = 3e-5
     articulation: float = 10.0
+    off_manifold: float = 2.0
     alternations: int = 3
     pose_iters: int = 1
     shape_iters: int = 2
@@ -125,7 +144,7 @@ class CageOptions:
     coverage_weight: float = 0.3
     coverage_margin: float = 0.02
     n_coverage: int = 500
-    silhouette_weight: float = 0.0
+    silhouette_weight: float = 0.3
     silhouette_margin: float = 1.0
     n_silhouette: int = 200
     field_spacing: float = 0.02
@@ -142,8 +161,12 @@ class CageOptions:
             raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
         if not (self.max_model_error > 0 and self.coverage_weight >= 0 and self.articulation >= 0
                 and self.coverage_margin >= 0 and self.n_coverage >= 1
-                and self.field_spacing > 0):  # fmt: skip
+                and self.field_spacing > 0 and self.silhouette_weight >= 0
+                and self.silhouette_margin >= 0 and self.n_silhouette >= 1
+                and self.outside_margin >= 0 and self.off_manifold >= 0):  # fmt: skip
             raise InputError(
-                "CageOptions: max_model_error must be > 0, articulation, coverage_weight and "
-                "coverage_margin ≥ 0, n_coverage ≥ 1 and field_spacing > 0"
+                "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
+                "coverage_margin, silhouette_weight, silhouette_margin, outside_margin and "
+                "off_manifold ≥ 0, "
+                "n_coverage and n_silhouette ≥ 1 and field_spacing > 0"
             )
