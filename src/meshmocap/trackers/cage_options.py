@@ -130,7 +130,7 @@ class CageOptions:
     local_iters: int = 3
     local_damping: float = 3e-5
     articulation: float = 10.0
-    off_manifold: float = 2.0
+    off_manifold: float = 4.0
     alternations: int = 3
     pose_iters: int = 1
     shape_iters: int = 2
