@@ -22,7 +22,7 @@ from meshmocap.io.capture import Capture, read_hull_mesh
 from meshmocap.io.results import read_track
 from meshmocap.io.silhouettes import write_mask
 
-ICP = ["--method", "articulated_icp", "--max-iter", "2"]
+ICP = ["--method", "articulated_icp", "--max-iter", "2", "--template", "neutral_5k"]
 
 
 @pytest.fixture(scope="module")
@@ -287,7 +287,8 @@ def test_point_clouds_without_normals_are_tracked_by_the_patch_tracker(cap, tmp_
         (seq / f"{f.index:03d}.ply").write_bytes(
             trimesh.PointCloud(f.hull_mesh[0][::2]).export(file_type="ply")
         )
-    argv = ["track", str(seq), "--frames", "0:2", "--max-iter", "2", "--n-patches", "40"]
+    argv = ["track", str(seq), "--frames", "0:2", "--max-iter", "2", "--n-patches", "40",
+            "--template", "neutral_5k"]  # fmt: skip
     assert main([*argv, "--out", str(tmp_path / "t")]) == 0
     t = read_track(tmp_path / "t")
     assert np.isfinite(t.vertices).all() and t.healthy.all()

@@ -56,6 +56,21 @@ def test_render_draws_the_body_and_sheet_tiles():
     assert sheet.shape == (320, 360, 3)
 
 
+def test_contact_sheet_captions_are_legible():
+    """Captions sit in a band under each tile, dark on white, their letters at least a
+    twenty-third of the tile's width tall (14 px on 320-px tiles; the old bitmap font: 8)."""
+    tile = np.full((400, 320, 3), 200, np.uint8)
+    sheet = contact_sheet([tile] * 4, columns=2, labels=["0.00 s · frame 0"] * 4)
+    band = sheet.shape[0] // 2 - 400
+    assert sheet.shape == (2 * (400 + band), 640, 3) and band >= 30
+    under = sheet[400 : 400 + band, :320].min(axis=2)
+    rows = np.flatnonzero((under < 100).any(axis=1))
+    cols = np.flatnonzero((under < 100).any(axis=0))
+    assert np.ptp(rows) + 1 >= 14 and np.ptp(cols) + 1 >= 120
+    with pytest.raises(InputError, match="labels"):
+        contact_sheet([tile] * 2, labels=["one"])
+
+
 def test_render_motion_writes_frames_and_sheet(tmp_path):
     t = toy_template()
     T = 5

@@ -34,7 +34,7 @@ from meshmocap.analysis.tables import format_table, table
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture
-from meshmocap.io.results import Track
+from meshmocap.io.results import Track, template_label
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,7 @@ class Evaluation:
     surface: SurfaceErrors | None
     correspondence: CorrespondenceErrors | None
     out_of_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    template: str = ""
 
 
 def evaluate(
@@ -153,6 +154,7 @@ def evaluate(
         surface=surf,
         correspondence=corr,
         out_of_view=track.frames[hidden] if len(hidden) else np.zeros(0, np.int64),
+        template=template_label(track.meta),
     )
 
 
@@ -179,7 +181,8 @@ def _out_of_view(truths: list, cameras: list) -> np.ndarray:
 
 def summary(ev: Evaluation) -> str:
     """A short plain-text report of an evaluation."""
-    out = [f"method {ev.method}: {ev.n_frames} frames, {ev.unhealthy} flagged unhealthy, "
+    out = [f"method {ev.method}, template {ev.template}: {ev.n_frames} frames, "
+           f"{ev.unhealthy} flagged unhealthy, "
            f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"]  # fmt: skip
     if len(ev.out_of_view):
         f = ev.out_of_view

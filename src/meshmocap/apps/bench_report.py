@@ -49,18 +49,18 @@ def _num(x: float, digits: int, scale: float = 1.0) -> str:
 def markdown_table(rows: Sequence[BenchRow]) -> str:
     """The results as a markdown table (errors in mm, silhouette error in %)."""
     head = ["capture", "method", "frames", "mean mm", "median", "std", "worst frame",
-            "silhouette %", "bone std max", "s/frame", "flagged"]  # fmt: skip
+            "silhouette %", "bone std max", "s/frame", "flagged", "template"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "--:|" * (len(head) - 2)]
     for r in rows:
         if r.status != "ok":
-            cells = [r.capture, r.method, "n/a", f"not applicable: {r.note}"] + [""] * 7
+            cells = [r.capture, r.method, "n/a", f"not applicable: {r.note}"] + [""] * 8
         else:
             unit = " (vertices)" if r.metric == "vertices" else ""
             cells = [
                 r.capture, r.method + unit, str(r.frames), _num(r.mean_mm, 1),
                 _num(r.median_mm, 1), _num(r.std_mm, 1), _num(r.worst_frame_mm, 1),
                 _num(r.silhouette_error, 2, 100), _num(r.bone_std_max_mm, 1),
-                _num(r.seconds_per_frame, 2), str(r.flagged),
+                _num(r.seconds_per_frame, 2), str(r.flagged), r.template,
             ]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -38,6 +38,7 @@ class BenchRow:
     frame_numbers : (T,) int, frames of ``per_frame_mm``; per_frame_mm : (T,) float, mm
     bone_names : tuple of B str; bone_mean_mm, bone_std_mm : (B,) float, mm
     track : str, the track folder
+    template : str, the tracking template and how it was chosen (``io.results.template_label``)
     """
 
     capture: str
@@ -60,6 +61,7 @@ class BenchRow:
     bone_mean_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bone_std_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     track: str = ""
+    template: str = ""
 
     def to_json(self) -> dict:
         """JSON-ready fields (NaN as None)."""
@@ -115,5 +117,5 @@ def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Pat
         bone_names=bones.names if bones is not None else (),
         bone_mean_mm=bones.mean if bones is not None else np.zeros(0),
         bone_std_mm=bones.std if bones is not None else np.zeros(0),
-        track=str(track),
+        track=str(track), template=ev.template,
     )  # fmt: skip

@@ -1,5 +1,13 @@
 """The main job on the bundled defaults (``meshmocap demo``): motions, retargeting and
-rendering, then a synthetic capture tracked and scored end to end.
+rendering, then a synthetic capture tracked as a user would track their own, exported and
+analysed, and scored against the truth that only the studio knows.
+
+The capture walks the real user's path: its performer (``heavy_male``) is a body the
+trackers are not told about, so the tracking template is estimated from the hulls
+(:func:`~meshmocap.estimate.tracking_template.tracking_template`), and the first pose is
+found from the capture (the trackers' default ``init="auto"``). The ground truth is read
+only to score. The patch track is exported to BVH, C3D, TRC, glTF and CSV and its gait
+analysed, as ``meshmocap export`` and ``meshmocap gait`` do.
 
 Everything runs from the installed package alone (bundled templates, procedural motions);
 a user clip (BVH/AMC) can be added.
@@ -8,20 +16,35 @@ a user clip (BVH/AMC) can be added.
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from meshmocap._atomic import atomic_open
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.export import export_track
+from meshmocap.apps.gait_files import gait_of, write_gait
 from meshmocap.apps.player import player_from_tracks
 from meshmocap.apps.render import render_motion
-from meshmocap.apps.report import Section, comparison_table, evaluation_section, write_report
+from meshmocap.apps.report import (
+    Section,
+    comparison_table,
+    evaluation_section,
+    gait_section,
+    write_report,
+)
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
-from meshmocap.body.template import load_template
+from meshmocap.body.template import bundled_templates, load_template
+from meshmocap.errors import InputError
+from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
+from meshmocap.io.results import done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -29,6 +52,13 @@ from meshmocap.trackers.registry import make_tracker
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
 #: cage tracker's pose manifold is learned on the spot from the procedural walk and jog.
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
+#: The demo capture's performer: a bundled body that the trackers are not told about.
+DEMO_PERFORMER = "heavy_male"
+#: Formats the demo's first track is exported to (``meshmocap export``).
+DEMO_EXPORTS = ("bvh", "c3d", "trc", "glb", "csv")
+#: Why the demo's comparison has no silhouette error (rendering every frame in every camera
+#: would double its run time).
+NO_SILHOUETTES = "the demo skips it to save time; `meshmocap report CAPTURE TRACK...` measures it"
 
 
 @dataclass(frozen=True)
@@ -48,6 +78,7 @@ class DemoResult:
     files: tuple[tuple[str, Path], ...]
     scores: tuple[TrackerScore, ...]
     seconds: float
+    notes: tuple[str, ...] = ()
 
 
 def run_demo(
@@ -56,6 +87,8 @@ def run_demo(
     seconds: float = 4.0,
     track_frames: int = 120,
     clip: str | None = None,
+    performer: str = DEMO_PERFORMER,
+    template: str = "auto",
     show_progress: bool | None = None,
 ) -> DemoResult:
     """Run the demo into the folder ``out``.
@@ -69,7 +102,16 @@ def run_demo(
         tracking.
     clip : str, optional
         A BVH/AMC file to retarget and render as well.
+    performer : str
+        Bundled body that performs in the synthetic capture.
+    template : str
+        Tracking template: ``"auto"`` estimates the performer's body from the hulls (what a
+        user without a body scan has); a bundled name or ``.npz`` file tracks with that body
+        (``neutral_5k`` is the fastest).
     """
+    if performer not in bundled_templates():
+        raise InputError(f"demo: performer must be one of {sorted(bundled_templates())}, "
+                         f"found {performer!r}")  # fmt: skip
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -92,20 +134,23 @@ def run_demo(
         res = render_motion(neutral, m, out / name, frames=False, show_progress=show_progress)
         files.append((f"{name} on neutral", res.sheet))
     scores: list[TrackerScore] = []
-    players, sections, evaluations, tracks = [], [], [], []
+    players, sections, evaluations, tracks, notes = [], [], [], [], []
     if track_frames > 0:
-        template = load_template("neutral_5k")
-        spec = SynthSpec(motion="walk", template="neutral_5k", rig="humaneva4", stop=track_frames)
+        spec = SynthSpec(motion="walk", template="neutral_5k", subject=performer,
+                         rig="humaneva4", stop=track_frames)  # fmt: skip
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4 hulls)", cap.path))
-        for method in DEMO_METHODS:
-            tracker = (
-                make_tracker(method, template=template)
-                if method == "cage"
-                else make_tracker(method)
-            )
-            track = track_sequence(tracker, template, cap, out / f"track_{method}",
-                                   show_progress=show_progress)  # fmt: skip
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {performer})", cap.path))
+        folders = [out / f"track_{method}" for method in DEMO_METHODS]
+        choice = tracking_template(cap, template, folders[0])
+        notes.append(f"performer {performer!r}, not told to the trackers; {choice.note}")
+        for method, folder in zip(DEMO_METHODS, folders, strict=True):
+            if "template_file" in choice.info and folder != folders[0]:
+                folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
+                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+            tracker = make_tracker(method, template=choice.template)
+            track = track_sequence(tracker, choice.template, cap, folder,
+                                   show_progress=show_progress,
+                                   template_info=choice.info)  # fmt: skip
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
             written = write_evaluation(ev, out / f"eval_{method}")
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
@@ -114,15 +159,84 @@ def run_demo(
             tracks.append(track)
             evaluations.append(ev)
             plots = [p for p in written if p.suffix == ".png"]
-            sections.append(evaluation_section(ev, images=plots))
+            sections.append(evaluation_section(ev, images=plots, track=track))
+            drop_resume_state(folder)
+        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
+        notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
+        sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
+        drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(
         out / "report.html", title="meshmocap demo", players=players,
-        tables=[comparison_table(evaluations)] if evaluations else [],
+        tables=[comparison_table(evaluations, no_silhouettes=NO_SILHOUETTES)] * bool(evaluations),
         sections=[*sections, Section("Motions rendered (contact sheets)", images=sheets)],
-        intro="procedural motions, retargeting and a synthetic capture tracked and scored",
+        intro="procedural motions, retargeting, and a synthetic capture tracked as a user "
+        "tracks their own: " + "; ".join(notes) if notes else "procedural motions and "
+        "retargeting",
     )  # fmt: skip
     files.append(("report (tables, plots, 3D player; open in a browser)", report))
-    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0)
+    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
+
+
+def _first_pose(track) -> str:
+    """How ``track``'s first pose was found, from its ``track.json``."""
+    init = str(track.meta.get("init", "truth"))
+    return {"auto": "found from the capture (init auto)",
+            "truth": "copied from the ground truth (init truth, the papers' protocol)",
+            }.get(init, f"init {init}")  # fmt: skip
+
+
+def _exports_and_gait(track: Path, out: Path, method: str, files: list) -> list[str]:
+    """Export ``track`` in every :data:`DEMO_EXPORTS` format into ``out/exports`` and write
+    its gait analysis into ``out/gait``; append what was written to ``files`` and return
+    one line each for the report."""
+    (out / "exports").mkdir(parents=True, exist_ok=True)
+    sizes = []
+    for fmt in DEMO_EXPORTS:
+        res = export_track(track, out / "exports" / f"walk_{method}.{fmt}")
+        files.append((f"{method} track as {fmt.upper()}", res.path))
+        sizes.append(f"{fmt.upper()} {res.size_bytes / 1e6:.1f} MB")
+    lines = [f"{method} track exported ({', '.join(sizes)}; meshmocap export)"]
+    try:
+        run = gait_of(track)
+    except InputError as exc:  # too few frames for a gait
+        return [*lines, f"{method} gait: none ({exc})"]
+    if run.gait.found:
+        written = write_gait(run.gait, out / "gait", reference=run.reference, title=method)
+        files.append((f"{method} gait: cycles, events, curves (CSV) and plots", written[0].parent))
+        s = run.gait.summary()
+        lines.append(f"{method} gait: {s.cadence_steps_per_min:.1f} steps/min, stride "
+                     f"{s.stride_length_m:.2f} m (meshmocap gait)")  # fmt: skip
+    else:
+        lines.append(f"{method} gait: none found ({run.gait.message})")
+    return lines
+
+
+def drop_resume_state(track: str | os.PathLike) -> int:
+    """Rewrite a finished track's frame files without the tracker state stored to resume an
+    interrupted run (``state_*`` arrays: 45 kB a frame for the patch tracker), except the
+    last frame's, from which tracking can still be extended. Returns the files rewritten."""
+    files = [frame_path(track, i) for i in done_frames(track)][:-1]
+    return sum(_drop_arrays(p, "state_") for p in files)
+
+
+def drop_hull_meshes(capture: str | os.PathLike) -> int:
+    """Rewrite a capture's hull files (``hulls/NNNNN.npz``) without their surface mesh
+    (``mesh_*`` arrays, 0.22 MB a frame at 1 cm), keeping the voxel occupancy (12 kB) from
+    which reading the capture rebuilds the same mesh by marching cubes
+    (:func:`~meshmocap.io.capture.read_hull_mesh`). Returns the files rewritten."""
+    return sum(_drop_arrays(p, "mesh_") for p in sorted((Path(capture) / "hulls").glob("*.npz")))
+
+
+def _drop_arrays(path: Path, prefix: str) -> bool:
+    """Rewrite the ``.npz`` at ``path`` without its arrays named ``prefix…``, atomically;
+    whether there were any."""
+    with np.load(path, allow_pickle=False) as z:
+        keep = {k: z[k] for k in z.files if not k.startswith(prefix)}
+        if len(keep) == len(z.files):
+            return False
+    with atomic_open(path) as f:
+        np.savez_compressed(f, **keep)
+    return True

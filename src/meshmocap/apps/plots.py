@@ -2,8 +2,8 @@
 
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot, no window, no
 global state; safe in worker processes and headless machines) and written atomically.
-Each function takes a result of :mod:`meshmocap.analysis` (metrics, gait) and a ``.png`` path
-and returns the path.
+Each function takes a result of :mod:`meshmocap.analysis` (metrics) and a ``.png`` path and
+returns the path; gait plots are in :mod:`meshmocap.apps.gait_files`.
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from meshmocap._atomic import write_bytes_atomic
-from meshmocap.analysis.gait import Gait
 from meshmocap.analysis.metrics import (
     BoneLengths,
     CorrespondenceErrors,
@@ -177,34 +176,4 @@ def plot_silhouette_errors(
     ax.legend(fontsize="small")
     default = f"Silhouette error per camera ({len(result.errors)} frames)"
     ax.set_title(title if title is not None else default)
-    return _save(fig, path)
-
-
-def plot_gait(gait: Gait, path: str | os.PathLike) -> Path:
-    """Fig. 11 of the cage paper: ankle heights over time, and the wrists' paths relative to
-    the pelvis in the sagittal plane, to a PNG."""
-    fig = Figure(figsize=(10, 4))
-    a, b = fig.subplots(1, 2)
-    for k, (name, col) in enumerate((("left", "tab:red"), ("right", "tab:blue"))):
-        a.plot(gait.times, gait.ankle_height[:, k] * 100, color=col, label=f"{name} ankle")
-        a.plot(
-            gait.times[gait.contacts[k]],
-            gait.ankle_height[gait.contacts[k], k] * 100,
-            "v",
-            color=col,
-        )
-        b.plot(gait.wrist_sagittal[:, k, 0] * 100, gait.wrist_sagittal[:, k, 1] * 100, color=col,
-               label=f"{name} wrist")  # fmt: skip
-    for s, e in gait.cycles:
-        a.axvspan(gait.times[s], gait.times[e], color="0.9", zorder=0)
-    a.set(
-        xlabel="time (s)", ylabel="height (cm)", title=f"ankle heights ({len(gait.cycles)} cycles)"
-    )
-    b.set(
-        xlabel="forward of pelvis (cm)", ylabel="above pelvis (cm)", title="wrists, sagittal plane"
-    )
-    b.set_aspect("equal", adjustable="datalim")
-    a.legend(loc="upper right")
-    b.legend(loc="upper right")
-    fig.tight_layout()
     return _save(fig, path)

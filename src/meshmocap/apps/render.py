@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from meshmocap._atomic import atomic_open
 from meshmocap._progress import progress
@@ -137,22 +137,47 @@ def _draw_floor(draw: ImageDraw.ImageDraw, V: np.ndarray, view: View) -> None:
                 draw.line(pts, fill=(200, 200, 205), width=1)
 
 
+def caption_font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    """A scalable sans-serif font of ``size`` pixels (Pillow's bundled one; matplotlib's
+    DejaVu Sans with Pillow < 10.1)."""
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: load_default() takes no size
+        from matplotlib import font_manager
+
+        return ImageFont.truetype(font_manager.findfont("DejaVu Sans"), size)
+
+
 def contact_sheet(
     images: list[np.ndarray], *, columns: int = 6, labels: list[str] | None = None
 ) -> np.ndarray:
-    """Tile equally sized (h, w, 3) uint8 images into one (rows·h, columns·w, 3) picture."""
+    """Tile equally sized (h, w, 3) uint8 images into one picture, ``columns`` wide.
+
+    Without ``labels`` the sheet is (rows·h, columns·w, 3). With them, each tile gets a
+    caption band under it, in dark text of a fifteenth of the tile's width (at least 14
+    px), so that captions stay legible when the sheet is shown shrunk (e.g. in a report):
+    the sheet is then (rows·(h + band), columns·w, 3).
+    """
     if not images:
         raise InputError("contact_sheet: expected at least one image, found none")
+    if labels is not None and len(labels) != len(images):
+        raise InputError(
+            f"contact_sheet: expected {len(images)} labels (one per image), found {len(labels)}"
+        )
     h, w = images[0].shape[:2]
     cols = min(columns, len(images))
     rows = -(-len(images) // cols)
-    sheet = Image.new("RGB", (cols * w, rows * h), (255, 255, 255))
+    size = max(14, round(w / 15))
+    band = 0 if labels is None else round(1.7 * size)
+    sheet = Image.new("RGB", (cols * w, rows * (h + band)), (255, 255, 255))
     draw = ImageDraw.Draw(sheet)
+    font = caption_font(size) if labels is not None else None
     for k, im in enumerate(images):
-        x, y = (k % cols) * w, (k // cols) * h
+        x, y = (k % cols) * w, (k // cols) * (h + band)
         sheet.paste(Image.fromarray(im), (x, y))
         if labels is not None:
-            draw.text((x + 6, y + 6), labels[k], fill=(0, 0, 0))
+            draw.text((x + w / 2, y + h + band / 2), labels[k], fill=(25, 25, 25), font=font,
+                      anchor="mm")  # fmt: skip
     return np.asarray(sheet)
 
 
@@ -248,7 +273,7 @@ def render_motion(
             written.append(save_png(out / f"frame_{index[k]:05d}.png", img))
         if k in picks:
             tiles.append(img)
-            labels.append(f"frame {index[k]}  t={index[k] / motion.fps:.2f}s")
+            labels.append(f"{index[k] / motion.fps:.2f} s · frame {index[k]}")
     sheet_path = (
         save_png(out / "contact_sheet.png", contact_sheet(tiles, columns=columns, labels=labels))
         if sheet

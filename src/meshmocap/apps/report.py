@@ -20,7 +20,7 @@ import math
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ from meshmocap._atomic import write_text_atomic
 from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.analysis.tables import _summary
 from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.gait_files import GAIT_HEADERS, gait_report
 from meshmocap.apps.player import (
     HULL_COLOR,
     PALETTE,
@@ -39,6 +40,7 @@ from meshmocap.apps.player import (
     player_js,
     player_payload,
 )
+from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, open_capture
 from meshmocap.io.results import Track, read_track
@@ -49,12 +51,14 @@ ImageSource = str | os.PathLike | bytes
 @dataclass(frozen=True)
 class Table:
     """A table of a report: ``rows`` of cells under ``headers``; floats get ``digits``
-    decimals (NaN prints as ``n/a``), numbers are right-aligned."""
+    decimals (NaN prints as ``n/a``), numbers are right-aligned; ``notes`` (definitions,
+    why a value is missing) are printed under it."""
 
     title: str
     headers: tuple[str, ...]
     rows: tuple[tuple[object, ...], ...]
     digits: int = 1
+    notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -84,19 +88,30 @@ def table_of(result: object, *, digits: int = 1) -> Table:
     return Table(title, tuple(heads), shown, digits)
 
 
-def evaluation_tables(ev: Evaluation) -> list[Table]:
-    """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables."""
+def _seconds(ev: Evaluation) -> tuple[float, float]:
+    return ev.seconds.mean, ev.seconds.median
+
+
+def evaluation_tables(ev: Evaluation, *, track: Track | None = None) -> list[Table]:
+    """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables, with the
+    frames not scored or flagged (``track``'s flags, when given) and why."""
     out = [
         Table(
             "Overview",
-            ("method", "frames", "unhealthy", "s/frame mean", "s/frame median"),
-            ((ev.method, ev.n_frames, ev.unhealthy, ev.seconds.mean, ev.seconds.median),),
+            ("method", "template", "frames", "unhealthy", "s/frame mean", "s/frame median"),
+            ((ev.method, ev.template, ev.n_frames, ev.unhealthy, *_seconds(ev)),),
             digits=3,
         )
     ]
+    skipped = frame_rows(ev, track)
+    if skipped:
+        out.append(Table("Frames not scored or flagged", ("what", "frames", "which", "why"),
+                         tuple(skipped)))  # fmt: skip
     for r in (ev.joints, ev.joints14, ev.bones, ev.silhouettes):
         if r is not None:
-            out.append(table_of(r))
+            t = table_of(r)
+            note = bone_note(ev) if r is ev.bones else ""
+            out.append(replace(t, notes=(note,)) if note else t)
     if ev.surface is not None:
         s = ev.surface
         rows = [
@@ -117,14 +132,20 @@ def evaluation_tables(ev: Evaluation) -> list[Table]:
 
 
 def comparison_table(
-    evaluations: Sequence[Evaluation], *, names: Sequence[str] | None = None
+    evaluations: Sequence[Evaluation],
+    *,
+    names: Sequence[str] | None = None,
+    no_silhouettes: str = "the report was made without silhouettes",
 ) -> Table:
     """One row per evaluation: frames, unhealthy frames, joint errors (mm; 14 joints without
-    the pelvis), silhouette error (%) and seconds per frame; ``n/a`` where not measured."""
+    the pelvis), the worst frame, silhouette error (%) and seconds per frame; ``n/a`` where
+    not measured, and notes that define the worst frame and say why silhouettes are missing
+    (``no_silhouettes``: the reason)."""
     nan = math.nan
     rows = []
     for k, ev in enumerate(evaluations):
         j, j14 = ev.joints, ev.joints14
+        worst = int(np.argmax(j.per_frame)) if j and len(j.per_frame) else None
         rows.append(
             (
                 names[k] if names else ev.method,
@@ -132,7 +153,8 @@ def comparison_table(
                 ev.unhealthy,
                 j.overall.mean if j else nan,
                 j.overall.median if j else nan,
-                float(j.per_frame.max()) if j and len(j.per_frame) else nan,
+                float(j.per_frame[worst]) if worst is not None else nan,
+                int(j.frames[worst]) if worst is not None else "n/a",
                 j14.overall.mean if j14 else nan,
                 ev.silhouettes.overall * 100 if ev.silhouettes else nan,
                 ev.seconds.mean,
@@ -145,23 +167,31 @@ def comparison_table(
         "joint mean (mm)",
         "joint median (mm)",
         "worst frame (mm)",
+        "worst frame",
         "14 joints mean (mm)",
         "silhouette (%)",
         "s/frame",
     )
-    return Table("Trackers compared", heads, tuple(rows), digits=2)
+    notes = [WORST_FRAME, silhouette_note(evaluations, no_silhouettes)]
+    return Table("Trackers compared", heads, tuple(rows), digits=2,
+                 notes=tuple(n for n in notes if n))  # fmt: skip
 
 
 def evaluation_section(
-    ev: Evaluation, *, images: Sequence[ImageSource] = (), title: str | None = None
+    ev: Evaluation,
+    *,
+    images: Sequence[ImageSource] = (),
+    title: str | None = None,
+    track: Track | None = None,
 ) -> Section:
-    """A report section of one evaluation: its tables and its plots (``.png`` paths or
-    bytes, captioned by file name)."""
+    """A report section of one evaluation: its tables (with ``track``'s flagged frames) and
+    its plots (``.png`` paths or bytes, captioned by file name)."""
     pics = []
     for im in images:
         cap = "" if isinstance(im, bytes) else Path(im).stem.replace("_", " ")
         pics.append((cap, im))
-    return Section(title or f"Evaluation: {ev.method}", tuple(evaluation_tables(ev)), tuple(pics))
+    tables = tuple(evaluation_tables(ev, track=track))
+    return Section(title or f"Evaluation: {ev.method}", tables, tuple(pics))
 
 
 # --------------------------------------------------------------------------- HTML
@@ -185,6 +215,7 @@ h1{font-size:22px;margin:4px 0}h2{font-size:18px;margin:18px 0 8px}
 .mm-table th,.mm-table td{border-bottom:1px solid #e3e6ea;padding:3px 10px;text-align:left}
 .mm-table td.num{text-align:right;font-variant-numeric:tabular-nums}
 .mm-table th{background:#f3f5f8}
+.mm-table td.mm-note{color:#555;font-size:12px;border:0;padding:2px 10px;max-width:60em}
 figure{display:inline-block;margin:0 12px 12px 0;vertical-align:top}
 figure img{max-width:100%;border:1px solid #e3e6ea}figcaption{color:#555;font-size:12px}
 pre{background:#f6f8fa;padding:8px;overflow:auto;font-size:12px}
@@ -217,9 +248,13 @@ def table_html(t: Table) -> str:
     """One ``<table>`` of a :class:`Table`."""
     head = "".join(f"<th>{_esc(h)}</th>" for h in t.headers)
     body = "".join("<tr>" + "".join(_cell(x, t.digits) for x in r) + "</tr>\n" for r in t.rows)
+    foot = "".join(
+        f'<tr><td class="mm-note" colspan="{len(t.headers)}">{_esc(n)}</td></tr>' for n in t.notes
+    )
     return (
         f'<table class="mm-table"><caption>{_esc(t.title)}</caption>'
-        f"<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody></table>\n"
+        f"<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>"
+        f"{f'<tfoot>{foot}</tfoot>' if foot else ''}</table>\n"
     )
 
 
@@ -343,6 +378,18 @@ def write_report(path: str | os.PathLike, **content) -> Path:
     return path
 
 
+def gait_section(
+    capture: Capture | SequenceCapture, tracks: Sequence[Track], names: Sequence[str]
+) -> Section:
+    """The gait of each track (:mod:`meshmocap.analysis.gait`) against the capture's ground
+    truth: a table, notes and each track's plots (Fig. 11, flexion over the cycle)."""
+    with tempfile.TemporaryDirectory(prefix="meshmocap-gait-") as tmp:
+        g = gait_report(capture, tracks, names, tmp)
+    table = Table("Gait from the tracked joints (and from the truth)", GAIT_HEADERS, g.rows,
+                  digits=2, notes=g.notes)  # fmt: skip
+    return Section("Gait", (table,), g.images)
+
+
 def build_report(
     out: str | os.PathLike,
     capture: str | os.PathLike | Capture | SequenceCapture,
@@ -382,6 +429,9 @@ def build_report(
             f"{n} ({Path(p).name if not isinstance(p, Track) else k})"
             for k, (n, p) in enumerate(zip(names, tracks, strict=True))
         ]
+    why = (
+        "the capture has no cameras" if silhouettes else "the report was made with --no-silhouettes"
+    )
     evs, sections = [], []
     with tempfile.TemporaryDirectory(prefix="meshmocap-report-") as tmp:
         for k, (name, t) in enumerate(zip(names, trs, strict=True)):
@@ -390,7 +440,9 @@ def build_report(
             pngs = [p for p in write_evaluation(ev, folder) if p.suffix == ".png"]
             pics = tuple((p.stem.replace("_", " "), p.read_bytes()) for p in pngs)
             evs.append(ev)
-            sections.append(Section(f"Evaluation: {name}", tuple(evaluation_tables(ev)), pics))
+            tables = tuple(evaluation_tables(ev, track=t))
+            sections.append(Section(f"Evaluation: {name}", tables, pics))
+    sections.append(gait_section(cap, trs, names))
     player = player_from_tracks(
         cap,
         trs,
@@ -402,7 +454,7 @@ def build_report(
         out,
         title=title or f"meshmocap report: {Path(cap.path).name}",
         players=[player],
-        tables=[comparison_table(evs, names=names)],
+        tables=[comparison_table(evs, names=names, no_silhouettes=why)],
         sections=sections,
         intro=f"capture {cap.path}, {len(cap)} frames; tracks: {', '.join(names)}",
     )

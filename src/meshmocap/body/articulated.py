@@ -35,7 +35,7 @@ from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
 from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.rotations import cross, so3_exp
+from meshmocap.geometry.rotations import cross, so3_exp, so3_log
 
 __all__ = [
     "FIXED_JOINTS",
@@ -43,9 +43,11 @@ __all__ = [
     "Residual",
     "apply_increment",
     "articulated_model",
+    "limit_step",
     "nearest_compatible",
     "pose_points",
     "residual_jacobian",
+    "rest_rotation_error",
     "subtree_matrix",
 ]
 
@@ -177,6 +179,26 @@ def apply_increment(
     omega = delta[3:].reshape(J, 3)
     local = np.einsum("jba,jb->ja", Gp, omega)  # G_parentᵀ ω_j
     return so3_exp(local) @ R, root + delta[:3]
+
+
+def limit_step(delta: np.ndarray, max_angle: float) -> np.ndarray:
+    """Shorten each joint's rotation in an increment ``delta`` (3 + 3J,) (as in
+    :func:`apply_increment`) to at most ``max_angle`` radians; returns a new array."""
+    out = np.array(delta, dtype=np.float64)
+    w = out[3:].reshape(-1, 3)
+    ang = np.linalg.norm(w, axis=1, keepdims=True)
+    out[3:] = (w * np.minimum(1.0, max_angle / np.maximum(ang, 1e-12))).ravel()
+    return out
+
+
+def rest_rotation_error(skeleton: Skeleton, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """(J, 3) float64: each joint's rotation away from its rest, as a world-frame rotation
+    vector ``G_parent log(R_j)`` (radians), the residual of a weak pull towards the rest
+    pose whose derivative with respect to the increments of :func:`apply_increment` is about
+    the identity."""
+    G, _ = forward_kinematics(skeleton, R, root)
+    Gp = np.concatenate([np.eye(3)[None], G[skeleton.parents[1:]]])
+    return np.einsum("jab,jb->ja", Gp, so3_log(R))
 
 
 def residual_jacobian(

@@ -50,9 +50,11 @@ from meshmocap.body.articulated import (
     FIXED_JOINTS,
     apply_increment,
     articulated_model,
+    limit_step,
     nearest_compatible,
     pose_points,
     residual_jacobian,
+    rest_rotation_error,
 )
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.template import EvalSkeleton, Template, load_template, template_problems
@@ -60,7 +62,7 @@ from meshmocap.errors import InputError, MeshError
 from meshmocap.geometry.decimate import decimate_mesh
 from meshmocap.geometry.mesh import face_normals, mesh_problems, signed_volume, vertex_normals
 from meshmocap.geometry.proximity import closest_points_on_triangles, sample_surface
-from meshmocap.geometry.rotations import so3_exp, so3_log
+from meshmocap.geometry.rotations import so3_exp
 
 __all__ = [
     "MIN_VERTICES",
@@ -201,9 +203,7 @@ class _Fitter:
         if not (len(i) or len(i2)):
             raise FloatingPointError("no compatible closest points")
         # weak pull of every non-root joint towards the rest pose (world-frame error)
-        G, _ = forward_kinematics(self.sk, R, root)
-        Gp = np.concatenate([np.eye(3)[None], G[self.sk.parents[1:]]])
-        e = np.einsum("jab,jb->ja", Gp, so3_log(R))
+        e = rest_rotation_error(self.sk, R, root)
         lam = np.full(J, self.lambda_pose)
         lam[0] = 0.0
         idx = np.arange(3, 3 + 3 * J)
@@ -217,12 +217,8 @@ class _Fitter:
         delta[act] = -np.linalg.solve(Ha, ga)
         if not np.all(np.isfinite(delta)):
             raise FloatingPointError("singular normal equations")
-        w = delta[3 : 3 + 3 * J].reshape(J, 3)
-        ang = np.linalg.norm(w, axis=1, keepdims=True)
-        delta[3 : 3 + 3 * J] = (
-            w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))
-        ).ravel()
-        R, root = apply_increment(self.sk, R, root, delta[: 3 + 3 * J])
+        step = limit_step(delta[: 3 + 3 * J], MAX_STEP_ANGLE)
+        R, root = apply_increment(self.sk, R, root, step)
         return R, root, s * float(np.exp(np.clip(delta[-1], -0.1, 0.1)))
 
 

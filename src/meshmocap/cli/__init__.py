@@ -17,11 +17,21 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from meshmocap import __version__
-from meshmocap.cli import batch, capture, demo, evaluation, export, motion, track
+from meshmocap.cli import (
+    batch,
+    capture,
+    demo,
+    evaluation,
+    export,
+    gait,
+    motion,
+    subject,
+    track,
+)
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, track, evaluation, batch, export)
+COMMANDS = (demo, motion, capture, subject, track, evaluation, batch, export, gait)
 
 
 class _Parser(argparse.ArgumentParser):

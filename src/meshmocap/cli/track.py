@@ -51,8 +51,8 @@ def _capture_source(sources: list[str]):
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from meshmocap.body.template import load_template
     from meshmocap.errors import InputError
+    from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
@@ -69,22 +69,18 @@ def _cmd_track(args: argparse.Namespace) -> int:
             print(f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
                   f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
                   f"{len(frames)}", file=sys.stderr)  # fmt: skip
-    template = load_template(args.template)
+    choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
+    template = choice.template
+    print(choice.note)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
         print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
               f"procedural walk and jog on {template.name!r}")  # fmt: skip
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
-    track = track_sequence(
-        tracker,
-        template,
-        capture,
-        args.out,
-        frames=frames,
-        resume=not args.restart,
-        vertices=False,
-    )
+    track = track_sequence(tracker, template, capture, args.out, frames=frames,
+                           resume=not args.restart, vertices=False,
+                           template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
@@ -197,7 +193,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "or point-cloud files, folders or a quoted glob or archive of them")  # fmt: skip
     k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
                    "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
-    k.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
+    k.add_argument("--template", help="tracking template: a name or .npz, or auto to estimate "
+                   "the performer's body (default: the template capture.json names, else auto; "
+                   "an estimate is cached as subject.npz in --out)")  # fmt: skip
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
     k.add_argument(

@@ -58,6 +58,7 @@ def track_sequence(
     resume: bool = True,
     show_progress: bool | None = None,
     vertices: bool = True,
+    template_info: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -79,6 +80,10 @@ def track_sequence(
     vertices : bool
         Read the tracked vertices back into the returned track (False for long runs: see
         :func:`~meshmocap.io.results.read_track`).
+    template_info : dict, optional
+        How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
+        ``"capture"`` or ``"estimated"``; ``template_file``); see
+        :func:`meshmocap.estimate.tracking_template.tracking_template`.
 
     Returns
     -------
@@ -97,6 +102,7 @@ def track_sequence(
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
+        **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "track"):  # a second run into the same folder is refused

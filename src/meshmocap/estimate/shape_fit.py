@@ -1,0 +1,340 @@
+"""Body shape and pose fitted jointly to the silhouettes of several frames.
+
+The body is a point of the bundled shape space (:mod:`meshmocap.body.shape_space`,
+standardised coefficients ``z``) posed in each frame ``f`` by its own pose (root
+translation, one rotation per free joint; the parametrisation of
+:mod:`meshmocap.body.articulated`). A visual hull is a superset of the body (phantom
+volumes), so the fit does not pull the model onto the hull; it asks, in every camera ``c``,
+
+* **inside** — every model point projects inside the silhouette:
+  ``r = max(0, d_c(π_c(v)))`` where ``d_c`` is the silhouette's signed distance
+  (pixels, > 0 outside); the one-sided hull term, at pixel rather than voxel resolution;
+* **outline** — every point of the model's own outline (a vertex on the boundary of the
+  model's rendered silhouette, seen edge-on) lies on the silhouette's contour:
+  ``r = d_c(π_c(v))``, both signs;
+* **coverage** — every contour pixel ``q`` of the silhouette is explained by the nearest
+  point of the model's outline: ``r = n_q · (π_c(v) − q)`` with ``n_q`` the contour's
+  outward normal; this is what keeps the body from shrinking inside the silhouettes;
+
+each residual converted from pixels to metres at the point's depth (``r · z / f``), with
+Huber-like weights beyond 2 cm, plus a Gaussian prior on the shape (``λ_z ‖z‖²``) and a
+weak pull of every joint towards the rest pose. Damped Gauss–Newton on all frames' poses
+and the shared shape together; the outlines and the matches are recomputed every iteration.
+
+Derivatives (exact for the model; the projection's derivative ignores lens distortion):
+a skinned point ``v_i = Σ_k w_ik (G_k (X_i − P_k) + p_k)`` moves with the shape through its
+rest position ``X_i(z)`` and the rest joints ``P_k(z)`` (both linear in ``z``), and the
+posed joints ``p_k = p_parent + G_parent (P_k − P_parent)``, ``p_root`` = the root
+parameter, so
+
+    ∂v_i/∂z = Σ_k w_ik [G_k (∂X_i − ∂P_k) + ∂p_k],   ∂p_k = ∂p_parent + G_parent (∂P_k − ∂P_parent)
+
+(:func:`shape_jacobian`, checked against finite differences in the tests).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+from scipy import ndimage
+
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    apply_increment,
+    articulated_model,
+    limit_step,
+    pose_points,
+    rest_rotation_error,
+)
+from meshmocap.body.shape_space import BodyShapeSpace
+from meshmocap.body.skeleton import forward_kinematics
+from meshmocap.body.template import Template
+from meshmocap.geometry.camera import Camera
+from meshmocap.geometry.rotations import cross
+from meshmocap.geometry.silhouette import silhouette
+
+__all__ = ["ShapeFit", "SilhouetteView", "fit_shape", "shape_jacobian", "silhouette_view"]
+
+#: Residuals beyond this (metres) get Huber weights.
+HUBER = 0.02
+#: Largest rotation (radians) of any joint, and change of any coefficient, in one step.
+MAX_STEP_ANGLE, MAX_STEP_Z = 0.3, 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class SilhouetteView:
+    """One camera's silhouette of one frame, ready for the fit.
+
+    Attributes
+    ----------
+    camera : Camera
+    sdt : (H, W) float64, signed distance to the silhouette's boundary, pixels (> 0 outside)
+    grad : (2, H, W) float64, its derivatives along u (columns) and v (rows)
+    contour : (c, 2) float64, boundary pixels (u, v) of the silhouette (subsampled)
+    normal : (c, 2) float64, their outward unit normals
+    """
+
+    camera: Camera
+    sdt: np.ndarray
+    grad: np.ndarray
+    contour: np.ndarray
+    normal: np.ndarray
+
+
+def silhouette_view(
+    mask: np.ndarray, camera: Camera, *, max_contour: int = 400, seed: int = 0
+) -> SilhouetteView:
+    """Precompute a :class:`SilhouetteView` of a (H, W) bool ``mask`` seen by ``camera``."""
+    mask = np.asarray(mask, dtype=bool)
+    # zero level on the pixels' edges: ±0.5 on the pixels either side of the boundary
+    sdt = np.where(mask, 0.5 - ndimage.distance_transform_edt(mask),
+                   ndimage.distance_transform_edt(~mask) - 0.5)  # fmt: skip
+    sdt = ndimage.gaussian_filter(sdt.astype(np.float64), 0.7)
+    gv, gu = np.gradient(sdt)
+    edge = mask & ~ndimage.binary_erosion(mask)
+    rows, cols = np.nonzero(edge)
+    if len(rows) > max_contour:
+        pick = np.sort(np.random.default_rng(seed).choice(len(rows), max_contour, replace=False))
+        rows, cols = rows[pick], cols[pick]
+    n = np.stack([gu[rows, cols], gv[rows, cols]], axis=1)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    q = np.stack([cols, rows], 1) + 0.5 * n  # the pixel's outer edge: where sdt = 0
+    return SilhouetteView(camera, sdt, np.stack([gu, gv]), q, n)
+
+
+def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``img`` (..., H, W) at pixel positions ``uv`` (p, 2), clamped."""
+    H, W = img.shape[-2:]
+    u = np.clip(uv[:, 0], 0, W - 1.001)
+    v = np.clip(uv[:, 1], 0, H - 1.001)
+    u0, v0 = u.astype(np.int64), v.astype(np.int64)
+    a, b = u - u0, v - v0
+    return (img[..., v0, u0] * (1 - a) * (1 - b) + img[..., v0, u0 + 1] * a * (1 - b)
+            + img[..., v0 + 1, u0] * (1 - a) * b + img[..., v0 + 1, u0 + 1] * a * b)  # fmt: skip
+
+
+def _projection(camera: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixels (p, 2), their derivatives ``∂uv/∂X`` (p, 2, 3) (pinhole, no distortion) and
+    metres per pixel at each point's depth (p,)."""
+    uv, _ = camera.project(X)
+    Xc = X @ camera.R.T + camera.t
+    z = np.maximum(Xc[:, 2], 1e-6)
+    K, R = camera.K, camera.R
+    du = (K[0, 0] / z)[:, None] * (R[0] - (Xc[:, 0] / z)[:, None] * R[2])
+    dv = (K[1, 1] / z)[:, None] * (R[1] - (Xc[:, 1] / z)[:, None] * R[2])
+    return uv, np.stack([du, dv], axis=1), z / (0.5 * (K[0, 0] + K[1, 1]))
+
+
+def shape_jacobian(
+    space: BodyShapeSpace, template: Template, R: np.ndarray, root: np.ndarray
+) -> np.ndarray:
+    """``∂v/∂z`` (n, 3, K) float64 of every skinned vertex of ``template`` (the space's body
+    at the current ``z``) posed by local rotations ``R`` (J, 3, 3) and ``root`` (3,)
+    (module docstring)."""
+    sk = template.skeleton
+    G, _ = forward_kinematics(sk, R, root)
+    d = space.derivatives()  # leading axis K
+    dP = np.moveaxis(d.heads, 0, -1)  # (J, 3, K)
+    dp = np.zeros_like(dP)
+    for k in range(1, sk.n_joints):  # parents precede children
+        q = sk.parents[k]
+        dp[k] = dp[q] + G[q] @ (dP[k] - dP[q])
+    W = template.weights
+    n, K = template.n_vertices, space.n_components
+    Gb = (W @ G.reshape(-1, 9)).reshape(n, 3, 3)
+    dX = np.moveaxis(d.V, 0, -1)  # (n, 3, K)
+    out = np.einsum("nab,nbk->nak", Gb, dX)
+    out -= (W @ np.einsum("jab,jbk->jak", G, dP).reshape(-1, 3 * K)).reshape(n, 3, K)
+    out += (W @ dp.reshape(-1, 3 * K)).reshape(n, 3, K)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeFit:
+    """Shape and poses fitted by :func:`fit_shape`.
+
+    Attributes
+    ----------
+    z : (K,) float64, standardised shape coefficients
+    R : (f, J, 3, 3) float64, local rotations per frame; ``root`` (f, 3) float64, metres
+    rms : float, RMS of the last iteration's silhouette residuals, metres
+    n_iter : int
+    """
+
+    z: np.ndarray
+    R: np.ndarray
+    root: np.ndarray
+    rms: float
+    n_iter: int
+
+
+class _Terms:
+    """Residual rows of one frame, accumulated into the normal equations."""
+
+    def __init__(self, n_pose: int, K: int):
+        self.rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.population: dict[str, int] = {}
+        self.n_pose, self.K = n_pose, K
+
+    def add(self, term, r, w3, a, S, population):
+        """Residuals ``r`` (p,) metres with ``∂r/∂v`` = ``w3`` (p, 3), lever arms ``a``
+        (p, J, 3) and shape Jacobians ``S`` (p, 3, K) of their points, out of
+        ``population`` candidates (the term is a mean over those)."""
+        self.population[term] = self.population.get(term, 0) + population
+        if len(r) == 0:
+            return
+        Jp = np.concatenate([w3, cross(a, w3[:, None, :]).reshape(len(r), -1)], axis=1)
+        Jz = np.einsum("pc,pck->pk", w3, S)
+        self.rows.append((term, r, Jp, Jz))
+
+
+def _outline(v, n, cam, F, *, ring: float = 2.0, rim_cos: float = 0.35) -> np.ndarray:
+    """Indices of the vertices ``v`` (n, 3) on the outline of the model seen by ``cam``:
+    for each boundary pixel of the model's rendered
+    silhouette, the nearest vertex seen edge-on (``|n · view| < rim_cos``) projected within
+    ``ring`` pixels of it."""
+    mask = silhouette(v, F, cam, assume_closed=True)
+    uv, depth = cam.project(v)
+    view = v - cam.centre
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    cand = np.flatnonzero((np.abs(np.sum(view * n, axis=1)) < rim_cos) & (depth > 0))
+    rows, cols = np.nonzero(mask & ~ndimage.binary_erosion(mask))
+    if len(cand) == 0 or len(rows) == 0:
+        return np.zeros(0, dtype=np.int64)
+    dist, k = KDTree(np.ascontiguousarray(uv[cand])).query(
+        np.stack([cols, rows], 1).astype(np.float64), k=1, distance_upper_bound=ring
+    )
+    return np.unique(cand[k[np.isfinite(dist) & (k < len(cand))].astype(np.int64)])
+
+
+def _frame_terms(views, v, n, a, S, F, sample, max_match):
+    """The three silhouette terms of one frame (module docstring), as a :class:`_Terms`."""
+    t = _Terms(a.shape[1] * 3 + 3, S.shape[2])
+    for view in views:
+        cam = view.camera
+        # inside: sampled points outside the silhouette
+        uv, D, s = _projection(cam, v[sample])
+        d = _bilinear(view.sdt, uv)
+        out = d > 0
+        if out.any():
+            g = _bilinear(view.grad, uv[out]).T  # (p, 2)
+            w3 = s[out, None] * np.einsum("pc,pcx->px", g, D[out])
+            i = sample[out]
+            t.add("inside", s[out] * d[out], w3, a[i], S[i], len(sample))
+        # outline on the contour, both signs
+        ol = _outline(v, n, cam, F)
+        if len(ol) == 0:
+            continue
+        uv, D, s = _projection(cam, v[ol])
+        d = _bilinear(view.sdt, uv)
+        g = _bilinear(view.grad, uv).T
+        t.add("outline", s * d, s[:, None] * np.einsum("pc,pcx->px", g, D), a[ol], S[ol], len(ol))
+        # coverage: each contour pixel explained by the nearest outline point
+        tree = KDTree(np.ascontiguousarray(uv))
+        dist, k = tree.query(view.contour, k=1, distance_upper_bound=max_match)
+        ok = np.isfinite(dist) & (k < len(ol))
+        if ok.any():
+            k, q, nq = k[ok].astype(np.int64), view.contour[ok], view.normal[ok]
+            r = np.sum(nq * (uv[k] - q), axis=1) * s[k]
+            w3 = s[k, None] * np.einsum("pc,pcx->px", nq, D[k])
+            t.add("coverage", r, w3, a[ol[k]], S[ol[k]], len(view.contour))
+    return t
+
+
+def fit_shape(
+    space: BodyShapeSpace,
+    views: list[list[SilhouetteView]],
+    R0: np.ndarray,
+    root0: np.ndarray,
+    *,
+    z0: np.ndarray | None = None,
+    iterations: int = 30,
+    lambda_shape: float = 1e-7,
+    lambda_pose: float = 1e-7,
+    n_points: int = 1500,
+    max_match: float = 25.0,
+    fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+    seed: int = 0,
+) -> ShapeFit:
+    """Fit one body shape and a pose per frame to the frames' silhouettes (module docstring).
+
+    Parameters
+    ----------
+    space : BodyShapeSpace
+    views : list (frames) of list (cameras) of SilhouetteView
+    R0 : (f, J, 3, 3) float64, starting local rotations per frame; ``root0`` (f, 3), metres
+    z0 : (K,) float64, starting shape (default: the mean body)
+    iterations : int, Gauss–Newton iterations
+    lambda_shape : float, weight (m²) of ``‖z‖²``
+    lambda_pose : float, weight (m²/rad²) of each joint's squared rotation from rest
+    n_points : int, model points of the inside term (area-weighted sample, fixed)
+    max_match : float, pixels: a contour pixel farther from every outline point is left out
+    fixed_joints : joints kept at their starting rotation
+    seed : int, seed of the point sample
+
+    Returns
+    -------
+    ShapeFit
+    """
+    n_f, K = len(views), space.n_components
+    R = np.array(R0, dtype=np.float64)
+    root = np.array(root0, dtype=np.float64)
+    z = np.zeros(K) if z0 is None else np.array(z0, dtype=np.float64)
+    tmpl = space.template(z)
+    J = tmpl.skeleton.n_joints
+    sample = articulated_model(tmpl, n_points=n_points, seed=seed).sample
+    free = [j for j, name in enumerate(space.joint_names) if name not in fixed_joints]
+    act_pose = np.r_[0:3, (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()]
+    n_pose = 3 + 3 * J
+    rms = np.inf
+    for _ in range(iterations):
+        tmpl = space.template(z)
+        model = articulated_model(tmpl, n_points=tmpl.n_vertices)
+        n_par = K + n_f * n_pose
+        H = np.zeros((n_par, n_par))
+        g = np.zeros(n_par)
+        sq, cnt = 0.0, 0
+        frames = []
+        for f in range(n_f):
+            v, n, a = pose_points(model, R[f], root[f])
+            S = shape_jacobian(space, tmpl, R[f], root[f])
+            frames.append(_frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
+        counts: dict[str, int] = {}
+        for t in frames:
+            for term, n_term in t.population.items():
+                counts[term] = counts.get(term, 0) + n_term
+        for f, t in enumerate(frames):
+            sl = slice(K + f * n_pose, K + (f + 1) * n_pose)
+            for term, r, Jp, Jz in t.rows:
+                w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12)) / counts[term]
+                H[sl, sl] += Jp.T @ (w[:, None] * Jp)
+                B = Jp.T @ (w[:, None] * Jz)
+                H[sl, :K] += B
+                H[:K, sl] += B.T
+                H[:K, :K] += Jz.T @ (w[:, None] * Jz)
+                g[sl] += Jp.T @ (w * r)
+                g[:K] += Jz.T @ (w * r)
+                sq, cnt = sq + float(r @ r), cnt + len(r)
+            # weak pull of every non-root joint towards the rest pose (world-frame error)
+            e = rest_rotation_error(tmpl.skeleton, R[f], root[f])[1:].ravel()
+            idx = np.arange(sl.start + 6, sl.stop)
+            H[idx, idx] += lambda_pose
+            g[idx] += lambda_pose * e
+        H[:K, :K] += lambda_shape * np.eye(K)
+        g[:K] += lambda_shape * z
+        rms = float(np.sqrt(sq / max(cnt, 1)))
+        act = np.concatenate([np.arange(K)] + [K + f * n_pose + act_pose for f in range(n_f)])
+        Ha, ga = H[np.ix_(act, act)], g[act]
+        Ha[np.diag_indices(len(act))] *= 1.0 + 1e-2
+        Ha[np.diag_indices(len(act))] += 1e-10
+        delta = np.zeros(n_par)
+        delta[act] = -np.linalg.solve(Ha, ga)
+        if not np.all(np.isfinite(delta)):
+            raise FloatingPointError("fit_shape: singular normal equations")
+        z = z + np.clip(delta[:K], -MAX_STEP_Z, MAX_STEP_Z)
+        for f in range(n_f):
+            d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose], MAX_STEP_ANGLE)
+            R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
+    return ShapeFit(z, R, root, rms, int(iterations))

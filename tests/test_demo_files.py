@@ -1,0 +1,43 @@
+"""The demo keeps what a user needs: hull meshes are rebuilt from their voxel occupancy, and
+finished tracks lose only the state that resumes an interrupted run."""
+
+import numpy as np
+
+from meshmocap.apps.demo import drop_hull_meshes, drop_resume_state
+from meshmocap.io.capture import Capture
+from meshmocap.io.results import FrameResult, read_state, read_track, start_track, write_frame
+from meshmocap.studio.synth import SynthSpec, synthesize
+
+
+def test_hull_meshes_are_rebuilt_from_the_voxels(tmp_path):
+    cap = synthesize(tmp_path / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=2),
+                     show_progress=False)  # fmt: skip
+    before = [cap[k].hull_mesh for k in range(2)]
+    size = sum(p.stat().st_size for p in (cap.path / "hulls").iterdir())
+    assert drop_hull_meshes(cap.path) == 2
+    left = sum(p.stat().st_size for p in (cap.path / "hulls").iterdir())
+    assert left < 0.15 * size  # the meshes are most of the hulls' bytes
+    again = Capture(cap.path)
+    for k, (V, F) in enumerate(before):
+        V2, F2 = again[k].hull_mesh
+        assert np.array_equal(F2, F) and np.array_equal(V2, V)  # the same mesh, bit for bit
+        assert again[k].hull.occupancy.any()
+    assert drop_hull_meshes(cap.path) == 0
+
+
+def test_resume_state_is_dropped_but_the_last(tmp_path):
+    meta = {"method": "toy", "template": "toy", "eval_names": ["a"], "eval_parents": [-1]}
+    start_track(tmp_path, meta, np.zeros((1, 3), np.int64), resume=False)
+    rng = np.random.default_rng(0)
+    for i in range(4):
+        state = {"R": rng.normal(size=(50, 3, 3)), "c": rng.normal(size=(50, 3))}
+        write_frame(tmp_path, FrameResult(i, rng.normal(size=(1, 3)), rng.normal(size=(9, 3)),
+                                          energies={"data": 1.0 + i}, state=state))  # fmt: skip
+    before = read_track(tmp_path)
+    assert drop_resume_state(tmp_path) == 3
+    after = read_track(tmp_path)
+    for k in ("joints", "vertices", "frames", "healthy"):
+        assert np.array_equal(getattr(after, k), getattr(before, k))
+    assert after.energies["data"].tolist() == [1.0, 2.0, 3.0, 4.0]
+    assert read_state(tmp_path, 2) == {} and set(read_state(tmp_path, 3)) == {"R", "c"}
+    assert drop_resume_state(tmp_path) == 0
