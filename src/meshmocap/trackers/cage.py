@@ -1,15 +1,22 @@
 """The cage tracker of cage-manifold-tracking.txt (Duveau, Boyer et al., 3DIMPVT 2012).
 
 The template sits in a cage built from 21 Oriented Quads (:mod:`meshmocap.body.oqr`) and
-follows it through 3D Green coordinates (Eq. 1). Plausible quad configurations lie on a
-GPLVM manifold learned from motion capture (§4). Each frame minimises
+follows it through 3D Green coordinates (Eq. 1; ``surface="green"``) or, by default, by its
+own skinning from the quads' joint frames (:mod:`~meshmocap.trackers.cage_surface`: Green
+coordinates put the surface 16–44 mm from the body the quads stand for). Plausible quad
+configurations lie on a GPLVM manifold learned from motion capture (§4; by default from
+the bundled CMU pose library, :func:`~meshmocap.trackers.manifold.default_manifold`).
+Each frame minimises
 
     E(x, Γ) = ½ Σ_i w_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)  [+ λc E_c]        # Eq. (4)–(5)
 
 over the latent point ``x`` (shape, Eq. 6: chain rule through the GPLVM mean, the
 quads, the cage and the Green coordinates) and the pelvis transform ``Γ`` (pose, Eq. 11),
-alternated (§5.3), then adjusts the quads locally (Eq. 12). Joints follow the cage through
-their own Green coordinates taken on the first frame (§6.2).
+alternated (§5.3), then adjusts the quads locally (Eq. 12). Joints follow their quads
+rigidly (``joints="quads"``) or the cage through Green coordinates taken on the first
+frame (§6.2). ``E_c`` is a silhouette coverage term where the frame has silhouettes, else
+the hull's. A frame whose manifold configuration fits far worse than the tracked quads
+is off the manifold (``off_manifold``): its adjustment is not pulled back and runs longer.
 
 Choices where the paper is silent or ambiguous (each stated where it is coded):
 - Eq. (4) sums distance-field values; we sum their squares (signed distance, so points
