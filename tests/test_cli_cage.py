@@ -45,6 +45,16 @@ def test_learn_prints_a_summary_and_writes_manifold_and_plot(tmp_path, capsys):
     assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_learn_from_the_bundled_pose_library_and_a_task_motion(tmp_path, capsys):
+    """A task-specific manifold: the library's first poses beside a procedural jog."""
+    out = tmp_path / "m.npz"
+    assert main(["learn", "library:40", "jog", "--samples", "30", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "read 161 poses of 'neutral_5k' from 2 source(s)" in text
+    groups = set(PoseManifold.load(out).groups)
+    assert "jog" in groups and len(groups - {"jog"}) >= 3  # library categories
+
+
 def test_learn_from_the_cmu35_walk_jog_mat(cmu, tmp_path, capsys):
     mat = cmu / "cmu35WalkJog.mat"
     if not mat.is_file():
