@@ -305,7 +305,8 @@ class CageTracker:
                 cams, masks = [], None
             if cams and masks and len(masks) == len(cams):
                 sil = SilhouetteCoverage(cams, masks, o.n_silhouette, o.silhouette_margin,
-                                         seed=[o.seed, frame.index, 1])  # fmt: skip
+                                         seed=[o.seed, frame.index, 1],
+                                         cap=o.silhouette_cap)  # fmt: skip
                 if len(sil):
                     out.append((sil, o.silhouette_weight, True))
         if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)
@@ -317,9 +318,12 @@ class CageTracker:
 
     def _distance_terms(self, field, P, sub):
         r, g = field.value_and_gradient(P)
-        m = self.opts.outside_margin
+        m, cap = self.opts.outside_margin, self.opts.outside_cap
         if m:  # outside: only beyond the margin
             r = np.where(r > 0, np.maximum(r - m, 0.0), r)
+        if cap:  # farther outside: the hull lost that part (a carved hole): no pull
+            far = r > cap
+            r, g = np.where(far, 0.0, r), np.where(far[:, None], 0.0, g)
         w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w[sub]
         r, g = r * w, g * w[:, None]
         if not self._coverage:

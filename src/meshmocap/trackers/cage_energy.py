@@ -272,9 +272,14 @@ class SilhouetteCoverage:
         Pixels.
     seed : int or sequence of int
         Seeds the draw.
+    cap : float
+        Pixels: contour samples farther than this from every projected model point are
+        outliers (spurious blobs of a noisy silhouette) and cost nothing (0: no cap).
     """
 
-    def __init__(self, cameras, masks, n_per_camera: int, margin: float, seed) -> None:
+    def __init__(
+        self, cameras, masks, n_per_camera: int, margin: float, seed, cap: float = 0.0
+    ) -> None:
         from scipy import ndimage
 
         rng = np.random.default_rng(seed)
@@ -291,7 +296,7 @@ class SilhouetteCoverage:
             K = np.asarray(cam.K, dtype=np.float64)
             self.views.append((q, K, np.asarray(cam.R, dtype=np.float64),
                                np.asarray(cam.t, dtype=np.float64)))  # fmt: skip
-        self.margin = float(margin)
+        self.margin, self.cap = float(margin), float(cap)
         self.n = sum(len(v[0]) for v in self.views)
 
     def __len__(self) -> int:
@@ -312,6 +317,8 @@ class SilhouetteCoverage:
             uv = np.stack([f * X[:, 0] / z + K[0, 2], K[1, 1] * X[:, 1] / z + K[1, 2]], 1)
             d, i = KDTree(uv).query(q, k=1)
             on = d > self.margin
+            if self.cap:  # farther: a spurious blob, not the body (truncated, robust)
+                on &= d <= self.cap
             if not on.any():
                 continue
             i, d = i[on].astype(np.intp), d[on]

@@ -97,6 +97,9 @@ class CageOptions:
         all.
     outside_margin : float
         Distance, metres, outside the hull that the data term tolerates (0: none).
+    outside_cap : float
+        Distance, metres, outside the hull beyond which a point costs nothing (truncated
+        data term: the hull lost that part, a hole carved by a noisy silhouette; 0: none).
     coverage_weight : float
         λc of the hull coverage term (0: none), against the data term: both are mean half
         squared distances (m²). Used only in frames without a silhouette term (no cameras
@@ -114,6 +117,9 @@ class CageOptions:
         squared distances, m²).
     silhouette_margin : float
         Pixels a silhouette contour sample may lie from the nearest projected model point.
+    silhouette_cap : float
+        Pixels beyond which a contour sample is an outlier (a spurious blob) and costs
+        nothing (0: no cap).
     n_silhouette : int
         Contour samples per camera and frame.
     field_spacing : float
@@ -137,6 +143,7 @@ class CageOptions:
     restarts: int = 3
     inside_weight: float = 0.05
     outside_margin: float = 0.0
+    outside_cap: float = 0.0
     joints: Joints = "quads"
     surface: Surface = "skinned"
     n_sample: int = 800
@@ -146,6 +153,7 @@ class CageOptions:
     n_coverage: int = 500
     silhouette_weight: float = 0.3
     silhouette_margin: float = 1.0
+    silhouette_cap: float = 15.0
     n_silhouette: int = 200
     field_spacing: float = 0.02
     damping: float = 1e-3
@@ -163,10 +171,11 @@ class CageOptions:
                 and self.coverage_margin >= 0 and self.n_coverage >= 1
                 and self.field_spacing > 0 and self.silhouette_weight >= 0
                 and self.silhouette_margin >= 0 and self.n_silhouette >= 1
-                and self.outside_margin >= 0 and self.off_manifold >= 0):  # fmt: skip
+                and self.outside_margin >= 0 and self.off_manifold >= 0
+                and self.outside_cap >= 0 and self.silhouette_cap >= 0):  # fmt: skip
             raise InputError(
                 "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
-                "coverage_margin, silhouette_weight, silhouette_margin, outside_margin and "
-                "off_manifold ≥ 0, "
+                "coverage_margin, silhouette_weight, silhouette_margin, silhouette_cap, "
+                "outside_margin, outside_cap and off_manifold ≥ 0, "
                 "n_coverage and n_silhouette ≥ 1 and field_spacing > 0"
             )
