@@ -306,7 +306,8 @@ class CageTracker:
             if cams and masks and len(masks) == len(cams):
                 sil = SilhouetteCoverage(cams, masks, o.n_silhouette, o.silhouette_margin,
                                          seed=[o.seed, frame.index, 1],
-                                         cap=o.silhouette_cap)  # fmt: skip
+                                         cap=o.silhouette_cap,
+                                         min_component=o.silhouette_clean)  # fmt: skip
                 if len(sil):
                     out.append((sil, o.silhouette_weight, True))
         if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)

@@ -275,10 +275,20 @@ class SilhouetteCoverage:
     cap : float
         Pixels: contour samples farther than this from every projected model point are
         outliers (spurious blobs of a noisy silhouette) and cost nothing (0: no cap).
+    min_component : float
+        Connected pieces of a mask smaller than this fraction of its largest are dropped
+        first (the usual cleaning of small spurious blobs; 0: none).
     """
 
     def __init__(
-        self, cameras, masks, n_per_camera: int, margin: float, seed, cap: float = 0.0
+        self,
+        cameras,
+        masks,
+        n_per_camera: int,
+        margin: float,
+        seed,
+        cap: float = 0.0,
+        min_component: float = 0.0,
     ) -> None:
         from scipy import ndimage
 
@@ -288,6 +298,11 @@ class SilhouetteCoverage:
             m = np.asarray(mask, dtype=bool)
             if not m.any():
                 continue
+            if min_component > 0:  # small pieces apart from the body: noise
+                lab, n = ndimage.label(m)
+                if n > 1:
+                    size = np.bincount(lab.ravel())[1:]
+                    m = np.isin(lab, 1 + np.flatnonzero(size >= min_component * size.max()))
             rows, cols = np.nonzero(m & ~ndimage.binary_erosion(m))
             if len(rows) > n_per_camera:
                 pick = rng.choice(len(rows), n_per_camera, replace=False)

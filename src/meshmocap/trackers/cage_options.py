@@ -120,6 +120,9 @@ class CageOptions:
     silhouette_cap : float
         Pixels beyond which a contour sample is an outlier (a spurious blob) and costs
         nothing (0: no cap).
+    silhouette_clean : float
+        Connected pieces of a silhouette smaller than this fraction of its largest are
+        dropped before sampling its contour (spurious blobs; 0: none).
     n_silhouette : int
         Contour samples per camera and frame.
     field_spacing : float
@@ -154,6 +157,7 @@ class CageOptions:
     silhouette_weight: float = 0.3
     silhouette_margin: float = 1.0
     silhouette_cap: float = 15.0
+    silhouette_clean: float = 0.02
     n_silhouette: int = 200
     field_spacing: float = 0.02
     damping: float = 1e-3
@@ -172,10 +176,11 @@ class CageOptions:
                 and self.field_spacing > 0 and self.silhouette_weight >= 0
                 and self.silhouette_margin >= 0 and self.n_silhouette >= 1
                 and self.outside_margin >= 0 and self.off_manifold >= 0
-                and self.outside_cap >= 0 and self.silhouette_cap >= 0):  # fmt: skip
+                and self.outside_cap >= 0 and self.silhouette_cap >= 0
+                and 0 <= self.silhouette_clean < 1):  # fmt: skip
             raise InputError(
                 "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
                 "coverage_margin, silhouette_weight, silhouette_margin, silhouette_cap, "
-                "outside_margin, outside_cap and off_manifold ≥ 0, "
+                "outside_margin, outside_cap and off_manifold ≥ 0, silhouette_clean in [0, 1), "
                 "n_coverage and n_silhouette ≥ 1 and field_spacing > 0"
             )
