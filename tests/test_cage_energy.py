@@ -145,7 +145,7 @@ def test_graft_hangs_the_donor_limb_on_the_trunk():
 def test_silhouette_coverage_prices_unexplained_contour_and_caps_blobs():
     """A body's image whose contour every projected model point explains costs nothing; a
     blob 60 px away costs its distance beyond the margin (in metres at the points' depth),
-    unless the cap makes it an outlier."""
+    unless the cap makes it an outlier or cleaning drops it."""
     from meshmocap.geometry.camera import Camera
 
     K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
@@ -165,3 +165,8 @@ def test_silhouette_coverage_prices_unexplained_contour_and_caps_blobs():
     assert per.sum() > 0 and np.sqrt(per.max()) >= (52 - 4) * 0.004
     capped = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, cap=15.0)
     assert np.all(capped.residuals(P)[0] == 0)
+    # or the blob, 2 % of the body's area, is cleaned off the mask (kept at 1 %)
+    cleaned = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, min_component=0.03)
+    assert np.all(cleaned.residuals(P)[0] == 0)
+    kept = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, min_component=0.01)
+    assert np.any(kept.residuals(P)[0] > 0)
