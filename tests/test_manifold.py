@@ -23,7 +23,12 @@ from meshmocap.trackers.manifold import (
     resolve_manifold,
     template_digest,
 )
-from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
+from meshmocap.trackers.registry import (
+    CAGE_ABLATIONS,
+    MANIFOLD_METHODS,
+    METHODS,
+    make_tracker,
+)
 
 
 @pytest.fixture(scope="module")
@@ -80,11 +85,16 @@ def test_check_refuses_another_template_or_rigging_in_one_line(tiny):
 
 def test_registry_cage_methods_and_their_ablations(tiny, tmp_path):
     t, _, pm = tiny
-    assert set(MANIFOLD_METHODS) == {"cage", "cage_quads", "cage_noreg", "cage_nolocal"}
-    assert set(MANIFOLD_METHODS) < set(METHODS)
-    path = pm.save(tmp_path / "m.npz")
     fixed = {"cage": {}, "cage_quads": {"space": "quads"}, "cage_noreg": {"variance_weight": 0.0},
-             "cage_nolocal": {"local_iters": 0}}  # fmt: skip
+             "cage_nolocal": {"local_iters": 0}, "cage_nosil": {"silhouette_weight": 0.0},
+             "cage_nowiden": {"off_manifold": 0.0},
+             "cage_green": {"surface": "green", "joints": "green"},
+             "cage_paper": {"surface": "green", "joints": "green", "silhouette_weight": 0.0,
+                            "off_manifold": 0.0}}  # fmt: skip
+    assert set(MANIFOLD_METHODS) == set(fixed)
+    assert set(MANIFOLD_METHODS) < set(METHODS)
+    assert set(CAGE_ABLATIONS) < set(MANIFOLD_METHODS)
+    path = pm.save(tmp_path / "m.npz")
     for method in MANIFOLD_METHODS:
         tr = make_tracker(method, manifold=pm.gp, n_sample=100)
         assert isinstance(tr, CageTracker) and tr.gp is pm.gp and tr.opts.n_sample == 100
