@@ -89,7 +89,12 @@ def test_an_estimate_is_cached_in_the_track_folder(mesh_folder, tmp_path, monkey
     assert c.info == {"template_source": "estimated", "template_file": "subject.npz"}
     again = tt.tracking_template(mesh_folder, "auto", out)
     assert calls == ["auto"] and "reused" in again.note
-    assert np.allclose(again.template.V, c.template.V)
+    # a resumed run tracks with the very template the first run did (a cage track's
+    # settings digest its manifold, learned on the template's joints): bit for bit
+    for a, b in ((again.template.V, c.template.V),
+                 (again.template.skeleton.end_offsets, c.template.skeleton.end_offsets),
+                 (again.template.weights.toarray(), c.template.weights.toarray())):  # fmt: skip
+        np.testing.assert_array_equal(a, b)
     tt.tracking_template(mesh_folder, None, out, refresh=True)
     assert calls == ["auto", "auto"]
 

@@ -95,7 +95,10 @@ def tracking_template(
     est = estimate_subject(capture, kind=kind)  # type: ignore[arg-type]
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
+    # tracked as read back from the file, as a resumed run will read it: the same template
+    # to the bit, so the resumed run's settings (a cage manifold's digest) are the same
+    t = load_template(path)
     note = (f"template estimated from the capture ({est.kind} kind, frames "
             f"{', '.join(map(str, est.frames))}; height {est.height:.3f} m; "
             f"{est.seconds:.0f} s): {path}")  # fmt: skip
-    return TemplateChoice(est.template, info, note)
+    return TemplateChoice(t, info, note)
