@@ -76,7 +76,7 @@ class Placer:
     (:mod:`meshmocap.body.oqr`), in the canonical frame: the template turned by ``C.T``
     about Z (``C`` from :func:`heading`), so that it faces −Y with its left along +X.
     ``joints`` are the rig joints the quads follow (all must exist);
-    :meth:`place` returns the quads by name (``QUAD_NAMES``), in that frame. With
+    :meth:`Placer.place` returns the quads by name (``QUAD_NAMES``), in that frame. With
     ``box_limbs`` set (default False) the shoulder and elbow quads also cover the upper
     arm's vertices between them, projected along the shoulder→elbow bone."""
 

@@ -26,7 +26,7 @@ in-plane distance ``d_e = ν_e·(a − η)`` and ``L_e = ∫_e ds/|ξ − η|``:
 ``−ν_{e_k}|e_k|/(2A)`` times ``∫ ρ/r³ dσ = −Σ_e ν_e L_e`` the rest.) ``Ω`` is van
 Oosterom & Strackee's atan2 formula and ``L_e = log((r_a + r_b + ℓ)/(r_a + r_b − ℓ))``
 with the denominator rewritten ``2|a×b|² / ((r_a r_b − a·b)(r_a + r_b + ℓ))`` where it
-would cancel. No threshold is needed (GC08 skips faces with |w| < ε): the jump of Ω
+would cancel. No threshold is needed (GC08 skips faces with ``|w| < ε``): the jump of Ω
 across a face is multiplied by ``h`` or by the continuous foot barycentrics, so values are
 continuous through the faces. Σ_i φ_i equals the winding number: 1 inside, 0 outside.
 

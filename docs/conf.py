@@ -1,0 +1,142 @@
+"""Sphinx configuration of the meshmocap documentation.
+
+Build: ``sphinx-build -W --keep-going docs docs/_build/html`` (``pip install -e ".[docs]"``).
+``MESHMOCAP_DOCS_GALLERY=fast`` runs only the gallery examples whose file name starts with
+``plot_`` and contains ``_fast`` ... see ``sphinx_gallery_conf`` below; ``off`` skips running
+them (the pages then show the code without figures).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import meshmocap
+
+HERE = Path(__file__).resolve().parent
+
+project = "meshmocap"
+author = "meshmocap developers"
+copyright = "meshmocap developers"
+release = meshmocap.__version__
+version = ".".join(release.split(".")[:2])
+
+extensions = [
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.doctest",
+    "sphinx.ext.mathjax",
+    "sphinx.ext.viewcode",
+    "numpydoc",
+    "sphinx_gallery.gen_gallery",
+]
+
+templates_path = ["_templates"]
+exclude_patterns = ["_build", "**.ipynb_checkpoints", "examples/README.rst"]
+root_doc = "index"
+nitpicky = True
+# Type names in signatures that are not documented objects of their own (no intersphinx:
+# the build machines have no network).
+nitpick_ignore_regex = [
+    (r"py:class", r"numpy\.typing\..*"),
+    (r"py:class", r"(np|npt)\..*"),
+    (r"py:class", r"optional"),
+    # the standard library, numpy and scipy (no intersphinx without network)
+    (r"py:.*", r"(os|pathlib|numpy|scipy|np|sklearn|dask|argparse)\..*"),
+]
+
+# -- autodoc / autosummary / numpydoc ----------------------------------------------------
+autosummary_generate = True
+autosummary_imported_members = False
+autodoc_default_options = {"members": True, "member-order": "bysource"}
+autodoc_typehints = "none"  # numpydoc's Parameters sections carry the types
+autodoc_preserve_defaults = True
+numpydoc_show_class_members = False
+numpydoc_class_members_toctree = False
+numpydoc_xref_param_type = False
+numpydoc_attributes_as_param_list = True
+
+# -- doctest -------------------------------------------------------------------------------
+doctest_global_setup = "import numpy as np"
+
+# -- sphinx-gallery ------------------------------------------------------------------------
+_gallery = os.environ.get("MESHMOCAP_DOCS_GALLERY", "full")
+sphinx_gallery_conf = {
+    "examples_dirs": str(HERE / "examples"),
+    "gallery_dirs": "auto_examples",
+    "filename_pattern": r"/plot_" if _gallery != "off" else r"^$",
+    "plot_gallery": "True" if _gallery != "off" else "False",
+    "download_all_examples": False,
+    "remove_config_comments": True,
+    "within_subsection_order": "FileNameSortKey",
+    "matplotlib_animations": False,
+    "image_scrapers": ("matplotlib",),
+    "show_memory": False,
+    "min_reported_time": 1,
+}
+
+# -- HTML ----------------------------------------------------------------------------------
+html_theme = "pydata_sphinx_theme"
+html_title = f"meshmocap {release}"
+html_static_path = ["_static"]
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "secondary_sidebar_items": ["page-toc"],
+}
+html_show_sourcelink = False
+
+warnings.filterwarnings("ignore", category=UserWarning, message="Matplotlib is currently using agg")
+
+
+# -- short cross-references ----------------------------------------------------------------
+# The docstrings name classes and functions of other modules by their short name
+# (:class:`Motion`, :func:`track_sequence`). Resolve such a name to the one documented object
+# whose full name ends with it, preferring the referring module's own package; an attribute
+# of a documented class (:attr:`FrameResult.flags`, listed in its Attributes section) links
+# to the class. Anything else stays a broken reference, and the -W build fails on it.
+def _resolve_short_reference(app, env, node, contnode):
+    if node.get("refdomain") != "py":
+        return None
+    py = env.get_domain("py")
+    target = node["reftarget"].lstrip(".~")
+    here = node.get("py:module") or ""
+    for name in (target, target.rpartition(".")[0]):
+        if not name:
+            continue
+        matches = [full for full in py.objects if full == name or full.endswith("." + name)]
+        if len(matches) > 1:  # the kinds of object the role names (a function, not a module)
+            kinds = set(py.objtypes_for_role(node["reftype"]) or ())
+            matches = [m for m in matches if py.objects[m].objtype in kinds] or matches
+        if len(matches) > 1:
+            # the candidates nearest to the referring module
+            def shared(full):
+                a, b = full.split("."), here.split(".")
+                n = 0
+                while n < min(len(a), len(b)) and a[n] == b[n]:
+                    n += 1
+                return n
+
+            best = max(shared(m) for m in matches)
+            matches = [m for m in matches if shared(m) == best]
+        if len(matches) == 1:
+            objtype = py.objects[matches[0]].objtype
+            role = {
+                "class": "class",
+                "exception": "exc",
+                "function": "func",
+                "method": "meth",
+                "data": "data",
+                "attribute": "attr",
+                "module": "mod",
+                "property": "attr",
+            }.get(objtype, "obj")
+            return py.resolve_xref(
+                env, node["refdoc"], app.builder, role, matches[0], node, contnode
+            )
+    return None
+
+
+def setup(app):
+    app.connect("missing-reference", _resolve_short_reference)
