@@ -1,9 +1,9 @@
 """Sphinx configuration of the meshmocap documentation.
 
 Build: ``sphinx-build -W --keep-going docs docs/_build/html`` (``pip install -e ".[docs]"``).
-``MESHMOCAP_DOCS_GALLERY=fast`` runs only the gallery examples whose file name starts with
-``plot_`` and contains ``_fast`` ... see ``sphinx_gallery_conf`` below; ``off`` skips running
-them (the pages then show the code without figures).
+``MESHMOCAP_DOCS_GALLERY`` sets how the gallery runs: ``full`` (default) runs every example,
+``fast`` only the two that need no studio capture (seconds), ``off`` none (the pages then
+show the code without its figures).
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ _gallery = os.environ.get("MESHMOCAP_DOCS_GALLERY", "full")
 sphinx_gallery_conf = {
     "examples_dirs": str(HERE / "examples"),
     "gallery_dirs": "auto_examples",
-    "filename_pattern": r"/plot_" if _gallery != "off" else r"^$",
+    "filename_pattern": {"full": r"/plot_", "fast": r"/plot_(gait|latent)"}.get(_gallery, r"^$"),
     "plot_gallery": "True" if _gallery != "off" else "False",
     "download_all_examples": False,
     "remove_config_comments": True,

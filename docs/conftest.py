@@ -25,6 +25,8 @@ import pytest
 
 DOCS = Path(__file__).resolve().parent
 SKIP_DIRS = {"_build", "generated", "auto_examples", "_templates"}
+# Built pages, not sources: never collected.
+collect_ignore = ["_build", "auto_examples", "api/generated", "examples", "conf.py"]
 NUMBER = re.compile(r"[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?")
 
 
