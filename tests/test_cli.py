@@ -1,5 +1,7 @@
 """The command line, run in-process."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -49,6 +51,15 @@ def test_demo_runs_on_bundled_defaults(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "meshmocap demo" in out and "articulated_icp" in out and "mean joint error" in out
     assert (tmp_path / "eval_patch" / "summary.txt").is_file()
+    # the user's path: a performer the trackers are not told about, its body estimated
+    assert "performer 'heavy_male', not told to the trackers; template estimated" in out
+    for tracker in ("patch", "cage", "articulated_icp"):
+        meta = json.loads((tmp_path / f"track_{tracker}" / "track.json").read_text())
+        assert meta["template_source"] == "estimated"
+        assert (tmp_path / f"track_{tracker}" / meta["template_file"]).is_file()
+    for ext in ("bvh", "c3d", "trc", "glb", "csv"):  # exported as meshmocap export does
+        assert (tmp_path / "exports" / f"walk_patch.{ext}").stat().st_size > 0
+    assert "patch gait: none" in out  # 4 frames hold no step; said, not a traceback
 
 
 @pytest.mark.parametrize(

@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -318,3 +319,23 @@ def test_blender_imports_the_export(ext, bvh, glb, track, tmp_path):
     heads = np.array(got["heads"])  # Blender's world: Z up, metres, like the library's
     ankle = track.joints[:, EVAL_NAMES.index("left_ankle")]
     assert np.linalg.norm(heads - ankle, axis=1).mean() < 0.005
+
+
+def test_a_track_of_an_estimated_subject_exports_with_its_own_template(track_dir, tmp_path):
+    """The default track of a real capture deforms an estimated body saved in the track
+    folder (track.json: template_file): exports find it there, with no template argument."""
+    from meshmocap.body.template import save_template
+
+    out = tmp_path / "track"
+    shutil.copytree(track_dir, out)
+    body = load_template("neutral_5k")
+    save_template(out / "subject.npz", replace(body, name="subject"))
+    meta = json.loads((out / "track.json").read_text())
+    meta.update(template="subject", template_source="estimated", template_file="subject.npz")
+    (out / "track.json").write_text(json.dumps(meta))
+    res = export_track(out, tmp_path / "walk.bvh")
+    assert res.n_frames == T and res.vertex_error_mm < 5.0  # same body, same fit as bundled
+    (out / "subject.npz").unlink()
+    with pytest.raises(MeshmocapFileNotFoundError, match=r"subject\.npz, which is missing"):
+        export_track(out, tmp_path / "walk2.bvh")
+    assert export_track(out, tmp_path / "walk.csv").n_frames == T  # points need no template

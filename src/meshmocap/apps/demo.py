@@ -1,5 +1,13 @@
 """The main job on the bundled defaults (``meshmocap demo``): motions, retargeting and
-rendering, then a synthetic capture tracked and scored end to end.
+rendering, then a synthetic capture tracked as a user would track their own, exported and
+analysed, and scored against the truth that only the studio knows.
+
+The capture walks the real user's path: its performer (``heavy_male``) is a body the
+trackers are not told about, so the tracking template is estimated from the hulls
+(:func:`~meshmocap.estimate.tracking_template.tracking_template`), and the first pose is
+found from the capture (the trackers' default ``init="auto"``). The ground truth is read
+only to score. The patch track is exported to BVH, C3D, TRC, glTF and CSV and its gait
+analysed, as ``meshmocap export`` and ``meshmocap gait`` do.
 
 Everything runs from the installed package alone (bundled templates, procedural motions);
 a user clip (BVH/AMC) can be added.
@@ -8,6 +16,7 @@ a user clip (BVH/AMC) can be added.
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +26,8 @@ import numpy as np
 from meshmocap._atomic import atomic_open
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.export import export_track
+from meshmocap.apps.gait_files import gait_of, write_gait
 from meshmocap.apps.player import player_from_tracks
 from meshmocap.apps.render import render_motion
 from meshmocap.apps.report import (
@@ -28,7 +39,9 @@ from meshmocap.apps.report import (
 )
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
-from meshmocap.body.template import load_template
+from meshmocap.body.template import bundled_templates, load_template
+from meshmocap.errors import InputError
+from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
 from meshmocap.io.results import done_frames, frame_path
@@ -39,6 +52,10 @@ from meshmocap.trackers.registry import make_tracker
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
 #: cage tracker's pose manifold is learned on the spot from the procedural walk and jog.
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
+#: The demo capture's performer: a bundled body that the trackers are not told about.
+DEMO_PERFORMER = "heavy_male"
+#: Formats the demo's first track is exported to (``meshmocap export``).
+DEMO_EXPORTS = ("bvh", "c3d", "trc", "glb", "csv")
 #: Why the demo's comparison has no silhouette error (rendering every frame in every camera
 #: would double its run time).
 NO_SILHOUETTES = "the demo skips it to save time; `meshmocap report CAPTURE TRACK...` measures it"
@@ -61,6 +78,7 @@ class DemoResult:
     files: tuple[tuple[str, Path], ...]
     scores: tuple[TrackerScore, ...]
     seconds: float
+    notes: tuple[str, ...] = ()
 
 
 def run_demo(
@@ -69,6 +87,8 @@ def run_demo(
     seconds: float = 4.0,
     track_frames: int = 120,
     clip: str | None = None,
+    performer: str = DEMO_PERFORMER,
+    template: str = "auto",
     show_progress: bool | None = None,
 ) -> DemoResult:
     """Run the demo into the folder ``out``.
@@ -82,7 +102,16 @@ def run_demo(
         tracking.
     clip : str, optional
         A BVH/AMC file to retarget and render as well.
+    performer : str
+        Bundled body that performs in the synthetic capture.
+    template : str
+        Tracking template: ``"auto"`` estimates the performer's body from the hulls (what a
+        user without a body scan has); a bundled name or ``.npz`` file tracks with that body
+        (``neutral_5k`` is the fastest).
     """
+    if performer not in bundled_templates():
+        raise InputError(f"demo: performer must be one of {sorted(bundled_templates())}, "
+                         f"found {performer!r}")  # fmt: skip
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -105,20 +134,23 @@ def run_demo(
         res = render_motion(neutral, m, out / name, frames=False, show_progress=show_progress)
         files.append((f"{name} on neutral", res.sheet))
     scores: list[TrackerScore] = []
-    players, sections, evaluations, tracks = [], [], [], []
+    players, sections, evaluations, tracks, notes = [], [], [], [], []
     if track_frames > 0:
-        template = load_template("neutral_5k")
-        spec = SynthSpec(motion="walk", template="neutral_5k", rig="humaneva4", stop=track_frames)
+        spec = SynthSpec(motion="walk", template="neutral_5k", subject=performer,
+                         rig="humaneva4", stop=track_frames)  # fmt: skip
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4)", cap.path))
-        for method in DEMO_METHODS:
-            tracker = (
-                make_tracker(method, template=template)
-                if method == "cage"
-                else make_tracker(method)
-            )
-            track = track_sequence(tracker, template, cap, out / f"track_{method}",
-                                   show_progress=show_progress)  # fmt: skip
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {performer})", cap.path))
+        folders = [out / f"track_{method}" for method in DEMO_METHODS]
+        choice = tracking_template(cap, template, folders[0])
+        notes.append(f"performer {performer!r}, not told to the trackers; {choice.note}")
+        for method, folder in zip(DEMO_METHODS, folders, strict=True):
+            if "template_file" in choice.info and folder != folders[0]:
+                folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
+                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+            tracker = make_tracker(method, template=choice.template)
+            track = track_sequence(tracker, choice.template, cap, folder,
+                                   show_progress=show_progress,
+                                   template_info=choice.info)  # fmt: skip
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
             written = write_evaluation(ev, out / f"eval_{method}")
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
@@ -128,7 +160,9 @@ def run_demo(
             evaluations.append(ev)
             plots = [p for p in written if p.suffix == ".png"]
             sections.append(evaluation_section(ev, images=plots, track=track))
-            drop_resume_state(out / f"track_{method}")
+            drop_resume_state(folder)
+        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
+        notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
@@ -138,10 +172,46 @@ def run_demo(
         out / "report.html", title="meshmocap demo", players=players,
         tables=[comparison_table(evaluations, no_silhouettes=NO_SILHOUETTES)] * bool(evaluations),
         sections=[*sections, Section("Motions rendered (contact sheets)", images=sheets)],
-        intro="procedural motions, retargeting and a synthetic capture tracked and scored",
+        intro="procedural motions, retargeting, and a synthetic capture tracked as a user "
+        "tracks their own: " + "; ".join(notes) if notes else "procedural motions and "
+        "retargeting",
     )  # fmt: skip
     files.append(("report (tables, plots, 3D player; open in a browser)", report))
-    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0)
+    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
+
+
+def _first_pose(track) -> str:
+    """How ``track``'s first pose was found, from its ``track.json``."""
+    init = str(track.meta.get("init", "truth"))
+    return {"auto": "found from the capture (init auto)",
+            "truth": "copied from the ground truth (init truth, the papers' protocol)",
+            }.get(init, f"init {init}")  # fmt: skip
+
+
+def _exports_and_gait(track: Path, out: Path, method: str, files: list) -> list[str]:
+    """Export ``track`` in every :data:`DEMO_EXPORTS` format into ``out/exports`` and write
+    its gait analysis into ``out/gait``; append what was written to ``files`` and return
+    one line each for the report."""
+    (out / "exports").mkdir(parents=True, exist_ok=True)
+    sizes = []
+    for fmt in DEMO_EXPORTS:
+        res = export_track(track, out / "exports" / f"walk_{method}.{fmt}")
+        files.append((f"{method} track as {fmt.upper()}", res.path))
+        sizes.append(f"{fmt.upper()} {res.size_bytes / 1e6:.1f} MB")
+    lines = [f"{method} track exported ({', '.join(sizes)}; meshmocap export)"]
+    try:
+        run = gait_of(track)
+    except InputError as exc:  # too few frames for a gait
+        return [*lines, f"{method} gait: none ({exc})"]
+    if run.gait.found:
+        written = write_gait(run.gait, out / "gait", reference=run.reference, title=method)
+        files.append((f"{method} gait: cycles, events, curves (CSV) and plots", written[0].parent))
+        s = run.gait.summary()
+        lines.append(f"{method} gait: {s.cadence_steps_per_min:.1f} steps/min, stride "
+                     f"{s.stride_length_m:.2f} m (meshmocap gait)")  # fmt: skip
+    else:
+        lines.append(f"{method} gait: none found ({run.gait.message})")
+    return lines
 
 
 def drop_resume_state(track: str | os.PathLike) -> int:

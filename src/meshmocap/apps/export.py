@@ -45,7 +45,7 @@ from meshmocap.io.bvh import LengthUnit, write_bvh
 from meshmocap.io.c3d import write_c3d
 from meshmocap.io.gltf import skinned_gltf, write_gltf
 from meshmocap.io.joints_csv import write_joints_csv
-from meshmocap.io.results import Track, read_track
+from meshmocap.io.results import Track, read_track, tracked_template
 from meshmocap.io.trc import write_trc
 
 __all__ = [
@@ -300,6 +300,9 @@ def export_track(
     if long and fmt != "csv":
         raise InputError(f"export: long applies to csv, not {fmt}")
     tr = track if isinstance(track, Track) else read_track(track)
+    posed = fmt in ("bvh", "gltf", "glb") or markers != "none"  # these need the template
+    if template is None and posed and not isinstance(track, Track):
+        template = tracked_template(track, tr.meta)  # an estimated subject: its file
     rows = track_rows(tr, frames)
     rate, source = track_fps(tr, fps)
     idx = tr.frames[rows]

@@ -23,6 +23,7 @@ import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap._npz import read_npz
+from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 
 FORMAT = "meshmocap-track-1"
@@ -119,6 +120,34 @@ def template_label(meta: dict) -> str:
     (e.g. ``"subject (estimated from the capture)"``; ``"neutral_5k (given)"``)."""
     source = str(meta.get("template_source", "given"))
     return f"{meta.get('template', '?')} ({TEMPLATE_SOURCES.get(source, source)})"
+
+
+def tracked_template(path: str | os.PathLike, meta: dict | None = None) -> Template:
+    """The template the track folder ``path`` deformed: the file its ``track.json`` names
+    (``template_file``, relative to the folder: an estimated subject), else the bundled
+    template named there.
+
+    Raises :class:`MeshmocapFileNotFoundError` when neither can be found (the message says
+    to pass the template's file)."""
+    path = Path(path)
+    if meta is None:
+        meta = json.loads((path / "track.json").read_text())
+    name = str(meta.get("template"))
+    file = meta.get("template_file")
+    if file:
+        if not (path / str(file)).is_file():
+            raise MeshmocapFileNotFoundError(
+                f"{path}: tracked with the template in {file}, which is missing from the track "
+                "folder; pass the template's file (template=, --template)"
+            )
+        return load_template(path / str(file))
+    try:
+        return load_template(name)
+    except MeshmocapFileNotFoundError:
+        raise MeshmocapFileNotFoundError(
+            f"{path}: tracked with template {name!r}, which is not bundled; pass its file "
+            "(template=, --template)"
+        ) from None
 
 
 def start_track(

@@ -38,7 +38,7 @@ import numpy as np
 from meshmocap._atomic import write_text_atomic
 from meshmocap._validate import check_choice
 from meshmocap.body.oqr import OQR, build_oqr, cage_vertices, configuration_from_vector
-from meshmocap.body.template import Template, load_template
+from meshmocap.body.template import Template
 from meshmocap.errors import (
     FormatError,
     InputError,
@@ -48,7 +48,7 @@ from meshmocap.errors import (
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.proximity import closest_points_on_triangles
 from meshmocap.io.gltf import morph_gltf, write_gltf
-from meshmocap.io.results import done_frames, read_state
+from meshmocap.io.results import done_frames, read_state, tracked_template
 
 __all__ = [
     "CageTrack",
@@ -128,13 +128,7 @@ def read_cage_track(
                          f"{meta.get('method')!r}")  # fmt: skip
     name = str(meta.get("template"))
     if template is None:
-        try:
-            template = load_template(name)
-        except MeshmocapFileNotFoundError:
-            raise MeshmocapFileNotFoundError(
-                f"{path}: tracked with template {name!r}, which is not bundled; pass its file "
-                "(template=, --template)"
-            ) from None
+        template = tracked_template(path, meta)
     elif template.name != name:
         raise InputError(f"{path}: tracked with template {name!r}, found {template.name!r}")
     frames = done_frames(path)
