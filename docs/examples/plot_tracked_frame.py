@@ -50,7 +50,7 @@ for ax, (a, name) in zip(axes, [(0, "x (m), front view"), (1, "y (m), side view"
     ax.set_xlabel(name)
     ax.set_aspect("equal")
 axes[0].set_ylabel("z (m)")
-axes[0].legend(loc="lower left", markerscale=4, fontsize=8)
+axes[0].legend(loc="lower left", markerscale=2.5, fontsize=8)
 errors = np.linalg.norm(J - true_J, axis=1) * 1000
 fig.suptitle(f"frame {int(track.frames[k])}: mean joint error {errors.mean():.1f} mm")
 plt.show()

@@ -97,6 +97,7 @@ class Placer:
         self.box_limbs = False
 
     def part(self, *names: str) -> np.ndarray:
+        """Return the (n,) bool mask of the vertices owned by the joints ``names``."""
         return np.isin(self.owner, [self.idx[n] for n in names if n in self.idx])
 
     def fit(self, anchor, n, u_ref, section, box=None, axis=None, keep_out=None) -> QuadRect:
@@ -152,6 +153,7 @@ class Placer:
         return quads[-1]
 
     def place(self) -> list[QuadRect]:
+        """Return the 21 quads, in the canonical frame (see the class docstring)."""
         P, bone, part = self.P, self.bone, self.part
         torso, head = part(*_TORSO), part(*_HEAD)
         out: dict[str, QuadRect] = {}

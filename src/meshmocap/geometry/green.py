@@ -299,13 +299,6 @@ def green_coordinates(
     psi : (n, nf) float64
         Face-normal coordinates ψ, metres; ≥ 0 inside.
 
-    Notes
-    -----
-    ``points[p] == phi[p] @ cage_V + psi[p] @ n`` to rounding (about 1e-14 m for a
-    1 m cage; see the module notes near edges) with ``n`` the unit outward face normals.
-    Cost: O(n · nf), ~130 array operations per (point, face) pair; 0.4–0.6 s for 12k
-    points in a 166-face cage on one core.
-
     Raises
     ------
     InputError
@@ -314,6 +307,13 @@ def green_coordinates(
     MeshError
         The cage is open, non-manifold, inconsistently or inward oriented, or has
         degenerate faces.
+
+    Notes
+    -----
+    ``points[p] == phi[p] @ cage_V + psi[p] @ n`` to rounding (about 1e-14 m for a
+    1 m cage; see the module notes near edges) with ``n`` the unit outward face normals.
+    Cost: O(n · nf), ~130 array operations per (point, face) pair; 0.4–0.6 s for 12k
+    points in a 166-face cage on one core.
     """
     func = "green_coordinates"
     check_choice(func, "exterior", exterior, _EXTERIOR)
