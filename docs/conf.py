@@ -77,7 +77,7 @@ _gallery = os.environ.get("MESHMOCAP_DOCS_GALLERY", "full")
 sphinx_gallery_conf = {
     "examples_dirs": str(HERE / "examples"),
     "gallery_dirs": "auto_examples",
-    "filename_pattern": {"full": r"/plot_", "fast": r"/plot_(gait|latent)"}.get(_gallery, r"^$"),
+    "filename_pattern": {"full": r"/plot_", "fast": r"/plot_\d_(gait|latent)"}.get(_gallery, r"^$"),
     "plot_gallery": "True" if _gallery != "off" else "False",
     "download_all_examples": False,
     "remove_config_comments": True,
