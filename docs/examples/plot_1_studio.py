@@ -13,7 +13,6 @@ import tempfile
 from pathlib import Path
 
 import matplotlib.pyplot as plt
-import numpy as np
 
 from meshmocap.studio.synth import SynthSpec, synthesize
 
@@ -43,5 +42,7 @@ ax.set_ylabel("z (m)")
 ax.set_aspect("equal")
 ax.legend(markerscale=6, fontsize=8)
 plt.show()
-print(f"hull: {len(hull_V)} vertices; occupancy grid {frame.hull.occupancy.shape}, "
-      f"{frame.hull.occupancy.sum() * 1e-6:.3f} m³ of voxels at 1 cm")
+print(
+    f"hull: {len(hull_V)} vertices; occupancy grid {frame.hull.occupancy.shape}, "
+    f"{frame.hull.occupancy.sum() * 1e-6:.3f} m³ of voxels at 1 cm"
+)
