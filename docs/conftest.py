@@ -4,7 +4,8 @@
   ``\\`` continuations) run in order with bash, in one fresh folder per page, and each must
   exit with status 0. The lines a command shows below it are its expected output: each must
   appear in the command's standard output, in order, with every number allowed to differ
-  (timings, paths of temporary folders) and ``...`` standing for any lines. Blocks written
+  (timings, paths of temporary folders), ``...`` alone standing for any lines and a line
+  ending in ``...`` for any line that starts so. Blocks written
   as ``.. code-block:: text`` are shown, not run (a cluster, a camera, data the build
   machine does not have).
 * ``>>>`` examples run as doctests (``--doctest-glob``), also in a fresh folder.
@@ -98,9 +99,12 @@ def _commands(body):
 
 
 def _pattern(expected: str) -> re.Pattern:
-    parts = NUMBER.split(expected.rstrip())
+    text = expected.rstrip()
+    prefix = text.endswith("...") and text.strip() != "..."  # a line's start only
+    parts = NUMBER.split(text[:-3] if prefix else text)
     body = r"[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?".join(re.escape(p) for p in parts)
-    return re.compile(r"\s*" + re.sub(r"(\\ )+", r"\\s+", body) + r"\s*$")
+    end = "" if prefix else r"\s*$"
+    return re.compile(r"\s*" + re.sub(r"(\\ )+", r"\\s+", body) + end)
 
 
 def check_output(expected: list[str], stdout: str) -> str | None:

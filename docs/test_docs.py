@@ -41,3 +41,5 @@ def test_output_compared_numbers_aside():
     assert check_output(["...", "more"], out) is None
     assert "not found" in check_output(["tracked 6 frames with cage"], out)
     assert "not found" in check_output(["more", "note"], out)  # order matters
+    assert check_output(["tracked 12 frames ..."], out) is None  # the line's start
+    assert "not found" in check_output(["tracked 12 frames"], out)
