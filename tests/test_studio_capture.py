@@ -8,9 +8,9 @@ import pytest
 
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.geometry.carving import distance_grid
+from meshmocap.geometry.carving import distance_grid, hull_mesh
 from meshmocap.geometry.mesh import signed_volume
-from meshmocap.io.capture import Capture, read_hull, write_hull
+from meshmocap.io.capture import Capture, read_hull, read_hull_mesh, write_hull
 from meshmocap.io.meshes import read_mesh
 from meshmocap.studio.hulls import compute_hulls
 from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
@@ -52,6 +52,24 @@ def test_hull_occupancy_round_trip(walk_capture, tmp_path):
     write_hull(tmp_path / "h.npz", h)
     g = read_hull(tmp_path / "h.npz")
     assert np.array_equal(g.occupancy, h.occupancy) and np.allclose(g.origin, h.origin)
+
+
+def test_hull_mesh_round_trip_is_exact(walk_capture, tmp_path):
+    """The stored mesh reads back as the hull's surface in float32, bit for bit, whether the
+    vertex coordinates go through the per-axis table or (far apart) are computed one by one."""
+    h = walk_capture[1].hull
+    V, F = hull_mesh(h)
+    K = np.rint((V - h.origin) / h.voxel_size * 2)  # half-voxel grid steps
+    for k, spread in enumerate((0, 10 * len(V))):  # the second spreads one axis far apart
+        K2 = K.copy()
+        K2[: len(V) // 2, 0] += spread
+        V2 = h.origin + K2 / 2 * h.voxel_size
+        write_hull(tmp_path / f"{k}.npz", h, mesh=(V2, F))
+        with np.load(tmp_path / f"{k}.npz") as z:
+            assert "mesh_dK" in z.files  # stored on the grid
+        W, G = read_hull_mesh(tmp_path / f"{k}.npz")
+        assert np.array_equal(W, V2.astype(np.float32)) and np.array_equal(G, F)
+        assert W.dtype == np.float64 and G.dtype == np.int64
 
 
 def test_interrupted_synth_resumes_and_keeps_finished_frames(walk_capture, tmp_path):

@@ -5,14 +5,18 @@ complaint for a file that is not a zip at all, and happily inflates a small arch
 gigabytes. :func:`read_npz` reads every array of an archive in memory, refuses archives
 whose arrays would unpack past :data:`MAX_NPZ_BYTES` (read from the zip directory before
 anything is inflated), and turns every failure into one line naming the file, what it was
-expected to be and what went wrong.
+expected to be and what went wrong. :func:`open_npz` does the same for readers that need
+only some of the arrays (a hull's mesh without its occupancy), inflating only those.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from tokenize import TokenError
 
@@ -59,29 +63,102 @@ def read_npz(
         Not a zip archive, a corrupt or truncated one, an array that is not a readable
         ``.npy`` (or holds Python objects), arrays above the size cap, or a missing key.
     """
-    path = Path(path)
-    if not path.is_file():
-        what_is = "is a folder, not a file" if path.is_dir() else "no such file"
-        raise MeshmocapFileNotFoundError(f"{path}: {what_is}")
-    cap = max_npz_bytes()
-    try:
-        with zipfile.ZipFile(path) as zf:
-            total = sum(i.file_size for i in zf.infolist())
-            if total > cap:
-                raise error(
-                    f"{path}: {what} arrays unpack to {total / 1e6:.0f} MB, above the "
-                    f"{cap / 1e6:.0f} MB limit (MESHMOCAP_MAX_NPZ_MB)"
-                )
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    except MeshmocapError:
-        raise
-    except (zipfile.BadZipFile, zlib.error, KeyError, NotImplementedError, RuntimeError,
-            *NPY_ERRORS) as exc:  # fmt: skip
-        text = str(exc).strip().splitlines()
-        why = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
-        raise error(f"{path}: not a readable .npz {what} ({why[:160]})") from None
+    with open_npz(path, what, error=error) as z:
+        total = sum(i.file_size for i in z.members.values())
+        if total > z.cap:
+            raise z.too_big(total)
+        d = {k: z[k] for k in z.members}
     missing = [k for k in keys if k not in d]
     if missing:
         raise error(f"{path}: not a {what}: missing {', '.join(map(repr, missing))}")
     return d
+
+
+class NpzArchive:
+    """An ``.npz`` file read into memory, whose arrays are inflated one at a time on request
+    (``z[name]``), so that a reader pays only for the arrays it uses; see :func:`open_npz`.
+
+    Attributes
+    ----------
+    path : Path; ``members``: array name → its zip entry; ``cap``: the size cap in bytes
+    """
+
+    def __init__(self, path: Path, what: str, error: type[MeshmocapError]):
+        self.path, self.what, self.error = path, what, error
+        self.cap = max_npz_bytes()
+        self._inflated = 0
+        with self._errors():
+            # one read of the whole file: a zip read in place makes many small reads
+            self._zip = zipfile.ZipFile(io.BytesIO(path.read_bytes()))
+            self.members = {
+                i.filename[:-4] if i.filename.endswith(".npy") else i.filename: i
+                for i in self._zip.infolist()
+            }
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.members
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """The array ``name`` (as ``numpy.load`` gives it: the raw bytes of a member that is
+        not a ``.npy``); a name the archive lacks raises ``error``."""
+        if name not in self.members:
+            raise self.error(f"{self.path}: not a {self.what}: missing {name!r}")
+        info = self.members[name]
+        self._inflated += info.file_size
+        if self._inflated > self.cap:
+            raise self.too_big(self._inflated)
+        with self._errors():
+            raw = self._zip.read(info)
+            if not raw.startswith(np.lib.format.MAGIC_PREFIX):
+                return raw
+            return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
+
+    def too_big(self, total: int) -> MeshmocapError:
+        """The error for arrays unpacking to ``total`` bytes, above the cap."""
+        return self.error(
+            f"{self.path}: {self.what} arrays unpack to {total / 1e6:.0f} MB, above the "
+            f"{self.cap / 1e6:.0f} MB limit (MESHMOCAP_MAX_NPZ_MB)"
+        )
+
+    @contextmanager
+    def _errors(self) -> Iterator[None]:
+        try:
+            yield
+        except MeshmocapError:
+            raise
+        except (zipfile.BadZipFile, zlib.error, KeyError, NotImplementedError, RuntimeError,
+                *NPY_ERRORS) as exc:  # fmt: skip
+            text = str(exc).strip().splitlines()
+            why = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+            why = f"not a readable .npz {self.what} ({why[:160]})"
+            raise self.error(f"{self.path}: {why}") from None
+
+    def close(self) -> None:
+        """Release the archive."""
+        self._zip.close()
+
+    def __enter__(self) -> NpzArchive:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_npz(
+    path: str | os.PathLike, what: str, *, error: type[MeshmocapError] = FormatError
+) -> NpzArchive:
+    """Open the ``.npz`` file ``path`` for reading arrays one at a time (a context manager;
+    errors as :func:`read_npz`'s, each array counted against the size cap as it is read).
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError
+        No such file.
+    error
+        Not a zip archive (the arrays' own damage is raised when they are read).
+    """
+    path = Path(path)
+    if not path.is_file():
+        what_is = "is a folder, not a file" if path.is_dir() else "no such file"
+        raise MeshmocapFileNotFoundError(f"{path}: {what_is}")
+    return NpzArchive(path, what, error)

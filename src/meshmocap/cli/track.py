@@ -58,6 +58,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
     options = _tracker_options(args)
+    if args.follow or args.idle is not None:
+        return _follow(args, options)
     capture = _capture_source(args.capture)
     frames = None
     if args.frames:
@@ -99,6 +101,66 @@ def _cmd_track(args: argparse.Namespace) -> int:
               f"across, first {int(track.frames[first])}: {track.messages[first]}",
               file=sys.stderr)  # fmt: skip
     return 0
+
+
+def _follow(args: argparse.Namespace, options: dict) -> int:
+    """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
+    from meshmocap.errors import InputError
+    from meshmocap.trackers.follow import follow_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    if not args.follow:
+        raise InputError("track: --idle goes with --follow")
+    if len(args.capture) != 1 or args.frames:
+        raise InputError("track --follow: give one folder (a capture or meshes) and no --frames")
+    choice = _follow_template(args)
+    template = choice.template
+    print(choice.note)
+    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    seen: list[float] = []
+
+    def report(f) -> None:
+        seen.append(f.seconds)
+        flags = f"  {','.join(f.flags)}: {f.message}" if f.flags else ""
+        print(f"frame {f.index}: {1000 * f.seconds:.0f} ms, latency {1000 * f.latency:.0f} ms"
+              f"{flags}", flush=True)  # fmt: skip
+
+    idle = f"; stops after {args.idle:g} s without a new frame" if args.idle else ""
+    print(f"following {args.capture[0]} with {args.method} (Ctrl-C stops){idle}", flush=True)
+    how = f"no new frame for {args.idle:g} s" if args.idle else "stopped"
+    try:
+        follow_sequence(tracker, template, args.capture[0], args.out, idle=args.idle,
+                        resume=not args.restart, report=report,
+                        template_info=choice.info)  # fmt: skip
+    except KeyboardInterrupt:
+        how = "Ctrl-C"
+    per = sorted(seen)[len(seen) // 2] if seen else 0.0
+    print(f"{how}: tracked {len(seen)} frames (median {1000 * per:.0f} ms per frame); "
+          f"results in {args.out}")  # fmt: skip
+    return 0
+
+
+def _follow_template(args: argparse.Namespace):
+    """The template of a folder being written: as ``track`` chooses it, except that a
+    folder with no frames yet cannot have the performer's body estimated from it."""
+    import json
+    from types import SimpleNamespace
+
+    from meshmocap.errors import InputError
+    from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
+
+    meta_file = Path(args.capture[0]) / "capture.json"
+    try:
+        meta = json.loads(meta_file.read_text()) if meta_file.is_file() else {}
+    except (OSError, ValueError):
+        meta = {}
+    named = isinstance(meta, dict) and (meta.get("spec") or {}).get("template")
+    cached = (Path(args.out) / SUBJECT_FILE).is_file() and not args.restart
+    if args.template in (None, "auto") and not (named and args.template is None) and not cached:
+        raise InputError("track --follow: give --template NAME|FILE (a folder being written "
+                         "has no frames yet to estimate the performer's body from)")  # fmt: skip
+    capture = SimpleNamespace(meta=meta if isinstance(meta, dict) else {})
+    return tracking_template(capture, args.template, args.out, refresh=args.restart)
 
 
 def _text(s: slice) -> str:
@@ -223,6 +285,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    k.add_argument("--follow", action="store_true", help="live: track each frame as it is "
+                   "written into the folder (complete files: write, then rename), print its "
+                   "latency; Ctrl-C stops, a rerun resumes")  # fmt: skip
+    k.add_argument(
+        "--idle",
+        type=number(0, 1e6, "seconds", open_lo=True),
+        help="with --follow: stop after this many seconds without a new frame",
+    )
     k.set_defaults(func=_cmd_track)
     m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")
     m.add_argument("sources", nargs="+", metavar="SOURCE", help="walk, jog (procedural), "

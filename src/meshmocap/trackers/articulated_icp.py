@@ -41,6 +41,7 @@ The articulated model (model points, lever arms, increments, correspondences) li
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 from typing import Literal, get_args
 
@@ -55,18 +56,27 @@ from meshmocap.body.articulated import (
     apply_increment,
     articulated_model,
     nearest_compatible,
-    pose_points,
-    residual_jacobian,
 )
-from meshmocap.body.skeleton import forward_kinematics
+from meshmocap.body.articulated_system import (
+    moment_plan,
+    normal_equations,
+    pair_moments,
+    point_motion,
+    posed_model,
+    rotation_error,
+)
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.rotations import cross, so3_log
+from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 
 Correspondences = Literal["model_to_data", "both"]
+
+#: Stages of :attr:`ArticulatedICP.stage_seconds`: reading and sampling the hull with its
+#: normals, closest points both ways, assembling the normal equations (posing included),
+#: solving and updating the pose, the output (posing the whole template).
+STAGES = ("observations", "correspondences", "system", "solve", "output")
 
 
 @dataclass(frozen=True)
@@ -118,7 +128,7 @@ class ICPOptions:
     normal_cos: float = 0.3
     k_neighbours: int = 8
     max_iter: int = 20
-    tol: float = 5e-4
+    tol: float = 1e-3
     lambda_pose: float = 1e-3
     lambda_root: float = 1e-4
     damping: float = 1e-3
@@ -163,6 +173,13 @@ class ArticulatedICP:
     Parameters
     ----------
     options : ICPOptions
+
+    Attributes
+    ----------
+    stage_seconds : dict of str → float
+        Wall time spent in each of :data:`STAGES` over all :meth:`step` calls, seconds.
+    n_steps : int
+        Number of :meth:`step` calls.
     """
 
     name = "articulated_icp"
@@ -173,6 +190,13 @@ class ArticulatedICP:
         self.opts = options
         self.template: Template | None = None
         self.model: ArticulatedModel | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        self.n_steps = 0
+
+    def _lap(self, stage: str) -> None:
+        t = time.perf_counter()
+        self.stage_seconds[stage] += t - self._t
+        self._t = t
 
     def options(self) -> dict:
         """JSON-ready settings."""
@@ -184,6 +208,7 @@ class ArticulatedICP:
         self.template = template
         o = self.opts
         self.model = articulated_model(template, n_points=o.n_model_points, seed=o.seed)
+        self.plan = moment_plan(self.model)
         sk = template.skeleton
         free = [j for j, name in enumerate(sk.names) if name not in self.opts.fixed_joints]
         #: estimated parameters: root translation, then the free joints' rotation increments
@@ -228,19 +253,19 @@ class ArticulatedICP:
         o = self.opts
         V, F = frame.hull_mesh
         V = np.asarray(V, dtype=np.float64)
-        if F is not None:
-            N = vertex_normals(V, F)
+        pick = np.arange(len(V))
+        if len(V) > o.max_points:
+            rng = np.random.default_rng([o.seed, frame.index])
+            pick = rng.choice(len(V), o.max_points, replace=False)
+        if F is not None:  # the normals of the sampled vertices only
+            N = vertex_normals_at(V, F, pick)
         elif getattr(frame, "normals", None) is not None:
-            N = np.asarray(frame.normals, dtype=np.float64)
+            N = np.asarray(frame.normals, dtype=np.float64)[pick]
         else:
             raise InputError(
                 f"ArticulatedICP: frame {frame.index} is a point cloud without normals"
             )
-        if len(V) > o.max_points:
-            rng = np.random.default_rng([o.seed, frame.index])
-            pick = rng.choice(len(V), o.max_points, replace=False)
-            V, N = V[pick], N[pick]
-        return np.ascontiguousarray(V), N
+        return np.ascontiguousarray(V[pick]), N
 
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by articulated ICP (see the module docstring).
@@ -254,8 +279,10 @@ class ArticulatedICP:
             (m²) and their weighted ``total``; iterations; state ``R`` (J, 3, 3), ``root``
             (3,) and the previous frame's ``R_prev``, ``root_prev``.
         """
-        o, m = self.opts, self.model
+        o = self.opts
         sk = self.template.skeleton
+        self._t = time.perf_counter()
+        self.n_steps += 1
         Y, NY = self.observations(frame)
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points")
@@ -267,58 +294,63 @@ class ArticulatedICP:
         self.prev = last
         R_ref, root_ref = last  # the regulariser pulls towards the previous pose
         data_tree = KDTree(Y)
+        self._lap("observations")
         n = 3 + 3 * sk.n_joints
+        act = self.active
+        diag = np.diag_indices(len(act))
         energies: dict[str, float] = {}
         n_iter = 0
         while n_iter < o.max_iter:
             n_iter += 1
-            v, nv, a = pose_points(m, self.R, self.root)
-            H, g, energies = self._normal_equations(v, nv, a, data_tree, Y, NY, R_ref, root_ref)
-            act = self.active
+            posed = posed_model(self.plan, self.R, self.root)
+            H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref)
             H, g = H[np.ix_(act, act)], g[act]
-            H[np.diag_indices(len(act))] *= 1 + o.damping
-            H[np.diag_indices(len(act))] += 1e-12
+            H[diag] *= 1 + o.damping
+            H[diag] += 1e-12
+            self._lap("system")
             delta = np.zeros(n)
             delta[act] = -np.linalg.solve(H, g)
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
-            self.R, self.root = apply_increment(sk, self.R, self.root, delta)
-            move = delta[:3] + cross(delta[3:].reshape(1, -1, 3), a).sum(axis=1)
-            if np.max(np.linalg.norm(move, axis=1)) < o.tol:
+            self.R, self.root = apply_increment(sk, self.R, self.root, delta, G=posed.G)
+            move = point_motion(self.plan, posed, delta)
+            self._lap("solve")
+            if np.max(np.einsum("mc,mc->m", move, move)) < o.tol * o.tol:
                 break
-        return self._result(frame.index, energies, n_iter)
+        out = self._result(frame.index, energies, n_iter)
+        self._lap("output")
+        return out
 
-    def _normal_equations(self, v, nv, a, data_tree, Y, NY, R_ref, root_ref):
+    def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref):
         """Gauss–Newton system ``H δ = −g`` at the current pose, and the energy terms."""
         o = self.opts
-        J = self.template.skeleton.n_joints
+        v, nv = posed.v, posed.n
         cand = dict(k=o.k_neighbours, max_distance=o.max_distance, normal_cos=o.normal_cos)
         i, k = nearest_compatible(data_tree, NY, v, nv, **cand)  # model → data
         parts = [(i, k, 1.0, "model_to_data")]
         if o.correspondences == "both":
             k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
             parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
-        H = np.zeros((3 + 3 * J, 3 + 3 * J))
-        g = np.zeros(3 + 3 * J)
-        energies: dict[str, float] = {}
-        total = 0.0
-        for i, k, weight, key in parts:
-            if len(i) == 0:
-                energies[key] = 0.0
-                continue
-            r, Jr = residual_jacobian(v, a, i, Y[k], NY[k], o.residual)
-            s = weight / len(i)  # mean over pairs: metres² whatever the sampling
-            H += s * (Jr.T @ Jr)
-            g += s * (Jr.T @ r)
-            energies[key] = float(r @ r) / len(i)
-            total += weight * energies[key]
+        self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
             raise FloatingPointError("no compatible correspondences")
+        # every pair weighs 1/len of its direction: the mean over pairs, metres² whatever
+        # the sampling; both directions summed into per-model-point moments at once
+        ii = np.concatenate([p[0] for p in parts])
+        kk = np.concatenate([p[1] for p in parts])
+        s = np.concatenate([np.full(len(p[0]), p[2] / max(len(p[0]), 1)) for p in parts])
+        S, b, r2 = pair_moments(v, ii, Y[kk], NY[kk], s, o.residual)
+        H, g = normal_equations(self.plan, posed, S, b)
+        energies: dict[str, float] = {}
+        total, start = 0.0, 0
+        for i, _, weight, key in parts:
+            r2_part = r2[start : start + len(i)]
+            start += len(i)
+            energies[key] = float(r2_part.sum()) / len(i) if len(i) else 0.0
+            total += weight * energies[key]
         # regularisers, linearised: world-frame rotation error e_j + ω_j, root error + t
-        sk = self.template.skeleton
-        G, _ = forward_kinematics(sk, self.R, self.root)
-        Gp = np.concatenate([np.eye(3)[None], G[sk.parents[1:]]])
-        e = np.einsum("jab,jb->ja", Gp, so3_log(self.R @ np.swapaxes(R_ref, 1, 2)))
+        J = self.template.skeleton.n_joints
+        e = rotation_error(self.plan, posed, self.R, R_ref)
         H[np.arange(3, 3 + 3 * J), np.arange(3, 3 + 3 * J)] += o.lambda_pose
         g[3:] += o.lambda_pose * e.ravel()
         H[np.arange(3), np.arange(3)] += o.lambda_root

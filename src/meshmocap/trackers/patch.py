@@ -29,6 +29,7 @@ from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
+from meshmocap.trackers._patch_kernels import assign_kernel
 from meshmocap.trackers.patch_model import (
     PatchModel,
     build_patch_model,
@@ -396,20 +397,16 @@ class PatchTracker:
         K = min(o.k_neighbours, len(Vc))
         d, idx = KDTree(Vc).query(Y, k=K)
         d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
-        ok = np.einsum("pkj,pj->pk", np.take(Nc, idx, axis=0), NY) > o.normal_cos  # normals agree
-        if ycls is not None:  # only patches of the point's body part (§III-B)
-            ok &= (m.bone_of_patch[m.labels[idx]] == ycls[:, None]) | (ycls[:, None] < 0)
-        i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
-        patch = m.labels[idx[i, j]]
-        key = i * m.P + patch
-        _, first = np.unique(key, return_index=True)  # nearest compatible vertex per patch
-        i, j, patch = i[first], j[first], patch[first]
-        d2 = d[i, j].astype(np.float64) ** 2
-        p = np.exp(-0.5 * d2 / self.sigma**2)
-        p_out = np.exp(-0.5 * o.outlier_sigmas**2)
-        denom = np.bincount(i, p, minlength=len(Y)) + p_out
-        w = p / denom[i]
-        return patch, idx[i, j], w, Y[i], NY[i]
+        # per point, the nearest vertex per patch among those whose normals agree and, with
+        # classes, on the point's body part (§III-B); posterior against an outlier class
+        cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
+        i, patch, v, w = assign_kernel(
+            d.astype(np.float64), idx, np.ascontiguousarray(Nc, dtype=np.float64),
+            np.ascontiguousarray(NY, dtype=np.float64), cls, m.labels.astype(np.int64),
+            m.bone_of_patch.astype(np.int64), float(o.normal_cos), self.sigma**2,
+            float(np.exp(-0.5 * o.outlier_sigmas**2)),
+        )  # fmt: skip
+        return patch, v, w, Y[i], NY[i]
 
     def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
         """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
