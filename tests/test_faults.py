@@ -69,12 +69,14 @@ def test_a_dropped_frame_is_carved_from_the_others_and_tracked_through(cap, tmp_
     assert (
         "tracked 5 frames with articulated_icp" in out and "1 flagged unhealthy (1 missing)" in out
     )
-    assert err.startswith(
+    warned = [x for x in err.splitlines() if x.startswith("meshmocap: warning:")]
+    assert warned[0].startswith(  # a progress line may come first on a loaded machine
         "meshmocap: warning: 1 frames had no observation and were coasted "
         "across, first 3: only 1 of 4 cameras"
     )
     t = read_track(tmp_path / "t")
-    assert t.flags == ((), (), (), ("missing",), ())
+    # frame 4, two frames after the last fit, may find a limb lost and re-initialise it
+    assert t.flags[:4] == ((), (), (), ("missing",)) and "missing" not in t.flags[4]
     assert t.messages[3] == c.notes()[3] and not t.healthy[3] and t.healthy[4]
     assert np.array_equal(t.vertices[3], t.vertices[2])  # coasted: the last state, kept
     assert not np.array_equal(t.vertices[4], t.vertices[3])  # the next real frame is fitted
@@ -96,7 +98,7 @@ def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
         tmp_path / "t",
         show_progress=False,
     )
-    assert t.flags[2] == ("missing",) and t.flags[3] == ()
+    assert t.flags[2] == ("missing",) and "missing" not in t.flags[3]  # 3 may be re-seated
     assert t.messages[2].startswith("MeshmocapFileNotFoundError: ")
     assert "hulls/00002.npz" in t.messages[2]
 
@@ -115,7 +117,7 @@ def test_an_unreadable_frame_of_a_mesh_sequence_is_skipped(cap, tmp_path, capsys
         == 0
     )
     t = read_track(tmp_path / "t")
-    assert t.flags == (("missing",), (), ("missing",), (), ())
+    assert ["missing" in f for f in t.flags] == [True, False, True, False, False]
     assert "mesh_0.ply" in t.messages[0] and "mesh_2.ply" in t.messages[2]
     assert np.array_equal(t.vertices[0], t.vertices[1])  # before the first readable frame
     assert "2 flagged unhealthy (2 missing)" in capsys.readouterr().out

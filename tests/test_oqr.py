@@ -380,3 +380,19 @@ def test_self_intersections_on_small_examples():
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.5, 1e-9], [0.5, -1, 0]])
     assert len(self_intersections(V, np.array([[0, 1, 2], [1, 0, 3]]))) == 1
     assert len(self_intersections(V, np.array([[0, 1, 2], [1, 0, 4]]))) == 0
+
+
+def test_a_long_dress_gets_a_relaxed_cage():
+    # ~10 s: four placements. A dress flaring 25 cm beyond the legs down to the ankles: the
+    # first two placements leave a vertex 2.5 mm from the cage (clearance 4 mm); the relaxed
+    # ones (wider cross-sections, more growth, less clearance) enclose it
+    t = load_template("neutral_5k")
+    E, names = t.eval_skeleton.rest_positions, t.eval_skeleton.names
+    top, hem = E[names.index("pelvis"), 2] + 0.05, E[names.index("left_ankle"), 2] + 0.05
+    V = t.V.copy()
+    flare = 0.25 * np.clip((top - V[:, 2]) / (top - hem), 0, 1) * (V[:, 2] > hem)
+    d = V[:, :2] - E[names.index("pelvis"), :2]
+    V[:, :2] += d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9) * flare[:, None]
+    dress = replace(t, V=V, name="dress")
+    o = build_oqr(dress)
+    assert cage_problems(o.rest_vertices, o.faces, dress.V, clearance=0.001) == []

@@ -47,7 +47,7 @@ def tracked(capture, tmp_path_factory):
     out = tmp_path_factory.mktemp("icp")
     tr = track_sequence(
         make_tracker("articulated_icp"), load_template("neutral_5k"), capture, out,
-        show_progress=False,
+        show_progress=False, init="truth", recover=False,
     )  # fmt: skip
     return out, tr
 

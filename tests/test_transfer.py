@@ -43,7 +43,7 @@ def tracked(rig, tmp_path_factory):
     cap = synthesize(tmp_path_factory.mktemp("cap"), spec, show_progress=False)
     tr = make_tracker("cage", manifold=pm.gp, alternations=1, local_iters=1, n_sample=300)
     out = tmp_path_factory.mktemp("track")
-    track = track_sequence(tr, t, cap, out, show_progress=False)
+    track = track_sequence(tr, t, cap, out, show_progress=False, init="truth", recover=False)
     return t, out, track, read_cage_track(out, template=t, oqr=oqr)
 
 

@@ -68,7 +68,21 @@ class Evaluation:
     surface: SurfaceErrors | None
     correspondence: CorrespondenceErrors | None
     out_of_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: How the track's first pose was found (``track.json``'s ``init``, with the search's
+    #: winner), and its frames flagged ``lost`` and ``reinit``.
+    init: str = ""
+    lost: int = 0
+    reinit: int = 0
     template: str = ""
+
+
+def track_init(track: Track) -> str:
+    """How a track's first pose was found: ``"truth"``, or ``"auto"`` with the search's
+    winner (tracks made before ``init`` existed started from ground truth)."""
+    for m in track.messages:  # the first observed frame's (frames before it are missing)
+        if m.startswith("init "):
+            return m[len("init ") :]
+    return str(track.meta.get("init", "truth"))
 
 
 def evaluate(
@@ -154,6 +168,9 @@ def evaluate(
         surface=surf,
         correspondence=corr,
         out_of_view=track.frames[hidden] if len(hidden) else np.zeros(0, np.int64),
+        init=track_init(track),
+        lost=sum("lost" in f for f in track.flags),
+        reinit=sum("reinit" in f for f in track.flags),
         template=template_label(track.meta),
     )
 
@@ -184,6 +201,10 @@ def summary(ev: Evaluation) -> str:
     out = [f"method {ev.method}, template {ev.template}: {ev.n_frames} frames, "
            f"{ev.unhealthy} flagged unhealthy, "
            f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"]  # fmt: skip
+    if ev.init:
+        out[0] += f"; init {ev.init}"
+    if ev.lost:
+        out[0] += f"; {ev.lost} frames with a limb lost ({ev.reinit} re-initialised)"
     if len(ev.out_of_view):
         f = ev.out_of_view
         out.append(f"{len(f)} frames not scored: the subject leaves a camera's view "

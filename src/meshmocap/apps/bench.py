@@ -7,7 +7,9 @@ every capture of a named set; each (capture, method) pair is scored by
 
 Protocol: synthetic captures from the studio at 60 fps, tracking template ``neutral_5k``,
 subject = template unless a variant names another body, first frame initialised from
-ground truth, visual hulls carved at 1 cm; joint errors over the 15 evaluation joints,
+ground truth (``init="auto"``: found from the capture alone; the crane starts in its
+template's rest pose, its frame 0), visual
+hulls carved at 1 cm; joint errors over the 15 evaluation joints,
 bone-length spread over the tracked evaluation skeleton, silhouette overlap error against
 the input silhouettes, seconds per frame as timed by the driver on this machine (frame 0,
 the initialisation, left out).
@@ -200,17 +202,19 @@ class _Run:
         capture: Capture,
         *,
         salt: str = "",
+        init: str = "truth",
     ) -> BenchRow:
         """Track (or resume) and score ``tracker`` on ``capture`` (named ``name``) as
         method ``label``. The track folder is named by a digest of the tracker's options,
         the template, ``salt`` (e.g. the manifold's) and the tracking code
         (:func:`code_digest`); scores are cached beside it."""
         digest = settings_key(tracker.name, tracker.options(), template.name,
-                              template_digest(template), salt)  # fmt: skip
+                              template_digest(template), salt, init)  # fmt: skip
         out = self.work / "tracks" / capture.path.name / f"{label.split('[')[0]}-{digest}"
         key = f"{capture.path.name}/{out.name}"
         before = len(done_frames(out)) if (out / "frames").is_dir() else 0
-        track = track_sequence(tracker, template, capture, out, show_progress=self.show_progress)
+        track = track_sequence(tracker, template, capture, out, show_progress=self.show_progress,
+                               init=init)  # fmt: skip
         if len(track.frames) > before:
             self.tracked.append(key)
         cache = out / _EVAL_CACHE
@@ -291,6 +295,7 @@ def run_bench(
     template: str = "neutral_5k",
     method_options: Mapping[str, Mapping[str, Any]] | None = None,
     manifold: Any = None,
+    init: str = "truth",
     show_progress: bool | None = None,
     log: Callable[[str], None] | None = None,
 ) -> BenchResult:
@@ -325,12 +330,18 @@ def run_bench(
     manifold : GPLVM, path or None
         Pose manifold of the methods that take one (the cage trackers); None: learned once
         from the procedural motions and cached in ``work`` (:func:`bench_manifold`).
+    init : {"truth", "auto"}
+        First pose of the synthetic captures: from ground truth (the papers' protocol) or
+        found from the capture (:func:`~meshmocap.trackers.driver.track_sequence`); a mesh
+        capture (the crane) starts in its template's rest pose, its frame 0. Each row says
+        which (``BenchRow.init``).
     show_progress : bool, optional
         Progress bars on stderr (default: when stderr is a terminal).
     log : callable, optional
         Called with one line per stage (e.g. ``print``).
     """
     t0 = time.perf_counter()
+    check_choice("bench", "init", init, ["truth", "auto"])
     cs = capture_set(captures) if isinstance(captures, str) else None
     if methods is None:
         methods = [m for m in (cs.methods if cs and cs.methods else METHODS) if m in METHODS]
@@ -408,17 +419,18 @@ def run_bench(
                 continue
             run.log(f"  {m}")
             rows.append(run.track_and_score(spec.name, m, trackers[m], track_template, capture,
-                                            salt=track_salt.get(m, "")))  # fmt: skip
+                                            salt=track_salt.get(m, ""), init=init))  # fmt: skip
         if spec.name == sweep_on:
             for f in keep_fractions:
                 run.log(f"  patch, kept fraction {f:g} (Fig. 8)")
                 t = tracker("patch", keep_fraction=f)
-                r = run.track_and_score(spec.name, f"patch[keep={f:g}]", t, tmpl, capture)
+                r = run.track_and_score(spec.name, f"patch[keep={f:g}]", t, tmpl, capture,
+                                        init=init)  # fmt: skip
                 tradeoff.append(TradeoffPoint(float(f), r))
     files = write_report(out, rows, tradeoff, sweep_on, skipped=skipped, template=template)
     settings = {
         "captures": [asdict(s) for s in specs], "skipped": skipped, "methods": methods,
-        "method_options": method_options, "template": template,
+        "method_options": method_options, "template": template, "init": init,
         "template_digest": template_digest(tmpl), "keep_fractions": list(keep_fractions),
         "tradeoff_capture": sweep_on, "tracks": {f"{r.capture}/{r.method}": r.track
                                                   for r in [*rows, *(t.row for t in tradeoff)]},

@@ -34,6 +34,18 @@ COLUMNS = (
 )  # fmt: skip
 
 
+def _inits(rows) -> str:
+    """How the rows' first poses were found, in words (rows without one: ground truth)."""
+    kinds = {("truth" if not r.init or r.init == "truth" else "auto") for r in rows
+             if r.status == "ok"}  # fmt: skip
+    if kinds == {"auto"}:
+        return "from the capture alone (automatic initialisation)"
+    if kinds == {"truth", "auto"}:
+        auto = sorted({r.capture for r in rows if r.init and r.init != "truth"})
+        return f"from ground truth ({', '.join(auto)}: from the capture alone)"
+    return "from ground truth"
+
+
 def _csv(path: Path, headers: Sequence[str], rows: Sequence[Sequence[object]]) -> Path:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -141,7 +153,7 @@ def write_report(
         "",
         f"Protocol: tracking template `{template}`; synthetic captures at 60 fps from the "
         "studio (humaneva4 rig unless the capture names another), first frame initialised "
-        "from ground truth, visual hulls carved at 1 cm. Errors in mm over all (frame, "
+        f"{_inits(rows)}, visual hulls carved at 1 cm. Errors in mm over all (frame, "
         "joint) pairs of the 15 evaluation joints (crane: per-vertex correspondence error); "
         "silhouette overlap error = XOR pixels / input silhouette pixels, mean over frames "
         "and cameras; bone std max = largest standard deviation of a tracked bone length; "

@@ -38,6 +38,8 @@ class BenchRow:
     frame_numbers : (T,) int, frames of ``per_frame_mm``; per_frame_mm : (T,) float, mm
     bone_names : tuple of B str; bone_mean_mm, bone_std_mm : (B,) float, mm
     track : str, the track folder
+    init : str, how the first pose was found (``truth``, or ``auto`` and the winner)
+    lost : int, frames flagged ``lost`` (a limb or the body off the observations)
     template : str, the tracking template and how it was chosen (``io.results.template_label``)
     """
 
@@ -61,6 +63,8 @@ class BenchRow:
     bone_mean_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bone_std_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     track: str = ""
+    init: str = ""
+    lost: int = 0
     template: str = ""
 
     def to_json(self) -> dict:
@@ -117,5 +121,5 @@ def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Pat
         bone_names=bones.names if bones is not None else (),
         bone_mean_mm=bones.mean if bones is not None else np.zeros(0),
         bone_std_mm=bones.std if bones is not None else np.zeros(0),
-        track=str(track), template=ev.template,
+        track=str(track), init=ev.init, lost=ev.lost, template=ev.template,
     )  # fmt: skip

@@ -95,14 +95,11 @@ def _seconds(ev: Evaluation) -> tuple[float, float]:
 def evaluation_tables(ev: Evaluation, *, track: Track | None = None) -> list[Table]:
     """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables, with the
     frames not scored or flagged (``track``'s flags, when given) and why."""
-    out = [
-        Table(
-            "Overview",
-            ("method", "template", "frames", "unhealthy", "s/frame mean", "s/frame median"),
-            ((ev.method, ev.template, ev.n_frames, ev.unhealthy, *_seconds(ev)),),
-            digits=3,
-        )
-    ]
+    heads = ("method", "template", "init", "frames", "unhealthy", "lost (re-initialised)",
+             "s/frame mean", "s/frame median")  # fmt: skip
+    row = (ev.method, ev.template, ev.init or "truth", ev.n_frames, ev.unhealthy,
+           f"{ev.lost} ({ev.reinit})", *_seconds(ev))  # fmt: skip
+    out = [Table("Overview", heads, (row,), digits=3)]
     skipped = frame_rows(ev, track)
     if skipped:
         out.append(Table("Frames not scored or flagged", ("what", "frames", "which", "why"),

@@ -203,7 +203,10 @@ def build_oqr(
     ``4 grow_step``, never into a new self-intersection) until every template vertex is
     inside the cage and at least ``clearance`` from it; the rig is turned back to the
     template's heading. Where the cage still fails a check, the quads are placed again
-    with the upper arms boxed (module docstring) and the same steps follow. On the four
+    with the upper arms boxed (module docstring) and the same steps follow; where that
+    fails too (loose clothing: a long dress flaring 25 cm beyond the legs), twice more,
+    relaxed: cross-sections 15 % and then 30 % wider, three times the growth iterations,
+    half and then a quarter of the clearance. On the four
     bundled templates this takes 1–4 rounds and about a second (no shrinking, no sliding,
     one placement); on the MIT crane's frame 0 (arms hanging against a jacket) 5–15 s.
 
@@ -257,7 +260,13 @@ def build_oqr(
         raise InputError(f"{func}: max_grow must be a non-negative integer, found {max_grow!r}")
     C = heading(template)  # canonical frame → world: the rig is built facing −Y
     why = []
-    for box_limbs in (False, True):  # the second placement boxes the upper arms
+    # the second placement boxes the upper arms; the later ones relax the cage for loose
+    # clothing (a long dress): wider cross-sections, three times the growth, half and then
+    # a quarter of the clearance
+    rounds = [(False, margin, clearance, max_grow), (True, margin, clearance, max_grow),
+              (True, min(margin * 1.15, 3.0), clearance / 2, 3 * max_grow),
+              (True, min(margin * 1.3, 3.0), clearance / 4, 3 * max_grow)]  # fmt: skip
+    for box_limbs, margin, clearance, max_grow in rounds:
         placer = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab))
         placer.box_limbs = box_limbs
         placed = placer.place()
@@ -282,7 +291,7 @@ def build_oqr(
             return _assemble(template, rects, F, V)
         why.append("; ".join(problems))
     raise MeshError(f"{func}: template {template.name!r}: {why[0]} (with the upper arms "
-                    f"boxed: {why[1]})")  # fmt: skip
+                    f"boxed: {why[1]}; relaxed for loose clothing: {why[-1]})")  # fmt: skip
 
 
 def _assemble(template: Template, rects: list[QuadRect], F: np.ndarray, V: np.ndarray) -> OQR:

@@ -50,3 +50,14 @@ def number(
 def flag(name: str) -> str:
     """``--n-patches`` for the option ``n_patches``."""
     return "--" + name.replace("_", "-")
+
+
+def xy_pair(text: str) -> tuple[float, float]:
+    """Parse ``X,Y`` (two finite numbers) into a tuple."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y with two numbers, found {text!r}") from None
+    return x, y

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from meshmocap.cli._args import frame_range, number
+from meshmocap.cli._args import frame_range, number, xy_pair
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
@@ -14,12 +14,16 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from meshmocap.studio.synth import SynthSpec, synthesize
 
     rng = args.frames or slice(None)
+    gap = args.missed_limb_frames
+    gap = None if gap is None else (gap.start or 0, gap.stop)
     spec = SynthSpec(
         motion=args.motion, template=args.template, subject=args.subject, rig=args.rig,
         fps=args.fps, start=rng.start, stop=rng.stop, step=rng.step, seed=args.seed,
-        voxel_size=args.voxel_size,
+        voxel_size=args.voxel_size, heading=args.heading, offset=args.offset,
         degradation=Degradation(jitter=args.jitter, holes=args.holes, blobs=args.blobs,
-                                missed_limb=args.missed_limb),
+                                missed_limb=args.missed_limb or gap is not None
+                                or args.missed_limb_joint is not None,
+                                missed_limb_frames=gap, missed_limb_joint=args.missed_limb_joint),
     )  # fmt: skip
     t0 = time.perf_counter()
     cap = synthesize(args.out, spec)
@@ -77,6 +81,33 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="spurious blobs per silhouette",
     )
     y.add_argument("--missed-limb", action="store_true", help="cut a limb from each silhouette")
+    y.add_argument(
+        "--missed-limb-frames",
+        type=frame_range,
+        metavar="START:STOP",
+        help="miss the limb on these frames only (implies --missed-limb)",
+    )
+    y.add_argument(
+        "--missed-limb-joint",
+        metavar="JOINT",
+        help="miss the body parts of this evaluation joint and below (e.g. left_elbow: the "
+        "forearm and hand) in every camera, so the hull misses that limb (default: a random "
+        "extremity cut from each camera's silhouette; implies --missed-limb)",
+    )
+    y.add_argument(
+        "--heading",
+        type=number(-3600, 3600, "degrees"),
+        default=0.0,
+        metavar="DEG",
+        help="turn the whole motion about the vertical axis through the volume's centre (degrees)",
+    )
+    y.add_argument(
+        "--offset",
+        type=xy_pair,
+        default=(0.0, 0.0),
+        metavar="X,Y",
+        help="shift the whole motion in the volume (metres)",
+    )
     y.add_argument(
         "--seed",
         type=number(0, 2**32 - 1, integer=True),

@@ -64,7 +64,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     res = run_bench(
         args.out, captures=items(args.captures) or args.set, methods=items(args.methods),
         data=args.data, work=args.work, max_frames=args.max_frames, keep_fractions=keep,
-        template=args.template, log=lambda line: print(line, flush=True),
+        template=args.template, init=args.init, log=lambda line: print(line, flush=True),
     )  # fmt: skip
     print(f"\n{markdown_table(res.rows)}")
     if res.tradeoff:
@@ -132,4 +132,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument("--keep-fractions", nargs="+", help="Fig. 8 sweep of the patch tracker")
     b.add_argument("--template", default="neutral_5k", help="tracking template")
+    b.add_argument("--init", default="truth", choices=["truth", "auto"], help="first pose of "
+                   "the synthetic captures: from ground truth (the papers' protocol, default) "
+                   "or found from the capture (the crane always is)")  # fmt: skip
     b.set_defaults(func=_cmd_bench)

@@ -33,24 +33,27 @@ def _tracker_options(args: argparse.Namespace) -> dict:
     return given
 
 
-def _capture_source(sources: list[str]):
+def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
     """One capture folder, or several mesh files/folders (the shell expands an unquoted
-    glob into many arguments)."""
+    glob into many arguments), in metres and Z up (mesh files: ``up`` and ``units`` read
+    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`).
+    Returns the capture and the axes read (None for a capture folder)."""
     from meshmocap.errors import InputError
-    from meshmocap.io.capture import open_capture
+    from meshmocap.estimate.axes import open_oriented
     from meshmocap.io.meshes import frame_files
 
     if len(sources) == 1:
-        return open_capture(sources[0])
+        return open_oriented(sources[0], up=up, units=units)
     capture_dirs = [s for s in sources if (Path(s) / "capture.json").is_file()
                     or (Path(s) / "hulls").is_dir()]  # fmt: skip
     if capture_dirs:
         raise InputError(f"track: give one capture folder, or several mesh files and folders; "
                          f"{capture_dirs[0]} is a capture folder")  # fmt: skip
-    return open_capture(frame_files(sources))
+    return open_oriented(frame_files(sources), up=up, units=units)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
@@ -60,7 +63,10 @@ def _cmd_track(args: argparse.Namespace) -> int:
     options = _tracker_options(args)
     if args.follow or args.idle is not None:
         return _follow(args, options)
-    capture = _capture_source(args.capture)
+    capture, axes = _capture_source(args.capture, args.up, args.units)
+    if axes is not None and (args.up == "auto" or args.units == "auto"):
+        print(f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
+              f"{axes.span:.2f} m long (--up, --units to set)")  # fmt: skip
     frames = None
     if args.frames:
         frames = range(len(capture))[args.frames]
@@ -81,7 +87,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(tracker, template, capture, args.out, frames=frames,
-                           resume=not args.restart, vertices=False,
+                           resume=not args.restart, vertices=False, init=args.init,
+                           recover=not args.no_recover, reseat=args.reseat,
                            template_info=choice.info)  # fmt: skip
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
@@ -93,14 +100,25 @@ def _cmd_track(args: argparse.Namespace) -> int:
     done = f"tracked {new} frames"
     done += f" ({resumed} resumed from an earlier run)" if resumed else ""
     flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
-    print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); {flagged}; "
-          f"results in {args.out}")  # fmt: skip
+    print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
+          f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}")  # fmt: skip
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
         print(f"meshmocap: warning: {missing} frames had no observation and were coasted "
               f"across, first {int(track.frames[first])}: {track.messages[first]}",
               file=sys.stderr)  # fmt: skip
     return 0
+
+
+def _lost(track) -> str:
+    """Frames with a limb lost, re-initialised, and the first one's reason ('' if none)."""
+    lost = [k for k, f in enumerate(track.flags) if "lost" in f]
+    if not lost:
+        return ""
+    reinit = sum("reinit" in f for f in track.flags)
+    k = lost[0]
+    return (f", {len(lost)} with a limb lost ({reinit} re-initialised; first: frame "
+            f"{int(track.frames[k])}, {track.messages[k]})")  # fmt: skip
 
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
@@ -284,6 +302,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "skeleton (the paper's) or surface")  # fmt: skip
     k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
                    "(default: learn one from the procedural walk and jog)")  # fmt: skip
+    k.add_argument("--init", default="auto", choices=["auto", "truth"], help="first pose: "
+                   "found from the capture (auto, default) or copied from its ground truth "
+                   "(truth: the papers' protocol, synthetic captures only)")  # fmt: skip
+    k.add_argument("--up", default="auto", choices=["auto", "z", "y"],
+                   help="mesh/point-cloud files: their up axis (default: detected)")  # fmt: skip
+    k.add_argument(
+        "--units",
+        default="auto",
+        choices=["auto", "m", "cm", "mm"],
+        help="mesh/point-cloud files: their length unit (default: detected)",
+    )
+    k.add_argument("--reseat", action="store_true", help="re-initialise a lost limb where a "
+                   "better pose is found and hold one the hulls miss as last seen (rescues a "
+                   "limb lost behind a hole; can mistake a fast limb for a lost one)")  # fmt: skip
+    k.add_argument("--no-recover", action="store_true", help="do not score frames, flag lost "
+                   "limbs or re-initialise them")  # fmt: skip
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")
     k.add_argument("--follow", action="store_true", help="live: track each frame as it is "
                    "written into the folder (complete files: write, then rename), print its "

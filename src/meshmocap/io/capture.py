@@ -520,12 +520,16 @@ class SequenceCapture:
         also carry their masks (for the silhouette overlap error).
     up : {"z", "y"}
         The files' up axis.
+    scale : float
+        Metres per file unit (0.001 for millimetres).
     """
 
-    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None):
+    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None,
+                 scale: float = 1.0):  # fmt: skip
         from meshmocap.io.meshes import MeshSequence
 
         self.seq = MeshSequence(source, up=up, frames=frames)
+        self.scale = float(scale)
         one = isinstance(source, str | os.PathLike)
         self.path = Path(
             os.fspath(source) if one else os.path.commonpath([os.path.abspath(p) for p in source])
@@ -542,16 +546,17 @@ class SequenceCapture:
 
     def __getitem__(self, k: int) -> SequenceFrame:
         f = self.seq[k]
+        V = f.V if self.scale == 1.0 else f.V * self.scale  # in metres
         normals = f.normals
         if f.F is None and normals is None:  # a point cloud without normals: estimate them
-            normals = point_normals(f.V)
+            normals = point_normals(V)
         masks = None
         if self.silhouette_dir is not None and self.cameras:
             masks = [
                 read_mask(self.silhouette_dir / c.name / f"{frame_name(f.index)}.png")
                 for c in self.cameras
             ]
-        return SequenceFrame(f.index, (f.V, f.F), normals, masks, cameras=self.cameras)
+        return SequenceFrame(f.index, (V, f.F), normals, masks, cameras=self.cameras)
 
     def __iter__(self) -> Iterator[SequenceFrame]:
         for k in range(len(self)):

@@ -17,6 +17,7 @@ random axes between half and all of the given radius and a random orientation.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,6 +49,14 @@ class Degradation:
         Remove a chunk at an extremity of the silhouette (:func:`remove_limb`).
     hole_radius, blob_radius : float
         Largest semi-axis of holes and blobs, pixels.
+    missed_limb_frames : (int, int), optional
+        Frame numbers ``[start, stop)`` of the capture in which the limb is missed (default:
+        every frame).
+    missed_limb_joint : str, optional
+        An evaluation joint (e.g. ``"left_elbow"``): the body parts of that joint and the
+        joints below it are seen by no camera (their pixels off the rest of the body are
+        lost in every view, :func:`meshmocap.studio.synth.write_frame`), so the visual hull
+        misses that limb (default: a random extremity cut from each camera's silhouette).
     """
 
     jitter: float = 0.0
@@ -56,6 +65,24 @@ class Degradation:
     missed_limb: bool = False
     hole_radius: float = 4.0
     blob_radius: float = 6.0
+    missed_limb_frames: tuple[int, int] | None = None
+    missed_limb_joint: str | None = None
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields (the missed limb's frames and joint only where set, so
+        captures made before they existed keep their parameters)."""
+        d = dataclasses.asdict(self)
+        for key in ("missed_limb_frames", "missed_limb_joint"):
+            if d[key] is None:
+                del d[key]
+        if "missed_limb_frames" in d:
+            d["missed_limb_frames"] = [int(v) for v in d["missed_limb_frames"]]
+        return d
+
+    def misses_limb(self, frame: int) -> bool:
+        """Whether the missed limb applies to frame number ``frame``."""
+        r = self.missed_limb_frames
+        return self.missed_limb and (r is None or r[0] <= frame < r[1])
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.jitter) and 0 <= self.jitter <= MAX_JITTER):
@@ -70,13 +97,29 @@ class Degradation:
             v = getattr(self, name)
             if not (np.isfinite(v) and 1 <= v <= 100):
                 raise InputError(f"Degradation: {name} must be from 1 to 100 pixels, found {v}")
+        r = self.missed_limb_frames
+        if r is not None:
+            ok = len(r) == 2 and all(isinstance(v, int | np.integer) for v in r) and r[0] < r[1]
+            if not ok:
+                raise InputError(
+                    f"Degradation: missed_limb_frames must be (start, stop) frame numbers with "
+                    f"start < stop, found {r!r}"
+                )
+            object.__setattr__(self, "missed_limb_frames", (int(r[0]), int(r[1])))
+        if (r is not None or self.missed_limb_joint is not None) and not self.missed_limb:
+            raise InputError("Degradation: missed_limb_frames and missed_limb_joint need "
+                             "missed_limb=True")  # fmt: skip
 
 
-def degrade(mask: np.ndarray, spec: Degradation, *, seed: Seed) -> np.ndarray:
+def degrade(
+    mask: np.ndarray, spec: Degradation, *, seed: Seed, frame: int | None = None
+) -> np.ndarray:
     """Apply the degradations of ``spec``: missed limb, holes, blobs, then boundary jitter.
 
     Each step draws from its own stream spawned from ``seed``, so switching one
-    degradation on or off does not change the random draws of the others.
+    degradation on or off does not change the random draws of the others. ``frame`` (the
+    frame number) selects whether ``spec.missed_limb_frames`` applies (None: it does); a
+    ``missed_limb_joint`` is not cut here (the renderer leaves that limb out).
 
     Returns
     -------
@@ -86,7 +129,8 @@ def degrade(mask: np.ndarray, spec: Degradation, *, seed: Seed) -> np.ndarray:
         raise InputError(f"degrade: spec must be a Degradation, found {type(spec).__name__}")
     out = _check_mask(mask, "degrade").copy()
     streams = _seed_sequence(seed, "degrade").spawn(4)
-    if spec.missed_limb:
+    missed = spec.missed_limb if frame is None else spec.misses_limb(frame)
+    if missed and spec.missed_limb_joint is None:
         out = remove_limb(out, seed=streams[0])
     if spec.holes:
         out = punch_holes(out, count=spec.holes, radius=spec.hole_radius, seed=streams[1])

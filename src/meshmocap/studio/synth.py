@@ -64,6 +64,11 @@ class SynthSpec:
         Seed of the degradations.
     voxel_size : float
         Visual-hull voxel edge, metres.
+    heading : float
+        Degrees: the whole motion turned about the vertical axis through the origin (the
+        capture volume's centre), counter-clockwise seen from above.
+    offset : (float, float)
+        Metres: the whole motion shifted along x and y after the turn.
     """
 
     motion: str = "walk"
@@ -77,6 +82,8 @@ class SynthSpec:
     degradation: Degradation = field(default_factory=Degradation)
     seed: int = 0
     voxel_size: float = 0.01
+    heading: float = 0.0
+    offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         checks = (("fps", self.fps, 0.0, 1000.0, "frames per second"),
@@ -94,10 +101,36 @@ class SynthSpec:
                              f"{type(self.degradation).__name__}")  # fmt: skip
 
     def as_dict(self) -> dict:
-        """JSON-ready parameters."""
+        """JSON-ready parameters (``heading`` and ``offset`` only where set, so captures
+        made before they existed keep their parameters)."""
         d = dataclasses.asdict(self)
         d["motion"] = os.fspath(self.motion)
+        d["degradation"] = self.degradation.as_dict()
+        d["offset"] = [float(v) for v in self.offset]
+        if not self.heading:
+            del d["heading"]
+        if not any(self.offset):
+            del d["offset"]
         return d
+
+
+def placed_motion(
+    R: np.ndarray, root: np.ndarray, *, heading: float = 0.0, offset=(0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """A motion turned by ``heading`` degrees about the vertical axis through the origin and
+    shifted by ``offset`` (x, y metres): local rotations ``R`` (T, J, 3, 3) (only the
+    root's, whose parent is the world, changes) and root positions ``root`` (T, 3), world
+    frame Z up. Returns new arrays."""
+    off = np.asarray(offset, dtype=np.float64)
+    if not (np.isfinite(heading) and off.shape == (2,) and np.all(np.isfinite(off))):
+        raise InputError(f"synth: heading must be a number of degrees and offset two numbers "
+                         f"(x, y metres), found {heading!r} and {offset!r}")  # fmt: skip
+    a = np.deg2rad(float(heading))
+    Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    R = np.array(R, dtype=np.float64)
+    R[:, 0] = Rz @ R[:, 0]
+    root = np.asarray(root, dtype=np.float64) @ Rz.T + np.array([*off, 0.0])
+    return R, root
 
 
 def _cameras(rig: str) -> list[Camera]:
@@ -122,8 +155,12 @@ def synthesize(
     out = Path(out)
     subject = load_template(spec.subject or spec.template)
     motion = clip_on(subject, spec.motion, fps=spec.fps)
+    rotations, roots = placed_motion(motion.rotations, motion.root_positions,
+                                     heading=spec.heading, offset=spec.offset)  # fmt: skip
     frames = _check_range(spec, motion.n_frames, os.fspath(spec.motion))
     cameras = _cameras(spec.rig)
+    if spec.degradation.missed_limb_joint is not None:  # checked before any frame is made
+        hidden_faces(subject, spec.degradation.missed_limb_joint)
     meta = {
         "fps": motion.fps / (spec.step or 1),
         "frames": frames,
@@ -148,8 +185,7 @@ def synthesize(
     notes = {}
     with folder_lock(out, "synth"):
         for f in progress(todo, label="synth", enabled=show_progress):
-            R, root = motion.rotations[f], motion.root_positions[f]
-            notes[f] = synth_frame(out, subject, R, root, cameras, f, spec)
+            notes[f] = synth_frame(out, subject, rotations[f], roots[f], cameras, f, spec)
     _warn_notes(notes)
     return Capture(out)
 
@@ -199,6 +235,10 @@ def synth_frame(
     """Pose the subject for one frame and write it (see :func:`write_frame`)."""
     posed = subject.pose(R, root)
     truth = Truth(posed.V, posed.eval_joints, R, root)
+    deg = spec.degradation
+    hidden = None
+    if deg.missed_limb_joint is not None and deg.misses_limb(index):
+        hidden = hidden_faces(subject, deg.missed_limb_joint)
     return write_frame(
         out,
         posed.V,
@@ -209,7 +249,23 @@ def synth_frame(
         degradation=spec.degradation,
         seed=spec.seed,
         voxel_size=spec.voxel_size,
+        hidden=hidden,
     )
+
+
+def hidden_faces(subject: Template, joint: str) -> np.ndarray:
+    """(m,) bool: the faces of ``subject`` on the body parts of evaluation joint ``joint``
+    and of the joints below it (a missed limb)."""
+    ev = subject.eval_skeleton
+    if joint not in ev.names:
+        raise InputError(f"synth: missed_limb_joint must be one of {list(ev.names)}, "
+                         f"found {joint!r}")  # fmt: skip
+    parts = {ev.names.index(joint)}
+    for k in range(len(ev.names)):  # parents come first: one pass collects the subtree
+        if ev.parents[k] in parts:
+            parts.add(k)
+    on = np.isin(subject.part_labels, sorted(parts))
+    return on[subject.F].all(axis=1)
 
 
 def write_frame(
@@ -223,15 +279,22 @@ def write_frame(
     degradation: Degradation,
     seed: int,
     voxel_size: float,
+    hidden: np.ndarray | None = None,
 ) -> str:
     """Render the silhouettes of mesh ``(V, F)``, degrade them, carve the hull and write the
-    frame; the truth file is written last (it marks the frame complete). Returns the hull's
+    frame; the truth file is written last (it marks the frame complete). ``hidden`` (m,)
+    bool: faces no camera sees (a missed limb: the silhouettes are those of the rest of
+    the body, so the limb's pixels off the rest are lost in every view). Returns the hull's
     note (cameras left out because the subject left their view; empty when none)."""
     masks = []
     for c, cam in enumerate(cameras):
-        mask = silhouette(V, F, cam, assume_closed=True)
+        if hidden is None:
+            mask = silhouette(V, F, cam, assume_closed=True)
+        else:  # the rest of the body, an open mesh: every face drawn
+            mask = silhouette(V, F[~hidden], cam)
         if degradation != Degradation():
-            mask = degrade(mask, degradation, seed=np.random.SeedSequence([seed, index, c]))
+            mask = degrade(mask, degradation, seed=np.random.SeedSequence([seed, index, c]),
+                           frame=index)  # fmt: skip
         write_mask(out / "silhouettes" / cam.name / f"{frame_name(index)}.png", mask)
         masks.append(mask)
     # a subject that walks out of a camera's view is carved from the cameras that see it
@@ -287,7 +350,7 @@ def synthesize_from_meshes(
             "up": up,
             "seed": seed,
             "voxel_size": voxel_size,
-            "degradation": dataclasses.asdict(degradation),
+            "degradation": degradation.as_dict(),
         },
         "cameras": [c.name for c in cameras],
         "subject_vertices": len(first.V),

@@ -67,6 +67,7 @@ from meshmocap.body.articulated_system import (
 )
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
+from meshmocap.estimate.observe import frame_points
 from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
@@ -234,6 +235,13 @@ class ArticulatedICP:
         self.prev = (R.copy(), root.copy())
         return self._result(frame.index, {}, 0)
 
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Continue from the pose ``R`` (J, 3, 3), ``root`` (3,) with no velocity."""
+        self.R = np.array(R, dtype=np.float64)
+        self.root = np.array(root, dtype=np.float64)
+        self.prev = (self.R.copy(), self.root.copy())
+        return self._result(frame.index, {}, 0)
+
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore the pose (and the previous one, for prediction) saved with a frame."""
         self.R, self.root = state["R"].astype(np.float64), state["root"].astype(np.float64)
@@ -253,18 +261,14 @@ class ArticulatedICP:
         o = self.opts
         V, F = frame.hull_mesh
         V = np.asarray(V, dtype=np.float64)
+        if F is None:  # a point cloud: its own normals, or estimated (estimate.observe)
+            V, N = frame_points(frame)
         pick = np.arange(len(V))
         if len(V) > o.max_points:
             rng = np.random.default_rng([o.seed, frame.index])
             pick = rng.choice(len(V), o.max_points, replace=False)
-        if F is not None:  # the normals of the sampled vertices only
-            N = vertex_normals_at(V, F, pick)
-        elif getattr(frame, "normals", None) is not None:
-            N = np.asarray(frame.normals, dtype=np.float64)[pick]
-        else:
-            raise InputError(
-                f"ArticulatedICP: frame {frame.index} is a point cloud without normals"
-            )
+        # a mesh: the normals of the sampled vertices only
+        N = vertex_normals_at(V, F, pick) if F is not None else N[pick]
         return np.ascontiguousarray(V[pick]), N
 
     def step(self, frame: CaptureFrame) -> FrameResult:

@@ -1,10 +1,12 @@
 """What every tracker provides, and how a tracking run starts.
 
 A tracker is a small stateful object: ``init`` places the template on the first frame
-(from a known pose), ``step`` fits the next frame and returns a
-:class:`~meshmocap.io.results.FrameResult`. The state it needs to continue is returned
-with each result (``FrameResult.state``) and restored by ``set_state``, so the sequence
-driver can resume an interrupted run and recover from a failed frame.
+(from a known or estimated pose), ``step`` fits the next frame and returns a
+:class:`~meshmocap.io.results.FrameResult`, and ``reseat`` re-initialises it mid-track at
+a pose found from the current frame (loss recovery, :mod:`meshmocap.estimate.reinit`).
+The state it needs to continue is returned with each result (``FrameResult.state``) and
+restored by ``set_state``, so the sequence driver can resume an interrupted run and
+recover from a failed frame.
 """
 
 from __future__ import annotations
@@ -29,6 +31,13 @@ class Tracker(Protocol):
     ) -> FrameResult:
         """Start on ``frame`` with the template posed by local rotations ``R`` (J, 3, 3) and
         root position ``root`` (3,) (e.g. the first frame's ground truth)."""
+        ...
+
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Re-initialise on ``frame`` (after a lost frame) with the template posed by
+        ``R`` (J, 3, 3), ``root`` (3,), keeping what the first frame fixed (the joints'
+        binding or coordinates, the data term's vertices) and forgetting the motion so far
+        (no velocity is carried into the next frame). Returns the re-seated result."""
         ...
 
     def step(self, frame: CaptureFrame) -> FrameResult:

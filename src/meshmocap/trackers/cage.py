@@ -80,6 +80,7 @@ from meshmocap.body.oqr import (
     quads_from_pose,
 )
 from meshmocap.body.template import Template
+from meshmocap.estimate.observe import frame_hull
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import cross, skew, so3_exp, so3_log
@@ -198,14 +199,7 @@ class CageTracker:
         in this pose leave the data term (module notes)."""
         if self.template is not template:
             self.setup(template)
-        c, Q = quads_from_pose(self.oqr, template, R, root)
-        self.pelvis_R, self.pelvis_c = Q[0].copy(), c[0].copy()
-        y = configuration_vector(c, Q)
-        self.x = self.gp.transform(y[None])[0]
-        self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
-        self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
-        self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
-        self._last_P = self._trail = None  # last frame's final points, prefetch (step)
+        c, Q = self._place(R, root)
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
@@ -219,6 +213,25 @@ class CageTracker:
             # (metres off). Take them in the rest cage, which encloses the rest skeleton.
             self._set_joints(self.oqr.rest_vertices.copy(), template.eval_skeleton.rest_positions)
         return self._result(frame.index, {}, 0)
+
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Put the quads at the pose ``R``, ``root`` (a re-initialisation), keeping the
+        first frame's cage coordinates of the joints and the data term's vertices."""
+        self._place(R, root)
+        return self._result(frame.index, {}, 0)
+
+    def _place(self, R: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Quads, pelvis and latent point of a pose, no velocity; returns the quads'
+        centres (21, 3) and rotations (21, 3, 3)."""
+        c, Q = quads_from_pose(self.oqr, self.template, R, root)
+        self.pelvis_R, self.pelvis_c = Q[0].copy(), c[0].copy()
+        y = configuration_vector(c, Q)
+        self.x = self.gp.transform(y[None])[0]
+        self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
+        self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
+        self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
+        self._last_P = self._trail = None  # last frame's final points, prefetch (step)
+        return c, Q
 
     def _set_keep(self, keep: np.ndarray) -> None:
         """Sampled vertices in the data term (bool, n); their weights √(1 / kept)."""
@@ -468,7 +481,7 @@ class CageTracker:
         locally (Eq. 12)."""
         o = self.opts
         clock = _Clock(self.stage_seconds)
-        hull = frame.hull
+        hull = frame_hull(frame)  # a capture's hull, or the solid a mesh or point cloud bounds
         k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
         stride = max(1, round(o.field_spacing / hull.voxel_size))
         field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size,

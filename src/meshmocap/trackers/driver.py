@@ -10,6 +10,17 @@ coasts across it the same way: the next real frame is fitted from the last good 
 
 Only one process writes into a track folder at a time: a second one is refused in one line
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
+
+The first frame's pose comes from the capture alone (``init="auto"``,
+:func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground
+truth (``init="truth"``). With ``recover``, every fitted frame is scored
+(:class:`~meshmocap.estimate.reinit.Recovery`): a frame with a limb lost is flagged
+``lost`` (the message names the limbs). With ``reseat`` too, where a better pose is found
+from the frame the tracker is re-seated there (``Tracker.reseat``) and the frame also
+flagged ``reinit``, and a limb the observations miss is held as last seen. Re-seating is
+off by default: it rescues a limb lost behind a hole in the hull (CMU 05_01 with a forearm
+missed for 10 frames: worst joint 342 → 62 mm) but mistakes a fast limb for a lost one on
+a run (CMU 09_01, patch, 55 frames: 13.5 → 35.8 mm mean; ``benchmarks/bench_recovery.py``).
 """
 
 from __future__ import annotations
@@ -19,13 +30,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
 from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
+from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
+from meshmocap.estimate.init import initial_pose
+from meshmocap.estimate.observe import observed
+from meshmocap.estimate.reinit import Recovery
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
@@ -39,6 +55,9 @@ from meshmocap.io.results import (
     write_frame,
 )
 from meshmocap.trackers.base import Tracker
+
+#: How the first frame's pose is found: from the capture alone, or from its ground truth.
+Init = Literal["auto", "truth"]
 
 #: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake.
 NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
@@ -58,6 +77,9 @@ def track_sequence(
     resume: bool = True,
     show_progress: bool | None = None,
     vertices: bool = True,
+    init: Init = "auto",
+    recover: bool = True,
+    reseat: bool = False,
     template_info: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
@@ -68,9 +90,7 @@ def track_sequence(
     template : Template
         The tracking template.
     capture : Capture
-        Frames to track. The first one (of ``frames``) initialises the template's pose from
-        its ground truth when it has one (the protocol of the papers' evaluations), else the
-        template starts in its rest pose (right for a template made from that frame).
+        Frames to track (a capture folder or a sequence of meshes or point clouds).
     out : path
         Track folder (:mod:`meshmocap.io.results`).
     frames : sequence of int, optional
@@ -80,6 +100,16 @@ def track_sequence(
     vertices : bool
         Read the tracked vertices back into the returned track (False for long runs: see
         :func:`~meshmocap.io.results.read_track`).
+    init : {"auto", "truth"}
+        The first frame's pose: found from the frame alone (a global search over heading,
+        place and a few seed poses, :func:`~meshmocap.estimate.init.initial_pose`), or
+        copied from its ground truth (the papers' protocol; the capture must have it).
+        ``track.json`` records which, the first frame's message the search's winner.
+    recover : bool
+        Score every frame and flag lost limbs (module docstring).
+    reseat : bool
+        With ``recover``, also re-initialise lost limbs where a better pose is found and
+        hold unobserved ones as last seen (module docstring: off by default).
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
@@ -93,6 +123,7 @@ def track_sequence(
     positions = list(range(len(capture))) if frames is None else list(frames)
     if not positions:
         raise InputError("track: no frames to track")
+    check_choice("track", "init", init, get_args(Init))
     indices = [int(capture.indices[k]) for k in positions]  # without reading the frames
     meta = {
         "method": tracker.name,
@@ -102,13 +133,16 @@ def track_sequence(
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
+        "init": init,
+        "recover": bool(recover),
+        "reseat": bool(recover and reseat),
         **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "track"):  # a second run into the same folder is refused
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
-            _initialise(tracker, template, capture, out, positions)
+            _initialise(tracker, template, capture, out, positions, init)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -119,6 +153,10 @@ def track_sequence(
             if getattr(tracker, "template", None) is not template:  # resuming: not initialised
                 tracker.setup(template)
             tracker.set_state(read_state(out, last))
+            recovery = None
+            if recover:
+                pose = _last_pose(out, [i for i in indices if i in done and i <= last])
+                recovery = Recovery(template, *pose)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
                 index, reason = int(capture.indices[k]), None
@@ -127,9 +165,12 @@ def track_sequence(
                     frame = capture[k]  # a mesh sequence reads the file here
                     reason = missing_reason(frame)
                     if reason is None:
+                        frame = observed(frame)  # points, normals, occupancy: made once
                         r = tracker.step(frame)
                         if not _finite(r):
                             raise FloatingPointError("non-finite joints or vertices")
+                        if recovery is not None:
+                            r = recovered(tracker, recovery, frame, r, reseat=reseat)
                         r = replace(r, index=index, seconds=time.perf_counter() - t0)
                         good = index
                 except NUMERICAL_ERRORS as exc:
@@ -169,10 +210,12 @@ def _carry(
                    message=why, flags=(flag,))  # fmt: skip
 
 
-def _initialise(tracker: Tracker, template: Template, capture, out, positions: list[int]) -> None:
-    """Start on the first frame that has an observation: from its ground truth pose when it
-    has one, else from the template's rest pose. Frames before it are written as copies of
-    it, flagged ``missing``."""
+def _initialise(
+    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+) -> None:
+    """Start on the first frame that has an observation, at the pose :func:`first_pose`
+    finds (its message says how). Frames before it are written as copies of it, flagged
+    ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -182,21 +225,18 @@ def _initialise(tracker: Tracker, template: Template, capture, out, positions: l
         except FRAME_ERRORS as exc:
             reason = _why(exc)
         if reason is None:
-            truth = _truth(frame)
-            if truth is not None and truth.rotations is not None:
-                R, root = truth.rotations, truth.root
-            else:  # no known pose: the rest pose (e.g. a template cut from that frame)
-                R = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
-                root = template.skeleton.rest_positions[0]
             t0 = time.perf_counter()
             try:
+                R, root, how = first_pose(template, frame, init, capture=capture)
                 r = tracker.init(template, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = _why(exc)
         if reason is not None:
             skipped.append((index, reason))
             continue
-        write_frame(out, replace(r, index=index, seconds=time.perf_counter() - t0))
+        state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
+        write_frame(out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how,
+                                 state=state))  # fmt: skip
         for index, why in skipped:
             write_frame(out, replace(r, index=index, seconds=0.0, healthy=False, message=why,
                                      flags=("missing",)))  # fmt: skip
@@ -223,3 +263,90 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
         message=str(z["message"]), flags=frame_flags(z),
         state={k[6:]: v for k, v in z.items() if k.startswith("state_")},
     )  # fmt: skip
+
+
+#: Automatic first poses found in this process: (template, capture, frame) → result, so
+#: several trackers started on one capture (the demo, a benchmark) search once.
+_FOUND: dict[tuple, tuple[np.ndarray, np.ndarray, str]] = {}
+
+
+def first_pose(
+    template: Template, frame, init: Init, *, capture=None
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
+    found (the frame's message in the track). An automatic search is remembered for
+    ``capture``'s frame for the rest of the process."""
+    if init == "truth":
+        truth = _truth(frame)
+        if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
+            rest = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
+            how = "init truth: the template is this frame, in its rest pose"
+            return rest, template.skeleton.rest_positions[0], how
+        if truth is None or truth.rotations is None:
+            raise InputError(
+                "track: --init truth needs a capture with ground-truth poses "
+                "(a synthetic capture); this one has none: use --init auto"
+            )
+        return truth.rotations, truth.root, "init truth: the first pose from ground truth"
+    key = None
+    if capture is not None:
+        key = (template.name, template.n_vertices, str(Path(capture.path).resolve()), frame.index)
+        if key in _FOUND:
+            return _FOUND[key]
+    obs = observed(frame)
+    P, N = obs.points
+    if len(P) < 50:
+        raise InputError(f"track: frame {frame.index} has {len(P)} observed points; "
+                         "--init auto needs a body to start from")  # fmt: skip
+    masks = obs.silhouettes if obs.cameras else None
+    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks,
+                       field=obs.field)  # fmt: skip
+    found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
+    if key is not None:
+        _FOUND[key] = found
+    return found
+
+
+def _is_rest(template: Template, truth) -> bool:
+    """Whether a truth without pose is the template's own rest mesh (within 1 mm)."""
+    if truth is None or truth.rotations is not None or truth.vertices is None:
+        return False
+    V = np.asarray(truth.vertices)
+    return V.shape == template.V.shape and float(np.abs(V - template.V).max()) < 1e-3
+
+
+def recovered(
+    tracker: Tracker, recovery: Recovery, frame, r: FrameResult, *, reseat: bool = False
+) -> FrameResult:
+    """``r`` scored against ``frame``; flagged ``lost`` with the limbs concerned, and with
+    ``reseat``, where a better pose is found, the tracker re-seated there (flag ``reinit``).
+    The frame's quality (``fit_outside``, ``fit_unexplained``) joins its energies, the
+    articulated pose of the tracked mesh its state (``pose_R``, ``pose_root``)."""
+    q = recovery.assess(frame, r.vertices)
+    flags, message = tuple(r.flags), r.message
+    if q.lost:
+        flags += ("lost",)
+        message = f"lost {q.describe()}"
+    if q.lost and reseat:
+        found = recovery.reinitialise(frame, r.vertices, q)
+        held = [n for n in q.lost if n in recovery.missing]
+        if found is not None:
+            r = tracker.reseat(frame, found.R, found.root)
+            flags += ("reinit",)
+            message += f"; re-initialised {', '.join(found.limbs)}"
+            q = found.quality
+        elif held:  # limbs the observations miss: held as last seen, not left where pulled
+            r = tracker.reseat(frame, recovery.coast_pose(), recovery.root)
+            message += f"; {', '.join(held)} held as last seen"
+    state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
+    return replace(r, flags=flags, message=message, energies={**r.energies, **q.energies()},
+                   state=state)  # fmt: skip
+
+
+def _last_pose(out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The articulated pose stored with the latest of ``indices`` that has one."""
+    for i in reversed(indices):
+        st = read_state(out, i)
+        if "pose_R" in st:
+            return st["pose_R"].astype(np.float64), st["pose_root"].astype(np.float64)
+    raise InputError(f"track: {out} holds no pose to resume recovery from; use --restart")

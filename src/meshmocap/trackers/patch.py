@@ -23,8 +23,8 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
+from meshmocap.estimate.observe import frame_points
 from meshmocap.geometry.camera import in_view
-from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
@@ -155,19 +155,26 @@ class PatchTracker:
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
     ) -> FrameResult:
         """Place the patches on the template posed by ``R``, ``root`` (ground truth)."""
-        o = self.opts
         if self.template is not template:
             self.setup(template)
-        m = self.model
-        posed = template.pose(R, root)
-        self.R, self.c = fit_patches(m, posed.V)
-        self.X = posed.eval_joints.copy()
+        self._place(template.pose(R, root))
         self.lengths = _pair_lengths(self.X, self.pairs)
-        self.model = rebind_bones(m, self.R, self.c, self.X)
-        self.sigma = o.sigma0
+        self.model = rebind_bones(self.model, self.R, self.c, self.X)
+        return self._result(frame.index, {}, 0)
+
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Place the patches and joints on the template posed by ``R``, ``root`` (a
+        re-initialisation), keeping the first frame's bone binding and lengths."""
+        self._place(self.template.pose(R, root))
+        return self._result(frame.index, {}, 0)
+
+    def _place(self, posed) -> None:
+        """Patches and joints on a posed template; no velocity, a fresh classifier."""
+        self.R, self.c = fit_patches(self.model, posed.V)
+        self.X = posed.eval_joints.copy()
+        self.sigma = self.opts.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
         self.logits = None
-        return self._result(frame.index, {}, 0)
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore patch transforms, joints and σ saved with a frame."""
@@ -232,9 +239,7 @@ class PatchTracker:
         random generator (seeded by frame, so resumed runs repeat exactly)."""
         o = self.opts
         rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
-        V, F = frame.hull_mesh
-        # a point cloud carries its normals (estimated by the capture where the file has none)
-        N = vertex_normals(V, F) if F is not None else np.asarray(frame.normals, dtype=float)
+        V, N = frame_points(frame)  # a mesh's vertex normals, a point cloud's own or estimated
         if len(V) > o.max_points:
             pick = rng.choice(len(V), o.max_points, replace=False)
             V, N = V[pick], N[pick]

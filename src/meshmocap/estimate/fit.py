@@ -1,0 +1,321 @@
+"""The articulated fit of a template to observed surface points: the Gauss–Newton of
+:mod:`meshmocap.body.articulated` (root translation, a world-frame rotation increment per
+free joint) on closest points **both ways** with agreeing normals, as
+:func:`meshmocap.body.autorig.fit_skeleton` does for closed meshes, but on any points with
+normals (visual-hull vertices, a point cloud), with a pull towards a reference pose and the
+subject's size fixed (the template is the performer).
+
+Per iteration, for pairs (model point i, observed point y with normal n_y):
+
+    E(Θ) = mean_md r² + w_dm mean_dm r² + μ (mean_md |v_i − y|² + mean_dm |v_i − y|²)
+           + Σ_j λ_j |G_parent(j) log(R_j R_refᵀ_j)|²
+
+with ``r = n_y · (v_i − y)`` (point-to-plane) and μ = :data:`POINT_MIX`, the pairs found
+within a distance shrinking over the iterations; one Levenberg–Marquardt-damped step, each
+joint's rotation clipped to :data:`MAX_STEP_ANGLE`. Metres and radians, world frame Z up.
+
+:func:`fit_score` is the symmetric closest-point distance a global search ranks candidate
+poses by, and :class:`PoseFitter` keeps the observed points, their k-d tree and the model
+points across the many fits of a search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    apply_increment,
+    articulated_model,
+    nearest_compatible,
+    pose_points,
+    residual_jacobian,
+)
+from meshmocap.body.skeleton import forward_kinematics
+from meshmocap.body.template import Template
+from meshmocap.geometry.camera import Camera
+from meshmocap.geometry.distance_field import DistanceGrid
+from meshmocap.geometry.rotations import so3_log
+from meshmocap.geometry.silhouette import silhouette
+
+__all__ = [
+    "MAX_STEP_ANGLE",
+    "POINT_MIX",
+    "PoseFit",
+    "PoseFitter",
+    "pose_of_vertices",
+    "silhouette_mismatch",
+]
+
+#: Weight of the point-to-point pull added to the point-to-plane residuals.
+POINT_MIX = 0.1
+#: Largest rotation (radians) of any joint in one Gauss–Newton step.
+MAX_STEP_ANGLE = 0.3
+#: Distances (metres) beyond which :meth:`PoseFitter.score` counts a point as unexplained.
+SCORE_CLIP = 0.15
+#: Distance outside the observed solid (metres) beyond which a model point costs no more.
+OUTSIDE_CLIP = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class PoseFit:
+    """A pose fitted to observed points.
+
+    Attributes
+    ----------
+    R : (J, 3, 3) float64, local joint rotations; ``root`` (3,) float64, metres
+    score : float, :meth:`PoseFitter.score` of the pose (metres, lower is better)
+    label : str, where the search started it (e.g. ``"t_pose@135°"``)
+    """
+
+    R: np.ndarray
+    root: np.ndarray
+    score: float
+    label: str = ""
+
+
+class PoseFitter:
+    """Articulated fits of ``template`` to one set of observed points (module docstring).
+
+    Parameters
+    ----------
+    template : Template
+    Y, NY : (p, 3) float64
+        Observed points (metres, world frame) and their outward unit normals.
+    n_model_points : int
+        Template vertices used (area-weighted sample).
+    normal_cos : float
+        Pairs need ``n_model · n_data`` above this.
+    data_to_model_weight : float
+        Weight ``w_dm`` of the data→model pairs.
+    fixed_joints : tuple of str
+        Joints kept at their starting rotation.
+    field : DistanceGrid, optional
+        Signed distance (metres, negative inside) of the observed solid, e.g. of a visual
+        hull: :meth:`score` then measures how far model points stand *outside* it (a hull
+        holds phantom volume, so a model point inside it proves nothing).
+    seed : int
+        Seed of the model-point sample.
+    """
+
+    def __init__(
+        self,
+        template: Template,
+        Y: np.ndarray,
+        NY: np.ndarray,
+        *,
+        n_model_points: int = 1000,
+        normal_cos: float = 0.3,
+        data_to_model_weight: float = 1.0,
+        fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+        field: DistanceGrid | None = None,
+        seed: int = 0,
+    ):
+        self.template = template
+        self.field = field
+        self.sk = template.skeleton
+        self.Y = np.ascontiguousarray(Y, dtype=np.float64)
+        self.NY = np.asarray(NY, dtype=np.float64)
+        self.tree = KDTree(self.Y)
+        self.model = articulated_model(template, n_points=n_model_points, seed=seed)
+        self.normal_cos = normal_cos
+        self.w_dm = data_to_model_weight
+        self.free = np.array(
+            [j for j, n in enumerate(self.sk.names) if n not in fixed_joints], dtype=np.int64
+        )
+
+    def points(self, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+        """The posed model points (m, 3), metres."""
+        return pose_points(self.model, R, root, jacobian=False)[0]
+
+    def score(self, R: np.ndarray, root: np.ndarray) -> float:
+        """Symmetric RMS distance (metres) between the posed model points and the observed
+        points: each observed point's distance to the nearest model point (clipped at
+        :data:`SCORE_CLIP`), and each model point's to the nearest observed point (clipped
+        likewise) or, given ``field``, how far it stands outside the observed solid
+        (clipped at :data:`OUTSIDE_CLIP`). A limb outside the observations and
+        observations no limb explains both cost."""
+        v = self.points(R, root)
+        if self.field is not None:
+            d1 = np.clip(self.field(v), 0.0, OUTSIDE_CLIP)
+        else:
+            d1 = np.minimum(self.tree.query(v, k=1)[0], SCORE_CLIP)
+        d2 = np.minimum(KDTree(v).query(self.Y, k=1)[0], SCORE_CLIP)
+        return float(np.sqrt(0.5 * (np.mean(d1**2) + np.mean(d2**2))))
+
+    def fit(
+        self,
+        R: np.ndarray,
+        root: np.ndarray,
+        *,
+        iterations: int = 20,
+        max_distance: tuple[float, float] = (0.3, 0.05),
+        R_ref: np.ndarray | None = None,
+        lambda_pose: float | np.ndarray = 1e-4,
+        joints: np.ndarray | None = None,
+        move_root: bool = True,
+        damping: float = 1e-2,
+        label: str = "",
+    ) -> PoseFit:
+        """Fit the pose from ``(R, root)``.
+
+        Parameters
+        ----------
+        R : (J, 3, 3) float64, local rotations; ``root`` (3,) float64, metres: the start.
+        iterations : int
+            Gauss–Newton iterations.
+        max_distance : (float, float)
+            Pairs farther apart are ignored, metres: the first value at the first
+            iteration, shrinking geometrically to the second at the last.
+        R_ref : (J, 3, 3) float64, optional
+            Rotations the pose is pulled towards (default: the start ``R``).
+        lambda_pose : float or (J,) float64
+            Weight (m²/rad²) of each joint's squared rotation away from ``R_ref`` (the
+            root's turn included when it is given per joint; a scalar leaves the root free).
+        joints : (k,) int64, optional
+            The joints whose rotation is estimated (default: every joint not fixed).
+        move_root : bool
+            Estimate the root translation.
+        damping : float
+            Levenberg–Marquardt damping (relative to the diagonal).
+        label : str
+            Stored in the result.
+        """
+        J = self.sk.n_joints
+        R = np.array(R, dtype=np.float64)
+        root = np.array(root, dtype=np.float64)
+        R_ref = R.copy() if R_ref is None else np.asarray(R_ref, dtype=np.float64)
+        lam = np.broadcast_to(np.asarray(lambda_pose, dtype=np.float64), (J,)).copy()
+        if np.ndim(lambda_pose) == 0:
+            lam[0] = 0.0
+        free = self.free if joints is None else np.intersect1d(joints, self.free)
+        d0, d1 = max_distance
+        for it in range(iterations):
+            d = d0 * (d1 / d0) ** (it / max(iterations - 1, 1))
+            step = self._step(R, root, d, R_ref, lam, free, move_root, damping)
+            if step is None:
+                break
+            R, root = apply_increment(self.sk, R, root, step)
+        return PoseFit(R, root, self.score(R, root), label)
+
+    def _step(self, R, root, max_distance, R_ref, lam, joints, move_root, damping):
+        """One damped Gauss–Newton increment (3 + 3J,) of the root (if ``move_root``) and
+        the rotations of ``joints``, or None without any pair. Only the model points those
+        move, and their pairs, enter (the others' residuals do not change)."""
+        J = self.sk.n_joints
+        v, nv, a = pose_points(self.model, R, root)
+        moving = np.ones(len(v), bool) if move_root else self.model.W_acc[:, joints].sum(1) > 0
+        cand = dict(k=8, max_distance=max_distance, normal_cos=self.normal_cos)
+        on = np.flatnonzero(moving)
+        i, k = nearest_compatible(self.tree, self.NY, v[on], nv[on], **cand)  # model → data
+        i = on[i]
+        k2, i2 = nearest_compatible(KDTree(v), nv, self.Y, self.NY, **cand)  # data → model
+        k2, i2 = k2[moving[i2]], i2[moving[i2]]
+        if not (len(i) or len(i2)):
+            return None
+        a = a[:, joints]  # lever arms of the estimated joints only
+        cols = np.arange(0 if move_root else 3, 3 + 3 * len(joints))
+        n = len(cols)
+        H, g = np.zeros((n, n)), np.zeros(n)
+        for ii, kk, w in ((i, k, 1.0), (i2, k2, self.w_dm)):
+            if len(ii) == 0:
+                continue
+            y, ny = self.Y[kk], self.NY[kk]
+            r, Jr = residual_jacobian(v, a, ii, y, ny, "point_to_plane")
+            Jr = Jr[:, cols]
+            H += (w / len(ii)) * (Jr.T @ Jr)
+            g += (w / len(ii)) * (Jr.T @ r)
+            sub = slice(None, None, max(1, len(ii) // 500))  # the weak pull: 500 pairs suffice
+            r, Jr = residual_jacobian(v, a, ii[sub], y[sub], ny[sub], "point_to_point")
+            Jr = Jr[:, cols]
+            s = w * POINT_MIX / len(ii[sub])
+            H += s * (Jr.T @ Jr)
+            g += s * (Jr.T @ r)
+        # pull towards the reference pose, linearised in world-frame rotation errors
+        G, _ = forward_kinematics(self.sk, R, root)
+        Gp = np.concatenate([np.eye(3)[None], G[self.sk.parents[1:]]])[joints]
+        e = np.einsum("jab,jb->ja", Gp, so3_log(R[joints] @ np.swapaxes(R_ref[joints], 1, 2)))
+        rot = np.arange(n - 3 * len(joints), n)
+        H[rot, rot] += np.repeat(lam[joints], 3)
+        g[rot] += (lam[joints][:, None] * e).ravel()
+        H[np.diag_indices(n)] *= 1.0 + damping
+        H[np.diag_indices(n)] += 1e-9
+        x = -np.linalg.solve(H, g)
+        if not np.all(np.isfinite(x)):
+            return None
+        delta = np.zeros(3 + 3 * J)
+        if move_root:
+            delta[:3] = x[:3]
+        w = x[rot].reshape(-1, 3)
+        ang = np.linalg.norm(w, axis=1, keepdims=True)
+        w = w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))
+        delta[(3 + 3 * joints[:, None] + np.arange(3)).ravel()] = w.ravel()
+        return delta
+
+
+def silhouette_mismatch(
+    V: np.ndarray, F: np.ndarray, cameras: list[Camera], masks: list[np.ndarray]
+) -> float:
+    """Mean over cameras of the pixels where the mesh's silhouette and the observed one
+    disagree, as a fraction of the observed silhouette's pixels (0: identical).
+
+    Parameters
+    ----------
+    V : (n, 3) float64, metres, world frame; ``F`` (m, 3) int, a closed mesh
+    cameras : list of Camera; ``masks`` : list of (height, width) bool, one per camera
+    """
+    err = []
+    for cam, mask in zip(cameras, masks, strict=True):
+        model = silhouette(V, F, cam, assume_closed=True)
+        err.append(np.count_nonzero(model ^ mask) / max(np.count_nonzero(mask), 1))
+    return float(np.mean(err)) if err else 0.0
+
+
+def pose_of_vertices(
+    template: Template,
+    V: np.ndarray,
+    R: np.ndarray,
+    root: np.ndarray,
+    *,
+    iterations: int = 6,
+    n_points: int = 600,
+    fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The template pose whose skinned vertices are nearest to ``V`` (the template's own
+    vertices, e.g. a tracker's output, in any deformation): Gauss–Newton on the
+    point-to-point residuals of ``n_points`` vertices, with the correspondences known.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, the template's vertices, metres, world frame
+    R : (J, 3, 3) float64, ``root`` (3,) float64: the starting pose (e.g. the last one)
+
+    Returns
+    -------
+    R : (J, 3, 3) float64, local rotations; root : (3,) float64, metres
+    """
+    model = articulated_model(template, n_points=n_points, seed=0)
+    sk = template.skeleton
+    target = np.asarray(V, dtype=np.float64)[model.sample]
+    free = [j for j, n in enumerate(sk.names) if n not in fixed_joints]
+    act = np.concatenate([np.arange(3), (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()])
+    R, root = np.array(R, dtype=np.float64), np.array(root, dtype=np.float64)
+    i = np.arange(len(model.sample))
+    for _ in range(iterations):
+        v, _, a = pose_points(model, R, root)
+        r, Jr = residual_jacobian(v, a, i, target, np.zeros_like(target), "point_to_point")
+        H = Jr[:, act].T @ Jr[:, act]
+        H[np.diag_indices(len(act))] *= 1.0 + 1e-3
+        H[np.diag_indices(len(act))] += 1e-9
+        delta = np.zeros(3 + 3 * sk.n_joints)
+        delta[act] = -np.linalg.solve(H, Jr[:, act].T @ r)
+        if not np.all(np.isfinite(delta)):
+            break
+        w = delta[3:].reshape(-1, 3)
+        ang = np.linalg.norm(w, axis=1, keepdims=True)
+        delta[3:] = (w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))).ravel()
+        R, root = apply_increment(sk, R, root, delta)
+    return R, root

@@ -1,0 +1,248 @@
+"""How well a tracked frame explains its observations, limb by limb: the fit-quality score
+that flags a frame ``lost`` (:data:`meshmocap.io.results.FRAME_FLAGS`).
+
+Three measures, each per limb (:data:`LIMB_PARTS`, from the template's per-vertex body
+parts):
+
+* **outside** — the fraction of the limb's vertices standing more than
+  :data:`OUTSIDE_MARGIN` outside the observed solid (the visual hull, or the solid a mesh or
+  point cloud bounds). A visual hull contains the body, so a limb tracked where the
+  performer's limb is stands inside it; a limb outside it is not where the data says.
+* **buried** — the fraction of the limb's vertices deeper than :data:`BURIED_DEPTH` inside
+  the observed solid. A tracked surface lies on the observations' surface (a visual
+  hull's a few millimetres out, more in its phantom volumes); a limb sunk into the trunk
+  explains no observation (typically while the observations miss that limb: nothing pulls
+  it out, and nothing outside it shows it is wrong).
+* **unexplained** — observed surface points farther than :data:`UNEXPLAINED_DISTANCE`
+  from every tracked vertex, as a fraction of all observed points, each counted for the
+  limb of its nearest tracked vertex. Something is there that no part of the model
+  explains: typically the real limb, while the model's is elsewhere. A hull's phantom
+  volumes leave some such points on every frame, so the threshold sits above them.
+
+A limb is lost when any measure passes its threshold (:data:`OUTSIDE_LOST`,
+:data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`). Metres, world frame Z up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+from scipy import ndimage
+
+from meshmocap.body.template import Template
+from meshmocap.geometry.camera import Camera, project
+from meshmocap.geometry.distance_field import DistanceGrid
+from meshmocap.geometry.silhouette import silhouette
+
+__all__ = [
+    "BURIED_DEPTH",
+    "BURIED_LOST",
+    "LIMB_PARTS",
+    "OUTSIDE_LOST",
+    "OUTSIDE_MARGIN",
+    "UNEXPLAINED_DISTANCE",
+    "UNEXPLAINED_LOST",
+    "UNSEEN_LOST",
+    "UNSEEN_MARGIN",
+    "FitQuality",
+    "fit_quality",
+    "limb_labels",
+    "limb_shares",
+    "uncovered_points",
+]
+
+#: Limbs named in flags → the evaluation joints whose body parts make them.
+LIMB_PARTS: dict[str, tuple[str, ...]] = {
+    "torso": ("pelvis", "thorax"),
+    "head": ("head",),
+    "left_arm": ("left_shoulder", "left_elbow", "left_wrist"),
+    "right_arm": ("right_shoulder", "right_elbow", "right_wrist"),
+    "left_leg": ("left_hip", "left_knee", "left_ankle"),
+    "right_leg": ("right_hip", "right_knee", "right_ankle"),
+}
+#: Metres a vertex may stand outside the observed solid before it counts as outside (the
+#: voxels' rounding, a performer slimmer than the template).
+OUTSIDE_MARGIN = 0.03
+#: Fraction of a limb's vertices outside beyond which the limb is lost.
+OUTSIDE_LOST = 0.25
+#: Metres inside the observed solid beyond which a vertex counts as buried.
+BURIED_DEPTH = 0.04
+#: Fraction of a limb's vertices buried beyond which the limb is lost.
+BURIED_LOST = 0.5
+#: Metres outside the observed solid beyond which a vertex of a limb posed as when last
+#: seen counts as unseen (wider than OUTSIDE_MARGIN: the limb has moved for a frame since).
+UNSEEN_MARGIN = 0.05
+#: Fraction of such a limb outside beyond which the observations miss it.
+UNSEEN_LOST = 0.4
+#: Metres from the nearest tracked vertex beyond which an observed point is unexplained.
+UNEXPLAINED_DISTANCE = 0.08
+#: Metres from the nearest tracked vertex beyond which an observed point imaging into
+#: uncovered silhouette pixels is unexplained.
+SILHOUETTE_DISTANCE = 0.03
+#: Fraction of all observed points, unexplained and nearest to one limb, beyond which that
+#: limb is lost.
+UNEXPLAINED_LOST = 0.02
+
+
+def limb_labels(template: Template) -> np.ndarray:
+    """(n,) int64: each template vertex's limb, an index into ``list(LIMB_PARTS)`` (−1 for
+    a part no limb lists)."""
+    names = template.eval_skeleton.names
+    part_limb = np.full(len(names), -1, dtype=np.int64)
+    for k, parts in enumerate(LIMB_PARTS.values()):
+        for p in parts:
+            if p in names:
+                part_limb[names.index(p)] = k
+    return part_limb[template.part_labels]
+
+
+@dataclass(frozen=True, eq=False)
+class FitQuality:
+    """The fit quality of one frame.
+
+    Attributes
+    ----------
+    outside : dict of limb → float, fraction of the limb's vertices outside the solid
+    buried : dict of limb → float, fraction of the limb's vertices deep inside it
+    unexplained : dict of limb → float, fraction of the observed points unexplained and
+        nearest to the limb
+    lost : tuple of str, the limbs past a threshold, in :data:`LIMB_PARTS` order
+    unseen : dict of limb → float, where known: fraction of the limb, posed as when last
+        seen on the tracked trunk, outside the observations (the observations miss it:
+        :class:`~meshmocap.estimate.reinit.Recovery`)
+    """
+
+    outside: dict[str, float]
+    buried: dict[str, float]
+    unexplained: dict[str, float]
+    lost: tuple[str, ...]
+    unseen: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def total_unexplained(self) -> float:
+        """Fraction of the observed points no tracked vertex explains."""
+        return float(sum(self.unexplained.values()))
+
+    def energies(self) -> dict[str, float]:
+        """The frame's quality as energy terms of its result: the largest outside fraction
+        of any limb and the total unexplained fraction."""
+        return {"fit_outside": max(self.outside.values(), default=0.0),
+                "fit_buried": max(self.buried.values(), default=0.0),
+                "fit_unexplained": self.total_unexplained}  # fmt: skip
+
+    def describe(self) -> str:
+        """One line naming each lost limb and why (empty when none is lost)."""
+        parts = []
+        for limb in self.lost:
+            why = []
+            if self.outside[limb] > OUTSIDE_LOST:
+                why.append(f"{100 * self.outside[limb]:.0f}% outside the observations")
+            if self.buried[limb] > BURIED_LOST:
+                why.append(f"{100 * self.buried[limb]:.0f}% buried in the body")
+            if self.unexplained[limb] > UNEXPLAINED_LOST:
+                why.append(f"{100 * self.unexplained[limb]:.1f}% of the points unexplained")
+            if self.unseen.get(limb, 0.0) > UNSEEN_LOST:
+                why.append("not observed where it was last seen")
+            parts.append(f"{limb} ({', '.join(why)})")
+        return "; ".join(parts)
+
+
+def limb_shares(labels: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+    """Per limb, the fraction of its vertices (``labels``, :func:`limb_labels`) where
+    ``mask`` (n,) bool holds."""
+    n = len(LIMB_PARTS)
+    on = labels >= 0
+    counts = np.maximum(np.bincount(labels[on], minlength=n), 1)
+    hits = np.bincount(labels[mask & on], minlength=n)
+    return {name: float(hits[k] / counts[k]) for k, name in enumerate(LIMB_PARTS)}
+
+
+def uncovered_points(
+    V: np.ndarray,
+    F: np.ndarray,
+    P: np.ndarray,
+    cameras: list[Camera],
+    masks: list[np.ndarray],
+) -> np.ndarray:
+    """(p,) bool: the observed points that image into silhouette pixels the tracked mesh
+    leaves uncovered, in at least one camera. A visual hull's phantom volume images into
+    pixels the body covers (along other rays), so with a good fit only rounding at the
+    silhouettes' edges (their outermost pixel is not counted) is left.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, tracked vertices, metres; ``F`` (m, 3) int, the template's faces
+    P : (p, 3) float64, observed points, metres
+    cameras : list of Camera; ``masks`` : list of (height, width) bool, one per camera
+    """
+    hit = np.zeros(len(P), dtype=bool)
+    for cam, mask in zip(cameras, masks, strict=True):
+        miss = ndimage.binary_erosion(mask) & ~silhouette(V, F, cam, assume_closed=True)
+        if not miss.any():
+            continue
+        uv, depth = project(P, cam.K, cam.R, cam.t)
+        px = np.round(uv).astype(np.int64)
+        ok = (depth > 0) & (px[:, 0] >= 0) & (px[:, 0] < mask.shape[1])
+        ok &= (px[:, 1] >= 0) & (px[:, 1] < mask.shape[0])
+        hit[ok] |= miss[px[ok, 1], px[ok, 0]]
+    return hit
+
+
+def fit_quality(
+    V: np.ndarray,
+    labels: np.ndarray,
+    P: np.ndarray,
+    field: DistanceGrid,
+    *,
+    F: np.ndarray | None = None,
+    cameras: list[Camera] | None = None,
+    masks: list[np.ndarray] | None = None,
+    max_points: int = 4000,
+    seed: int = 0,
+) -> FitQuality:
+    """Score a tracked frame against its observations (module docstring).
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Tracked template vertices, metres, world frame.
+    labels : (n,) int64
+        Each vertex's limb (:func:`limb_labels`).
+    P : (p, 3) float64
+        Observed surface points, metres.
+    field : DistanceGrid
+        Signed distance of the observed solid (negative inside), metres.
+    F, cameras, masks : optional
+        The template's faces, the capture's cameras and the frame's silhouettes: where
+        given, an observed point far from the tracked mesh is unexplained only if it
+        also images into silhouette pixels the mesh leaves uncovered
+        (:func:`uncovered_points`): a visual hull's phantom volume is far from the body
+        but covered by it in every image.
+    max_points : int
+        At most this many observed points are checked (a seeded subsample).
+    seed : int
+        Seed of that subsample.
+
+    Returns
+    -------
+    FitQuality
+    """
+    limbs = list(LIMB_PARTS)
+    if len(P) > max_points:
+        P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
+    sdf = field(V)
+    outside = limb_shares(labels, sdf > OUTSIDE_MARGIN)
+    buried = limb_shares(labels, sdf < -BURIED_DEPTH)
+    d, i = KDTree(np.ascontiguousarray(V)).query(np.ascontiguousarray(P), k=1)
+    if cameras and masks is not None and F is not None:
+        far = (d > SILHOUETTE_DISTANCE) & uncovered_points(V, F, P, cameras, masks)
+    else:
+        far = d > UNEXPLAINED_DISTANCE
+    near = labels[np.asarray(i, dtype=np.int64)[far]]
+    votes = np.bincount(near[near >= 0], minlength=len(limbs)) / max(len(P), 1)
+    unexplained = {n: float(votes[k]) for k, n in enumerate(limbs)}
+    lost = tuple(n for n in limbs if outside[n] > OUTSIDE_LOST or buried[n] > BURIED_LOST
+                 or unexplained[n] > UNEXPLAINED_LOST)  # fmt: skip
+    return FitQuality(outside, buried, unexplained, lost)

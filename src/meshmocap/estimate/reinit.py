@@ -1,0 +1,241 @@
+"""Loss detection and re-initialisation during tracking.
+
+After every frame, :class:`Recovery` scores the tracked mesh against the frame's
+observations (:func:`~meshmocap.estimate.quality.fit_quality`). When a limb is lost it
+searches, from the frame alone, for a better pose with the machinery of the automatic
+initialisation (:mod:`meshmocap.estimate.init`):
+
+1. the tracked mesh's pose in the articulated model (:func:`~meshmocap.estimate.fit.
+   pose_of_vertices`, warm-started from the last frame's);
+2. each limb re-seeded over the sphere, straight and bent, and fitted with only that limb
+   free (:func:`~meshmocap.estimate.init.limb_candidates`); a limb is replaced when that
+   lowers the fit score plus the silhouette mismatch by more than :data:`MIN_GAIN`;
+3. when the body itself is outside the observations (the torso lost), the whole global
+   search (:func:`~meshmocap.estimate.init.initial_pose`), kept if it scores better;
+4. a short fit of the whole body from the result, accepted only if it leaves fewer limbs
+   lost (or as many, with less unexplained).
+
+The tracker is then re-seated at that pose (``Tracker.reseat``); the frame carries the
+flags ``lost`` and ``reinit`` and a message naming the limbs. A limb lost where nothing
+unexplained is left to fit it to (the observations miss it, e.g. a limb the silhouettes
+dropped) is flagged and left to the tracker. After a search that finds nothing better,
+the next :data:`COOLDOWN` frames are only flagged, not searched again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from meshmocap.body.template import Template
+from meshmocap.estimate.fit import PoseFit, PoseFitter, pose_of_vertices
+from meshmocap.estimate.init import (
+    LIMBS,
+    initial_pose,
+    limb_candidates,
+    ranking_key,
+    subsample_points,
+)
+from meshmocap.estimate.observe import observed
+from meshmocap.estimate.quality import (
+    BURIED_LOST,
+    LIMB_PARTS,
+    OUTSIDE_LOST,
+    UNEXPLAINED_LOST,
+    UNSEEN_LOST,
+    UNSEEN_MARGIN,
+    FitQuality,
+    fit_quality,
+    limb_labels,
+    limb_shares,
+)
+
+__all__ = ["COOLDOWN", "JUMP", "MIN_GAIN", "Recovery", "Reinit"]
+
+#: Least decrease of the ranking key (metres of fit score) that makes a re-seeded limb win.
+MIN_GAIN = 0.001
+#: Frames only flagged after a search that found no better pose.
+COOLDOWN = 3
+#: Metres a tracked limb must stand from where it was last seen (mean over its vertices)
+#: to count as having jumped away from observations that no longer show it.
+JUMP = 0.08
+#: Joints above a limb's own that move with it (an arm's clavicle).
+_ROOTS = {"left_arm": ("LeftShoulder",), "right_arm": ("RightShoulder",)}
+
+
+@dataclass(frozen=True, eq=False)
+class Reinit:
+    """A re-initialisation found by :meth:`Recovery.reinitialise`.
+
+    Attributes
+    ----------
+    R : (J, 3, 3) float64, local rotations; ``root`` (3,) float64, metres
+    limbs : tuple of str, the limbs re-seeded (``("body",)`` for a whole-body search)
+    quality : FitQuality, of the template posed there
+    """
+
+    R: np.ndarray
+    root: np.ndarray
+    limbs: tuple[str, ...]
+    quality: FitQuality
+
+
+class Recovery:
+    """Fit-quality checks and re-initialisation for one tracking run (module docstring).
+
+    Parameters
+    ----------
+    template : Template
+        The tracking template.
+    R, root : (J, 3, 3) and (3,) float64
+        The first frame's pose (the warm start of the pose estimates).
+    """
+
+    def __init__(self, template: Template, R: np.ndarray, root: np.ndarray):
+        self.template = template
+        self.labels = limb_labels(template)
+        self.R, self.root = np.array(R, dtype=np.float64), np.array(root, dtype=np.float64)
+        self.cooldown = 0
+        sk = template.skeleton
+        #: each limb's joints (an arm's from the clavicle), their rotations when the limb was
+        #: last seen, and the limbs the observations miss now
+        self.limb_joints = {n: np.array([sk.index(j) for j in (*_ROOTS.get(n, ()), *js)
+                                         if j in sk.names])
+                            for n, (js, _) in LIMBS.items()}  # fmt: skip
+        self.held: np.ndarray | None = None
+        self.missing: set[str] = set()
+
+    def _inputs(self, frame):
+        obs = observed(frame)
+        P, _ = obs.points
+        field = obs.field
+        masks = obs.silhouettes if obs.cameras else None
+        return obs, P, field, obs.cameras, masks
+
+    def check(self, frame, V: np.ndarray) -> FitQuality:
+        """The fit quality of the tracked vertices ``V`` (n, 3) on ``frame``."""
+        _, P, field, cameras, masks = self._inputs(frame)
+        return fit_quality(V, self.labels, P, field, F=self.template.F, cameras=cameras,
+                           masks=masks, seed=int(frame.index))  # fmt: skip
+
+    def assess(self, frame, V: np.ndarray) -> FitQuality:
+        """The fit quality of ``V`` on ``frame`` (:meth:`check`), with each limb also posed
+        as when last seen (its joints' rotations then, on the trunk tracked now) and
+        checked against the observations. A limb is missed (``unseen``, lost however well
+        the tracked mesh fits) when, posed as last seen, it stands outside the observations
+        while the tracked limb has jumped away from there (the tracker put it where the
+        observations have something else); it is seen again when, posed as last seen, it is
+        inside them again or the tracked limb is back there. Updates the pose estimate."""
+        q = self.check(frame, V)
+        R, root = self.track_pose(V)
+        if self.held is None:  # the first frame checked: every limb as tracked
+            self.held = R.copy()
+        Vc = self.coast_pose(R)
+        _, _, field, _, _ = self._inputs(frame)
+        out = field(self.template.pose(Vc, root).V) > UNSEEN_MARGIN
+        unseen = {n: v for n, v in limb_shares(self.labels, out).items() if n in self.limb_joints}
+        moved = self._limb_moves(V, self.template.pose(Vc, root).V)
+        for n, v in unseen.items():  # hysteresis: missed until clearly seen again
+            if v > UNSEEN_LOST and moved[n] > JUMP:
+                self.missing.add(n)
+            elif v < UNSEEN_LOST / 2 or moved[n] < JUMP / 2:
+                self.missing.discard(n)
+        lost = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
+        for n, idx in self.limb_joints.items():
+            if n not in lost:
+                self.held[idx] = R[idx]
+        return replace(q, lost=lost, unseen={n: float(n in self.missing) for n in unseen})
+
+    def coast_pose(self, R: np.ndarray | None = None) -> np.ndarray:
+        """Local rotations (J, 3, 3): ``R`` (default: the pose estimate) with each limb's
+        joints as when the limb was last seen (its missed limbs held, the others as of the
+        last frame)."""
+        coast = (self.R if R is None else R).copy()
+        if self.held is not None:
+            for idx in self.limb_joints.values():
+                coast[idx] = self.held[idx]
+        return coast
+
+    def _limb_moves(self, V: np.ndarray, W: np.ndarray) -> dict[str, float]:
+        """Per limb, the mean distance (metres) between its vertices in ``V`` and ``W``."""
+        d = np.linalg.norm(V - W, axis=1)
+        n = len(LIMB_PARTS)
+        on = self.labels >= 0
+        mean = np.bincount(self.labels[on], d[on], minlength=n) / np.maximum(
+            np.bincount(self.labels[on], minlength=n), 1
+        )
+        return {name: float(mean[k]) for k, name in enumerate(LIMB_PARTS)}
+
+    def track_pose(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The articulated pose of the tracked vertices ``V``, warm-started from the last."""
+        self.R, self.root = pose_of_vertices(self.template, V, self.R, self.root)
+        return self.R, self.root
+
+    def reinitialise(self, frame, V: np.ndarray, quality: FitQuality) -> Reinit | None:
+        """A better pose for ``frame`` than the tracked vertices ``V``, or None (module
+        docstring); None too while cooling down after a fruitless search."""
+        if self.cooldown > 0:
+            self.cooldown -= 1
+            return None
+        obs, _, field, cameras, masks = self._inputs(frame)
+        t = self.template
+        R, root = self.R, self.root  # the tracked mesh's pose (assess)
+        if all(n in self.missing and n not in _evidence(quality) for n in quality.lost):
+            return None  # only limbs the observations miss: nothing to fit them to
+        Pn, Nn = subsample_points(*obs.points, 2000, int(frame.index))
+        fitter = PoseFitter(t, Pn, Nn, n_model_points=500, field=field, seed=0)
+        key = ranking_key(t, cameras, masks)
+        best = PoseFit(R, root, fitter.score(R, root))
+        k_best, changed = key(best), []
+        if quality.outside.get("torso", 0.0) > 0.25:  # the body itself is lost: search anew
+            res = initial_pose(t, *obs.points, cameras=cameras, masks=masks, field=field,
+                               seed=int(frame.index))  # fmt: skip
+            cand = PoseFit(res.R, res.root, res.score)
+            if key(cand) < k_best:
+                best, k_best, changed = cand, key(cand), ["body"]
+        else:
+            gains = []
+            for limb in LIMBS:
+                cands = limb_candidates(fitter, best.R, best.root, limb, directions=8,
+                                        iterations=8)[:4]  # fmt: skip
+                if cands:
+                    c = min(cands, key=key)
+                    gains.append((k_best - key(c), limb, c))
+            for gain, limb, c in sorted(gains, key=lambda g: -g[0]):
+                if gain <= MIN_GAIN:
+                    break
+                if changed:  # re-fit this limb on the pose the first change left
+                    cands = limb_candidates(fitter, best.R, best.root, limb, directions=8,
+                                            iterations=8)[:4]  # fmt: skip
+                    c = min(cands, key=key)
+                if k_best - key(c) > MIN_GAIN:
+                    best, k_best = c, key(c)
+                    changed.append(limb)
+        if not changed:
+            self.cooldown = COOLDOWN
+            return None
+        fit = fitter.fit(best.R, best.root, iterations=8, max_distance=(0.1, 0.03),
+                         lambda_pose=1e-3)  # fmt: skip
+        if key(fit) < k_best:
+            best = fit
+        q = self.check(frame, t.pose(best.R, best.root).V)
+        better = len(q.lost) < len(quality.lost) or (
+            len(q.lost) == len(quality.lost) and q.total_unexplained < quality.total_unexplained
+        )
+        if not better:
+            self.cooldown = COOLDOWN
+            return None
+        self.R, self.root = best.R.copy(), best.root.copy()
+        for n in changed:
+            if n in self.limb_joints and self.held is not None:
+                self.held[self.limb_joints[n]] = best.R[self.limb_joints[n]]
+                self.missing.discard(n)
+        return Reinit(best.R, best.root, tuple(changed), q)
+
+
+def _evidence(q: FitQuality) -> set[str]:
+    """Limbs lost for what the observations show (outside, buried or unexplained), not only
+    because they miss the limb."""
+    return {n for n in q.lost if q.outside[n] > OUTSIDE_LOST or q.buried[n] > BURIED_LOST
+            or q.unexplained[n] > UNEXPLAINED_LOST}  # fmt: skip
