@@ -29,8 +29,9 @@ capture = synthesize(work / "jog", SynthSpec(motion="jog", template="neutral_5k"
 results = {}
 for method in ("patch", "cage", "articulated_icp"):
     tracker = make_tracker(method, template=template) if method == "cage" else make_tracker(method)
-    track = track_sequence(tracker, template, capture, work / method, init="truth",
-                           show_progress=False)
+    track = track_sequence(
+        tracker, template, capture, work / method, init="truth", show_progress=False
+    )
     results[method] = evaluate(track, capture, silhouettes=False, surface_frames=0)
 
 # %%
