@@ -4,7 +4,8 @@ A tracked frame
 
 A synthetic studio capture of a walk (4 cameras, visual hulls carved from their
 silhouettes, the ground truth kept), tracked by the patch tracker with the 5,000-vertex
-``neutral_5k`` template. We draw the last frame from the front and from the side: the
+``neutral_5k`` template from a first pose found from the capture alone (``init="auto"``,
+the default; the truth only scores). We draw the last frame from the front and from the side: the
 hull's points (grey), the tracked template (blue), its joints and bones (black) and the
 true joints (red).
 """
