@@ -101,7 +101,7 @@ def _commands(body):
 def _pattern(expected: str) -> re.Pattern:
     text = expected.rstrip()
     prefix = text.endswith("...") and text.strip() != "..."  # a line's start only
-    parts = NUMBER.split(text[:-3] if prefix else text)
+    parts = NUMBER.split(text[:-3].rstrip() if prefix else text)
     body = r"[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?".join(re.escape(p) for p in parts)
     end = "" if prefix else r"\s*$"
     return re.compile(r"\s*" + re.sub(r"(\\ )+", r"\\s+", body) + end)
