@@ -25,3 +25,13 @@ def cmu(shared_data: Path) -> Path:
     if not path.is_dir():
         pytest.skip(f"CMU clips not available: {path} is absent")
     return path
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _manifold_cache(tmp_path_factory):
+    """Default pose manifolds learned by tests are cached in a session folder, not in the
+    user's cache (``MESHMOCAP_CACHE``)."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("MESHMOCAP_CACHE", str(tmp_path_factory.mktemp("manifold_cache")))
+    yield
+    mp.undo()

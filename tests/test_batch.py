@@ -51,7 +51,7 @@ def alone(captures, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cluster():
-    options = dict(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    options = dict(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
     with distributed.LocalCluster(**options) as c, distributed.Client(c) as client:
         yield client
 
@@ -136,7 +136,8 @@ def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, clu
     assert failed.status == "failed" and "capture.json" in failed.error
     assert "\n" not in failed.error
     md = (tmp_path / "b" / "summary.md").read_text()
-    assert "| bad | articulated_icp | neutral_5k | failed |" in md
+    assert "| bad | articulated_icp | default | failed |" in md  # never opened
+    assert "| walk | articulated_icp | neutral_5k (named by capture.json) | ok |" in md
 
 
 def test_without_dask_it_runs_serially_and_says_how_to_get_the_cluster(

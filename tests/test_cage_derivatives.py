@@ -15,7 +15,9 @@ from meshmocap.body.template import load_template
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage import CageOptions, CageTracker, _orthonormal
-from meshmocap.trackers.cage_energy import HullCoverage
+from meshmocap.trackers.cage_energy import HullCoverage, SilhouetteCoverage
+from meshmocap.trackers.cage_math import pose_jacobian
+from meshmocap.trackers.cage_surface import GreenSurface, SkinnedSurface
 
 
 class _Field:
@@ -33,8 +35,8 @@ class _Field:
         return r - 0.3 + wave, grad
 
 
-@pytest.fixture(scope="module")
-def tracker():
+@pytest.fixture(scope="module", params=["skinned", "green"])
+def tracker(request):
     t = load_template("neutral_5k")
     oqr = build_oqr(t)
     m = walk(t, duration=1.0, fps=30.0)
@@ -44,8 +46,13 @@ def tracker():
     # finite differences of log σ² (the analytic gradient is not the culprit).
     Y = Y + 0.02 * np.random.default_rng(0).normal(size=Y.shape)
     gp = GPLVM(2, max_iter=200, random_state=0).fit(Y)
-    tr = CageTracker(gp, CageOptions(n_sample=60, variance_weight=1e-3))
+    opts = CageOptions(n_sample=60, variance_weight=1e-3, surface=request.param)
+    tr = CageTracker(gp, opts)
     tr.setup(t)
+    if request.param == "skinned":  # only the vertices with exact derivatives (class notes)
+        tr.sample = tr.sample[tr.surface.exact]
+        tr.surface = SkinnedSurface(tr.oqr, t, tr.sample)
+        assert len(tr.sample) >= 20 and tr.surface.exact.all()
     tr.pelvis_R, tr.pelvis_c = m.rotations[0][0], m.root_positions[0]
     tr.x = gp.X_[:2].mean(axis=0) + 0.3
     tr.local = gp.predict(tr.x[None])[0]
@@ -65,24 +72,43 @@ def _check(problem, state, dim, seed, h=1e-6):
         assert abs(g @ d - fd) <= 1e-6 * max(1.0, abs(fd)), (g @ d, fd)
 
 
-@pytest.fixture(params=["data", "coverage"])
+def _silhouette(tr):
+    """A silhouette term of one camera 3 m in front of the pelvis, its mask a disc larger
+    than the body's image: contour pixels far from every projected model point."""
+    from meshmocap.geometry.camera import Camera
+
+    K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
+    R = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # looks along +Y, image y down
+    t = -R @ (tr.pelvis_c - np.array([0.0, 3.0, 0.0]))
+    rr, cc = np.mgrid[:240, :320]
+    mask = (rr - 120) ** 2 + (cc - 160) ** 2 < 110**2
+    return SilhouetteCoverage([Camera(K, R, t, 320, 240)], [mask], 60, 1.0, seed=0)
+
+
+@pytest.fixture(params=["data", "coverage", "silhouette"])
 def terms(request, tracker):
-    """The data term alone, or with a hull coverage term: samples on a sphere around the
-    pelvis, 25 of them farther than the margin from every model point (some model points
-    are left out of the data term, as the first frame's misplaced ones)."""
+    """The data term alone, or with a hull coverage term (samples on a sphere around the
+    pelvis, 25 of them farther than the margin from every model point; some model points
+    are left out of the data term, as the first frame's misplaced ones), or with a
+    silhouette term."""
     tr, field = tracker
     keep = np.ones(len(tr.sample), dtype=bool)
+    P = tr.surface.points(tr.local, tr.pelvis_R, tr.pelvis_c)
     if request.param == "coverage":
         rng = np.random.default_rng(7)
         H = rng.normal(size=(40, 3))
         H = tr.pelvis_c + 0.6 * H / np.linalg.norm(H, axis=1, keepdims=True)
-        tr._coverage = HullCoverage(H, margin=0.05)
+        term = HullCoverage(H, margin=0.05)
         keep[::3] = False
-        P = tr.deform_sample.deform(tr._rig(tr.local, tr.pelvis_R, tr.pelvis_c)[0])
-        assert (tr._coverage.residuals(P)[0] > 0).sum() >= 5
+        assert (term.residuals(P)[0] > 0).sum() >= 5
+        tr._coverage = ((term, 0.3),)
+    elif request.param == "silhouette":
+        term = _silhouette(tr)
+        assert (term.residuals(P)[0] > 0).sum() >= 5
+        tr._coverage = ((term, 0.3),)
     tr._set_keep(keep)
     yield tr, field
-    tr._coverage = None
+    tr._coverage = ()
     tr._set_keep(np.ones(len(tr.sample), dtype=bool))
 
 
@@ -107,14 +133,39 @@ def test_local_adjustment_gradient(terms, anchored):
 
 def test_pose_jacobian_is_the_rigid_motion_of_the_points(tracker):
     tr, field = tracker
-    cage = tr._rig(tr.local, tr.pelvis_R, tr.pelvis_c)[0]
-    _, g, P = tr._residuals(field, cage)
-    J = tr._pose_jacobian(P, g, tr.pelvis_c)
+    _, g, P = tr._residuals(field, tr.local, tr.pelvis_R, tr.pelvis_c)
+    J = pose_jacobian(P, g, tr.pelvis_c)
     rng = np.random.default_rng(5)
     d, h = rng.normal(size=6), 1e-6
 
     def moved(s):
         R = so3_exp(s * d[:3])
-        return tr._residuals(field, (cage - tr.pelvis_c) @ R.T + tr.pelvis_c + s * d[3:])[0]
+        return tr._distance(field, (P - tr.pelvis_c) @ R.T + tr.pelvis_c + s * d[3:])[0]
 
     np.testing.assert_allclose(J.T @ d, (moved(h) - moved(-h)) / (2 * h), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("surface", [SkinnedSurface, GreenSurface])
+def test_surface_directions_against_central_differences(surface):
+    """``directions`` along random configuration directions: exact (1e-7 m) for the
+    vertices :attr:`SkinnedSurface.exact` marks (all of the Green surface's), within 25 %
+    for the skinned vertices of quad-less joints (the Gauss–Newton approximation)."""
+    t = load_template("neutral_5k")
+    oqr = build_oqr(t)
+    m = walk(t, duration=0.5, fps=10.0)
+    c, Q = quads_from_pose(oqr, t, m.rotations[2:3], m.root_positions[2:3])
+    y = configuration_vector(c, Q)[0]
+    Rp, cp = Q[0, 0], c[0, 0]
+    sample = np.random.default_rng(0).choice(len(t.V), 300, replace=False)
+    s = surface(oqr, t, sample)
+    rng = np.random.default_rng(1)
+    dy = rng.normal(size=(180, 2)) * 0.01
+    D = s.directions(y, Rp, cp, dy)
+    h = 1e-6
+    for k in range(2):
+        fd = (s.points(y + h * dy[:, k], Rp, cp) - s.points(y - h * dy[:, k], Rp, cp)) / (2 * h)
+        ex = getattr(s, "exact", np.ones(len(sample), dtype=bool))
+        np.testing.assert_allclose(D[k][ex], fd[ex], rtol=0, atol=1e-7)
+        if not ex.all():
+            err = np.linalg.norm(D[k][~ex] - fd[~ex]) / np.linalg.norm(fd[~ex])
+            assert err < 0.25, err

@@ -5,7 +5,12 @@ import pytest
 
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.trackers.cage_energy import HullCoverage, placement_errors, surface_sample
+from meshmocap.trackers.cage_energy import (
+    HullCoverage,
+    SilhouetteCoverage,
+    placement_errors,
+    surface_sample,
+)
 
 
 def test_surface_sample_follows_the_area():
@@ -135,3 +140,33 @@ def test_graft_hangs_the_donor_limb_on_the_trunk():
     off = (c[arm] - c[chest]) @ R[chest]
     offd = (cd[arm] - cd[chest]) @ Rd[chest]
     np.testing.assert_allclose(off, offd, rtol=0, atol=1e-12)
+
+
+def test_silhouette_coverage_prices_unexplained_contour_and_caps_blobs():
+    """A body's image whose contour every projected model point explains costs nothing; a
+    blob 60 px away costs its distance beyond the margin (in metres at the points' depth),
+    unless the cap makes it an outlier or cleaning drops it."""
+    from meshmocap.geometry.camera import Camera
+
+    K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
+    cam = Camera(K, np.eye(3), np.zeros(3), 320, 240)  # looks along +Z
+    rng = np.random.default_rng(0)
+    # model points filling a 0.4 m square at 2 m: the 100 px square around the centre
+    P = np.column_stack([rng.uniform(-0.2, 0.2, (4000, 2)), np.full(4000, 2.0)])
+    rr, cc = np.mgrid[:240, :320]
+    body = (np.abs(rr - 120) < 49) & (np.abs(cc - 160) < 49)
+    blob = (rr - 120) ** 2 + (cc - 270) ** 2 < 8**2  # 60 px right of the square's edge
+    clean = SilhouetteCoverage([cam], [body], 400, 4.0, seed=0)
+    assert np.all(clean.residuals(P)[0] == 0)
+    noisy = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0)
+    r = noisy.residuals(P)[0]
+    # the blob's contour lies 52-68 px from the nearest point, 0.004 m a pixel at 2 m
+    per = r[r > 0] ** 2  # each point's share: Σ ρ² of the samples nearest to it
+    assert per.sum() > 0 and np.sqrt(per.max()) >= (52 - 4) * 0.004
+    capped = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, cap=15.0)
+    assert np.all(capped.residuals(P)[0] == 0)
+    # or the blob, 2 % of the body's area, is cleaned off the mask (kept at 1 %)
+    cleaned = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, min_component=0.03)
+    assert np.all(cleaned.residuals(P)[0] == 0)
+    kept = SilhouetteCoverage([cam], [body | blob], 400, 4.0, seed=0, min_component=0.01)
+    assert np.any(kept.residuals(P)[0] > 0)

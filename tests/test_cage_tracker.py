@@ -9,6 +9,7 @@ from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import so3_exp
+from meshmocap.io.pose_data import library_poses
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.cage import CageOptions, CageTracker, learn_manifold
@@ -116,7 +117,7 @@ def test_a_folded_first_cage_falls_back_to_the_rest_cage(setup):
 
 def test_vertices_the_cage_cannot_place_leave_the_data_term(setup):
     t, gp, cap = setup
-    tr = CageTracker(gp)
+    tr = CageTracker(gp, CageOptions(surface="green"))
     I = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
     root = t.skeleton.rest_positions[0]
     tr.init(t, cap[0], I, root)  # rest pose: Green coordinates reproduce every vertex
@@ -128,7 +129,7 @@ def test_vertices_the_cage_cannot_place_leave_the_data_term(setup):
     head = part == t.skeleton.index("Head")
     neck = np.isin(part, [t.skeleton.index(n) for n in ("Head", "Neck", "Neck1")])
     assert neck[~tr._keep].all() and (~tr._keep[head]).mean() > 0.5
-    again = CageTracker(gp)
+    again = CageTracker(gp, CageOptions(surface="green"))
     again.setup(t)
     again.set_state(state)  # a resumed run keeps the same data term
     assert np.array_equal(again._keep, tr._keep)
@@ -154,3 +155,26 @@ def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setu
     assert "\n" not in str(info.value)
     with pytest.raises(InputError, match="manifold_digest: gp must be a fitted GPLVM"):
         manifold_digest(GPLVM(2))
+
+
+def test_a_manifold_of_other_motions_is_noticed_and_not_pulled_back_to(setup, tmp_path):
+    """A manifold of modern-dance poses cannot explain a walk: its configuration fits the
+    frames far worse than the tracked quads, so the frames are marked off the manifold
+    (energy ``off_manifold``) and tracked without its pull; with ``off_manifold=0`` never,
+    nor with a manifold of the walk's own generator."""
+    t, gp, cap = setup
+    own = track_sequence(CageTracker(gp, CageOptions(local_iters=1, alternations=1)), t, cap,
+                         tmp_path / "c", frames=range(4), show_progress=False)  # fmt: skip
+    assert not np.any(own.energies["off_manifold"] > 0)
+    lib = library_poses(t, 400)
+    dance = lib.configurations[lib.groups == "modern dance"][:60]
+    other = GPLVM(2, back_constraint="rbf", max_iter=100, random_state=0).fit(dance)
+    frames = range(4)
+    opts = dict(local_iters=1, alternations=1)
+    off = track_sequence(CageTracker(other, CageOptions(**opts)), t, cap, tmp_path / "a",
+                         frames=frames, show_progress=False).energies["off_manifold"]  # fmt: skip
+    assert np.sum(off[1:] > 0) >= 2
+    never = CageTracker(other, CageOptions(off_manifold=0.0, **opts))
+    off = track_sequence(never, t, cap, tmp_path / "b", frames=frames,
+                         show_progress=False).energies["off_manifold"]  # fmt: skip
+    assert not np.any(off[1:] > 0)

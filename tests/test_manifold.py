@@ -23,7 +23,12 @@ from meshmocap.trackers.manifold import (
     resolve_manifold,
     template_digest,
 )
-from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
+from meshmocap.trackers.registry import (
+    CAGE_ABLATIONS,
+    MANIFOLD_METHODS,
+    METHODS,
+    make_tracker,
+)
 
 
 @pytest.fixture(scope="module")
@@ -80,11 +85,16 @@ def test_check_refuses_another_template_or_rigging_in_one_line(tiny):
 
 def test_registry_cage_methods_and_their_ablations(tiny, tmp_path):
     t, _, pm = tiny
-    assert set(MANIFOLD_METHODS) == {"cage", "cage_quads", "cage_noreg", "cage_nolocal"}
-    assert set(MANIFOLD_METHODS) < set(METHODS)
-    path = pm.save(tmp_path / "m.npz")
     fixed = {"cage": {}, "cage_quads": {"space": "quads"}, "cage_noreg": {"variance_weight": 0.0},
-             "cage_nolocal": {"local_iters": 0}}  # fmt: skip
+             "cage_nolocal": {"local_iters": 0}, "cage_nosil": {"silhouette_weight": 0.0},
+             "cage_nowiden": {"off_manifold": 0.0},
+             "cage_green": {"surface": "green", "joints": "green"},
+             "cage_paper": {"surface": "green", "joints": "green", "silhouette_weight": 0.0,
+                            "off_manifold": 0.0}}  # fmt: skip
+    assert set(MANIFOLD_METHODS) == set(fixed)
+    assert set(MANIFOLD_METHODS) < set(METHODS)
+    assert set(CAGE_ABLATIONS) < set(MANIFOLD_METHODS)
+    path = pm.save(tmp_path / "m.npz")
     for method in MANIFOLD_METHODS:
         tr = make_tracker(method, manifold=pm.gp, n_sample=100)
         assert isinstance(tr, CageTracker) and tr.gp is pm.gp and tr.opts.n_sample == 100
@@ -113,12 +123,31 @@ def test_registry_errors(tiny, tmp_path):
         make_tracker("cage", manifold=pm.gp, n_patches=3)
 
 
-def test_no_manifold_learns_one_from_the_procedural_motions(tiny, monkeypatch, caplog):
+def test_no_manifold_learns_one_from_the_pose_library_and_caches_it(
+    tiny, monkeypatch, caplog, tmp_path
+):
     t, _, _ = tiny
     monkeypatch.setattr(manifold_module, "ON_THE_FLY_MAX_ITER", 20)  # a quick fit suffices
+    monkeypatch.setenv(manifold_module.CACHE_ENV, str(tmp_path / "cache"))
     with caplog.at_level(logging.INFO, logger="meshmocap.trackers.manifold"):
         tr = make_tracker("cage_nolocal", template=t)
-    assert tr.gp.X_.shape == (120, 2) and tr.gp.n_iter_ <= 20
-    assert "learned a 2-D one from procedural walk+jog on 'neutral_5k'" in caplog.text
+    assert tr.gp.X_.shape == (400, 5) and tr.gp.n_iter_ <= 20
+    assert "learned a 5-D one from library:400 on 'neutral_5k'" in caplog.text
+    path = manifold_module.default_manifold_path(t)
+    assert path.parent == tmp_path / "cache" and path.is_file()
+    assert set(PoseManifold.load(path).groups) >= {"walk", "run", "salsa", "modern dance"}
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="meshmocap.trackers.manifold"):
+        again = make_tracker("cage_nolocal", template=t)  # read from the cache
+    assert "learned" not in caplog.text
+    np.testing.assert_array_equal(again.gp.X_, tr.gp.X_)
+    path.write_bytes(b"not a manifold")  # a broken cache file is learned again
+    with caplog.at_level(logging.INFO, logger="meshmocap.trackers.manifold"):
+        make_tracker("cage_nolocal", template=t)
+    assert "unusable" in caplog.text and "learned" in caplog.text
+    monkeypatch.setattr(manifold_module, "ON_THE_FLY_MAX_ITER", 21)  # another setting
+    assert manifold_module.default_manifold_path(t) != path
+    monkeypatch.setenv(manifold_module.CACHE_ENV, "off")
+    assert manifold_module.default_manifold_path(t) is None
     with pytest.raises(InputError, match="none given"):
         learn_pose_manifold(t, [])

@@ -103,7 +103,8 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
     with (folder / "attempts.log").open("a") as log:  # the retry count survives a kill
         log.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} pid {os.getpid()}\n")
     attempts = len((folder / "attempts.log").read_text().splitlines())
-    base = CaptureSummary(item.name, item.capture, item.method, item.template, "failed",
+    template = item.template or "default"
+    base = CaptureSummary(item.name, item.capture, item.method, template, "failed",
                           attempts=attempts)  # fmt: skip
     try:
         summary = _track_and_score(item, folder, base)
@@ -118,23 +119,26 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
 def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
     from meshmocap.analysis.evaluate import evaluate
     from meshmocap.apps.evaluation_files import write_evaluation
-    from meshmocap.body.template import load_template
-    from meshmocap.io.capture import Capture, open_capture
+    from meshmocap.estimate.axes import open_oriented
+    from meshmocap.estimate.tracking_template import tracking_template
+    from meshmocap.io.capture import Capture
+    from meshmocap.io.results import template_label
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import make_tracker
 
-    template = load_template(item.template)
-    capture = open_capture(item.capture)
+    capture, _ = open_oriented(item.capture)  # mesh files: up axis and units as track reads
+    choice = tracking_template(capture, item.template or None, folder / "track")
+    template = choice.template
     tracker = make_tracker(item.method, template=template)
     frames = None
     if item.frames:
         frames = range(len(capture))[frame_slice(item.frames, what="batch: frames")]
     track = track_sequence(tracker, template, capture, folder / "track", frames=frames,
-                           show_progress=False)  # fmt: skip
+                           show_progress=False, template_info=choice.info)  # fmt: skip
     flags = track.flags or tuple(() if h else ("failed",) for h in track.healthy)
     steady = track.seconds[1:] if len(track.seconds) > 1 else track.seconds
     summary = replace(
-        base, status="ok", frames=len(track.frames),
+        base, status="ok", frames=len(track.frames), template=template_label(track.meta),
         flagged=sum(1 for f in flags if f), lost=sum("lost" in f for f in flags),
         missing=sum("missing" in f for f in flags), seconds_per_frame=float(steady.mean()),
     )  # fmt: skip
@@ -178,7 +182,7 @@ def _watch(done: Callable[[], int], finished: Callable[[], bool]) -> Iterator[No
         time.sleep(0.5)
 
 
-def _client(workers: int | None, scheduler: str | None, dashboard: bool):
+def _client(workers: int | None, scheduler: str | None):
     """A Dask client: on ``scheduler``, or on a new local cluster of worker processes."""
     from distributed import Client, LocalCluster
 
@@ -189,9 +193,11 @@ def _client(workers: int | None, scheduler: str | None, dashboard: bool):
             raise InputError(
                 f"batch: --scheduler {scheduler}: no Dask scheduler answers there ({exc})"
             ) from None
+    # the dashboard on a free port, shown or not: None still binds 8787, so a second batch
+    # on the same machine would fail to start
     cluster = LocalCluster(
         n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-        dashboard_address=":0" if dashboard else None,
+        dashboard_address=":0",
     )  # fmt: skip
     return Client(cluster), cluster
 
@@ -235,7 +241,7 @@ def run_batch(
         Run in this process, one capture after another, without Dask (the default when
         Dask is not installed).
     dashboard : bool
-        Start the local cluster's dashboard (its address is in the result).
+        Give the local cluster's dashboard address (in the result and the log).
     log : callable
         Receives one line per finished capture and the run's setup.
     """
@@ -267,7 +273,7 @@ def run_batch(
     if todo and not serial and (client is not None or scheduler or have_dask()):
         mode = "dask"
         own_client, cluster = (client, None) if client is not None else _client(
-            workers, scheduler, dashboard)  # fmt: skip
+            workers, scheduler)  # fmt: skip
         try:
             link = getattr(own_client, "dashboard_link", "") or "" if dashboard else ""
             n = len(own_client.scheduler_info().get("workers", {}))

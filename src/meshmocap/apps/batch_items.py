@@ -13,8 +13,10 @@ from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 
 __all__ = ["DEFAULT_TEMPLATE", "BatchItem", "batch_items"]
 
-#: Template used when neither the command nor the manifest names one.
-DEFAULT_TEMPLATE = "neutral_5k"
+#: Template of a capture when neither the command nor the manifest names one: as
+#: ``meshmocap track`` chooses (the one capture.json names, else the performer's body
+#: estimated from the capture; :func:`~meshmocap.estimate.tracking_template.tracking_template`).
+DEFAULT_TEMPLATE = ""
 
 
 @dataclass(frozen=True)
@@ -26,7 +28,8 @@ class BatchItem:
     name : str, unique folder name of its results inside the batch folder
     capture : str, capture folder, mesh folder, glob or archive (as ``meshmocap track`` takes)
     method : str, tracker name (:data:`meshmocap.trackers.registry.METHODS`)
-    template : str, template name or ``.npz`` path
+    template : str, template name or ``.npz`` path, ``"auto"`` to estimate the performer's
+        body, or empty for ``meshmocap track``'s default (:data:`DEFAULT_TEMPLATE`)
     frames : str, ``START:STOP[:STEP]`` or empty for every frame
     """
 

@@ -143,11 +143,13 @@ def bench_manifold(manifold: Any, template: Template, work: str | os.PathLike) -
     once and checked against ``template``: ``manifold`` as given (GPLVM, PoseManifold or
     path), or None: learned on the fly as the cage tracker learns it
     (:func:`~meshmocap.trackers.manifold.resolve_manifold`) and cached as
-    ``work/manifold-<template>-<key>.npz`` (the key: the template and the tracking code).
+    ``work/manifold-<template>-<key>.npz`` (the key: the template, the pose library and the
+    tracking code).
     Returns the fitted GPLVM."""
+    from meshmocap.body.pose_library import load_pose_library
     from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
 
-    key = settings_key(template_digest(template), "default manifold")
+    key = settings_key(template_digest(template), "default manifold", load_pose_library().digest)
     path = Path(work) / f"manifold-{template.name}-{key}.npz"
     if manifold is None and path.is_file():
         manifold = path

@@ -22,6 +22,7 @@ from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
 
 __all__ = [
     "CAPTURE_SETS",
+    "CLIP_FPS",
     "CMU_CLIPS",
     "CRANE",
     "DEFAULT_KEEP_FRACTIONS",
@@ -42,7 +43,11 @@ CMU_CLIPS: dict[str, tuple[str, int | None, int | None]] = {
     "05_01": ("05_01.amc", None, None),
     "09_01": ("09_01.bvh", 4, None),
     "01_01": ("01_01.amc", None, 600),
+    "49_18": ("49_18.amc", None, None),  # balance on one leg, arms out: 551 frames
+    "16_01": ("16_01.bvh", None, None),  # a jump in place: 161 frames (at its true 120 fps)
 }
+#: CMU clips whose header's frame rate is wrong → the true one (see the data README).
+CLIP_FPS: dict[str, float] = {"16_01": 120.0}
 #: The MIT crane sequence in DATA (175 frames, fixed connectivity, Y up).
 CRANE = "meshes/crane/crane_mesh_0000-0174.tar.gz"
 #: Silhouette degradations of the ``degraded`` variant (pixels).
@@ -102,6 +107,7 @@ class BenchCapture:
     source : str, procedural motion name, absolute motion file, or mesh archive
     rig : str; subject : str or None (default: the template); degraded : bool
     start, stop : int or None, frame range at 60 fps (30 fps for the crane)
+    source_fps : float or None, the motion file's true frame rate (:data:`CLIP_FPS`)
     """
 
     name: str
@@ -112,6 +118,7 @@ class BenchCapture:
     degraded: bool = False
     start: int | None = None
     stop: int | None = None
+    source_fps: float | None = None
 
     @property
     def folder(self) -> str:
@@ -172,7 +179,8 @@ def parse_capture(
         kind = "synthetic"
     if not path.is_file():
         raise MeshmocapFileNotFoundError(f"bench: capture {name!r} needs {path}")
-    return BenchCapture(name, kind, str(path), start=start, stop=stop, **opts)
+    fix = {"source_fps": CLIP_FPS[base]} if base in CLIP_FPS else {}
+    return BenchCapture(name, kind, str(path), start=start, stop=stop, **opts, **fix)
 
 
 def make_capture(
@@ -195,7 +203,7 @@ def make_capture(
         )  # fmt: skip
     synth = SynthSpec(
         motion=spec.source, template=template, subject=spec.subject, rig=spec.rig, fps=60.0,
-        start=spec.start, stop=spec.stop, degradation=deg,
+        start=spec.start, stop=spec.stop, degradation=deg, source_fps=spec.source_fps,
     )  # fmt: skip
     return synthesize(out, synth, show_progress=show_progress)
 

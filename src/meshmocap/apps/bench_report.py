@@ -78,6 +78,61 @@ def markdown_table(rows: Sequence[BenchRow]) -> str:
     return "\n".join(lines)
 
 
+def ablation_table(
+    rows: Sequence[BenchRow], base: str = "patch", ablations: dict[str, str] | None = None
+) -> str:
+    """A tracker's ablations as a table like the papers': one row per variant of
+    ``ablations`` (method → what it changes against ``base``; default the patch tracker's,
+    :data:`~meshmocap.trackers.registry.PATCH_ABLATIONS`), one column per capture, each
+    cell the variant's mean error and its change against ``base`` (mm); empty when no
+    capture has both."""
+    if ablations is None:
+        from meshmocap.trackers.registry import PATCH_ABLATIONS as ablations
+    ok = {(r.capture, r.method): r.mean_mm for r in rows if r.status == "ok"}
+    caps = [c for c in dict.fromkeys(r.capture for r in rows) if (c, base) in ok]
+    methods = [m for m in ablations if any((c, m) in ok for c in caps)]
+    if not methods:
+        return ""
+    lines = ["| method | change | " + " | ".join(caps) + " |", "|---|---|" + "--:|" * len(caps)]
+    lines.append(f"| {base} | — | " + " | ".join(_num(ok[c, base], 1) for c in caps) + " |")
+    for m in methods:
+        cells = [f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, base]:+.1f})" if (c, m) in ok
+                 else "" for c in caps]  # fmt: skip
+        lines.append(f"| {m} | {ablations[m]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def baseline_losses(
+    rows: Sequence[BenchRow], method: str = "patch", baseline: str = "articulated_icp"
+) -> str:
+    """One line saying plainly on which captures ``method`` has a larger mean error than
+    ``baseline`` (the papers claim it never does), with both means and worst frames, mm;
+    empty when it wins everywhere both ran."""
+    ok = {(r.capture, r.method): r for r in rows if r.status == "ok"}
+    lost = [(c, ok[c, method], ok[c, baseline]) for c in dict.fromkeys(r.capture for r in rows)
+            if (c, method) in ok and (c, baseline) in ok
+            and ok[c, method].mean_mm > ok[c, baseline].mean_mm]  # fmt: skip
+    if not lost:
+        return ""
+    cells = [f"`{c}` ({_num(a.mean_mm, 1)} against {_num(b.mean_mm, 1)} mm, worst frame "
+             f"{_num(a.worst_frame_mm, 1)} against {_num(b.worst_frame_mm, 1)})"
+             for c, a, b in lost]  # fmt: skip
+    return f"**`{method}` is worse than `{baseline}` on:** " + "; ".join(cells) + "."
+
+
+def _ablation_sections(rows: Sequence[BenchRow]) -> list[str]:
+    """One ablation table per tracker that registers its ablations (``registry``'s
+    ``<TRACKER>_ABLATIONS``)."""
+    from meshmocap.trackers import registry
+
+    md = []
+    for base in ("patch", "cage"):
+        table = ablation_table(rows, base, getattr(registry, f"{base.upper()}_ABLATIONS", {}))
+        if table:
+            md += ["", f"## Ablations of `{base}` (mean mm; change against `{base}`)", "", table]
+    return md
+
+
 def tradeoff_table(points: Sequence[TradeoffPoint]) -> str:
     """Fig. 8's numbers as a markdown table."""
     lines = ["| kept fraction | s/frame | mean mm | silhouette % | flagged |"]
@@ -161,6 +216,9 @@ def write_report(
         "",
         markdown_table(rows),
     ]
+    losses = baseline_losses(rows)
+    md += ["", losses] if losses else []
+    md += _ablation_sections(rows)
     if skipped:
         md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
     if tradeoff:

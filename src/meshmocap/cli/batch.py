@@ -37,7 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "template, frames)")  # fmt: skip
     b.add_argument("--method", default="patch", help="tracker for captures whose manifest "
                    "row names none (default: %(default)s)")  # fmt: skip
-    b.add_argument("--template", help="tracking template (name or .npz; default neutral_5k)")
+    b.add_argument(
+        "--template",
+        help="tracking template (name or .npz, or auto; default: as "
+        "track chooses, the one capture.json names, else the performer's body "
+        "estimated from each capture)",
+    )
     b.add_argument("--frames", help="frame range START:STOP[:STEP] of every capture")
     b.add_argument("--out", required=True, help="batch folder")
     b.add_argument("--workers", type=int, help="local worker processes (default: the cores)")

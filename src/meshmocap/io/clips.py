@@ -7,6 +7,8 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
+
 from meshmocap.body.motion import Motion, resample
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
@@ -31,6 +33,7 @@ def load_clip(
     *,
     asf: str | os.PathLike | None = None,
     fps: float | None = None,
+    source_fps: float | None = None,
 ) -> Motion:
     """Load a motion in metres, world frame Z up.
 
@@ -44,6 +47,9 @@ def load_clip(
         Skeleton of an AMC file (default: ``SS.asf`` in the AMC's folder).
     fps : float, optional
         Resample to this frame rate.
+    source_fps : float, optional
+        The file's true frame rate, where its header is wrong (CMU ``16_01.bvh`` says 30
+        fps; its data is 120 fps): replaces the header's before resampling.
     """
     from meshmocap.body.template import load_template
     from meshmocap.io.asf_amc import read_amc, read_asf
@@ -66,6 +72,10 @@ def load_clip(
             motion = read_bvh(path)
         else:
             motion = read_amc(path, read_asf(Path(asf) if asf else find_asf(path)))
+        if source_fps is not None:
+            if not (np.isfinite(source_fps) and source_fps > 0):
+                raise InputError(f"clip: source_fps must be a positive number, found {source_fps}")
+            motion = Motion(motion.skeleton, motion.rotations, motion.root_positions, source_fps)
     return resample(motion, fps) if fps else motion
 
 

@@ -15,7 +15,11 @@ skeleton" of motion-capture frames (§6.2). :func:`load_pose_source` reads one s
 * a **MATLAB ``.mat`` table of AMC channel rows** with one-hot trial labels, such as the
   CMU subject-35 walk/jog set ``cmu35WalkJog.mat`` (:func:`read_mat_trials`), decoded with
   the subject's ASF, split into trials, retargeted and mapped like an AMC file;
-* a **hand-labelled pose file** (``.npz``, format below; :func:`save_poses` writes it).
+* a **hand-labelled pose file** (``.npz``, format below; :func:`save_poses` writes it);
+* ``"library"`` or ``"library:N"``: the first ``N`` poses (all by default) of the bundled
+  CMU pose library (:mod:`~meshmocap.body.pose_library`, diverse poses of many motion
+  categories in farthest-point order), retargeted onto the template; trials are CMU
+  trials, groups their motion categories.
 
 Hand-labelled pose files (``.npz``, ``format = "meshmocap-poses-1"``). Either quad
 configurations (what the paper's manual labelling produces) or local joint rotations of
@@ -72,6 +76,7 @@ __all__ = [
     "CMU35_TRIALS",
     "POSES_FORMAT",
     "PoseSet",
+    "library_poses",
     "load_pose_source",
     "load_pose_sources",
     "poses_from_motion",
@@ -432,6 +437,8 @@ def load_pose_source(
 
     oqr = oqr or build_oqr(template)
     name = os.fspath(source)
+    if name == "library" or name.startswith("library:"):
+        return library_poses(template, _library_count(name), oqr=oqr)
     if name in PROCEDURAL_MOTIONS:
         m = procedural_motion(name, template, duration=duration, fps=fps)  # type: ignore[arg-type]
         return poses_from_motion(m, template, oqr=oqr, trial=name,
@@ -439,8 +446,9 @@ def load_pose_source(
     path = Path(name)
     suffix = path.suffix.lower()
     if suffix not in (".bvh", ".amc", ".mat", ".npz"):
-        raise InputError(f"pose source: expected one of {list(PROCEDURAL_MOTIONS)} or a .bvh, "
-                         f".amc, .mat or .npz file, found {name!r}")  # fmt: skip
+        raise InputError(f"pose source: expected one of {list(PROCEDURAL_MOTIONS)}, 'library' "
+                         "or 'library:N', or a .bvh, .amc, .mat or .npz file, "
+                         f"found {name!r}")  # fmt: skip
     if not path.is_file():
         raise MeshmocapFileNotFoundError(f"pose source: {path} does not exist")
     if suffix == ".npz":
@@ -456,6 +464,31 @@ def load_pose_source(
                        (f"{path} ({len(trials)} trials)",))  # fmt: skip
     m = load_clip(path, asf=asf) if suffix == ".amc" else load_clip(path)
     return poses_from_motion(m, template, oqr=oqr, trial=path.stem, source=str(path))
+
+
+def _library_count(name: str) -> int | None:
+    n = name.partition(":")[2]
+    if not n:
+        return None
+    if not n.isdigit() or int(n) < 1:
+        raise InputError(f"pose source: 'library:N' takes a count N ≥ 1, found {name!r}")
+    return int(n)
+
+
+def library_poses(template: Template, n: int | None = None, *, oqr: OQR | None = None) -> PoseSet:
+    """The first ``n`` poses (all by default) of the bundled pose library
+    (:func:`~meshmocap.body.pose_library.load_pose_library`) as configurations of
+    ``template``'s quads: trials are their CMU trials, groups their motion categories."""
+    from meshmocap.body.pose_library import load_pose_library
+
+    lib = load_pose_library()
+    oqr = oqr or build_oqr(template)
+    n = len(lib) if n is None else min(int(n), len(lib))
+    R = lib.on(template, n)
+    root = np.broadcast_to(template.skeleton.rest_positions[0], (n, 3))
+    Y = configuration_vector(*quads_from_pose(oqr, template, R, root))
+    return PoseSet(Y, lib.trials[:n].copy(), lib.categories[:n].copy(), template.name,
+                   (f"library:{n} (CMU pose library {lib.digest})",))  # fmt: skip
 
 
 def load_pose_sources(

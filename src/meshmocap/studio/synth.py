@@ -69,6 +69,9 @@ class SynthSpec:
         capture volume's centre), counter-clockwise seen from above.
     offset : (float, float)
         Metres: the whole motion shifted along x and y after the turn.
+    source_fps : float or None
+        The motion file's true frame rate where its header is wrong (CMU ``16_01.bvh``:
+        30 in the header, 120 in fact); None: the header's.
     """
 
     motion: str = "walk"
@@ -84,6 +87,7 @@ class SynthSpec:
     voxel_size: float = 0.01
     heading: float = 0.0
     offset: tuple[float, float] = (0.0, 0.0)
+    source_fps: float | None = None
 
     def __post_init__(self) -> None:
         checks = (("fps", self.fps, 0.0, 1000.0, "frames per second"),
@@ -111,6 +115,8 @@ class SynthSpec:
             del d["heading"]
         if not any(self.offset):
             del d["offset"]
+        if d["source_fps"] is None:  # captures made before it existed keep their parameters
+            del d["source_fps"]
         return d
 
 
@@ -154,7 +160,8 @@ def synthesize(
     """
     out = Path(out)
     subject = load_template(spec.subject or spec.template)
-    motion = clip_on(subject, spec.motion, fps=spec.fps)
+    fix = {"source_fps": spec.source_fps} if spec.source_fps is not None else {}
+    motion = clip_on(subject, spec.motion, fps=spec.fps, **fix)
     rotations, roots = placed_motion(motion.rotations, motion.root_positions,
                                      heading=spec.heading, offset=spec.offset)  # fmt: skip
     frames = _check_range(spec, motion.n_frames, os.fspath(spec.motion))

@@ -1,15 +1,22 @@
 """The cage tracker of cage-manifold-tracking.txt (Duveau, Boyer et al., 3DIMPVT 2012).
 
 The template sits in a cage built from 21 Oriented Quads (:mod:`meshmocap.body.oqr`) and
-follows it through 3D Green coordinates (Eq. 1). Plausible quad configurations lie on a
-GPLVM manifold learned from motion capture (§4). Each frame minimises
+follows it through 3D Green coordinates (Eq. 1; ``surface="green"``) or, by default, by its
+own skinning from the quads' joint frames (:mod:`~meshmocap.trackers.cage_surface`: Green
+coordinates put the surface 16–44 mm from the body the quads stand for). Plausible quad
+configurations lie on a GPLVM manifold learned from motion capture (§4; by default from
+the bundled CMU pose library, :func:`~meshmocap.trackers.manifold.default_manifold`).
+Each frame minimises
 
     E(x, Γ) = ½ Σ_i w_i d_DF(M_i(x, Γ))² / n  +  λσ · log σ²(x)  [+ λc E_c]        # Eq. (4)–(5)
 
 over the latent point ``x`` (shape, Eq. 6: chain rule through the GPLVM mean, the
 quads, the cage and the Green coordinates) and the pelvis transform ``Γ`` (pose, Eq. 11),
-alternated (§5.3), then adjusts the quads locally (Eq. 12). Joints follow the cage through
-their own Green coordinates taken on the first frame (§6.2).
+alternated (§5.3), then adjusts the quads locally (Eq. 12). Joints follow their quads
+rigidly (``joints="quads"``) or the cage through Green coordinates taken on the first
+frame (§6.2). ``E_c`` is a silhouette coverage term where the frame has silhouettes, else
+the hull's. A frame whose manifold configuration fits far worse than the tracked quads
+is off the manifold (``off_manifold``): its adjustment is not pulled back and runs longer.
 
 Choices where the paper is silent or ambiguous (each stated where it is coded):
 
@@ -73,6 +80,7 @@ from dataclasses import asdict
 import numpy as np
 
 from meshmocap.body.oqr import (
+    N_QUADS,
     build_oqr,
     cage_vertices,
     configuration_from_vector,
@@ -80,16 +88,19 @@ from meshmocap.body.oqr import (
     quads_from_pose,
 )
 from meshmocap.body.template import Template
+from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.estimate.observe import frame_hull
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
-from meshmocap.geometry.rotations import cross, skew, so3_exp, so3_log
+from meshmocap.geometry.rotations import skew, so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage_energy import (
     Articulation,
     HullCoverage,
+    SilhouetteCoverage,
+    distance_terms,
     placement_errors,
     surface_sample,
 )
@@ -100,9 +111,11 @@ from meshmocap.trackers.cage_math import (
     _move_pelvis,
     _orthonormal,
     graft,
+    pose_jacobian,
     rig,
 )
 from meshmocap.trackers.cage_options import CageOptions, Joints, Space, manifold_digest
+from meshmocap.trackers.cage_surface import GreenSurface, SkinnedSurface
 from meshmocap.trackers.manifold import learn_manifold
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
@@ -160,12 +173,11 @@ class CageTracker:
         o = self.opts
         self.template = template
         self.oqr = build_oqr(template)
-        rest = self.oqr.rest_vertices
-        self.deform_all = GreenDeformer(rest, self.oqr.faces, template.V)
         self.sample = surface_sample(template.V, template.F, o.n_sample, seed=o.seed)
-        self.deform_sample = GreenDeformer(rest, self.oqr.faces, template.V[self.sample])
-        self._set_keep(np.ones(len(self.sample), dtype=bool))
-        self._coverage: HullCoverage | None = None  # this frame's (step)
+        surface = SkinnedSurface if o.surface == "skinned" else GreenSurface
+        self.surface = surface(self.oqr, template, self.sample)
+        self._set_keep(self.surface.fitted)
+        self._coverage: tuple = ()  # this step's coverage terms and weights
         self._memo: list = []  # _distance's last results
         q, sk = self.oqr.quads, template.skeleton
         self._articulation = Articulation(q.centres, q.rotations, q.joint_indices,
@@ -173,12 +185,6 @@ class CageTracker:
         c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
         self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
         self.joint_deformer: GreenDeformer | None = None
-        # each quad's cage vertices, padded to the largest count (mask 0 on the padding)
-        quad = self.oqr.vertex_quad
-        slots = [np.flatnonzero(quad == k) for k in range(1, quad.max() + 1)]
-        width = max(len(v) for v in slots)
-        self._slots = np.array([np.resize(v, width) for v in slots])  # (20, width)
-        self._slot_mask = np.array([np.arange(width) < len(v) for v in slots], dtype=float)
         # joints="quads": the quad following each evaluation joint's rig joint, and the
         # joint in that quad's frame (constant: quads follow their joints rigidly)
         ev, jq = template.eval_skeleton, self.oqr.quads.joint_indices
@@ -203,8 +209,9 @@ class CageTracker:
         posed = template.pose(R, root)
         joints = posed.eval_joints
         cage0 = cage_vertices(self.oqr, c, Q)
-        err = placement_errors(self.deform_sample.deform(cage0), posed.V[self.sample])
-        keep = err <= self.opts.max_model_error
+        model = self.surface.points(configuration_vector(c, Q), Q[0], c[0])
+        keep = placement_errors(model, posed.V[self.sample]) <= self.opts.max_model_error
+        keep &= self.surface.fitted
         self._set_keep(keep if keep.any() else np.ones_like(keep))
         self._set_joints(cage0, joints)
         if np.abs(self.joint_deformer.deform(cage0) - joints).max() > _REPRODUCED:
@@ -270,17 +277,19 @@ class CageTracker:
                  "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
                  "velocity_w": self._velocity[1], "velocity_c": self._velocity[2],
                  "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS])}  # fmt: skip
-        return FrameResult(index=index, joints=joints, vertices=self.deform_all.deform(cage),
-                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+        V = self.surface.vertices(self.local, self.pelvis_R, self.pelvis_c)
+        return FrameResult(index=index, joints=joints, vertices=V, energies=energies,
+                           n_iter=n_iter, state=state)  # fmt: skip
 
     # -------------------------------------------------------------- the model
     def _rig(self, y, Rp, cp, *, derivatives=False):
         """The cage, quad rotations and dV/dy of :func:`~meshmocap.trackers.cage_math.rig`."""
         return rig(y, Rp, cp, self.oqr.vertex_quad, self.oqr.vertex_local, derivatives)
 
-    def _residuals(self, field, cage):
-        """:meth:`_distance` at the sampled template vertices of ``cage``, and the points."""
-        P = self.deform_sample.deform(cage)
+    def _residuals(self, field, y, Rp, cp):
+        """:meth:`_distance` at the sampled template vertices of configuration ``y`` with
+        the pelvis at ``Rp, cp``, and the points."""
+        P = self.surface.points(y, Rp, cp)
         return (*self._distance(field, P), P)
 
     def _distance(self, field, P, sub=slice(None)):
@@ -291,39 +300,39 @@ class CageTracker:
         (:meth:`~meshmocap.trackers.cage_energy.HullCoverage.residuals`). ``sub``: the
         sampled vertices ``P`` holds, when not all (comparing candidates). The last few
         results are kept: the stages hand over the same points (to rounding)."""
-        key = (id(self._coverage), str(sub))  # the memo is emptied each frame (step)
+        key = (tuple(id(t) for t, _ in self._coverage), str(sub))  # emptied each frame
         for k, Q, out in self._memo:
             if k == key and abs(Q[0, 0] - P[0, 0]) < _SAME and np.abs(Q - P).max() < _SAME:
                 return out
-        out = self._distance_terms(field, P, sub)
+        w = self._data_w[sub]
+        out = distance_terms(field, P, w, self.opts, self._coverage)
         self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
         return out
 
-    def _distance_terms(self, field, P, sub):
-        r, g = field.value_and_gradient(P)
-        w = np.where(r < 0, np.sqrt(self.opts.inside_weight), 1.0) * self._data_w[sub]
-        r, g = r * w, g * w[:, None]
-        if self._coverage is None:
-            return r, g
-        rc, ac = self._coverage.residuals(P)
-        s = np.sqrt(self.opts.coverage_weight / len(self._coverage))
-        return np.concatenate([r, s * rc]), np.concatenate([g, s * ac])
-
-    @staticmethod
-    def _pose_jacobian(P: np.ndarray, g: np.ndarray, cp: np.ndarray) -> np.ndarray:
-        """(6, n) Jacobian of the residuals along the pelvis rotation (about its centre
-        ``cp``, world axes) and translation (Eq. 11). Green coordinates follow similarities
-        of the cage exactly (x' = R x + t), so a rigid motion of the cage moves the points
-        ``P`` rigidly: dx = ω × (x − cp) + dt, and dr = g·dx."""
-        return np.concatenate([cross(P - cp, g), g], axis=1).T
-
-    def _config_directions(self, M: np.ndarray, dy: np.ndarray) -> np.ndarray:
-        """(k, 85, 3): cage derivatives along configuration directions ``dy`` (180, k)."""
-        quad = self.oqr.vertex_quad
-        on = quad > 0
-        D = np.zeros((len(quad), 3, dy.shape[1]))
-        D[on] = M[on] @ dy.reshape(-1, 9, dy.shape[1])[quad[on] - 1]
-        return D.transpose(2, 0, 1)
+    def _coverage_terms(self, frame, field) -> list:
+        """This frame's coverage terms, ``[(term, weight, in the local step)]``: the
+        silhouettes' (:class:`SilhouetteCoverage`, every step) where the frame has cameras
+        and masks, else the hull's (:class:`HullCoverage`, pose and shape steps); samples
+        seeded by the frame (the same on a resumed run)."""
+        o, out = self.opts, []
+        if o.silhouette_weight > 0:
+            try:
+                cams, masks = frame.cameras, frame.silhouettes
+            except (MeshmocapFileNotFoundError, FormatError):
+                cams, masks = [], None
+            if cams and masks and len(masks) == len(cams):
+                sil = SilhouetteCoverage(cams, masks, o.n_silhouette, o.silhouette_margin,
+                                         seed=[o.seed, frame.index, 1],
+                                         cap=o.silhouette_cap,
+                                         min_component=o.silhouette_clean)  # fmt: skip
+                if len(sil):
+                    out.append((sil, o.silhouette_weight, True))
+        if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)
+            B = field.boundary
+            pick = np.random.default_rng([o.seed, frame.index]).choice(
+                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
+            out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
+        return out
 
     # -------------------------------------------------------------- optimisation
     def _lm(self, state, n_iter, evaluate, linearise, update, key=None):
@@ -366,7 +375,7 @@ class CageTracker:
         """Eq. (11): the pelvis transform ``(R, c)`` with the quads at ``y``. Green
         coordinates follow rigid motions of the cage exactly, so the points are deformed
         once in the pelvis frame and then moved rigidly."""
-        P0 = self.deform_sample.deform(self._rig(y, np.eye(3), np.zeros(3))[0])
+        P0 = self.surface.points(y, np.eye(3), np.zeros(3))
 
         def evaluate(s):
             P = P0 @ s[0].T + s[1]
@@ -375,7 +384,7 @@ class CageTracker:
 
         def linearise(s, cache):
             r, g, P = cache
-            J = self._pose_jacobian(np.tile(P, (len(r) // len(P), 1)), g, s[1])
+            J = pose_jacobian(np.tile(P, (len(r) // len(P), 1)), g, s[1])
             return J @ r, J @ J.T
 
         return evaluate, linearise, _move_pelvis
@@ -387,7 +396,7 @@ class CageTracker:
 
         def evaluate(x):
             mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
-            r, g, _ = self._residuals(field, self._rig(mean, self.pelvis_R, self.pelvis_c)[0])
+            r, g, _ = self._residuals(field, mean, self.pelvis_R, self.pelvis_c)
             # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the noise
             # variance: Eq. (9) alone vanishes at training points, where its log is a
             # singular well of rounding noise (K is near singular) that traps the latent point
@@ -396,29 +405,30 @@ class CageTracker:
 
         def linearise(x, cache):
             r, g, mean, dmean, var, dvar = cache
-            cage, M, _ = self._rig(mean, self.pelvis_R, self.pelvis_c, derivatives=True)
-            dx = self.deform_sample.jvp(cage, self._config_directions(M, dmean))  # Eq. (6)
+            dx = self.surface.directions(mean, self.pelvis_R, self.pelvis_c, dmean)  # Eq. (6)
             J = np.einsum("kpa,spa->ksp", dx, g.reshape(-1, *dx.shape[1:])).reshape(len(dx), -1)
             grad = J @ r + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
             return grad, J @ J.T + lam * np.outer(dvar, dvar) / var**2
 
         return evaluate, linearise, lambda x, d: x + d
 
-    def _local_problem(self, field, anchor):
+    def _local_problem(self, field, anchor, *, pull=True):
         """Eq. (12): every quad's centre and orientation (6 numbers: no Gram–Schmidt gauge)
         and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration,
-        weight ``local_damping``) and held together by soft joints (``articulation``,
+        weight ``local_damping``; not when ``pull`` is False: off the manifold) and held
+        together by soft joints (``articulation``,
         :class:`~meshmocap.trackers.cage_energy.Articulation`); ``anchor`` None: free, the
         quads ablation."""
-        w = self.opts.local_damping if anchor is not None else 0.0
+        w = self.opts.local_damping if anchor is not None and pull else 0.0
         wa = self.opts.articulation if anchor is not None else 0.0
-        loc, slots = self.oqr.vertex_local, self._slots
+        nq = N_QUADS - 1
         I0 = np.eye(3)[None]
 
         def evaluate(s):
             y, Rp, cp = s
-            cage, _, R = self._rig(y, Rp, cp)
-            r, g, P = self._residuals(field, cage)
+            Y = y.reshape(-1, 3, 3)
+            R = _gs(Y[:, 1], Y[:, 2])  # pelvis-relative quad rotations
+            r, g, P = self._residuals(field, y, Rp, cp)
             e = y - anchor if w else 0.0
             E = 0.5 * (r @ r + w * np.sum(e * e))
             quads = None
@@ -427,24 +437,14 @@ class CageTracker:
                          np.concatenate([I0, R]))  # fmt: skip
                 a = self._articulation.residuals(*quads)
                 E += 0.5 * wa * a @ a
-            return E, (r, g, P, cage, R, e, quads)
+            return E, (r, g, P, e, quads)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, cage, R, e, quads = cache
-            n = len(P)
-            # each vertex of quad q: dV = Rp (dc + ω × R_q l): columns Rp [I | −[R_q l]×]
-            arm = np.einsum("qij,qvj->qvi", R, loc[slots])  # (20, w, 3)
-            M6 = np.concatenate([np.broadcast_to(Rp, (*arm.shape[:2], 3, 3)), Rp @ -skew(arm)], 3)
-            M6 *= self._slot_mask[..., None, None]
-            nq, k = slots.shape
-            J = []
-            for gs in g.reshape(-1, n, 3):  # data rows, then coverage rows
-                W = self.deform_sample.pointwise_vjp(cage, gs).transpose(1, 2, 0)  # (85, 3, n)
-                Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
-                               W[slots].reshape(nq, 3 * k, n))  # (20, 6, n)  # fmt: skip
-                J.append(np.concatenate([Jq.reshape(6 * nq, n), self._pose_jacobian(P, gs, cp)]))
-            J = np.concatenate(J, axis=1)
+            r, g, P, e, quads = cache
+            G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
+            J = np.concatenate([self.surface.quad_rows(y, Rp, cp, G),
+                                pose_jacobian(np.tile(P, (len(G), 1)), g, cp)])  # fmt: skip
             grad, H = J @ r, J @ J.T
             if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
                 Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
@@ -489,15 +489,11 @@ class CageTracker:
         if self._trail is not None:  # speed only: the grid cells this frame will likely
             field.prefetch(self._trail)  # need, in one batch (LazyDistanceGrid.prefetch)
         clock.lap("distance")
-        it, anchor, self._memo = 0, None, []
+        it, anchor, off, self._memo = 0, None, False, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
         self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
-        self._coverage = None
-        if o.coverage_weight > 0:  # hull surface samples, the same on a resumed run
-            B = field.boundary
-            pick = np.random.default_rng([o.seed, frame.index]).choice(
-                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
-            self._coverage = HullCoverage(B[pick], o.coverage_margin)
+        terms = self._coverage_terms(frame, field)  # [(term, weight, in the local step)]
+        self._coverage = tuple(t[:2] for t in terms)
         pelvis = (self.pelvis_R, self.pelvis_c)
         previous = (_orthonormal(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
@@ -535,30 +531,37 @@ class CageTracker:
                 it += n
             fit = self._local_problem(field, None)[0]
             E = [(r := fit(s)[1][0]) @ r for s in starts]
-            state, E = starts[int(np.argmin(E))], min(E)
+            state, best = starts[int(np.argmin(E))], min(E)
+            # off the manifold: its configuration explains the frame far worse than the
+            # tracked quads do; then no pull back to it and a wider adjustment
+            off = o.off_manifold > 0 and E[0] > o.off_manifold * best
             for base, quads in _LIMBS:  # the manifold's limbs, each tried on that start
                 y = graft(state[0], anchor, base, quads)
                 r = fit((y, *state[1:]))[1][0]
-                if r @ r < E:
-                    state, E = (y, *state[1:]), r @ r
-        coverage, self._coverage = self._coverage, None  # local: data term (module notes)
+                if r @ r < best:
+                    state, best = (y, *state[1:]), r @ r
+        if off:
+            n_local *= 2
+        self._coverage = tuple(t[:2] for t in terms if t[2])  # local: silhouettes only
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
-            state, n_local, *self._local_problem(field, anchor)
+            state, n_local, *self._local_problem(field, anchor, pull=not off)
         )
         U, _, Vt = np.linalg.svd(self.pelvis_R)  # no rounding drift from a rotation
         self.pelvis_R = U @ Vt
         self._velocity = (self.local - previous[0], so3_log(self.pelvis_R @ previous[1].T),
                           self.pelvis_c - previous[2])  # fmt: skip
         it += n
-        r, P = cache[0], cache[2]
+        P = cache[2]
+        r = cache[0][: len(P)]
         # the sampled points where this frame ended and, moved on as from the last frame,
         # where the next one may: ~80 % of the grid points its lookups will touch
         self._trail = P if self._last_P is None else np.concatenate([P, 2 * P - self._last_P])
         self._last_P = P
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
-        energies = {"distance": float(r @ r), "variance": var}
-        if coverage is not None:  # mean ρ² (m²) of the final fit
-            energies["coverage"] = float(np.sum(coverage.residuals(P)[0] ** 2)) / len(coverage)
+        energies = {"distance": float(r @ r), "variance": var, "off_manifold": float(off)}
+        for t, _, _ in terms:  # mean ρ² (m²) of the final fit
+            name = "silhouette" if isinstance(t, SilhouetteCoverage) else "coverage"
+            energies[name] = float(np.sum(t.residuals(P)[0] ** 2)) / len(t)
         clock.lap("local")
         out = self._result(frame.index, energies, it)
         clock.lap("output")
@@ -578,8 +581,7 @@ class CageTracker:
             cands += list(gp.X_[np.argsort(d2)[: self.opts.restarts]])
         X = np.array(cands)
         Y, var = gp.predict(X, return_var=True)
-        cages = np.stack([self._rig(y, self.pelvis_R, self.pelvis_c)[0] for y in Y])
-        P = self.deform_sample.deform(cages)  # one pass over the coordinates for all
+        P = self.surface.points_batch(Y, self.pelvis_R, self.pelvis_c)
         field.prefetch(P[:, _SUB])  # and one batch of new grid points (speed only)
         r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
         noise = gp.Y_scale_**2 / gp.beta_

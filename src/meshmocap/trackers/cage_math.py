@@ -125,3 +125,11 @@ def rig(y, Rp, cp, quad, loc, derivatives=False):
     M[on, :, :3] = Rp
     M[on, :, 3:] = np.einsum("ij,vmjk,vk->vim", Rp, dR[quad[on] - 1], loc[on])
     return cage, M, R
+
+
+def pose_jacobian(P: np.ndarray, g: np.ndarray, cp: np.ndarray) -> np.ndarray:
+    """(6, n) Jacobian of the residuals along the pelvis rotation (about its centre ``cp``,
+    world axes) and translation (Eq. 11). Green coordinates follow similarities of the cage
+    exactly (x' = R x + t), so a rigid motion of the cage moves the points ``P`` rigidly:
+    dx = ω × (x − cp) + dt, and dr = g·dx."""
+    return np.concatenate([cross(P - cp, g), g], axis=1).T

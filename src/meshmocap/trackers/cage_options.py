@@ -15,6 +15,7 @@ from meshmocap.models.gplvm import GPLVM
 
 Space = Literal["latent", "quads"]
 Joints = Literal["green", "quads"]
+Surface = Literal["skinned", "green"]
 
 
 def manifold_digest(gp: GPLVM) -> str:
@@ -62,6 +63,11 @@ class CageOptions:
         Pull of the local adjustment towards the manifold's configuration (weight of half
         its squared distance, metres and unit axis vectors): weak, the adjustment tracks
         from the previous frame (:mod:`~meshmocap.trackers.cage` notes).
+    off_manifold : float
+        A frame is off the manifold when the manifold's configuration fits it (data and
+        silhouette terms) more than this many times worse than the best tracked start of the
+        local adjustment; there the adjustment is not pulled towards the manifold and runs
+        twice ``local_iters`` (0: never; energy ``off_manifold`` of each frame says).
     articulation : float
         Weight of the local adjustment's soft joints between consecutive quads (half
         their squared gaps, m²; :class:`~meshmocap.trackers.cage_energy.Articulation`).
@@ -73,10 +79,15 @@ class CageOptions:
     inside_weight : float
         Weight, in (0, 1], of the squared distance of points inside the hull (module
         notes; 1: symmetric).
-    joints : {"green", "quads"}
-        Joints from the cage through Green coordinates (§6.2), or carried rigidly by the
-        quad that follows their rig joint (the quads sit at the joints, §3; joints of no
-        quad keep Green coordinates).
+    joints : {"quads", "green"}
+        Joints carried rigidly by the quad that follows their rig joint (the quads sit at
+        the joints, §3; joints of no quad keep Green coordinates), or from the cage through
+        Green coordinates (§6.2), which misplace them by 11–21 mm at the true quads (CMU
+        05_01, 09_01, 01_01 on ``neutral_5k``).
+    surface : {"skinned", "green"}
+        The template surface the data term fits (:mod:`~meshmocap.trackers.cage_surface`):
+        posed by its own skinning from the quads' joint frames, or deformed by the cage's
+        Green coordinates (the paper's Eq. (1), 16–44 mm from the skinned body).
     n_sample : int
         Template vertices in the energy, drawn by area (the output deforms all of them).
     max_model_error : float
@@ -84,14 +95,36 @@ class CageOptions:
         skinned position in the first frame's known pose get no data term (Eq. 4): the
         cage cannot follow them (:mod:`~meshmocap.trackers.cage_energy`); ``inf``: keep
         all.
+    outside_margin : float
+        Distance, metres, outside the hull that the data term tolerates (0: none).
+    outside_cap : float
+        Distance, metres, outside the hull beyond which a point costs nothing (truncated
+        data term: the hull lost that part, a hole carved by a noisy silhouette; 0: none).
     coverage_weight : float
         λc of the hull coverage term (0: none), against the data term: both are mean half
-        squared distances (m²).
+        squared distances (m²). Used only in frames without a silhouette term (no cameras
+        or masks, or ``silhouette_weight`` 0): the hull's phantom volumes drag the model
+        (:class:`~meshmocap.trackers.cage_energy.SilhouetteCoverage`).
     coverage_margin : float
         Distance, metres, from a hull surface sample to the nearest sampled model point
         that the coverage term tolerates.
     n_coverage : int
         Hull surface samples of the coverage term per frame.
+    silhouette_weight : float
+        Weight of the silhouette coverage term
+        (:class:`~meshmocap.trackers.cage_energy.SilhouetteCoverage`; 0: none), in every
+        step where the frame has cameras and silhouettes (as ``coverage_weight``: mean half
+        squared distances, m²).
+    silhouette_margin : float
+        Pixels a silhouette contour sample may lie from the nearest projected model point.
+    silhouette_cap : float
+        Pixels beyond which a contour sample is an outlier (a spurious blob) and costs
+        nothing (0: no cap).
+    silhouette_clean : float
+        Connected pieces of a silhouette smaller than this fraction of its largest are
+        dropped before sampling its contour (spurious blobs; 0: none).
+    n_silhouette : int
+        Contour samples per camera and frame.
     field_spacing : float
         Spacing, metres, of the distance field's grid: the nearest multiple of the hull's
         voxel (:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid` ``stride``).
@@ -106,17 +139,26 @@ class CageOptions:
     local_iters: int = 3
     local_damping: float = 3e-5
     articulation: float = 10.0
+    off_manifold: float = 4.0
     alternations: int = 3
     pose_iters: int = 1
     shape_iters: int = 2
     restarts: int = 3
     inside_weight: float = 0.05
-    joints: Joints = "green"
+    outside_margin: float = 0.0
+    outside_cap: float = 0.0
+    joints: Joints = "quads"
+    surface: Surface = "skinned"
     n_sample: int = 800
     max_model_error: float = 0.03
     coverage_weight: float = 0.3
     coverage_margin: float = 0.02
     n_coverage: int = 500
+    silhouette_weight: float = 0.3
+    silhouette_margin: float = 1.0
+    silhouette_cap: float = 15.0
+    silhouette_clean: float = 0.02
+    n_silhouette: int = 200
     field_spacing: float = 0.02
     damping: float = 1e-3
     seed: int = 0
@@ -124,14 +166,21 @@ class CageOptions:
     def __post_init__(self) -> None:
         check_choice("CageOptions", "space", self.space, get_args(Space))
         check_choice("CageOptions", "joints", self.joints, get_args(Joints))
+        check_choice("CageOptions", "surface", self.surface, get_args(Surface))
         if self.variance_weight < 0 or self.n_sample < 10:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:
             raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
         if not (self.max_model_error > 0 and self.coverage_weight >= 0 and self.articulation >= 0
                 and self.coverage_margin >= 0 and self.n_coverage >= 1
-                and self.field_spacing > 0):  # fmt: skip
+                and self.field_spacing > 0 and self.silhouette_weight >= 0
+                and self.silhouette_margin >= 0 and self.n_silhouette >= 1
+                and self.outside_margin >= 0 and self.off_manifold >= 0
+                and self.outside_cap >= 0 and self.silhouette_cap >= 0
+                and 0 <= self.silhouette_clean < 1):  # fmt: skip
             raise InputError(
-                "CageOptions: max_model_error must be > 0, articulation, coverage_weight and "
-                "coverage_margin ≥ 0, n_coverage ≥ 1 and field_spacing > 0"
+                "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
+                "coverage_margin, silhouette_weight, silhouette_margin, silhouette_cap, "
+                "outside_margin, outside_cap and off_manifold ≥ 0, silhouette_clean in [0, 1), "
+                "n_coverage and n_silhouette ≥ 1 and field_spacing > 0"
             )

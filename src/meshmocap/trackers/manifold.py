@@ -47,6 +47,8 @@ __all__ = [
     "DEFAULT_SOURCES",
     "MANIFOLD_FORMAT",
     "PoseManifold",
+    "default_manifold",
+    "default_manifold_path",
     "fit_pose_manifold",
     "learn_manifold",
     "learn_pose_manifold",
@@ -55,13 +57,20 @@ __all__ = [
 ]
 
 MANIFOLD_FORMAT = "meshmocap-pose-manifold-1"
-#: Sources of the manifold learned when none is given: the package's procedural motions.
-DEFAULT_SOURCES = ("walk", "jog")
-#: L-BFGS-B iterations of a manifold learned on the fly. The procedural poses are exactly
-#: low-dimensional, so the likelihood keeps creeping up until the 2000 of GPLVM's default
-#: (7 s); after 300 (1.7 s) the cage tracker's joint errors on a 12-frame synthetic walk
-#: match those with 2000 to 1.3 mm (10-19 mm either way).
+#: Sources of the manifold learned when none is given: the first 400 poses of the bundled
+#: CMU pose library (:mod:`~meshmocap.body.pose_library`; farthest-point order, so they
+#: spread over walks, runs, jumps, dances and everyday actions). The procedural walk and
+#: jog it replaces could not represent a dance: the cage fell off the body (issue 20).
+DEFAULT_SOURCES = ("library:400",)
+#: Latent dimension and training poses of the default manifold (the paper: q = 10 for
+#: varied locomotion; 5 keeps the latent step cheap).
+DEFAULT_COMPONENTS = 5
+DEFAULT_POSES = 400
+#: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000).
 ON_THE_FLY_MAX_ITER = 300
+#: Environment variable naming the folder where learned default manifolds are cached
+#: (default ``$XDG_CACHE_HOME/meshmocap`` or ``~/.cache/meshmocap``; ``off``: no cache).
+CACHE_ENV = "MESHMOCAP_CACHE"
 #: Largest difference, metres, between a manifold's stored rest cage and the tracking
 #: template's OQR (a rebuilt OQR is bit-identical; anything larger is another rigging).
 CAGE_TOLERANCE = 1e-6
@@ -301,9 +310,7 @@ def resolve_manifold(
     manifold : GPLVM, PoseManifold, path or None
         A fitted GPLVM (returned as given: nothing records its template), a
         :class:`PoseManifold` or the path of a saved one (checked against ``template``), or
-        None: learn one from :data:`DEFAULT_SOURCES` on ``template`` (120 poses, q = 2,
-        :data:`ON_THE_FLY_MAX_ITER` iterations; logged at INFO level on the
-        ``meshmocap.trackers.manifold`` logger).
+        None: the default manifold of ``template`` (:func:`default_manifold`).
     template : Template or None
         The tracking template; needed unless ``manifold`` is a GPLVM.
     oqr : OQR, optional
@@ -328,11 +335,7 @@ def resolve_manifold(
     if template is None:
         raise InputError("cage: template= is needed to check or learn its manifold")
     if manifold is None:
-        pm = learn_pose_manifold(template, DEFAULT_SOURCES, oqr=oqr, max_iter=ON_THE_FLY_MAX_ITER)
-        log.info("cage: no manifold given; learned a %d-D one from procedural %s on %r "
-                 "(%d poses, %.1f s fit)", pm.n_components, "+".join(DEFAULT_SOURCES),
-                 template.name, pm.n_samples, pm.fit_seconds)  # fmt: skip
-        return pm
+        return default_manifold(template, oqr)
     if isinstance(manifold, PoseManifold):
         manifold.check(template, oqr)
         return manifold
@@ -342,3 +345,59 @@ def resolve_manifold(
         return pm
     raise InputError(f"cage: manifold must be a GPLVM, PoseManifold, path or None, "
                      f"found {type(manifold).__name__}")  # fmt: skip
+
+
+def _cache_dir() -> Path | None:
+    env = os.environ.get(CACHE_ENV)
+    if env is not None:
+        return None if env.strip().lower() in ("off", "") else Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "meshmocap"
+
+
+def default_manifold_path(template: Template) -> Path | None:
+    """Where :func:`default_manifold` caches ``template``'s default manifold (None: caching
+    is off, :data:`CACHE_ENV`): the file name holds the template's name and a key of
+    everything the manifold depends on (template digest, pose library digest, sources,
+    q, poses, iterations, file format)."""
+    from meshmocap.body.pose_library import load_pose_library
+
+    folder = _cache_dir()
+    if folder is None:
+        return None
+    h = hashlib.sha256()
+    parts = (MANIFOLD_FORMAT, template_digest(template), load_pose_library().digest,
+             *DEFAULT_SOURCES, DEFAULT_COMPONENTS, DEFAULT_POSES, ON_THE_FLY_MAX_ITER)  # fmt: skip
+    for part in parts:
+        h.update(f"{part}\0".encode())
+    return folder / f"manifold-{template.name}-{h.hexdigest()[:16]}.npz"
+
+
+def default_manifold(template: Template, oqr: OQR | None = None) -> PoseManifold:
+    """The cage tracker's default pose manifold of ``template``: learned at first use from
+    :data:`DEFAULT_SOURCES` (:data:`DEFAULT_POSES` poses, q = :data:`DEFAULT_COMPONENTS`,
+    :data:`ON_THE_FLY_MAX_ITER` iterations; ~25 s on 2 cores for ``neutral_5k``) and cached
+    (:func:`default_manifold_path`); a cached file that cannot be read is learned again.
+    Logged at INFO level on the ``meshmocap.trackers.manifold`` logger."""
+    path = default_manifold_path(template)
+    if path is not None and path.is_file():
+        try:
+            pm = PoseManifold.load(path)
+            pm.check(template, oqr, source=path)
+            return pm
+        except (FormatError, InputError) as e:
+            log.warning("cage: cached default manifold %s unusable (%s); learning it again",
+                        path, str(e).splitlines()[0][:120])  # fmt: skip
+    pm = learn_pose_manifold(template, DEFAULT_SOURCES, n_components=DEFAULT_COMPONENTS,
+                             n_samples=DEFAULT_POSES, oqr=oqr,
+                             max_iter=ON_THE_FLY_MAX_ITER)  # fmt: skip
+    log.info("cage: no manifold given; learned a %d-D one from %s on %r (%d poses, %.1f s "
+             "fit)", pm.n_components, "+".join(DEFAULT_SOURCES), template.name, pm.n_samples,
+             pm.fit_seconds)  # fmt: skip
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            pm.save(path)
+        except OSError as e:
+            log.warning("cage: could not cache the default manifold in %s (%s)", path, e)
+    return pm

@@ -45,10 +45,12 @@ from meshmocap.trackers.patch_solver import (
     add_plane_terms,
     add_point_terms,
     add_rigidity,
+    group_basis,
     length_residuals,
     normal_pattern,
     rigidity_moments,
 )
+from meshmocap.trackers.patch_terms import add_joint_prior, add_silhouette, silhouette_rays
 
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
@@ -70,6 +72,11 @@ MAX_PREDICTION_ANGLE = 0.3
 #: Largest predicted displacement (metres) of a joint when patches follow their bones
 #: (a running foot moves ~13 cm per frame at 60 fps).
 MAX_BONE_PREDICTION = 0.15
+#: ``accel_gate``: a joint's velocity change beyond this multiple of its last speed (and
+#: beyond ``accel_gate``) stops its extrapolation.
+GATE_RATIO = 0.5
+#: Frame rate assumed where a capture states none (``accel_gate``).
+DEFAULT_FPS = 60.0
 #: Largest rotation (radians) of a patch in one Gauss–Newton step.
 MAX_STEP_ANGLE = 0.3
 #: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
@@ -89,6 +96,11 @@ SURFACE_JOINT_ERROR = 0.01
 FLOOR_POSE_STEP = 4
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
+#: Depth (metres) inside the model below which a hull point is not yet suspect
+#: (``interior_scale``): hull boundaries eroded by silhouette jitter, a model a little fat.
+INTERIOR_MARGIN = 0.01
+#: Template vertices (every k-th) whose projections must cover the silhouettes.
+COVERAGE_SAMPLES = 6000
 
 
 class PatchTracker:
@@ -140,6 +152,10 @@ class PatchTracker:
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
         self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
+        # coverage vertices and the radius each covers: 1.5 × their median spacing at rest
+        self.cover_sample = np.arange(0, n, max(1, n // COVERAGE_SAMPLES))
+        d, _ = KDTree(self.model.V0[self.cover_sample]).query(self.model.V0[self.cover_sample], k=2)
+        self.cover_radius = 1.5 * float(np.median(d[:, 1]))
         # Joint read-out (joint_readout): share of each reported joint taken from the surface
         self.regressor = None
         self.surface_weight = np.zeros(len(template.eval_skeleton.names))
@@ -174,6 +190,7 @@ class PatchTracker:
         self.X = posed.eval_joints.copy()
         self.sigma = self.opts.sigma0
         self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
+        self.X_prev2 = self.X.copy()  # joints two frames back (accel_gate)
         self.logits = None
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -184,6 +201,7 @@ class PatchTracker:
         # the last classifier fit, the next fit's starting point (absent in older tracks)
         self.logits = (state["clf_coef"], state["clf_intercept"]) if "clf_coef" in state else None
         self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
+        self.X_prev2 = state.get("X_prev2", state["X_prev"]).copy()  # absent in older tracks
         self.model = replace(
             self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
         )
@@ -193,7 +211,7 @@ class PatchTracker:
         state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
                  "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
                  "delta0": self.model.delta0, "bone_w": self.model.bone_w,
-                 "lengths": self.lengths}  # fmt: skip
+                 "lengths": self.lengths, "X_prev2": self.X_prev2}  # fmt: skip
         if self.logits is not None:
             state["clf_coef"], state["clf_intercept"] = self.logits
         V = self.vertices()
@@ -263,6 +281,7 @@ class PatchTracker:
             max_distance=o.max_distance, random_state=rng.integers(1 << 31),
         )  # fmt: skip
         keep = part.keep
+        self.last_partition = part  # for diagnostics (benchmarks/diag_patch.py)
         if o.part_matching == "none":
             return V[keep], N[keep], None
         labels = part.labels.copy()
@@ -282,8 +301,11 @@ class PatchTracker:
         # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
+        budget += o.coarse_iter
         if o.prediction == "bones":
-            self._predict_by_bones()
+            self._predict_by_bones(
+                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
+            )
         elif o.prediction == "patches":
             # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
             # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
@@ -293,6 +315,7 @@ class PatchTracker:
             self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
             w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
             self.R = so3_exp(w) @ self.R
+        self.X_prev2 = self.prev[2].copy()
         self.prev = last
         # Re-acquisition after a lost frame: if the model stands far from the data (the
         # driver restored an old state), move it horizontally onto the observations' centre.
@@ -300,19 +323,25 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
+        X_hat = self.X.copy()  # the temporal prior's prediction (lambda_temporal)
+        rays = None
+        cameras = getattr(frame, "cameras", [])
+        if o.lambda_silhouette > 0 and cameras:
+            masks = _masks(frame)
+            rays = silhouette_rays(cameras, masks) if masks else None
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
         self._lap("classify")
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
         tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
-        cameras = getattr(frame, "cameras", [])
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         energies: dict[str, float] = {}
         n_iter = 0
         while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
+            coarse = n_iter <= o.coarse_iter
             patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
             self._lap("assign")
             sys = System.empty(self.pattern)
@@ -336,8 +365,22 @@ class PatchTracker:
             if o.lambda_length > 0:
                 e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths,
                                          o.lambda_length / len(self.pairs))  # fmt: skip
+            e_sil = e_tmp = 0.0
+            if rays is not None:
+                s = self.cover_sample
+                qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
+                e_sil, _ = add_silhouette(sys, rays, Vc[s], m.labels[s], qs,
+                                          radius=self.cover_radius, scale=o.silhouette_scale,
+                                          weight=o.lambda_silhouette)  # fmt: skip
+            if o.lambda_temporal > 0:
+                K = len(self.X)
+                e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
             self._lap("system")
-            delta = sys.solve(o.damping)
+            if coarse:  # body parts as rigid groups first (coarse_iter)
+                S = group_basis(m.bone_of_patch, self.c, len(self.X))
+                delta = sys.solve_grouped(o.damping, S)
+            else:
+                delta = sys.solve(o.damping)
             self._lap("solve")
             if not np.all(np.isfinite(delta)):
                 raise FloatingPointError("singular normal equations")
@@ -346,10 +389,11 @@ class PatchTracker:
             self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
             energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
                         "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma,
-                        "length": e_len / max(len(self.pairs), 1), "reverse": e_rev}  # fmt: skip
+                        "length": e_len / max(len(self.pairs), 1), "reverse": e_rev,
+                        "silhouette": e_sil, "temporal": e_tmp}  # fmt: skip
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
-            if move < o.tol:
+            if move < o.tol and n_iter > o.coarse_iter:
                 break
         energies["total"] = (
             o.lambda_data * energies["data"]
@@ -357,21 +401,31 @@ class PatchTracker:
             + o.lambda_bone * BONE_SCALE * energies["bone"]
             + o.lambda_length * energies["length"]
             + o.lambda_reverse * energies["reverse"]
+            + o.lambda_silhouette * energies["silhouette"]
+            + o.lambda_temporal * energies["temporal"]
         )
+        # the last E-step and the kept points, for diagnostics (benchmarks/diag_patch.py)
+        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": (patch, v, w, y)}
         self._check_divergence(Y, last[2])
         result = self._result(frame.index, energies, n_iter)
         self._lap("output")
         self.n_steps += 1
         return result
 
-    def _predict_by_bones(self) -> None:
+    def _predict_by_bones(self, fps: float = DEFAULT_FPS) -> None:
         """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
         every patch moved rigidly with its bone: the rotation turning the bone's old
         direction into its new one, about the patch's bone point Δ (Eq. 8). Joints average
         many patches, so a patch that slipped last frame is not thrown further."""
         m = self.model
         _, _, Xp = self.prev
-        X_new = self.X + _clip_rows(self.X - Xp, MAX_BONE_PREDICTION)
+        v = self.X - Xp
+        gate = self.opts.accel_gate / fps**2  # m/s² → metres per frame²
+        if gate > 0:  # no extrapolation of a velocity that just jumped
+            v_old = Xp - self.X_prev2
+            jump = np.linalg.norm(v - v_old, axis=1)
+            v = v * (jump <= np.maximum(gate, GATE_RATIO * np.linalg.norm(v_old, axis=1)))[:, None]
+        X_new = self.X + _clip_rows(v, MAX_BONE_PREDICTION)
         j, ch, g = m.bone_j, m.bone_child, m.gamma[:, None]
         a, b = self.X[ch] - self.X[j], X_new[ch] - X_new[j]
         R_b = _rotation_between(a, b)
@@ -402,6 +456,8 @@ class PatchTracker:
         K = min(o.k_neighbours, len(Vc))
         d, idx = KDTree(Vc).query(Y, k=K)
         d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
+        if o.interior_scale > 0:  # the E-step with depth penalties, in numpy
+            return self._assign_interior(Y, NY, ycls, Vc, Nc, d, idx)
         # per point, the nearest vertex per patch among those whose normals agree and, with
         # classes, on the point's body part (§III-B); posterior against an outlier class
         cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
@@ -412,6 +468,27 @@ class PatchTracker:
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
         )  # fmt: skip
         return patch, v, w, Y[i], NY[i]
+
+    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx):
+        """:meth:`_assign` with ``interior_scale``: each metre a point lies deeper than
+        :data:`INTERIOR_MARGIN` behind its candidate vertex adds ``σ / interior_scale`` to
+        their distance (in quadrature), so points deep inside the model fall to the outlier
+        class."""
+        o, m = self.opts, self.model
+        ok = np.einsum("pkj,pj->pk", np.take(Nc, idx, axis=0), NY) > o.normal_cos
+        if ycls is not None:  # only patches of the point's body part (§III-B)
+            ok &= (m.bone_of_patch[m.labels[idx]] == ycls[:, None]) | (ycls[:, None] < 0)
+        i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
+        patch = m.labels[idx[i, j]]
+        _, first = np.unique(i * m.P + patch, return_index=True)  # nearest per patch
+        i, j, patch = i[first], j[first], patch[first]
+        vx = idx[i, j]
+        depth = np.einsum("ij,ij->i", Vc[vx] - Y[i], Nc[vx]) - INTERIOR_MARGIN
+        d2 = d[i, j].astype(np.float64) ** 2
+        d2 = d2 + (np.maximum(depth, 0.0) / o.interior_scale * self.sigma) ** 2
+        p = np.exp(-0.5 * d2 / self.sigma**2)
+        denom = np.bincount(i, p, minlength=len(Y)) + np.exp(-0.5 * o.outlier_sigmas**2)
+        return patch, vx, p / denom[i], Y[i], NY[i]
 
     def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
         """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
@@ -444,6 +521,15 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _masks(frame: CaptureFrame) -> list[np.ndarray]:
+    """The frame's silhouettes, one per camera, or [] where the capture has none."""
+    try:
+        masks = frame.silhouettes
+    except (OSError, AttributeError, ValueError):
+        return []
+    return masks if len(masks) == len(frame.cameras) else []
 
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:

@@ -87,6 +87,15 @@ class PatchOptions:
         mm); CMU 09_01 (a run at 60 fps, all frames fast; 20 iterations throughout) 12.5 →
         11.2 mm, worst frame 26.2 → 17.8 mm. Slow captures hardly pay: 16 % of CMU 05_01's
         frames are fast, 2 % of 01_01's.
+    coarse_iter : int
+        EM iterations at the start of each frame (added to its budget) in which the
+        patches of each body part move as one rigid group (a reduced Gauss–Newton step,
+        :func:`~meshmocap.trackers.patch_solver.group_basis`) before every patch moves on
+        its own; 0 turns it off. A limb that moved far since the last frame is pulled back
+        whole by the points it still reaches, instead of patch by patch onto the nearest
+        wrong points. (Matching every kept point freely in these iterations, as
+        articulated ICP does, instead of by the classifier's parts: CMU 08_05 from its
+        T-pose, with ``accel_gate=72``, 11.7 → 43.7 mm.)
     k_neighbours : int
         Candidate vertices per observed point.
     damping : float
@@ -95,6 +104,28 @@ class PatchOptions:
         Warm start of each frame: constant-velocity extrapolation of the joints, each patch
         carried rigidly by its bone ("bones"); of every patch transform and joint on its
         own ("patches"); or the last frame as it is ("none"). Steps are clipped.
+    accel_gate : float
+        With ``prediction="bones"``: a joint whose velocity changed in the last frame by
+        more than this acceleration (m/s², at the capture's frame rate) and more than
+        half its speed is not extrapolated (0: every joint is). A velocity that just jumped
+        comes from an abrupt start or a fit that slipped; extrapolating it throws the joint
+        further off. Off by default: at 72 m/s² (``--method patch_gate``) clips that start
+        from a T-pose gain (60 frames at 60 fps, 4 cameras, ``benchmarks/sweep_patch.py``:
+        CMU 13_32 31.8 → 21.5 mm, 08_05 55.1 → 11.7 mm; without it the left forearm is
+        thrown 0.5 m at frame 2 and then gets all its data from phantom volumes and other
+        parts' points), but a run loses its feet (09_01: 11.9 → 34.5 mm, the right ankle
+        up to 94 mm off for 25 frames: a foot's push-off exceeds the gate, and without
+        its prediction the foot is left behind) and the held-out 05_03 loses (24.6 →
+        31.0). In metres per frame² it would also gate ordinary motion at 30 fps.
+    interior_scale : float
+        Hull points inside the model (not in the paper; 0 turns it off). A visual hull
+        contains the body, so a hull point deeper than
+        :data:`~meshmocap.trackers.patch.INTERIOR_MARGIN` behind the model surface comes
+        from a silhouette hole (which carves a tunnel through the hull: 16 % of the hull
+        points of CMU 05_01 with the ``degraded`` silhouettes lie over 1 cm inside the
+        true body, none with clean ones) or a model out of place. Each metre of depth
+        beyond the margin counts as ``1 / interior_scale`` σ of distance in the E-step,
+        so deep points fall to the outlier class.
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -115,6 +146,19 @@ class PatchOptions:
         which no patch follows rigidly (floors 30–40 mm), come from the surface; the
         limbs mostly from the skeleton. Both read-outs are then moved the least that keeps
         the skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
+    lambda_silhouette : float
+        Weight of the silhouette coverage term (not in the paper; 0 turns it off; used
+        where the capture has cameras and silhouettes): silhouette pixels that no model
+        vertex covers pull their nearest projected vertex onto their viewing ray
+        (:mod:`~meshmocap.trackers.patch_terms`). The hull's points cannot tell a limb on
+        the true surface from one in a phantom wedge beside it; the silhouettes can.
+    silhouette_scale : float
+        Cauchy scale (metres) of the coverage term's weights: a pixel that far from the
+        model pulls half as hard (spurious blobs far from the body pull little).
+    lambda_temporal : float
+        Weight of the temporal prior (not in the paper; 0 turns it off): mean squared
+        distance of the joints from their constant-velocity prediction (an acceleration
+        penalty), so that a limb coasts through a few frames without data.
     seed : int
         Patches and subsampling seed.
     """
@@ -143,12 +187,18 @@ class PatchOptions:
     sigma_min: float = 0.005
     sigma_max: float = 0.05
     outlier_sigmas: float = 3.0
+    coarse_iter: int = 0
     k_neighbours: int = 8
+    interior_scale: float = 0.0
     normal_cos: float = 0.0
     residual: Residual = "point_to_point"
     damping: float = 1e-4
     prediction: Prediction = "bones"
+    accel_gate: float = 0.0
     joint_readout: JointReadout = "blend"
+    lambda_silhouette: float = 0.0
+    silhouette_scale: float = 0.05
+    lambda_temporal: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -163,14 +213,20 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
             )
+        if self.coarse_iter < 0:
+            raise InputError(f"PatchOptions: coarse_iter must be ≥ 0, found {self.coarse_iter}")
         if self.max_iter < 1:
             raise InputError(f"PatchOptions: max_iter must be ≥ 1, found {self.max_iter}")
         if not self.fast_iter_scale >= 1:
             raise InputError(
                 f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
             )
+        for name in ("lambda_silhouette", "lambda_temporal", "accel_gate", "interior_scale"):
+            if not getattr(self, name) >= 0:  # also rejects NaN
+                raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
         for name, unit in (("outlier_sigmas", ""), ("fast_motion", " metres"),
-                           ("reverse_cap", " metres"), ("reverse_scale", " metres")):  # fmt: skip
+                           ("reverse_cap", " metres"), ("reverse_scale", " metres"),
+                           ("silhouette_scale", " metres")):  # fmt: skip
             if not getattr(self, name) > 0:  # also rejects NaN
                 raise InputError(
                     f"PatchOptions: {name} must be > 0{unit}, found {getattr(self, name)}"

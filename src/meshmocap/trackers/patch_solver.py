@@ -235,6 +235,54 @@ class System:
         delta[pt.order] = lu.solve(-self.g[pt.order])
         return delta
 
+    def solve_grouped(self, damping: float, S: sp.spmatrix) -> np.ndarray:
+        """Solve the damped normal equations restricted to steps ``δ = S δ_r`` (``S``
+        (n, r), e.g. :func:`group_basis`): ``(SᵀHS + μ diag + ε I) δ_r = −Sᵀg``, dense
+        (r is small). Returns δ (n,)."""
+        H = self.matrix(0.0)
+        Hr = np.asarray((S.T @ H @ S).todense())
+        gr = S.T @ self.g
+        d = np.diag(Hr).copy()
+        floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
+        Hr[np.diag_indices_from(Hr)] += damping * d + floor
+        try:
+            dr = np.linalg.solve(Hr, -gr)
+        except np.linalg.LinAlgError as exc:
+            raise FloatingPointError(f"singular grouped normal equations ({exc})") from None
+        return S @ dr
+
+
+def group_basis(groups: np.ndarray, c: np.ndarray, n_joints: int) -> sp.csr_matrix:
+    """Steps of patches that move rigidly in groups: (6P + 3K, 6G + 3K) sparse ``S`` with
+    ``δ = S δ_r``. Group ``g`` turns by ``ω_g`` about the mean ``p_g`` of its patch centres
+    and moves by ``t_g``, so each of its patches ``k`` (centre ``c_k``) gets ``ω_k = ω_g``
+    and ``δc_k = t_g + ω_g × (c_k − p_g)`` (first order); joints stay free.
+
+    Parameters: ``groups`` (P,) int in ``0 .. G-1``, ``c`` (P, 3) patch centres, metres.
+    """
+    P, G = len(groups), int(groups.max()) + 1
+    cnt = np.bincount(groups, minlength=G)
+    piv = np.stack([np.bincount(groups, c[:, a], minlength=G) for a in range(3)], 1)
+    piv /= np.maximum(cnt, 1)[:, None]
+    a = c - piv[groups]  # lever arms
+    k6, g6 = 6 * np.arange(P), 6 * groups
+    e3 = np.arange(3)
+    rows = [k6[:, None] + e3, k6[:, None] + 3 + e3]  # ω_k = ω_g, δc_k ∋ t_g
+    cols = [g6[:, None] + e3, g6[:, None] + 3 + e3]
+    vals = [np.ones((P, 3)), np.ones((P, 3))]
+    M = -skew(a)  # δc_k ∋ −[a]× ω_g
+    rows.append(np.repeat(k6[:, None] + 3 + e3, 3, axis=1))
+    cols.append(np.tile(g6[:, None] + e3, 3))
+    vals.append(M.reshape(P, 9))
+    n, r = 6 * P + 3 * n_joints, 6 * G + 3 * n_joints
+    j = np.arange(3 * n_joints)
+    rows.append(6 * P + j), cols.append(6 * G + j), vals.append(np.ones(3 * n_joints))
+    return sp.csr_matrix(
+        (np.concatenate([v.ravel() for v in vals]),
+         (np.concatenate([x.ravel() for x in rows]), np.concatenate([x.ravel() for x in cols]))),
+        shape=(n, r),
+    )  # fmt: skip
+
 
 #: Upper-triangle indices of a 3×3 matrix (``np.triu_indices`` costs 0.2 ms a call).
 _TRIU3 = np.triu_indices(3)

@@ -32,12 +32,50 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         "PatchOptions",
         {"classifier": "none"},
     ),
+    # the patch tracker with or without each of its extensions beyond the paper (issue 20;
+    # PATCH_ABLATIONS), and with none of them (the paper's method with earlier fixes)
+    **{
+        name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
+        for name, fixed in (
+            ("patch_gate", {"accel_gate": 72.0}),
+            ("patch_interior", {"interior_scale": 0.01}),
+            ("patch_sil", {"lambda_silhouette": 10.0}),
+            ("patch_coarse", {"coarse_iter": 2}),
+            ("patch_temporal", {"lambda_temporal": 1.0}),
+            (
+                "patch_paper",
+                dict.fromkeys(
+                    ("accel_gate", "interior_scale", "lambda_silhouette", "lambda_temporal"), 0.0
+                )
+                | {"coarse_iter": 0},
+            ),
+        )
+    },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
     # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1)
     "cage": (*_CAGE, {}),
     "cage_quads": (*_CAGE, {"space": "quads"}),
     "cage_noreg": (*_CAGE, {"variance_weight": 0.0}),
     "cage_nolocal": (*_CAGE, {"local_iters": 0}),
+    # without each extension beyond the paper (issue 20; CAGE_ABLATIONS)
+    "cage_nosil": (*_CAGE, {"silhouette_weight": 0.0}),
+    "cage_nowiden": (*_CAGE, {"off_manifold": 0.0}),
+    "cage_green": (*_CAGE, {"surface": "green", "joints": "green"}),
+    "cage_paper": (
+        *_CAGE,
+        {"surface": "green", "joints": "green", "silhouette_weight": 0.0, "off_manifold": 0.0},
+    ),
+}
+
+#: The patch tracker's ablations (bench's ablation table): method → what it changes.
+PATCH_ABLATIONS: dict[str, str] = {
+    "patch_noclf": "− body-part classifier (§III-B)",
+    "patch_gate": "+ acceleration gate of the prediction",
+    "patch_interior": "+ hull points inside the model as outliers",
+    "patch_sil": "+ silhouette coverage",
+    "patch_coarse": "+ part-rigid first iterations",
+    "patch_temporal": "+ temporal prior on the joints",
+    "patch_paper": "− every extension beyond the paper",
 }
 
 #: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
@@ -60,8 +98,8 @@ def make_tracker(
         A key of :data:`METHODS`.
     manifold : GPLVM, PoseManifold, path or None
         Cage methods (:data:`MANIFOLD_METHODS`) only: the pose manifold, see
-        :func:`~meshmocap.trackers.manifold.resolve_manifold` (None: learn one from the
-        procedural walk and jog on ``template``, logged).
+        :func:`~meshmocap.trackers.manifold.resolve_manifold` (None: the template's
+        default manifold, learned from the bundled pose library at first use and cached).
     template : Template, optional
         The tracking template. Cage methods need it unless ``manifold`` is a fitted GPLVM:
         the tracker is set up for it and the manifold checked against it (one-line
@@ -104,3 +142,13 @@ def method_options(method: str) -> tuple[str, ...]:
     module, _, opts_cls, fixed = METHODS[method]
     opts = getattr(importlib.import_module(module), opts_cls)
     return tuple(f.name for f in dataclasses.fields(opts) if f.name not in fixed)
+
+
+#: The cage tracker's ablations (issue 20): method → what it leaves out of ``cage``.
+CAGE_ABLATIONS: dict[str, str] = {
+    "cage_nolocal": "local adjustment (Table 1)",
+    "cage_nosil": "silhouette coverage (hull coverage instead)",
+    "cage_nowiden": "off-manifold widening",
+    "cage_green": "skinned surface and quad joints (Green coordinates, §6.2)",
+    "cage_paper": "all three extensions",
+}
