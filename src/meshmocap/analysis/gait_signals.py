@@ -61,6 +61,7 @@ def smoothed(X: np.ndarray, window: int, deriv: int = 0) -> np.ndarray:
 
 
 def unit(v: np.ndarray) -> np.ndarray:
+    """Return ``v`` (..., 3) scaled to unit length along the last axis (zero stays zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, 1e-12)
 

@@ -85,7 +85,7 @@ def _fmt(v: Any) -> str:
 
 
 def write_summary(out: Path, summaries: Sequence[CaptureSummary]) -> tuple[Path, ...]:
-    """summary.csv (unrounded; empty where not applicable) and summary.md."""
+    """Write summary.csv (unrounded; empty where not applicable) and summary.md."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(SUMMARY_COLUMNS)

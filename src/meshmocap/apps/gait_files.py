@@ -45,6 +45,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.io.results import read_track
 
 _COLOURS = {"left": "tab:red", "right": "tab:blue"}
+#: Columns of ``gait.csv``: one row per cycle, then the summaries of each side.
 CYCLE_COLUMNS = ("side", "cycle", "strike_frame", "foot_off_frame", "end_frame", "start_s",
                  "stride_time_s", "stride_length_m", "speed_m_per_s", "step_time_s",
                  "step_length_m", "stance_pct", "swing_pct", "cadence_steps_per_min")  # fmt: skip
@@ -295,6 +296,7 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
 # --------------------------------------------------------------------------- report
 
 
+#: Columns of the report's gait table.
 GAIT_HEADERS = ("source", "cycles", "steps", "cadence (steps/min)", "stride length (m)",
                 "stride time (s)", "speed (m/s)", "stance (%)", "events matched",
                 "mean offset (frames)", "max offset (frames)", "cadence error (%)",

@@ -354,11 +354,12 @@ def cage_problems(
 ) -> list[str]:
     """Return the checks a cage fails, each message starting with the check's name.
 
-    Checks (in order): ``manifold`` (finite, closed 2-manifold: :func:`~meshmocap.geometry.
-    mesh.mesh_problems`), ``orientation`` (every directed edge used once), ``outward``
-    (signed volume > 0), ``self-intersection`` (:func:`self_intersections`) and, when
-    ``points`` (n, 3) are given, ``enclosure``: every point strictly inside (winding number
-    within 1e-6 of 1) and at least ``clearance`` metres from the cage surface.
+    Checks (in order): ``manifold`` (finite, closed 2-manifold:
+    :func:`~meshmocap.geometry.mesh.mesh_problems`), ``orientation`` (every directed edge used
+    once), ``outward`` (signed volume > 0), ``self-intersection``
+    (:func:`self_intersections`) and, when ``points`` (n, 3) are given, ``enclosure``: every
+    point strictly inside (winding number within 1e-6 of 1) and at least ``clearance`` metres
+    from the cage surface.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)

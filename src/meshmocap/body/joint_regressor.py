@@ -33,7 +33,7 @@ def training_poses(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The template posed by its rig through every procedural motion (every ``step``-th
     frame), once as generated and once with every joint turned by a random rotation (axis
-    angle ~ N(0, ``noise``² I) per component, radians).
+    angle ~ N(0, σ² I) per component, σ = ``noise`` radians).
 
     Returns
     -------

@@ -98,14 +98,14 @@ class Motion:
     def transformed(self, C: np.ndarray, *, scale: float = 1.0) -> Motion:
         """Return the motion expressed in another world frame.
 
+        Local rotations become ``C R Cᵀ`` so that world positions become ``scale · C x``.
+
         Parameters
         ----------
         C : (3, 3) float64
             Rotation from this motion's world frame to the new one (e.g. :data:`Y_UP_TO_Z_UP`).
         scale : float
             Length factor (e.g. a unit conversion to metres).
-
-        Local rotations become ``C R Cᵀ`` so that world positions become ``scale · C x``.
         """
         C = np.asarray(C, dtype=float)
         R = C @ self.rotations @ C.T

@@ -76,7 +76,7 @@ class Placer:
     (:mod:`meshmocap.body.oqr`), in the canonical frame: the template turned by ``C.T``
     about Z (``C`` from :func:`heading`), so that it faces −Y with its left along +X.
     ``joints`` are the rig joints the quads follow (all must exist);
-    :meth:`place` returns the quads by name (``QUAD_NAMES``), in that frame. With
+    :meth:`Placer.place` returns the quads by name (``QUAD_NAMES``), in that frame. With
     ``box_limbs`` set (default False) the shoulder and elbow quads also cover the upper
     arm's vertices between them, projected along the shoulder→elbow bone."""
 
@@ -97,6 +97,7 @@ class Placer:
         self.box_limbs = False
 
     def part(self, *names: str) -> np.ndarray:
+        """Return the (n,) bool mask of the vertices owned by the joints ``names``."""
         return np.isin(self.owner, [self.idx[n] for n in names if n in self.idx])
 
     def fit(self, anchor, n, u_ref, section, box=None, axis=None, keep_out=None) -> QuadRect:
@@ -152,6 +153,7 @@ class Placer:
         return quads[-1]
 
     def place(self) -> list[QuadRect]:
+        """Return the 21 quads, in the canonical frame (see the class docstring)."""
         P, bone, part = self.P, self.bone, self.part
         torso, head = part(*_TORSO), part(*_HEAD)
         out: dict[str, QuadRect] = {}

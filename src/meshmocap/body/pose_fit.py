@@ -3,7 +3,7 @@
 A tracker deforms the template's own vertices, so every tracked vertex has a known rest
 vertex: the pose that explains a frame is the least-squares fit
 
-    min_{t, R}  (1/p) Σ_i |v_i(t, R) − y_i|²  +  λ (1/K) Σ_k |e_k(t, R) − x_k|²
+    ``min_{t, R}  (1/p) Σ_i |v_i(t, R) − y_i|²  +  λ (1/K) Σ_k |e_k(t, R) − x_k|²``
 
 of linear-blend skinning ``v_i = Σ_j w_ij A_j ṽ_i`` (:mod:`meshmocap.body.skinning`) to the
 tracked vertices ``y_i`` (a fixed, area-weighted sample of ``p`` of them), plus, optionally,

@@ -7,25 +7,24 @@ skeleton whose joints are carried by the rig like skinned points.
 On-disk format (``.npz``, ``format = "meshmocap-template-1"``), all in metres, world frame
 Z up, subject facing −Y, its left side towards +X, feet on z = 0:
 
-=====================  ===========  ===============================================
-key                    shape/dtype  meaning
-=====================  ===========  ===============================================
-format                 str          ``"meshmocap-template-1"``
-name                   str          template name
-V                      (n, 3) f4/8  rest vertices
-F                      (m, 3) int   triangles, counter-clockwise seen from outside
-joint_names            (J,) str     rig joint names (parents before children)
-joint_parents          (J,) int     parent index, −1 for the root
-joint_positions        (J, 3) float rest joint positions (world-aligned rest frames)
-end_positions          (J, 3) float rest position of each bone's tail
-weights_data/indices/  CSR parts    (n, J) skinning weights, rows sum to 1
-  indptr
-part_labels            (n,) int     evaluation-joint index (0..14) of each vertex
-eval_names             (K,) str     evaluation joints (15: pelvis ... right_ankle)
-eval_parents           (K,) int     evaluation skeleton tree
-eval_rest_positions    (K, 3) float rest positions of evaluation joints
-eval_weights           (K, J) float rig weights carrying each evaluation joint
-=====================  ===========  ===============================================
+=============================  ============  ===============================================
+key                            shape/dtype   meaning
+=============================  ============  ===============================================
+format                         str           ``"meshmocap-template-1"``
+name                           str           template name
+V                              (n, 3) f4/8   rest vertices
+F                              (m, 3) int    triangles, counter-clockwise seen from outside
+joint_names                    (J,) str      rig joint names (parents before children)
+joint_parents                  (J,) int      parent index, −1 for the root
+joint_positions                (J, 3) float  rest joint positions (world-aligned rest frames)
+end_positions                  (J, 3) float  rest position of each bone's tail
+weights_data/indices/indptr    CSR parts     (n, J) skinning weights, rows sum to 1
+part_labels                    (n,) int      evaluation-joint index (0..14) of each vertex
+eval_names                     (K,) str      evaluation joints (15: pelvis ... right_ankle)
+eval_parents                   (K,) int      evaluation skeleton tree
+eval_rest_positions            (K, 3) float  rest positions of evaluation joints
+eval_weights                   (K, J) float  rig weights carrying each evaluation joint
+=============================  ============  ===============================================
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ free joint) on closest points **both ways** with agreeing normals, as
 normals (visual-hull vertices, a point cloud), with a pull towards a reference pose and the
 subject's size fixed (the template is the performer).
 
-Per iteration, for pairs (model point i, observed point y with normal n_y):
+Per iteration, for pairs (model point i, observed point y with normal n_y)::
 
     E(Θ) = mean_md r² + w_dm mean_dm r² + μ (mean_md |v_i − y|² + mean_dm |v_i − y|²)
            + Σ_j λ_j |G_parent(j) log(R_j R_refᵀ_j)|²
@@ -14,7 +14,7 @@ with ``r = n_y · (v_i − y)`` (point-to-plane) and μ = :data:`POINT_MIX`, the
 within a distance shrinking over the iterations; one Levenberg–Marquardt-damped step, each
 joint's rotation clipped to :data:`MAX_STEP_ANGLE`. Metres and radians, world frame Z up.
 
-:func:`fit_score` is the symmetric closest-point distance a global search ranks candidate
+:meth:`PoseFitter.score` is the symmetric closest-point distance a global search ranks candidate
 poses by, and :class:`PoseFitter` keeps the observed points, their k-d tree and the model
 points across the many fits of a search.
 """

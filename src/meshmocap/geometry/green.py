@@ -26,7 +26,7 @@ in-plane distance ``d_e = ν_e·(a − η)`` and ``L_e = ∫_e ds/|ξ − η|``:
 ``−ν_{e_k}|e_k|/(2A)`` times ``∫ ρ/r³ dσ = −Σ_e ν_e L_e`` the rest.) ``Ω`` is van
 Oosterom & Strackee's atan2 formula and ``L_e = log((r_a + r_b + ℓ)/(r_a + r_b − ℓ))``
 with the denominator rewritten ``2|a×b|² / ((r_a r_b − a·b)(r_a + r_b + ℓ))`` where it
-would cancel. No threshold is needed (GC08 skips faces with |w| < ε): the jump of Ω
+would cancel. No threshold is needed (GC08 skips faces with ``|w| < ε``): the jump of Ω
 across a face is multiplied by ``h`` or by the continuous foot barycentrics, so values are
 continuous through the faces. Σ_i φ_i equals the winding number: 1 inside, 0 outside.
 
@@ -299,13 +299,6 @@ def green_coordinates(
     psi : (n, nf) float64
         Face-normal coordinates ψ, metres; ≥ 0 inside.
 
-    Notes
-    -----
-    ``points[p] == phi[p] @ cage_V + psi[p] @ n`` to rounding (about 1e-14 m for a
-    1 m cage; see the module notes near edges) with ``n`` the unit outward face normals.
-    Cost: O(n · nf), ~130 array operations per (point, face) pair; 0.4–0.6 s for 12k
-    points in a 166-face cage on one core.
-
     Raises
     ------
     InputError
@@ -314,6 +307,13 @@ def green_coordinates(
     MeshError
         The cage is open, non-manifold, inconsistently or inward oriented, or has
         degenerate faces.
+
+    Notes
+    -----
+    ``points[p] == phi[p] @ cage_V + psi[p] @ n`` to rounding (about 1e-14 m for a
+    1 m cage; see the module notes near edges) with ``n`` the unit outward face normals.
+    Cost: O(n · nf), ~130 array operations per (point, face) pair; 0.4–0.6 s for 12k
+    points in a 166-face cage on one core.
     """
     func = "green_coordinates"
     check_choice(func, "exterior", exterior, _EXTERIOR)

@@ -83,13 +83,13 @@ def point_to_surface(
     within ``δ ≤ tol`` of a sample of its own triangle (a point of a sub-triangle of
     longest edge ``e`` sees two of its corners under an angle ≥ 120°, so by the law of
     cosines it is within ``e/√3`` of one). A k-d tree (pykdtree) gives each query's ``k``
-    nearest samples; the exact distance to their triangles (:func:`closest_points_on_
-    triangles`) is taken. Accuracy: ``d ≤ result ≤ d + δ`` for the true distance ``d``
-    (the nearest sample is within ``d + δ`` and lies on a candidate triangle). In practice
-    the true nearest triangle is among the candidates: all of 3,000 distances between the
-    bundled ``neutral`` and ``heavy_male`` templates (up to 11 cm) and of 1,000 between two
-    14.6k-vertex marching-cubes meshes equal brute-force exact ones (``k = 8``: 99.6 %,
-    off by ≤ 0.12 mm, the mesh having many tiny triangles).
+    nearest samples; the exact distance to their triangles
+    (:func:`closest_points_on_triangles`) is taken. Accuracy: ``d ≤ result ≤ d + δ`` for the
+    true distance ``d`` (the nearest sample is within ``d + δ`` and lies on a candidate
+    triangle). In practice the true nearest triangle is among the candidates: all of 3,000
+    distances between the bundled ``neutral`` and ``heavy_male`` templates (up to 11 cm) and
+    of 1,000 between two 14.6k-vertex marching-cubes meshes equal brute-force exact ones
+    (``k = 8``: 99.6 %, off by ≤ 0.12 mm, the mesh having many tiny triangles).
 
     Parameters
     ----------

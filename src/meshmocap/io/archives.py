@@ -48,6 +48,7 @@ class TarArchive:
         return _GzipReader(f, self._index) if self.gz else f
 
     def read(self, name: str) -> bytes:
+        """Return the bytes of member ``name``."""
         offset, size = self._where[name]
         self._check_size(size, f"{self.path}::{name}")
         try:

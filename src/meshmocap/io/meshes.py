@@ -401,18 +401,18 @@ class MeshSequence:
         vertices (with normals where the file has them).
     up : {"z", "y"}, the files' up axis (see :func:`read_mesh`)
 
+    Raises
+    ------
+    MeshmocapFileNotFoundError : missing folder/file, glob matching nothing, no frame files.
+    InputError : bad ``frames``, ``kind`` or ``up``; a folder mixing frame formats.
+    FormatError : a corrupt archive.
+
     Notes
     -----
     ``len()``, indexing (``seq[i]`` → :class:`Frame`, ``seq[a:b:c]`` → a sub-sequence) and
     iteration read files on demand; nothing is cached. Archive members are located once at
     construction (for a gzip archive this decompresses it once: 0.6 s for the 39 MB crane
     archive). Not thread-safe; give each worker its own sequence (sequences pickle).
-
-    Raises
-    ------
-    MeshmocapFileNotFoundError : missing folder/file, glob matching nothing, no frame files.
-    InputError : bad ``frames``, ``kind`` or ``up``; a folder mixing frame formats.
-    FormatError : a corrupt archive.
     """
 
     def __init__(

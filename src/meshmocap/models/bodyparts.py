@@ -354,7 +354,7 @@ class BodyPartClassifier:
             ``"svc"`` each label needs at least two points).
         coef_init, intercept_init : array_like, optional
             ``"logistic"`` only: the starting point of L-BFGS, as world-frame logits
-            ``coef_init @ x + intercept_init`` (the :attr:`coef_` and :attr:`intercept_` of
+            ``coef_init @ x + intercept_init`` (the ``coef_`` and ``intercept_`` of
             an earlier fit with the same labels). The optimum does not depend on it; from
             the previous frame's fit a tracker's next fit takes ~12 L-BFGS iterations
             instead of ~63 (``neutral_5k`` walking at 60 fps).

@@ -218,7 +218,7 @@ class GPLVM:
     alpha_, gamma_, beta_ : float
         Learned RBF variance, inverse width and noise precision.
     A_ : (N, q) float64 or None
-        ``"rbf"`` back-constraint weights (X_ = K_bc(Y_, Y_) A_); None otherwise.
+        ``"rbf"`` back-constraint weights (``X_ = K_bc(Y_, Y_) A_``); None otherwise.
     mlp_weights_ : tuple of arrays or None
         ``"mlp"`` weights ``(W1 (D, H), b1 (H,), W2 (H, q), b2 (q,))``; None otherwise.
     bc_gamma_ : float
@@ -230,14 +230,14 @@ class GPLVM:
     Y_scale_ : float
         Global scale of the training poses.
     Kinv_ : (N, N) float64
-        K⁻¹ with K = K_rbf(X_, X_) + β⁻¹ I.
+        K⁻¹ with ``K = K_rbf(X_, X_) + β⁻¹ I``.
     KinvY_ : (N, D) float64
-        K⁻¹ Y_ (standardised units).
+        ``K⁻¹ Y_`` (standardised units).
     n_iter_ : int
         L-BFGS-B iterations run.
     log_likelihood_ : float
         Eq. (2) at the optimum, on the standardised data.
-    log_likelihood_history_ : (n_iter_ + 1,) float64
+    log_likelihood_history_ : (``n_iter_`` + 1,) float64
         Eq. (2) at the start and after every iteration (non-decreasing).
     converged_ : bool
         Whether L-BFGS-B met its tolerance before ``max_iter``.

@@ -5,7 +5,7 @@ space: rest vertices, bone heads and tails, one evaluation joint; see
 :mod:`meshmocap.body.shape_space`). :class:`ShapeSpace` keeps the mean and the first
 ``n_components`` principal directions of a set of such vectors and writes a body as
 
-    x(z) = mean_ + Σ_k z_k std_k c_k                                            (PCA)
+    ``x(z) = mean_ + Σ_k z_k std_k c_k``                                        (PCA)
 
 with **standardised** coefficients ``z`` (each of unit variance over the training bodies),
 so that ``‖z‖²`` is the Gaussian prior's negative log-likelihood (up to a constant and a
@@ -29,9 +29,9 @@ class ShapeSpace:
     n_components : int
         Components kept (at most ``min(n_samples - 1, n_features)``).
 
-    Attributes (after :meth:`fit`)
-    ------------------------------
-    mean_ : (d,) float64
+    Attributes
+    ----------
+    mean_ : (d,) float64, set by :meth:`fit` like the others
     components_ : (K, d) float64, orthonormal rows
     std_ : (K,) float64, standard deviation of the training bodies along each component
     explained_variance_ratio_ : (K,) float64, fraction of the total variance each explains

@@ -18,7 +18,7 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
    * one Levenberg–Marquardt-damped Gauss–Newton step on the pose Θ = (root translation t,
      a rotation increment ω_j per free joint) for
 
-         E(Θ) = E_md + w_dm E_dm + λ_pose Σ_j |log(R_j R̂_jᵀ)|² + λ_root |root − root̂|²
+         ``E(Θ) = E_md + w_dm E_dm + λ_pose Σ_j |log(R_j R̂_jᵀ)|² + λ_root |root − root̂|²``
 
      where E_md, E_dm are the mean squared residuals (metres²) of the model→data and
      data→model pairs, (R̂, root̂) the previous frame's pose, and the residuals are
@@ -279,7 +279,7 @@ class ArticulatedICP:
         FrameResult
             Evaluation joints (K, 3) and posed template vertices (n, 3), metres, world frame;
             energies at the last linearisation point: ``model_to_data``, ``data_to_model``
-            (mean squared residuals, m²), ``pose`` (Σ_j |log(R_j R̂_jᵀ)|², rad²), ``root``
+            (mean squared residuals, m²), ``pose`` (``Σ_j |log(R_j R̂_jᵀ)|²``, rad²), ``root``
             (m²) and their weighted ``total``; iterations; state ``R`` (J, 3, 3), ``root``
             (3,) and the previous frame's ``R_prev``, ``root_prev``.
         """

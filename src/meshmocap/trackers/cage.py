@@ -19,6 +19,7 @@ the hull's. A frame whose manifold configuration fits far worse than the tracked
 is off the manifold (``off_manifold``): its adjustment is not pulled back and runs longer.
 
 Choices where the paper is silent or ambiguous (each stated where it is coded):
+
 - Eq. (4) sums distance-field values; we sum their squares (signed distance, so points
   inside the hull are pulled out to its surface too, and Gauss–Newton applies), with a
   weight ``w_i = inside_weight`` (default 0.05) on points inside the hull: a visual hull
@@ -43,11 +44,11 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
 - The sum runs over ``n_sample`` template vertices drawn by area; those the cage cannot
   place (farther than ``max_model_error`` from their skinned position in the first
   frame's known pose: a head bent inside the neck–head tube, fingers) get ``w_i = 0``; a
-  coverage term ``E_c`` makes hull left unexplained cost (:mod:`~meshmocap.trackers.
-  cage_energy`, with the measurements behind each) in the pose and shape steps and in
-  the choice of the local adjustment's start, not in the adjustment itself: quads free
-  of the manifold follow it into the hull's phantom volumes (procedural walk: 20.2 mm
-  instead of 11.7).
+  coverage term ``E_c`` makes hull left unexplained cost
+  (:mod:`~meshmocap.trackers.cage_energy`, with the measurements behind each) in the pose and
+  shape steps and in the choice of the local adjustment's start, not in the adjustment
+  itself: quads free of the manifold follow it into the hull's phantom volumes (procedural
+  walk: 20.2 mm instead of 11.7).
 - The local adjustment (Eq. 12) tracks: it starts from whichever fits the frame best
   (data and coverage terms) of the manifold's configuration and the previous frame's
   adjusted quads, still and moved on at their last velocity (each with its own pelvis

@@ -110,7 +110,7 @@ class SkinnedSurface:
     """The template posed by its own skinning from the quads' joint frames (module notes).
 
     Derivatives (``directions``, ``quad_rows``) are exact for the vertices skinned only to
-    joints that own a quad (:attr:`exact`); a vertex weighted on a quad-less joint (hip
+    joints that own a quad (``exact``); a vertex weighted on a quad-less joint (hip
     joints, Spine1, Neck1, clavicles) moves, in them, rigidly with the nearest ancestor
     quad, though that joint also turns towards the quads below it: a Gauss–Newton
     approximation (the energies are evaluated exactly, so Levenberg–Marquardt still only

@@ -9,7 +9,7 @@ file is absent or unreadable) is flagged ``missing`` with the reason, and the tr
 coasts across it the same way: the next real frame is fitted from the last good state.
 
 Only one process writes into a track folder at a time: a second one is refused in one line
-(:func:`meshmocap._atomic.folder_lock`, released by the kernel when a run dies).
+(``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
 
 The first frame's pose comes from the capture alone (``init="auto"``,
 :func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground

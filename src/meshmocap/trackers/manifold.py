@@ -65,6 +65,7 @@ DEFAULT_SOURCES = ("library:400",)
 #: Latent dimension and training poses of the default manifold (the paper: q = 10 for
 #: varied locomotion; 5 keeps the latent step cheap).
 DEFAULT_COMPONENTS = 5
+#: Training poses of the default manifold.
 DEFAULT_POSES = 400
 #: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000).
 ON_THE_FLY_MAX_ITER = 300

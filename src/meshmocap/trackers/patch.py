@@ -221,7 +221,7 @@ class PatchTracker:
     def joints(self, V: np.ndarray) -> np.ndarray:
         """The reported joints (K, 3) for the output mesh ``V`` (n, 3): the skeleton's, or
         the surface read-out or its per-joint blend with the skeleton (``joint_readout``),
-        moved the least to keep the skeleton's bone lengths (:func:`_held_lengths`)."""
+        moved the least to keep the skeleton's bone lengths (``_held_lengths``)."""
         if self.regressor is None:
             return self.X.copy()
         w = self.surface_weight[:, None]

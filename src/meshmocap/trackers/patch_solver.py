@@ -456,7 +456,10 @@ def add_bone_lengths(
     X : (K, 3) joint positions, metres
     pairs : (m, 2) int, joints whose distance is held (a bone: child, parent)
     lengths : (m,) distance to hold for each pair, metres
-    Returns the sum of squared length errors (before ``weight``).
+
+    Returns
+    -------
+    float, the sum of squared length errors (before ``weight``)
     """
     b, p = pairs[:, 0], pairs[:, 1]
     u, r = length_residuals(X, pairs, lengths)

@@ -95,7 +95,10 @@ def add_silhouette(
     radius : float, metres a vertex covers (about the vertices' spacing)
     scale : float, Cauchy scale τ of the weights, metres
 
-    Returns the weighted mean squared distance (metres²) and the share of samples uncovered.
+    Returns
+    -------
+    tuple of float, the weighted mean squared distance (metres²) and the share of samples
+    uncovered
     """
     total, n_out = 0.0, 0
     rows_p, rows_q, rows_r, rows_w = [], [], [], []

@@ -1,0 +1,45 @@
+"""Checks of the documentation's own machinery (``pytest -q docs``)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from conftest import check_output, sessions
+
+DOCS = Path(__file__).resolve().parent
+sys.path.insert(0, str(DOCS))
+
+from api_modules import index_rst, public_modules  # noqa: E402
+
+
+def test_api_index_lists_every_public_module():
+    text = (DOCS / "api" / "index.rst").read_text()
+    listed = {line.strip() for line in text.splitlines() if line.startswith("   meshmocap")}
+    assert set(public_modules()) == listed, "run python docs/api_modules.py"
+    assert text == index_rst()
+
+
+def test_sessions_join_continuations_and_keep_expected_output():
+    text = """
+.. code-block:: console
+
+   $ meshmocap synth a \\
+         --frames 0:6
+   wrote a: 6 frames
+
+.. code-block:: text
+
+   $ not run
+"""
+    assert sessions(text) == [[("meshmocap synth a  --frames 0:6", ["wrote a: 6 frames"], 4)]]
+
+
+def test_output_compared_numbers_aside():
+    out = "note\ntracked 12 frames in 3.5 s (0.29 s per frame)\nmore\n"
+    assert check_output(["tracked 6 frames in 1.0 s (0.100 s per frame)"], out) is None
+    assert check_output(["...", "more"], out) is None
+    assert "not found" in check_output(["tracked 6 frames with cage"], out)
+    assert "not found" in check_output(["more", "note"], out)  # order matters
+    assert check_output(["tracked 12 frames ..."], out) is None  # the line's start
+    assert "not found" in check_output(["tracked 12 frames"], out)
