@@ -39,8 +39,13 @@ def captures(work: Path, n: int, frames: int) -> list[Path]:
         motion = MOTIONS[k % len(MOTIONS)]
         jitter = 0.0 if k < len(MOTIONS) else 1.0
         path = work / "captures" / f"{k:02d}_{motion}{'_jitter' if jitter else ''}"
-        spec = SynthSpec(motion=motion, template="neutral_5k", stop=frames,
-                         degradation=Degradation(jitter=jitter), seed=k)  # fmt: skip
+        spec = SynthSpec(
+            motion=motion,
+            template="neutral_5k",
+            stop=frames,
+            degradation=Degradation(jitter=jitter),
+            seed=k,
+        )
         synthesize(path, spec, show_progress=False)
         out.append(path)
     return out
@@ -71,8 +76,20 @@ def main() -> None:
         run([*exe, "track", str(c), "--method", a.method, "--out", str(work / "serial" / c.name)])
         for c in caps
     )
-    batch = run([*exe, "batch", *map(str, caps), "--method", a.method, "--workers",
-                 str(a.workers), "--out", str(work / "batch"), "--no-dashboard"])  # fmt: skip
+    batch = run(
+        [
+            *exe,
+            "batch",
+            *map(str, caps),
+            "--method",
+            a.method,
+            "--workers",
+            str(a.workers),
+            "--out",
+            str(work / "batch"),
+            "--no-dashboard",
+        ]
+    )
     same = all(
         np.array_equal(
             read_track(work / "serial" / c.name).joints,
@@ -82,14 +99,20 @@ def main() -> None:
     )
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     load = os.getloadavg()[0]
-    print(f"\n{a.method}, {len(caps)} captures x {a.frames} frames; {cores} cores available; "
-          f"load average {load:.2f}")  # fmt: skip
+    print(
+        f"\n{a.method}, {len(caps)} captures x {a.frames} frames; {cores} cores available; "
+        f"load average {load:.2f}"
+    )
     print("| mode | wall s | s per capture | speed-up | joints identical |")
     print("|---|--:|--:|--:|---|")
-    print(f"| serial `meshmocap track` x {len(caps)} | {serial:.1f} | {serial / len(caps):.1f} "
-          "| 1.00 | |")  # fmt: skip
-    print(f"| `meshmocap batch --workers {a.workers}` | {batch:.1f} | {batch / len(caps):.1f} | "
-          f"{serial / batch:.2f} | {'yes' if same else 'NO'} |")  # fmt: skip
+    print(
+        f"| serial `meshmocap track` x {len(caps)} | {serial:.1f} | {serial / len(caps):.1f} "
+        "| 1.00 | |"
+    )
+    print(
+        f"| `meshmocap batch --workers {a.workers}` | {batch:.1f} | {batch / len(caps):.1f} | "
+        f"{serial / batch:.2f} | {'yes' if same else 'NO'} |"
+    )
 
 
 if __name__ == "__main__":

@@ -62,8 +62,9 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        cap = synthesize(tmp, SynthSpec(motion="walk", template="neutral_5k", stop=12),
-                         show_progress=False)  # fmt: skip
+        cap = synthesize(
+            tmp, SynthSpec(motion="walk", template="neutral_5k", stop=12), show_progress=False
+        )
         frames = [(f.truth.vertices, f.hull_mesh[0]) for f in cap]
         synth_s = time.perf_counter() - t0
     n_hull = int(np.mean([len(h) for _, h in frames]))
@@ -72,8 +73,18 @@ def main() -> None:
         f"frames synthesised in {synth_s:.0f} s, {n_hull} hull vertices per frame\n"
     )
 
-    names = ["acc +1", "acc +10", "err>.9", "hull acc", "hull out", "surf out", "phant out",
-             "gate out", "gate ph", "kept"]  # fmt: skip
+    names = [
+        "acc +1",
+        "acc +10",
+        "err>.9",
+        "hull acc",
+        "hull out",
+        "surf out",
+        "phant out",
+        "gate out",
+        "gate ph",
+        "kept",
+    ]
     head = f"{'method':9s} {'labels':7s} {'fit 3k':>8s} {'pred 10k':>9s} " + " ".join(
         f"{n:>9s}" for n in names
     )
@@ -112,9 +123,18 @@ def main() -> None:
                 h_gate.append(np.mean(gated.kind == OUTLIER))
                 h_gph.append(np.mean(gated.kind[phantom] == OUTLIER))
                 h_keep.append(np.mean(part.keep))
-            cols = [np.mean(acc[1]), np.mean(acc[10]), np.mean(sure), np.mean(h_acc),
-                    np.mean(h_out), np.mean(h_sf), np.mean(h_ph), np.mean(h_gate), np.mean(h_gph),
-                    np.mean(h_keep)]  # fmt: skip
+            cols = [
+                np.mean(acc[1]),
+                np.mean(acc[10]),
+                np.mean(sure),
+                np.mean(h_acc),
+                np.mean(h_out),
+                np.mean(h_sf),
+                np.mean(h_ph),
+                np.mean(h_gate),
+                np.mean(h_gph),
+                np.mean(h_keep),
+            ]
             print(
                 f"{method:9s} {lname:7s} {fit_s * 1e3:6.0f}ms {pred_s * 1e3:7.1f}ms "
                 + " ".join(f"{v:9.1%}" for v in cols)

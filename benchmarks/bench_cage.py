@@ -94,8 +94,10 @@ def load() -> str:
 
 
 def accuracy(args, work: Path, template) -> None:
-    head = ("| capture | manifold | method | mean | median | worst frame | worst joint | s/frame "
-            "| " + " | ".join(STAGES) + " |")  # fmt: skip
+    head = (
+        "| capture | manifold | method | mean | median | worst frame | worst joint | s/frame "
+        "| " + " | ".join(STAGES) + " |"
+    )
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     notes = []
@@ -107,23 +109,31 @@ def accuracy(args, work: Path, template) -> None:
                 t0 = time.perf_counter()
                 r = run(label, method, opts, kind, template, capture, work)
                 st = " | ".join(f"{r['stages'][k]:.4f}" for k in STAGES)
-                print(f"| {clip} | {kind} | {label} | {r['mean']:.1f} | {r['median']:.1f} | "
-                      f"{r['worst_frame']:.1f} | {r['worst_joint']:.1f} | {r['s_frame']:.3f} | "
-                      f"{st} |", flush=True)  # fmt: skip
+                print(
+                    f"| {clip} | {kind} | {label} | {r['mean']:.1f} | {r['median']:.1f} | "
+                    f"{r['worst_frame']:.1f} | {r['worst_joint']:.1f} | {r['s_frame']:.3f} | "
+                    f"{st} |",
+                    flush=True,
+                )
                 args.log(f"  ({label}, {kind}, {clip}: {time.perf_counter() - t0:.0f} s, {load()})")
-        notes.append(f"{clip}: {len(capture)} frames, {r['scored']} scored (the others are not "
-                     "fully seen by the cameras)")  # fmt: skip
+        notes.append(
+            f"{clip}: {len(capture)} frames, {r['scored']} scored (the others are not "
+            "fully seen by the cameras)"
+        )
     print()
     for n in notes:
         print(n)
 
 
 def speed(args, work: Path) -> None:
-    print(f"speed: 60-frame procedural walk, cage (local adjustment), procedural manifold; "
-          f"3 runs each (min and max of their mean s/frame); {load()} on {os.cpu_count()} "
-          "cores")  # fmt: skip
-    head = ("| template | vertices | s/frame min | s/frame max | " + " | ".join(STAGES)
-            + " | mean mm |")  # fmt: skip
+    print(
+        f"speed: 60-frame procedural walk, cage (local adjustment), procedural manifold; "
+        f"3 runs each (min and max of their mean s/frame); {load()} on {os.cpu_count()} "
+        "cores"
+    )
+    head = (
+        "| template | vertices | s/frame min | s/frame max | " + " | ".join(STAGES) + " | mean mm |"
+    )
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     spec = parse_capture("walk", frames=60)
@@ -135,8 +145,11 @@ def speed(args, work: Path) -> None:
         best = min(runs, key=lambda r: r["s_frame"])
         st = " | ".join(f"{best['stages'][k]:.4f}" for k in STAGES)
         worst = max(r["s_frame"] for r in runs)
-        print(f"| {name} | {template.n_vertices} | {best['s_frame']:.3f} | {worst:.3f} | {st} "
-              f"| {best['mean']:.1f} |", flush=True)  # fmt: skip
+        print(
+            f"| {name} | {template.n_vertices} | {best['s_frame']:.3f} | {worst:.3f} | {st} "
+            f"| {best['mean']:.1f} |",
+            flush=True,
+        )
     print(f"(stages: of the fastest run; {load()} after)")
 
 
@@ -153,8 +166,10 @@ def main() -> None:
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     template = load_template("neutral_5k")
-    print(f"cage tracker benchmark: humaneva4 rig, 60 fps, template {template.name}, subject = "
-          f"template, first frame from ground truth; joint errors in mm; {load()}\n")  # fmt: skip
+    print(
+        f"cage tracker benchmark: humaneva4 rig, 60 fps, template {template.name}, subject = "
+        f"template, first frame from ground truth; joint errors in mm; {load()}\n"
+    )
     if not args.skip_speed:
         speed(args, work)
         print()

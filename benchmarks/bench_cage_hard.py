@@ -36,8 +36,16 @@ from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-CAPTURES = ("05_01", "09_01", "01_01", "49_18", "16_01",
-            "05_01+degraded", "09_01+degraded", "01_01+degraded")  # fmt: skip
+CAPTURES = (
+    "05_01",
+    "09_01",
+    "01_01",
+    "49_18",
+    "16_01",
+    "05_01+degraded",
+    "09_01+degraded",
+    "01_01+degraded",
+)
 HELD_OUT = ("05_03", "60_01", "61_01")
 
 
@@ -63,8 +71,10 @@ def main() -> None:
     os.environ.setdefault("MESHMOCAP_CACHE", str(work / "cache"))
     template = load_template("neutral_5k")
     names = list(args.captures) + (list(HELD_OUT) if args.held_out else [])
-    print("| capture | method | frames | mean | worst frame | worst joint | frames > 60 | "
-          "off manifold | s/frame | load |")  # fmt: skip
+    print(
+        "| capture | method | frames | mean | worst frame | worst joint | frames > 60 | "
+        "off manifold | s/frame | load |"
+    )
     print("|---|---|--:|--:|--:|--:|--:|--:|--:|--:|")
     for name in names:
         cap = capture_of(name, work, args.max_frames)
@@ -72,17 +82,19 @@ def main() -> None:
             tracker = make_tracker(method, template=template)
             out = work / "tracks" / name / method
             t0 = time.perf_counter()
-            track = track_sequence(tracker, template, cap, out, resume=False,
-                                   show_progress=False)  # fmt: skip
+            track = track_sequence(tracker, template, cap, out, resume=False, show_progress=False)
             wall = time.perf_counter() - t0
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
             pf = ev.joints.per_frame
             off = int(np.sum(np.asarray(track.energies.get("off_manifold", [0.0])) > 0))
             sec = np.mean(track.seconds[1:]) if len(track.seconds) > 1 else wall
-            print(f"| {name} | {method} | {len(pf)} | {ev.joints.overall.mean:.1f} | "
-                  f"{np.nanmax(pf):.1f} | {ev.joints.overall.max:.1f} | "
-                  f"{int(np.sum(pf > 60))} | {off} | {sec:.2f} | "
-                  f"{os.getloadavg()[0]:.1f} |", flush=True)  # fmt: skip
+            print(
+                f"| {name} | {method} | {len(pf)} | {ev.joints.overall.mean:.1f} | "
+                f"{np.nanmax(pf):.1f} | {ev.joints.overall.max:.1f} | "
+                f"{int(np.sum(pf > 60))} | {off} | {sec:.2f} | "
+                f"{os.getloadavg()[0]:.1f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -120,8 +120,9 @@ def placed_quads(oqr: OQR, full: Template, meshes: np.ndarray) -> tuple[np.ndarr
     return np.stack(c, axis=1), np.stack(R, axis=1)
 
 
-def cage_tracker(tmpl: Template, full: Template, capture, F: np.ndarray, positions: list[int],
-                 args, work):  # fmt: skip
+def cage_tracker(
+    tmpl: Template, full: Template, capture, F: np.ndarray, positions: list[int], args, work
+):
     """The cage tracker with a manifold of ``--poses`` automatically placed poses (cached in
     ``work``) and its OQR, or the reason why there is none (build_oqr fails)."""
     t0 = time.perf_counter()
@@ -148,10 +149,10 @@ def cage_tracker(tmpl: Template, full: Template, capture, F: np.ndarray, positio
             rms = np.array([f.rms for f in fits]) * 1000
             what = f"from skeleton fits (RMS {rms.mean():.1f} mm, worst {rms.max():.1f})"
         labels = np.array([f"crane:{k}" for k in pick])
-        poses = PoseSet(Y, labels, np.full(len(pick), "crane"), tmpl.name,
-                        (f"crane poses {args.poses_from}",))  # fmt: skip
-        pm = fit_pose_manifold(poses, tmpl, oqr=oqr, n_components=args.latent,
-                               n_samples=len(pick))  # fmt: skip
+        poses = PoseSet(
+            Y, labels, np.full(len(pick), "crane"), tmpl.name, (f"crane poses {args.poses_from}",)
+        )
+        pm = fit_pose_manifold(poses, tmpl, oqr=oqr, n_components=args.latent, n_samples=len(pick))
         pm.save(path)
         dt = time.perf_counter() - t0
         print(f"  cage manifold: {len(pick)} poses {what}, {args.latent}-D GPLVM, {dt:.0f} s")
@@ -173,10 +174,18 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--poses", type=int, default=16, help="fitted poses of the cage manifold")
     ap.add_argument("--latent", type=int, default=10, help="latent dimension of the manifold")
-    ap.add_argument("--cage-vertices", type=int, default=4000,
-                    help="vertices of the cage's decimated template (0: full)")  # fmt: skip
-    ap.add_argument("--poses-from", choices=("truth", "fit"), default="truth",
-                    help="training quads: from the true meshes or skeleton fits")  # fmt: skip
+    ap.add_argument(
+        "--cage-vertices",
+        type=int,
+        default=4000,
+        help="vertices of the cage's decimated template (0: full)",
+    )
+    ap.add_argument(
+        "--poses-from",
+        choices=("truth", "fit"),
+        default="truth",
+        help="training quads: from the true meshes or skeleton fits",
+    )
     ap.add_argument("--work", default="/tmp/meshmocap-crane")
     args = ap.parse_args()
     if not CRANE.is_file():
@@ -186,15 +195,24 @@ def main() -> None:
     N = min(max(args.frames, 2), 175)
     stamp = datetime.now().strftime("%Y-%m-%d %H:%M")
     t0 = time.perf_counter()
-    capture = synthesize_from_meshes(CRANE, work / "captures" / "crane-ring8", rig="ring8",
-                                     frames=range(175), up="y", show_progress=True)  # fmt: skip
+    capture = synthesize_from_meshes(
+        CRANE,
+        work / "captures" / "crane-ring8",
+        rig="ring8",
+        frames=range(175),
+        up="y",
+        show_progress=True,
+    )
     print(f"capture: {len(capture)} ring8 hulls ({time.perf_counter() - t0:.0f} s)")
     F = MeshSequence(CRANE, frames=[0], up="y")[0].F
     V0 = capture[0].truth.vertices.astype(np.float64)
     full = rigged(work / "crane_frame0.npz", V0, F, "crane_frame0", None)
     n_cage = args.cage_vertices or None
-    small = (rigged(work / f"crane_frame0_{n_cage}v.npz", V0, F, f"crane_frame0_{n_cage}v",
-                    n_cage) if n_cage else full)  # fmt: skip
+    small = (
+        rigged(work / f"crane_frame0_{n_cage}v.npz", V0, F, f"crane_frame0_{n_cage}v", n_cage)
+        if n_cage
+        else full
+    )
     positions = list(range(N))
     truth = np.stack([capture[k].truth.vertices for k in positions]).astype(np.float64)
     indices = [capture[k].index for k in positions]
@@ -214,17 +232,29 @@ def main() -> None:
         opts = hashlib.sha1(key.encode()).hexdigest()[:8]
         out = work / "tracks" / f"{m}-{N}f-{template_digest(tmpl)[:8]}-{opts}"
         track = track_sequence(tracker, tmpl, capture, out, frames=positions, show_progress=True)
-        V = track.vertices[:N] if m != "cage" or n_cage is None else full_resolution(
-            oqr, V0, out, indices)  # fmt: skip
+        V = (
+            track.vertices[:N]
+            if m != "cage" or n_cage is None
+            else full_resolution(oqr, V0, out, indices)
+        )
         e = correspondence_error(V, truth).errors  # (T, 10002) mm
         sec = track.seconds[1:N]
         off = [KDTree(T).query(X, k=1)[0].mean() for X, T in zip(V, truth, strict=True)]
-        stats = (e.mean(), np.median(e), np.percentile(e, 95), e.mean(axis=1).max(), e.max(),
-                 float(np.median(sec)), int((~track.healthy[:N]).sum()),
-                 1000 * float(np.mean(off)))  # fmt: skip
+        stats = (
+            e.mean(),
+            np.median(e),
+            np.percentile(e, 95),
+            e.mean(axis=1).max(),
+            e.max(),
+            float(np.median(sec)),
+            int((~track.healthy[:N]).sum()),
+            1000 * float(np.mean(off)),
+        )
         worst = int(np.argmax(e.mean(axis=1)))
-        print(f"  per-frame mean error: frame 0 {e[0].mean():.2f} mm, worst frame "
-              f"{indices[worst]} {e[worst].mean():.1f} mm")  # fmt: skip
+        print(
+            f"  per-frame mean error: frame 0 {e[0].mean():.2f} mm, worst frame "
+            f"{indices[worst]} {e[worst].mean():.1f} mm"
+        )
         np.save(out / "vertex_errors_mm.npy", e.astype(np.float32))
         rows.append((m, stats, ""))
         if m == "cage":  # the deformation model's floor: truth-placed quads on every frame
@@ -232,29 +262,43 @@ def main() -> None:
             cages = cage_vertices(oqr, *placed_quads(oqr, full, truth))
             floor = correspondence_error(np.stack([gd.deform(c) for c in cages]), truth).errors
             worst = floor.mean(axis=1).max()
-            notes.append(f"cage model floor (quads placed from the truth on every frame, same "
-                         f"cage and Green coordinates): mean {floor.mean():.1f} mm, median "
-                         f"{np.median(floor):.1f}, worst frame {worst:.1f}")  # fmt: skip
+            notes.append(
+                f"cage model floor (quads placed from the truth on every frame, same "
+                f"cage and Green coordinates): mean {floor.mean():.1f} mm, median "
+                f"{np.median(floor):.1f}, worst frame {worst:.1f}"
+            )
             print(f"  {notes[-1]}")
-    head = ("| method | template | mean mm | median mm | p95 mm | worst frame mm | max mm "
-            "| surface mm | s/frame | flagged |\n"
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")  # fmt: skip
-    lines = [f"crane, ring8 hulls at 1 cm, frames 0–{N - 1}, per-vertex error on the "
-             f"{full.n_vertices} true vertices, measured {stamp}", "", head]  # fmt: skip
+    head = (
+        "| method | template | mean mm | median mm | p95 mm | worst frame mm | max mm "
+        "| surface mm | s/frame | flagged |\n"
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"
+    )
+    lines = [
+        f"crane, ring8 hulls at 1 cm, frames 0–{N - 1}, per-vertex error on the "
+        f"{full.n_vertices} true vertices, measured {stamp}",
+        "",
+        head,
+    ]
     for m, s, why in rows:
         tv = (small if m == "cage" else full).n_vertices
         if s is None:
             lines.append(f"| {m} | {tv} v | n/a | | | | | | | |  \n  {m}: {why}")
         else:
-            lines.append(f"| {m} | {tv} v | {s[0]:.1f} | {s[1]:.1f} | {s[2]:.1f} | {s[3]:.1f} | "
-                         f"{s[4]:.0f} | {s[7]:.1f} | {s[5]:.2f} | {s[6]} |")  # fmt: skip
+            lines.append(
+                f"| {m} | {tv} v | {s[0]:.1f} | {s[1]:.1f} | {s[2]:.1f} | {s[3]:.1f} | "
+                f"{s[4]:.0f} | {s[7]:.1f} | {s[5]:.2f} | {s[6]} |"
+            )
     if "cage" in args.methods and n_cage:
-        lines.append(f"\ncage: template decimated to {small.n_vertices} v; error of the "
-                     f"{full.n_vertices} full-resolution vertices carried by the tracked cage "
-                     "through their Green coordinates in the rest cage")  # fmt: skip
-    lines.append("\nsurface mm: mean distance from each tracked vertex to the nearest true vertex "
-                 "(the part of the error off the true surface; the rest of the correspondence "
-                 "error is sliding along it)")  # fmt: skip
+        lines.append(
+            f"\ncage: template decimated to {small.n_vertices} v; error of the "
+            f"{full.n_vertices} full-resolution vertices carried by the tracked cage "
+            "through their Green coordinates in the rest cage"
+        )
+    lines.append(
+        "\nsurface mm: mean distance from each tracked vertex to the nearest true vertex "
+        "(the part of the error off the true surface; the rest of the correspondence "
+        "error is sliding along it)"
+    )
     lines += notes
     text = "\n".join(lines)
     print("\n" + text)

@@ -51,8 +51,10 @@ def main() -> None:
                 inside.append(np.mean(distance_grid(f.hull)(V) <= f.hull.voxel_size))
                 ratio.append(f.hull.volume / signed_volume(V, F))
         inside, ratio = np.array(inside), np.array(ratio)
-        print(f"{rig:<10} {100 * inside.mean():>18.2f}% {100 * inside.min():>11.2f}% "
-              f"{ratio.mean():>9.3f} ± {ratio.std():.3f} {dt:>8.2f}")  # fmt: skip
+        print(
+            f"{rig:<10} {100 * inside.mean():>18.2f}% {100 * inside.min():>11.2f}% "
+            f"{ratio.mean():>9.3f} ± {ratio.std():.3f} {dt:>8.2f}"
+        )
 
 
 if __name__ == "__main__":

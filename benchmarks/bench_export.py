@@ -60,8 +60,11 @@ def main() -> None:
         for method in METHODS:
             out = work / f"{name}-{method}"
             if not (out / "track.json").is_file():
-                tracker = make_tracker(method, template=template) if method == "cage" else (
-                    make_tracker(method))  # fmt: skip
+                tracker = (
+                    make_tracker(method, template=template)
+                    if method == "cage"
+                    else (make_tracker(method))
+                )
                 track_sequence(tracker, template, cap, out, show_progress=False)
             tr = read_track(out)
             files = work / "exports" / f"{name}-{method}"
@@ -72,9 +75,12 @@ def main() -> None:
             ve = np.linalg.norm(posed.V - tr.vertices, axis=2)
             je = np.linalg.norm(posed.eval_joints - tr.joints, axis=2)
             cells = [f"{res[f].seconds:.1f} / {res[f].size_bytes / 1e3:.0f}" for f in FORMATS]
-            print(f"| {label} | {method} | {len(tr.frames)} | {ve.mean() * 1e3:.2f} | "
-                  f"{ve.mean(axis=1).max() * 1e3:.2f} | {je.mean() * 1e3:.2f} | "
-                  f"{je.max() * 1e3:.1f} | " + " | ".join(cells) + " |", flush=True)  # fmt: skip
+            print(
+                f"| {label} | {method} | {len(tr.frames)} | {ve.mean() * 1e3:.2f} | "
+                f"{ve.mean(axis=1).max() * 1e3:.2f} | {je.mean() * 1e3:.2f} | "
+                f"{je.max() * 1e3:.1f} | " + " | ".join(cells) + " |",
+                flush=True,
+            )
     print(
         f"\nload average {' '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cores"
     )

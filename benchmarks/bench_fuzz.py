@@ -42,8 +42,12 @@ def _manifold(work: Path) -> Path:
 def _property(loader, work: Path, counts: Counter, slowest: list, defects: dict):
     """The fuzz property of ``loader``, counting outcomes instead of stopping at a defect."""
 
-    @settings(max_examples=EXAMPLES[0], deadline=None, database=None,
-              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @settings(
+        max_examples=EXAMPLES[0],
+        deadline=None,
+        database=None,
+        suppress_health_check=list(HealthCheck),
+    )
     @given(data=loader.strategy)
     def prop(data: bytes) -> None:
         t0 = time.perf_counter()
@@ -86,19 +90,33 @@ def main() -> int:
             t0 = time.perf_counter()
             seed(args.seed)(_property(loader, work, counts, slowest, defects))()
             n = sum(counts.values())
-            rows.append((loader.name, n, counts["ok"], counts["error"], counts["defect"],
-                         time.perf_counter() - t0, slowest[0]))  # fmt: skip
-            print(f"{loader.name:<20} {n:6d} examples: {counts['ok']:5d} read, "
-                  f"{counts['error']:5d} meshmocap errors, {counts['defect']:4d} defects "
-                  f"({rows[-1][5]:.0f} s, slowest {slowest[0]:.2f} s)", flush=True)  # fmt: skip
+            rows.append(
+                (
+                    loader.name,
+                    n,
+                    counts["ok"],
+                    counts["error"],
+                    counts["defect"],
+                    time.perf_counter() - t0,
+                    slowest[0],
+                )
+            )
+            print(
+                f"{loader.name:<20} {n:6d} examples: {counts['ok']:5d} read, "
+                f"{counts['error']:5d} meshmocap errors, {counts['defect']:4d} defects "
+                f"({rows[-1][5]:.0f} s, slowest {slowest[0]:.2f} s)",
+                flush=True,
+            )
         total = sum(r[1] for r in rows)
         print("\n| loader | examples | read | meshmocap error | defects | s | slowest s |")
         print("|---|---:|---:|---:|---:|---:|---:|")
         for r in rows:
             print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]:.0f} | {r[6]:.2f} |")
-        print(f"| **all** | **{total}** | {sum(r[2] for r in rows)} | "
-              f"{sum(r[3] for r in rows)} | {sum(r[4] for r in rows)} | "
-              f"{time.perf_counter() - t_all:.0f} | |")  # fmt: skip
+        print(
+            f"| **all** | **{total}** | {sum(r[2] for r in rows)} | "
+            f"{sum(r[3] for r in rows)} | {sum(r[4] for r in rows)} | "
+            f"{time.perf_counter() - t_all:.0f} | |"
+        )
         for name, found in defects.items():
             print(f"\n{name}:")
             for text, k in found.most_common():

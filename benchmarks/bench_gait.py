@@ -153,9 +153,11 @@ def main() -> None:
     manifold = None
     if any(m in MANIFOLD_METHODS for m in args.methods):
         manifold = bench_manifold(None, template, work)
-    head = ("| clip | what | frames | method | events matched | within 1 frame | mean offset "
-            "(frames) | max offset (frames) | cadence truth (steps/min) | cadence error % | "
-            "stride truth (m) | stride error % |")  # fmt: skip
+    head = (
+        "| clip | what | frames | method | events matched | within 1 frame | mean offset "
+        "(frames) | max offset (frames) | cadence truth (steps/min) | cadence error % | "
+        "stride truth (m) | stride error % |"
+    )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     print(head, flush=True)
     print(lines[1], flush=True)
@@ -172,12 +174,14 @@ def main() -> None:
                 continue
             source = str(path.resolve())
         start, stop = in_view_range(source, template, cameras, max_frames=args.max_frames)
-        spec = SynthSpec(motion=source, template=TEMPLATE, rig="humaneva4", fps=FPS,
-                         start=start, stop=stop)  # fmt: skip
+        spec = SynthSpec(
+            motion=source, template=TEMPLATE, rig="humaneva4", fps=FPS, start=start, stop=stop
+        )
         cap = synthesize(work / "captures" / f"{name}-{start}-{stop}", spec, show_progress=False)
         names = cap.meta["eval_names"]
-        truth = gait_analysis(np.stack([f.truth.joints for f in cap]), cap.fps, names,
-                              frames=np.asarray(cap.indices))  # fmt: skip
+        truth = gait_analysis(
+            np.stack([f.truth.joints for f in cap]), cap.fps, names, frames=np.asarray(cap.indices)
+        )
         ref = truth.summary()
         for method in args.methods:
             track = tracked(method, template, cap, work, manifold)
@@ -188,20 +192,26 @@ def main() -> None:
             t[:3] = t[0] + c.reference_events, t[1] + c.matched, t[2] + close
             t[3] = np.nanmax([t[3], abs(c.cadence_error_pct)])
             t[4] = np.nanmax([t[4], abs(c.stride_length_error_pct)])
-            row = (f"| {name} | {what} | {len(cap)} | {method} | {c.matched}/{c.reference_events}"
-                   f"{extra} | {close}/{c.matched} | {c.mean_offset:.2f} | {c.max_offset:.2f} | "
-                   f"{ref.cadence_steps_per_min:.1f} | {c.cadence_error_pct:+.2f} | "
-                   f"{ref.stride_length_m:.3f} | {c.stride_length_error_pct:+.2f} |")  # fmt: skip
+            row = (
+                f"| {name} | {what} | {len(cap)} | {method} | {c.matched}/{c.reference_events}"
+                f"{extra} | {close}/{c.matched} | {c.mean_offset:.2f} | {c.max_offset:.2f} | "
+                f"{ref.cadence_steps_per_min:.1f} | {c.cadence_error_pct:+.2f} | "
+                f"{ref.stride_length_m:.3f} | {c.stride_length_error_pct:+.2f} |"
+            )
             lines.append(row)
             print(row, flush=True)
     for m, (n, matched, close, cad, stride) in totals.items():
-        row = (f"| all | | | {m} | {matched}/{n} | {close}/{matched} | | | | ≤ {cad:.2f} | | "
-               f"≤ {stride:.2f} |")  # fmt: skip
+        row = (
+            f"| all | | | {m} | {matched}/{n} | {close}/{matched} | | | | ≤ {cad:.2f} | | "
+            f"≤ {stride:.2f} |"
+        )
         lines.append(row)
         print(row)
     load = os.getloadavg()
-    tail = (f"\n{time.perf_counter() - t0:.0f} s; load average {load[0]:.1f} {load[1]:.1f} "
-            f"{load[2]:.1f}; tracking code {track_digest()}")  # fmt: skip
+    tail = (
+        f"\n{time.perf_counter() - t0:.0f} s; load average {load[0]:.1f} {load[1]:.1f} "
+        f"{load[2]:.1f}; tracking code {track_digest()}"
+    )
     print(tail)
     (work / "results.md").write_text("\n".join(lines) + "\n" + tail + "\n")
 

@@ -40,8 +40,12 @@ def data(D: int = 126) -> tuple[np.ndarray, str]:
         Y = mat["Y"][:, 3:]
         jog = np.isin(np.array(TRIALS)[np.argmax(mat["lbls"], 1)], list(JOGS))
         w, j = np.flatnonzero(~jog), np.flatnonzero(jog)
-        rows = np.concatenate([w[np.linspace(0, len(w) - 1, 60).astype(int)],
-                               j[np.linspace(0, len(j) - 1, 60).astype(int)]])  # fmt: skip
+        rows = np.concatenate(
+            [
+                w[np.linspace(0, len(w) - 1, 60).astype(int)],
+                j[np.linspace(0, len(j) - 1, 60).astype(int)],
+            ]
+        )
         Y = np.tile(Y[rows], (1, -(-D // Y.shape[1])))[:, :D]
         return Y, f"cmu35WalkJog.mat, 60 walk + 60 jog frames, 59 channels tiled to {D}"
     rng = np.random.default_rng(0)
@@ -68,8 +72,20 @@ def per_call_us(model: GPLVM, repeat: int = 7, number: int = 2000) -> tuple[floa
 def main() -> None:
     Y, source = data()
     print(f"data: {Y.shape[0]} x {Y.shape[1]} ({source})")
-    head = ("q", "bc", "fit s", "cpu s", "iters", "conv", "log-lik", "alpha", "gamma", "beta",
-            "pwg us", "cpu us")  # fmt: skip
+    head = (
+        "q",
+        "bc",
+        "fit s",
+        "cpu s",
+        "iters",
+        "conv",
+        "log-lik",
+        "alpha",
+        "gamma",
+        "beta",
+        "pwg us",
+        "cpu us",
+    )
     widths = (3, 5, 6, 6, 6, 5, 9, 6, 7, 6, 7, 7)
     print(" ".join(f"{h:>{w}}" for h, w in zip(head, widths, strict=True)))
     for q in (2, 10):
@@ -78,9 +94,11 @@ def main() -> None:
             m = GPLVM(q, back_constraint=bc, random_state=0).fit(Y)
             fit_s, fit_cpu = time.perf_counter() - t0, time.process_time() - c0
             us, cpu_us = per_call_us(m)
-            print(f"{q:>3} {bc!s:>5} {fit_s:>6.2f} {fit_cpu:>6.2f} {m.n_iter_:>6} "
-                  f"{m.converged_!s:>5} {m.log_likelihood_:>9.1f} {m.alpha_:>6.3g} "
-                  f"{m.gamma_:>7.3g} {m.beta_:>6.3g} {us:>7.1f} {cpu_us:>7.1f}")  # fmt: skip
+            print(
+                f"{q:>3} {bc!s:>5} {fit_s:>6.2f} {fit_cpu:>6.2f} {m.n_iter_:>6} "
+                f"{m.converged_!s:>5} {m.log_likelihood_:>9.1f} {m.alpha_:>6.3g} "
+                f"{m.gamma_:>7.3g} {m.beta_:>6.3g} {us:>7.1f} {cpu_us:>7.1f}"
+            )
     print(
         "reference: GPy BC-GPLVM 4 s (q = 2), 30 s unconverged (q = 10); "
         "target predict_with_gradient <= 50 us"

@@ -32,16 +32,21 @@ def main() -> int:
     ap.add_argument("--work", default="hull-storage-work")
     args = ap.parse_args()
     work = Path(args.work)
-    new = synthesize(work / "new", SynthSpec(motion="walk", fps=30.0, stop=args.frames),
-                     show_progress=False)  # fmt: skip
+    new = synthesize(
+        work / "new", SynthSpec(motion="walk", fps=30.0, stop=args.frames), show_progress=False
+    )
     old = work / "old"
     shutil.rmtree(old, ignore_errors=True)
     shutil.copytree(new.path, old)
     for p in sorted((old / "hulls").glob("*.npz")):  # the layout written before
         hull = new[new.indices.index(int(p.stem))].hull
-        np.savez_compressed(p, bits=np.packbits(hull.occupancy.ravel()),
-                            shape=np.array(hull.occupancy.shape), origin=hull.origin,
-                            voxel_size=np.float64(hull.voxel_size))  # fmt: skip
+        np.savez_compressed(
+            p,
+            bits=np.packbits(hull.occupancy.ravel()),
+            shape=np.array(hull.occupancy.shape),
+            origin=hull.origin,
+            voxel_size=np.float64(hull.voxel_size),
+        )
         write_mesh(p.with_suffix(".ply"), *hull_mesh(hull))
     sizes = {}
     for name, root in (("old", old), ("new", new.path)):
@@ -53,8 +58,10 @@ def main() -> int:
         t0 = time.perf_counter()
         meshes = [cap[k].hull_mesh for k in range(len(cap))]
         reads[name] = ((time.perf_counter() - t0) / len(cap), meshes)
-    same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-               for a, b in zip(reads["old"][1], reads["new"][1], strict=True))  # fmt: skip
+    same = all(
+        np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+        for a, b in zip(reads["old"][1], reads["new"][1], strict=True)
+    )
     nv = np.mean([len(m[0]) for m in reads["new"][1]])
     print(f"{len(new)} frames, hull meshes of {nv:.0f} vertices on average; identical: {same}")
     print("| layout | hull disk per frame | read one hull mesh |")

@@ -81,12 +81,27 @@ def cases(args) -> list[dict]:
                 stop = start + 1 if args.first_only else n
                 roots = motion.root_positions[s0 + start : s0 + stop]
                 off = offset_for(roots, h, 1.0 if i % 2 == 0 else 0.5)
-                spec = SynthSpec(motion=str(DATA / "mocap" / "cmu" / file), template=TEMPLATE,
-                                 fps=60.0, start=s0 + start, stop=s0 + stop, heading=float(h),
-                                 offset=off)  # fmt: skip
+                spec = SynthSpec(
+                    motion=str(DATA / "mocap" / "cmu" / file),
+                    template=TEMPLATE,
+                    fps=60.0,
+                    start=s0 + start,
+                    stop=s0 + stop,
+                    heading=float(h),
+                    offset=off,
+                )
                 name = f"{clip}-h{h:g}-s{start}-n{stop - start}"
-                out.append(dict(clip=clip, heading=h, start=start, offset=off, spec=spec,
-                                name=name, n=stop - start))  # fmt: skip
+                out.append(
+                    dict(
+                        clip=clip,
+                        heading=h,
+                        start=start,
+                        offset=off,
+                        spec=spec,
+                        name=name,
+                        n=stop - start,
+                    )
+                )
     return out
 
 
@@ -99,8 +114,9 @@ def run_case(case: dict, work: str, method: str, first_only: bool) -> dict:
     res = dict(case, spec=None)
     for init in ("auto",) if first_only else ("auto", "truth"):
         out = work / "tracks" / case["name"] / f"{method}-{init}"
-        track = track_sequence(make_tracker(method), template, cap, out, init=init,
-                               show_progress=False)  # fmt: skip
+        track = track_sequence(
+            make_tracker(method), template, cap, out, init=init, show_progress=False
+        )
         ev = evaluate(track, cap, silhouettes=False, surface_frames=0)
         res[f"{init}_first"] = float(ev.joints.per_frame[0]) if ev.joints.per_frame.size else np.nan
         res[f"{init}_mean"] = ev.joints.overall.mean
@@ -127,8 +143,10 @@ def main() -> None:
     todo = cases(args)
     stamp = datetime.now().strftime("%Y-%m-%d %H:%M")
     load0 = os.getloadavg()[0]
-    print(f"{len(todo)} cases, {args.jobs} jobs, load average {load0:.1f} on {os.cpu_count()} "
-          f"cores", flush=True)  # fmt: skip
+    print(
+        f"{len(todo)} cases, {args.jobs} jobs, load average {load0:.1f} on {os.cpu_count()} cores",
+        flush=True,
+    )
     t0 = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -137,32 +155,52 @@ def main() -> None:
             r = f.result()
             rows.append(r)
             vs = "" if args.first_only else f" vs truth {r['truth_mean']:.1f}"
-            print(f"  {r['name']}: first {r['auto_first']:.1f} mm ({r['auto_label']}), mean "
-                  f"{r['auto_mean']:.1f}{vs}, {r['seconds']:.0f} s", flush=True)  # fmt: skip
+            print(
+                f"  {r['name']}: first {r['auto_first']:.1f} mm ({r['auto_label']}), mean "
+                f"{r['auto_mean']:.1f}{vs}, {r['seconds']:.0f} s",
+                flush=True,
+            )
     head = ["clip", "heading °", "start", "offset m", "first pose found", "first frame mm"]
     if not args.first_only:
         head += ["mean auto mm", "mean truth mm", "Δ mm", "lost auto/truth"]
-    lines = [f"Start acceptance ({args.method}, neutral_5k = performer, humaneva4, 60 fps; "
-             f"{'first frames only' if args.first_only else 'tracked to frame ' + str(args.frames)}"
-             f"), measured {stamp}, load average {load0:.1f}→{os.getloadavg()[0]:.1f} on "
-             f"{os.cpu_count()} cores, {time.perf_counter() - t0:.0f} s", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]  # fmt: skip
+    lines = [
+        f"Start acceptance ({args.method}, neutral_5k = performer, humaneva4, 60 fps; "
+        f"{'first frames only' if args.first_only else 'tracked to frame ' + str(args.frames)}"
+        f"), measured {stamp}, load average {load0:.1f}→{os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} cores, {time.perf_counter() - t0:.0f} s",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
     for r in rows:
-        cells = [r["clip"], f"{r['heading']:g}", str(r["start"]),
-                 f"{r['offset'][0]:+.2f},{r['offset'][1]:+.2f}",
-                 r["auto_label"].replace("auto: ", ""), f"{r['auto_first']:.1f}"]  # fmt: skip
+        cells = [
+            r["clip"],
+            f"{r['heading']:g}",
+            str(r["start"]),
+            f"{r['offset'][0]:+.2f},{r['offset'][1]:+.2f}",
+            r["auto_label"].replace("auto: ", ""),
+            f"{r['auto_first']:.1f}",
+        ]
         if not args.first_only:
-            cells += [f"{r['auto_mean']:.1f}", f"{r['truth_mean']:.1f}",
-                      f"{r['auto_mean'] - r['truth_mean']:+.1f}",
-                      f"{r['auto_lost']}/{r['truth_lost']}"]  # fmt: skip
+            cells += [
+                f"{r['auto_mean']:.1f}",
+                f"{r['truth_mean']:.1f}",
+                f"{r['auto_mean'] - r['truth_mean']:+.1f}",
+                f"{r['auto_lost']}/{r['truth_lost']}",
+            ]
         lines.append("| " + " | ".join(cells) + " |")
     first = np.array([r["auto_first"] for r in rows])
-    lines += ["", f"first frame: {np.sum(first <= 30)}/{len(first)} cases ≤ 30 mm; worst "
-              f"{first.max():.1f} mm, median {np.median(first):.1f}"]  # fmt: skip
+    lines += [
+        "",
+        f"first frame: {np.sum(first <= 30)}/{len(first)} cases ≤ 30 mm; worst "
+        f"{first.max():.1f} mm, median {np.median(first):.1f}",
+    ]
     if not args.first_only:
         d = np.array([r["auto_mean"] - r["truth_mean"] for r in rows])
-        lines.append(f"clip mean, auto − truth: {np.sum(np.abs(d) <= 2)}/{len(d)} cases within "
-                     f"2 mm; largest {d[np.argmax(np.abs(d))]:+.1f} mm")  # fmt: skip
+        lines.append(
+            f"clip mean, auto − truth: {np.sum(np.abs(d) <= 2)}/{len(d)} cases within "
+            f"2 mm; largest {d[np.argmax(np.abs(d))]:+.1f} mm"
+        )
     text = "\n".join(lines)
     print("\n" + text)
     work = Path(args.work)

@@ -68,22 +68,38 @@ def crane(args, work: Path) -> list[str]:
     """The real-meshes table (module docstring)."""
     n = min(args.crane_frames, 175)
     truth = np.stack([f.V for f in MeshSequence(CRANE, frames=range(n), up="y")])
-    rows = ["| method | status | mean mm | median mm | p95 mm | worst frame mm | flagged lost "
-            "| s/frame | the command's last line |",
-            "|---|--:|--:|--:|--:|--:|--:|--:|---|"]  # fmt: skip
+    rows = [
+        "| method | status | mean mm | median mm | p95 mm | worst frame mm | flagged lost "
+        "| s/frame | the command's last line |",
+        "|---|--:|--:|--:|--:|--:|--:|--:|---|",
+    ]
     for m in args.methods:
         out = work / "tracks" / f"crane-{m}-{n}"
-        status, last, _ = run(["track", str(CRANE), "--up", "y", "--method", m,
-                               "--frames", f"0:{n}", "--out", str(out)])  # fmt: skip
+        status, last, _ = run(
+            [
+                "track",
+                str(CRANE),
+                "--up",
+                "y",
+                "--method",
+                m,
+                "--frames",
+                f"0:{n}",
+                "--out",
+                str(out),
+            ]
+        )
         if status != 0:
             rows.append(f"| {m} | {status} | | | | | | | {last} |")
             continue
         tr = read_track(out)
         e = np.linalg.norm(tr.vertices - truth[: len(tr.frames)], axis=2) * 1000
         lost = sum("lost" in f for f in tr.flags)
-        rows.append(f"| {m} | 0 | {e.mean():.1f} | {np.median(e):.1f} | "
-                    f"{np.percentile(e, 95):.1f} | {e.mean(axis=1).max():.1f} | {lost} | "
-                    f"{np.median(tr.seconds[1:]):.2f} | {last[:90]}… |")  # fmt: skip
+        rows.append(
+            f"| {m} | 0 | {e.mean():.1f} | {np.median(e):.1f} | "
+            f"{np.percentile(e, 95):.1f} | {e.mean(axis=1).max():.1f} | {lost} | "
+            f"{np.median(tr.seconds[1:]):.2f} | {last[:90]}… |"
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -91,8 +107,12 @@ def crane(args, work: Path) -> list[str]:
 def inputs(args, work: Path) -> list[str]:
     """The inputs table (module docstring)."""
     t = load_template("neutral_5k")
-    spec = SynthSpec(motion=str(DATA / "mocap" / "cmu" / "05_01.amc"), template="neutral_5k",
-                     start=100, stop=100 + args.frames)  # fmt: skip
+    spec = SynthSpec(
+        motion=str(DATA / "mocap" / "cmu" / "05_01.amc"),
+        template="neutral_5k",
+        start=100,
+        stop=100 + args.frames,
+    )
     cap = synthesize(work / "walk", spec, show_progress=False)
     truth = np.stack([f.truth.joints for f in cap])
     forms = {}
@@ -111,8 +131,13 @@ def inputs(args, work: Path) -> list[str]:
         for name, normals in (("cloud", True), ("cloud_no_normals", False)):
             cols = [V, vertex_normals(V, t.F)] if normals else [V]
             props = [f"property float {c}" for c in ("x", "y", "z", "nx", "ny", "nz")]
-            head = ["ply", "format ascii 1.0", f"element vertex {len(V)}",
-                    *props[: 6 if normals else 3], "end_header"]  # fmt: skip
+            head = [
+                "ply",
+                "format ascii 1.0",
+                f"element vertex {len(V)}",
+                *props[: 6 if normals else 3],
+                "end_header",
+            ]
             body = "\n".join(" ".join(f"{x:.6f}" for x in row) for row in np.hstack(cols))
             (folder(name) / f"f{k:03d}.ply").write_text("\n".join(head) + "\n" + body + "\n")
     archive = work / "inputs" / "walk.tar.gz"
@@ -120,12 +145,20 @@ def inputs(args, work: Path) -> list[str]:
         with tarfile.open(archive, "w:gz") as tf:
             for p in sorted(folder("obj").glob("*.obj")):
                 tf.add(p, arcname=p.name)
-    forms = {"mesh folder": folder("obj"), "glob": f"{folder('obj')}/f0*.obj",
-             "archive": archive, "millimetres": folder("mm"), "Y up": folder("yup"),
-             "point cloud": folder("cloud"), "point cloud, no normals": folder("cloud_no_normals"),
-             "1000 km away": folder("far")}  # fmt: skip
-    rows = ["| input | method | status | mean joint mm | worst frame mm | the command's last "
-            "line |", "|---|---|--:|--:|--:|---|"]  # fmt: skip
+    forms = {
+        "mesh folder": folder("obj"),
+        "glob": f"{folder('obj')}/f0*.obj",
+        "archive": archive,
+        "millimetres": folder("mm"),
+        "Y up": folder("yup"),
+        "point cloud": folder("cloud"),
+        "point cloud, no normals": folder("cloud_no_normals"),
+        "1000 km away": folder("far"),
+    }
+    rows = [
+        "| input | method | status | mean joint mm | worst frame mm | the command's last line |",
+        "|---|---|--:|--:|--:|---|",
+    ]
     for name, src in forms.items():
         for m in args.methods:
             out = work / "tracks" / f"{name.replace(' ', '_').replace(',', '')}-{m}"
@@ -156,19 +189,30 @@ def main() -> None:
     text = []
     if not args.skip_crane:
         if CRANE.is_file():
-            text += ["## Real meshes: the MIT crane, clean meshes, per-vertex error", "",
-                     *crane(args, work), ""]  # fmt: skip
+            text += [
+                "## Real meshes: the MIT crane, clean meshes, per-vertex error",
+                "",
+                *crane(args, work),
+                "",
+            ]
         else:
             text += [f"crane skipped: {CRANE} is absent", ""]
     if not args.skip_inputs:
         if (DATA / "mocap" / "cmu" / "05_01.amc").is_file():
-            text += [f"## Inputs: CMU 05_01 frames 100–{100 + args.frames - 1} as files", "",
-                     *inputs(args, work)]  # fmt: skip
+            text += [
+                f"## Inputs: CMU 05_01 frames 100–{100 + args.frames - 1} as files",
+                "",
+                *inputs(args, work),
+            ]
         else:
             text += ["inputs skipped: the CMU clips are absent"]
-    text = [f"bench_inputs, measured {stamp}, load average {load0:.1f}→"
-            f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, "
-            f"{time.perf_counter() - t0:.0f} s", "", *text]  # fmt: skip
+    text = [
+        f"bench_inputs, measured {stamp}, load average {load0:.1f}→"
+        f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, "
+        f"{time.perf_counter() - t0:.0f} s",
+        "",
+        *text,
+    ]
     print("\n" + "\n".join(text))
     (work / "results.md").write_text("\n".join(text) + "\n")
 

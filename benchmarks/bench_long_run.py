@@ -58,8 +58,10 @@ def in_place_walk(out: Path) -> Capture:
     root[:, :2] = 0.0  # in place
     for f in range(motion.n_frames):
         synth_frame(out, subject, motion.rotations[f], root[f], cams, f, spec)
-    write_meta(out / "capture.json", {"fps": 30.0, "frames": list(range(motion.n_frames)),
-                                      "spec": {"in_place": "walk"}})  # fmt: skip
+    write_meta(
+        out / "capture.json",
+        {"fps": 30.0, "frames": list(range(motion.n_frames)), "spec": {"in_place": "walk"}},
+    )
     return Capture(out)
 
 
@@ -115,9 +117,11 @@ def main() -> int:
     base = in_place_walk(work / "capture")
     cap_bytes = du(work / "capture") / len(base)
     hull_bytes = du(work / "capture" / "hulls") / len(base)
-    print(f"capture: {len(base)} frames in place, {cap_bytes / 1e3:.0f} kB per frame "
-          f"({hull_bytes / 1e3:.0f} kB of it the hull), {time.perf_counter() - t0:.0f} s",
-          flush=True)  # fmt: skip
+    print(
+        f"capture: {len(base)} frames in place, {cap_bytes / 1e3:.0f} kB per frame "
+        f"({hull_bytes / 1e3:.0f} kB of it the hull), {time.perf_counter() - t0:.0f} s",
+        flush=True,
+    )
     template = load_template("neutral_5k")
     rows = []
     for name in args.trackers:
@@ -133,12 +137,28 @@ def main() -> int:
         r = np.array([m for _, m, _ in stream.rss])
         w = min(1000, max(1, n // 10))
         disk = du(out) / n
-        rows.append((name, n, dt / n, r[:w].mean(), r[:w].max(), r[-w:].mean(), r[-w:].max(),
-                     w, disk, int((~track.healthy).sum()), rss_start))  # fmt: skip
-        print(f"{name}: {n} frames in {dt:.0f} s ({dt / n:.3f} s/frame); RSS first {w}: "
-              f"mean {r[:w].mean():.0f} MB max {r[:w].max():.0f}; last {w}: mean "
-              f"{r[-w:].mean():.0f} MB max {r[-w:].max():.0f}; {disk / 1e3:.0f} kB/frame; "
-              f"{rows[-1][9]} unhealthy", flush=True)  # fmt: skip
+        rows.append(
+            (
+                name,
+                n,
+                dt / n,
+                r[:w].mean(),
+                r[:w].max(),
+                r[-w:].mean(),
+                r[-w:].max(),
+                w,
+                disk,
+                int((~track.healthy).sum()),
+                rss_start,
+            )
+        )
+        print(
+            f"{name}: {n} frames in {dt:.0f} s ({dt / n:.3f} s/frame); RSS first {w}: "
+            f"mean {r[:w].mean():.0f} MB max {r[:w].max():.0f}; last {w}: mean "
+            f"{r[-w:].mean():.0f} MB max {r[-w:].max():.0f}; {disk / 1e3:.0f} kB/frame; "
+            f"{rows[-1][9]} unhealthy",
+            flush=True,
+        )
         del track
     print(
         "\n| tracker | frames | s/frame | RSS first window mean / max (MB) | RSS last window "

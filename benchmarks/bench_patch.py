@@ -44,8 +44,10 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 def speed(out: Path, repeats: int) -> None:
     """Print the speed table (module docstring)."""
-    print(f"speed: 60-frame procedural walk, humaneva4, patch (defaults); fastest of {repeats} "
-          f"runs; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")  # fmt: skip
+    print(
+        f"speed: 60-frame procedural walk, humaneva4, patch (defaults); fastest of {repeats} "
+        f"runs; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
+    )
     head = "| template | vertices | s/frame min | s/frame max | " + " | ".join(STAGES)
     head += " | mean mm |"
     print(head)
@@ -57,17 +59,28 @@ def speed(out: Path, repeats: int) -> None:
         runs = []
         for r in range(repeats):
             tracker = PatchTracker(PatchOptions())
-            track = track_sequence(tracker, template, capture, out / "speed" / f"{name}-{r}",
-                                   resume=False, show_progress=False)  # fmt: skip
+            track = track_sequence(
+                tracker,
+                template,
+                capture,
+                out / "speed" / f"{name}-{r}",
+                resume=False,
+                show_progress=False,
+            )
             stages = {k: v / max(tracker.n_steps, 1) for k, v in tracker.stage_seconds.items()}
             runs.append((float(np.mean(track.seconds[1:])), stages, track))
         s_min, stages, track = min(runs, key=lambda r: r[0])
         ev = evaluate(track, capture, surface_frames=0, silhouettes=False)
         st = " | ".join(f"{stages[k]:.3f}" for k in STAGES)
-        print(f"| {name} | {template.n_vertices} | {s_min:.3f} | {max(r[0] for r in runs):.3f} "
-              f"| {st} | {ev.joints.overall.mean:.1f} |", flush=True)  # fmt: skip
-    print(f"(stages: seconds per frame of the fastest run; load average {os.getloadavg()[0]:.2f} "
-          "after)")  # fmt: skip
+        print(
+            f"| {name} | {template.n_vertices} | {s_min:.3f} | {max(r[0] for r in runs):.3f} "
+            f"| {st} | {ev.joints.overall.mean:.1f} |",
+            flush=True,
+        )
+    print(
+        f"(stages: seconds per frame of the fastest run; load average {os.getloadavg()[0]:.2f} "
+        "after)"
+    )
 
 
 def main() -> None:
@@ -86,15 +99,27 @@ def main() -> None:
     if args.speed:
         speed(Path(args.out), args.repeats)
         return
-    variants = [args.rig, *([args.subject] if args.subject else []),
-                *(["degraded"] if args.degrade else [])]  # fmt: skip
+    variants = [
+        args.rig,
+        *([args.subject] if args.subject else []),
+        *(["degraded"] if args.degrade else []),
+    ]
     captures = ["+".join([clip, *variants]) for clip in args.clips]
     res = run_bench(
-        args.out, captures=captures, methods=args.methods, data=DATA, max_frames=args.max_frames,
-        keep_fractions=(), template=args.template, show_progress=True, log=print,
-    )  # fmt: skip
-    print(f"\nsetting: {' '.join(variants)}, template {args.template}, 60 fps, "
-          "first frame from ground truth")  # fmt: skip
+        args.out,
+        captures=captures,
+        methods=args.methods,
+        data=DATA,
+        max_frames=args.max_frames,
+        keep_fractions=(),
+        template=args.template,
+        show_progress=True,
+        log=print,
+    )
+    print(
+        f"\nsetting: {' '.join(variants)}, template {args.template}, 60 fps, "
+        "first frame from ground truth"
+    )
     print(markdown_table(res.rows))
 
 

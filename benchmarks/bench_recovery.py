@@ -88,11 +88,18 @@ def score(track, cap, gap: tuple[int, int] | None, names) -> dict:
         whole = [k for k, i in enumerate(track.frames) if i >= gap[1]]
         ok = [k for k in whole if e[k].max() < 40]
         after = (int(track.frames[ok[0]]) - gap[1]) if ok else None
-    return dict(mean=float(e.mean()), worst=float(e.max()), n150=len(frames_over),
-                joints150=len(over), named=int(named), run100=longest_run(e.max(axis=1) > 100),
-                after=after, lost=sum("lost" in f for f in track.flags),
-                reinit=sum("reinit" in f for f in track.flags),
-                seconds=float(np.median(track.seconds[1:])))  # fmt: skip
+    return dict(
+        mean=float(e.mean()),
+        worst=float(e.max()),
+        n150=len(frames_over),
+        joints150=len(over),
+        named=int(named),
+        run100=longest_run(e.max(axis=1) > 100),
+        after=after,
+        lost=sum("lost" in f for f in track.flags),
+        reinit=sum("reinit" in f for f in track.flags),
+        seconds=float(np.median(track.seconds[1:])),
+    )
 
 
 def main() -> None:
@@ -116,10 +123,19 @@ def main() -> None:
         file, s0, joint, gap = CAPTURES[name]
         deg = Degradation()
         if joint is not None:
-            deg = Degradation(missed_limb=True, missed_limb_joint=joint,
-                              missed_limb_frames=(s0 + gap[0], s0 + gap[1]))  # fmt: skip
-        spec = SynthSpec(motion=str(DATA / "mocap" / "cmu" / file), template=TEMPLATE, fps=60.0,
-                         start=s0, stop=s0 + args.frames, degradation=deg)  # fmt: skip
+            deg = Degradation(
+                missed_limb=True,
+                missed_limb_joint=joint,
+                missed_limb_frames=(s0 + gap[0], s0 + gap[1]),
+            )
+        spec = SynthSpec(
+            motion=str(DATA / "mocap" / "cmu" / file),
+            template=TEMPLATE,
+            fps=60.0,
+            start=s0,
+            stop=s0 + args.frames,
+            degradation=deg,
+        )
         print(f"{name}: capture", flush=True)
         cap = synthesize(work / "captures" / f"{name}-{args.frames}", spec, show_progress=True)
         gap_abs = None if gap is None else (s0 + gap[0], s0 + gap[1])
@@ -135,28 +151,48 @@ def main() -> None:
                 tracker = (
                     make_tracker(m, template=template) if m.startswith("cage") else make_tracker(m)
                 )
-                track = track_sequence(tracker, template, cap, out, init="truth",
-                                       recover=recover, reseat=recover,
-                                       show_progress=True)  # fmt: skip
+                track = track_sequence(
+                    tracker,
+                    template,
+                    cap,
+                    out,
+                    init="truth",
+                    recover=recover,
+                    reseat=recover,
+                    show_progress=True,
+                )
                 r = score(track, cap, gap_abs, names)
                 rows.append((name, m, recover, len(track.frames), r))
-                print(f"    mean {r['mean']:.1f} mm, >150: {r['named']}/{r['joints150']} named, "
-                      f"longest >100 run {r['run100']}, after gap {r['after']}",
-                      flush=True)  # fmt: skip
-    head = ("| capture | method | recovery | frames | mean mm | worst mm | frames >150 | "
-            ">150 joint-frames flagged with the limb | longest >100 run | back <40 mm after "
-            "gap | lost | reinit | s/frame |")  # fmt: skip
-    lines = [f"Recovery acceptance (neutral_5k = performer, humaneva4, 60 fps, first pose from "
-             f"truth), measured {stamp}, load average {load0:.1f}→{os.getloadavg()[0]:.1f} on "
-             f"{os.cpu_count()} cores, {time.perf_counter() - t0:.0f} s", "", head,
-             "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]  # fmt: skip
+                print(
+                    f"    mean {r['mean']:.1f} mm, >150: {r['named']}/{r['joints150']} named, "
+                    f"longest >100 run {r['run100']}, after gap {r['after']}",
+                    flush=True,
+                )
+    head = (
+        "| capture | method | recovery | frames | mean mm | worst mm | frames >150 | "
+        ">150 joint-frames flagged with the limb | longest >100 run | back <40 mm after "
+        "gap | lost | reinit | s/frame |"
+    )
+    lines = [
+        f"Recovery acceptance (neutral_5k = performer, humaneva4, 60 fps, first pose from "
+        f"truth), measured {stamp}, load average {load0:.1f}→{os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} cores, {time.perf_counter() - t0:.0f} s",
+        "",
+        head,
+        "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+    ]
     for name, m, rec, n, r in rows:
-        after = "" if CAPTURES[name][3] is None else ("never" if r["after"] is None else
-                                                     f"{r['after']} frames")  # fmt: skip
-        lines.append(f"| {name} | {m} | {'on' if rec else 'off'} | {n} | {r['mean']:.1f} | "
-                     f"{r['worst']:.0f} | {r['n150']} | {r['named']}/{r['joints150']} | "
-                     f"{r['run100']} | {after} | {r['lost']} | {r['reinit']} | "
-                     f"{r['seconds']:.2f} |")  # fmt: skip
+        after = (
+            ""
+            if CAPTURES[name][3] is None
+            else ("never" if r["after"] is None else f"{r['after']} frames")
+        )
+        lines.append(
+            f"| {name} | {m} | {'on' if rec else 'off'} | {n} | {r['mean']:.1f} | "
+            f"{r['worst']:.0f} | {r['n150']} | {r['named']}/{r['joints150']} | "
+            f"{r['run100']} | {after} | {r['lost']} | {r['reinit']} | "
+            f"{r['seconds']:.2f} |"
+        )
     text = "\n".join(lines)
     print("\n" + text)
     work.mkdir(parents=True, exist_ok=True)

@@ -67,8 +67,10 @@ def subjects() -> list[tuple[str, np.ndarray, np.ndarray]]:
 def main() -> None:
     cams = camera_rig("humaneva4")
     print(f"humaneva4, {cams[0].width}×{cams[0].height}, best of {REPEAT} (ms per view)")
-    print(f"{'subject':18s} {'faces':>6s} {'camera':>6s} {'pixels':>7s} "
-          f"{'exact':>7s} {'closed':>7s} {'coverage':>9s}  same")  # fmt: skip
+    print(
+        f"{'subject':18s} {'faces':>6s} {'camera':>6s} {'pixels':>7s} "
+        f"{'exact':>7s} {'closed':>7s} {'coverage':>9s}  same"
+    )
     worst = 0.0
     for name, V, F in subjects():
         for cam in cams:

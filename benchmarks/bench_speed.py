@@ -82,8 +82,10 @@ def stages_table(args, work: Path) -> None:
     for name in args.templates:
         template = load_template(name)
         capture = make_capture(spec, work, template=name, show_progress=False)
-        print(f"\n### {name} ({template.n_vertices} vertices), {args.frames}-frame walk, "
-              f"humaneva4 hulls; {args.repeats} runs; {_load()}")  # fmt: skip
+        print(
+            f"\n### {name} ({template.n_vertices} vertices), {args.frames}-frame walk, "
+            f"humaneva4 hulls; {args.repeats} runs; {_load()}"
+        )
         for method in args.methods:
             runs = [stage_run(method, template, capture, args.frames) for _ in range(args.repeats)]
             meds = [float(np.median(r[0])) for r in runs]
@@ -91,10 +93,13 @@ def stages_table(args, work: Path) -> None:
             wall, cpu, read, st, err = runs[i]
             names = importlib.import_module(f"meshmocap.trackers.{MODULES[method]}").STAGES
             parts = " ".join(f"{k} {1000 * st[k]:.1f}" for k in names)
-            print(f"- **{method}**: {1000 * np.median(wall):.0f} ms/frame wall "
-                  f"(runs {1000 * min(meds):.0f}–{1000 * max(meds):.0f}), "
-                  f"{1000 * np.median(cpu):.0f} ms CPU; read {1000 * np.median(read):.1f} ms, "
-                  f"step stages (ms): {parts}; joint error {err:.1f} mm", flush=True)  # fmt: skip
+            print(
+                f"- **{method}**: {1000 * np.median(wall):.0f} ms/frame wall "
+                f"(runs {1000 * min(meds):.0f}–{1000 * max(meds):.0f}), "
+                f"{1000 * np.median(cpu):.0f} ms CPU; read {1000 * np.median(read):.1f} ms, "
+                f"step stages (ms): {parts}; joint error {err:.1f} mm",
+                flush=True,
+            )
     print(f"(after: {_load()})")
 
 
@@ -125,8 +130,15 @@ def crane_table(args, work: Path) -> None:
     rows = []
     for method in [m for m in args.methods if m != "cage"]:  # cage needs a crane manifold
         out = work / "tracks" / f"crane-{method}"
-        track = track_sequence(make_tracker(method), template, capture, out, frames=positions,
-                               resume=False, show_progress=False)  # fmt: skip
+        track = track_sequence(
+            make_tracker(method),
+            template,
+            capture,
+            out,
+            frames=positions,
+            resume=False,
+            show_progress=False,
+        )
         e = correspondence_error(track.vertices[1:], truth).errors  # (20, n) mm
         rows.append((method, e, float(np.median(track.seconds[1:]))))
         print(f"  {method}: {e.mean():.1f} mm, {rows[-1][2]:.3f} s/frame", flush=True)
@@ -134,15 +146,21 @@ def crane_table(args, work: Path) -> None:
     V, sec = nricp(template, capture, picked)
     e_n = correspondence_error(V, truth[:: args.nricp_every]).errors
     s_n = float(np.median(sec))
-    print(f"\n### crane, ring8 hulls, template frame 0 rigged ({template.n_vertices} v), "
-          f"frames 2–40 every 2nd; nricp on {len(picked)} of them; {_load()}")  # fmt: skip
-    print("| method | mean mm | median mm | p95 mm | mean mm, nricp's frames | s/frame "
-          "| nricp s / method s |\n|---|---:|---:|---:|---:|---:|---:|")  # fmt: skip
+    print(
+        f"\n### crane, ring8 hulls, template frame 0 rigged ({template.n_vertices} v), "
+        f"frames 2–40 every 2nd; nricp on {len(picked)} of them; {_load()}"
+    )
+    print(
+        "| method | mean mm | median mm | p95 mm | mean mm, nricp's frames | s/frame "
+        "| nricp s / method s |\n|---|---:|---:|---:|---:|---:|---:|"
+    )
     print(f"| trimesh nricp_amberg | | | | {e_n.mean():.1f} | {s_n:.2f} | 1 |")
     for method, e, s in rows:
         sub = e[:: args.nricp_every].mean()
-        print(f"| {method} | {e.mean():.1f} | {np.median(e):.1f} | {np.percentile(e, 95):.1f} "
-              f"| {sub:.1f} | {s:.3f} | {s_n / s:.0f}× |")  # fmt: skip
+        print(
+            f"| {method} | {e.mean():.1f} | {np.median(e):.1f} | {np.percentile(e, 95):.1f} "
+            f"| {sub:.1f} | {s:.3f} | {s_n / s:.0f}× |"
+        )
 
 
 def main() -> None:

@@ -50,9 +50,11 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared/data"
 #: Clip → (file, first frame at 60 fps). 09_01 (a run) is 75 frames long: its first 4 blend
 #: out of a T-pose (as in ``meshmocap bench``) and the runner leaves the cameras' view
 #: after frame 64, so it is cut to 4:60.
-CLIPS = {"05_01": ("mocap/cmu/05_01.amc", None, None),
-         "09_01": ("mocap/cmu/09_01.bvh", 4, 60),
-         "01_01": ("mocap/cmu/01_01.amc", None, None)}  # fmt: skip
+CLIPS = {
+    "05_01": ("mocap/cmu/05_01.amc", None, None),
+    "09_01": ("mocap/cmu/09_01.bvh", 4, 60),
+    "01_01": ("mocap/cmu/01_01.amc", None, None),
+}
 CRANE = DATA / "meshes/crane/crane_mesh_0000-0174.tar.gz"
 
 
@@ -72,33 +74,49 @@ def subject_row(clip: str, subject: str, args) -> dict:
     file, start, last = CLIPS[clip]
     stop = min(last or args.frames, args.frames + (start or 0))
     name = f"{clip}-{subject}-{stop}" if start is None else f"{clip}-{subject}-{start}-{stop}"
-    spec = SynthSpec(motion=str(DATA / file), template="neutral", subject=subject,
-                     rig="humaneva4", fps=60.0, start=start, stop=stop)  # fmt: skip
+    spec = SynthSpec(
+        motion=str(DATA / file),
+        template="neutral",
+        subject=subject,
+        rig="humaneva4",
+        fps=60.0,
+        start=start,
+        stop=stop,
+    )
     cap = synthesize(work / "captures" / name, spec, show_progress=False)
     true = load_template(subject)
     path = work / "subjects" / f"{name}-{args.n_frames}-{args.iterations}.npz"
     fit_path = path.with_suffix(".fit.npz")
     if not fit_path.is_file():  # estimated once, kept with the fit's first pose
         t0 = time.perf_counter()
-        est = estimate_subject(cap, n_frames=args.n_frames, iterations=args.iterations,
-                               name=f"subject-{name}")  # fmt: skip
+        est = estimate_subject(
+            cap, n_frames=args.n_frames, iterations=args.iterations, name=f"subject-{name}"
+        )
         path.parent.mkdir(parents=True, exist_ok=True)
         save_template(path, est.template)
-        np.savez(fit_path, R=est.R[0], root=est.root[0], frames=np.array(est.frames),
-                 seconds=time.perf_counter() - t0)  # fmt: skip
+        np.savez(
+            fit_path,
+            R=est.R[0],
+            root=est.root[0],
+            frames=np.array(est.frames),
+            seconds=time.perf_counter() - t0,
+        )
     t = load_template(path)
     with np.load(fit_path) as z:
         fit = {k: z[k] for k in z.files}
     secs, frames = float(fit["seconds"]), tuple(int(i) for i in fit["frames"])
     height = float(np.ptp(t.V[:, 2]))
     f0 = cap[0].truth
-    row = dict(clip=clip, subject=subject, seconds=secs, frames=frames,
-               height_mm=1000 * (height - float(np.ptp(true.V[:, 2]))),
-               surface_mm=_surface_mm(t.pose(f0.rotations, f0.root).V, t.F, f0.vertices,
-                                      true.F))  # fmt: skip
+    row = dict(
+        clip=clip,
+        subject=subject,
+        seconds=secs,
+        frames=frames,
+        height_mm=1000 * (height - float(np.ptp(true.V[:, 2]))),
+        surface_mm=_surface_mm(t.pose(f0.rotations, f0.root).V, t.F, f0.vertices, true.F),
+    )
     fk = cap[cap.indices.index(frames[0])].truth
-    row["fit_surface_mm"] = _surface_mm(t.pose(fit["R"], fit["root"]).V, t.F, fk.vertices,
-                                        true.F)  # fmt: skip
+    row["fit_surface_mm"] = _surface_mm(t.pose(fit["R"], fit["root"]).V, t.F, fk.vertices, true.F)
     for label, tmpl in (("est", t), ("neutral", "neutral"), ("true", subject)):
         if label not in args.compare and (label != "est" or args.no_track):
             row[label] = (np.nan, np.nan)
@@ -111,8 +129,13 @@ def subject_row(clip: str, subject: str, args) -> dict:
 def crane_row(args) -> dict:
     """The crane's body estimated from its silhouettes (humaneva4), against its true mesh."""
     work = Path(args.work)
-    cap = synthesize_from_meshes(CRANE, work / "captures" / "crane-humaneva4", rig="humaneva4",
-                                 frames=range(0, 60, 2), show_progress=False)  # fmt: skip
+    cap = synthesize_from_meshes(
+        CRANE,
+        work / "captures" / "crane-humaneva4",
+        rig="humaneva4",
+        frames=range(0, 60, 2),
+        show_progress=False,
+    )
     t0 = time.perf_counter()
     est = estimate_subject(cap, n_frames=args.n_frames, iterations=args.iterations)
     secs = time.perf_counter() - t0
@@ -123,9 +146,14 @@ def crane_row(args) -> dict:
         from meshmocap.io.meshes import MeshSequence
 
         F_true = MeshSequence(CRANE, frames=range(1), up="y")[0].F
-    return dict(seconds=secs, frames=est.frames, height=est.height,
-                fit_surface_mm=_surface_mm(t.pose(est.R[0], est.root[0]).V, t.F,
-                                           cap[k].truth.vertices, F_true))  # fmt: skip
+    return dict(
+        seconds=secs,
+        frames=est.frames,
+        height=est.height,
+        fit_surface_mm=_surface_mm(
+            t.pose(est.R[0], est.root[0]).V, t.F, cap[k].truth.vertices, F_true
+        ),
+    )
 
 
 def main() -> None:
@@ -145,10 +173,21 @@ def main() -> None:
         return
     args.compare = args.compare.split(",")
     print(f"load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    print(f"protocol: humaneva4, 60 fps, frames 0:{args.frames}, patch tracker, first frame from "
-          "ground truth; errors in mm")  # fmt: skip
-    head = ("clip", "subject", "height err", "surface", "fit surface", "est s",
-            "est mean/worst", "neutral mean/worst", "true mean/worst")  # fmt: skip
+    print(
+        f"protocol: humaneva4, 60 fps, frames 0:{args.frames}, patch tracker, first frame from "
+        "ground truth; errors in mm"
+    )
+    head = (
+        "clip",
+        "subject",
+        "height err",
+        "surface",
+        "fit surface",
+        "est s",
+        "est mean/worst",
+        "neutral mean/worst",
+        "true mean/worst",
+    )
     print("| " + " | ".join(head) + " |")
     print("|---|---|" + "--:|" * (len(head) - 2))
     rows = []
@@ -156,25 +195,35 @@ def main() -> None:
         for subject in args.subjects.split(","):
             r = subject_row(clip, subject, args)
             rows.append(r)
-            cells = [clip, subject, f"{r['height_mm']:+.1f}", f"{r['surface_mm']:.1f}",
-                     f"{r['fit_surface_mm']:.1f}", f"{r['seconds']:.0f}"]  # fmt: skip
+            cells = [
+                clip,
+                subject,
+                f"{r['height_mm']:+.1f}",
+                f"{r['surface_mm']:.1f}",
+                f"{r['fit_surface_mm']:.1f}",
+                f"{r['seconds']:.0f}",
+            ]
             cells += [f"{r[k][0]:.1f} / {r[k][1]:.1f}" for k in ("est", "neutral", "true")]
             print("| " + " | ".join(cells) + " |", flush=True)
     ok_h = all(abs(r["height_mm"]) <= 10 for r in rows)
     ok_s = all(r["surface_mm"] <= 10 for r in rows)
     tracked = [r for r in rows if not np.isnan(r["est"][0])]
     ok_t = all(r["est"][0] <= 15 and r["est"][1] <= 60 for r in tracked) if tracked else "not run"
-    print(f"acceptance: height within 10 mm: {ok_h}; surface ≤ 10 mm: {ok_s}; "
-          f"patch mean ≤ 15 mm and no frame over 60 mm: {ok_t}")  # fmt: skip
+    print(
+        f"acceptance: height within 10 mm: {ok_h}; surface ≤ 10 mm: {ok_s}; "
+        f"patch mean ≤ 15 mm and no frame over 60 mm: {ok_t}"
+    )
     if args.crane:
         if not CRANE.is_file():
             print(f"crane: skipped, {CRANE} is absent")
         else:
             c = crane_row(args)
-            print(f"crane (real person, not an anny body; humaneva4 hulls, frames 0:60:2): "
-                  f"estimated in {c['seconds']:.0f} s from frames {c['frames']}, height "
-                  f"{c['height']:.3f} m, surface distance at frame {c['frames'][0]} with the "
-                  f"fit's pose {c['fit_surface_mm']:.1f} mm")  # fmt: skip
+            print(
+                f"crane (real person, not an anny body; humaneva4 hulls, frames 0:60:2): "
+                f"estimated in {c['seconds']:.0f} s from frames {c['frames']}, height "
+                f"{c['height']:.3f} m, surface distance at frame {c['frames'][0]} with the "
+                f"fit's pose {c['fit_surface_mm']:.1f} mm"
+            )
     print(f"load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 

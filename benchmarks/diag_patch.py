@@ -55,9 +55,16 @@ def capture_of(args):
     # a file whose header misstates its rate (16_01: 30 for 120 fps) is resampled so that
     # its true motion plays at 60 fps
     fps = 60.0 * (args.header_fps / args.source_fps if args.source_fps else 1.0)
-    spec = SynthSpec(motion=motion, template=args.template, rig=args.rig, fps=fps,
-                     start=args.start, stop=args.stop, step=args.step,
-                     degradation=DEGRADED if args.degrade else Degradation())  # fmt: skip
+    spec = SynthSpec(
+        motion=motion,
+        template=args.template,
+        rig=args.rig,
+        fps=fps,
+        start=args.start,
+        stop=args.stop,
+        step=args.step,
+        degradation=DEGRADED if args.degrade else Degradation(),
+    )
     name = f"{Path(args.motion).stem}-{args.rig}-{args.start}-{args.stop}-{args.step}"
     name += "-deg" if args.degrade else ""
     return synthesize(Path(args.work) / name, spec, show_progress=True)
@@ -101,8 +108,9 @@ def baseline(args, cap, t) -> None:
 
     n = len(cap) if args.frames is None else min(len(cap), args.frames)
     out = Path(args.out).with_suffix("")
-    track = track_sequence(make_tracker(args.method), t, cap, out, frames=range(n),
-                           resume=False, show_progress=False)  # fmt: skip
+    track = track_sequence(
+        make_tracker(args.method), t, cap, out, frames=range(n), resume=False, show_progress=False
+    )
     true = np.stack([cap[i].truth.joints for i in range(n)])
     e = np.linalg.norm(track.joints - true, axis=2) * 1000
     for i in range(1, n):
@@ -180,25 +188,33 @@ def main() -> None:
         cands = np.flatnonzero((m.bone_j == jw) | (m.bone_child == jw))
         V_out = res.vertices
         row = {
-            "frame": fr.index, "mean_mm": e.mean(), "worst_mm": e.max(),
-            "worst_joint": names[jw], "skel_mean_mm": e_skel.mean(), "n_iter": res.n_iter,
+            "frame": fr.index,
+            "mean_mm": e.mean(),
+            "worst_mm": e.max(),
+            "worst_joint": names[jw],
+            "skel_mean_mm": e_skel.mean(),
+            "n_iter": res.n_iter,
             "sigma_mm": 1000 * res.energies.get("sigma", np.nan),
-            "n_obs": len(Y0), "n_kept": int(kept.sum()),
+            "n_obs": len(Y0),
+            "n_kept": int(kept.sum()),
             "kept_phantom": float((~on[kept]).mean()) if kept.any() else np.nan,
             "true_dropped": float((~kept[on]).mean()) if on.any() else np.nan,
             "label_acc": float(lab_ok[kept & on].mean()) if (kept & on).any() else np.nan,
             "w_phantom": float(w[dy >= args.phantom].sum() / wsum),
             "w_wrong_part": float(w[wrong].sum() / wsum),
             "surface_mm": 1000 * float(np.mean(np.linalg.norm(V_out - Vt, axis=1))),
-        }  # fmt: skip
+        }
         o = tr.opts
         en = res.energies
-        row.update({
-            "E_data": o.lambda_data * en["data"], "E_rev": o.lambda_reverse * en["reverse"],
-            "E_rig": o.lambda_rigid * RIGIDITY_SCALE * en["rigidity"],
-            "E_bone": o.lambda_bone * BONE_SCALE * en["bone"],
-            "E_len": o.lambda_length * en["length"],
-        })  # fmt: skip
+        row.update(
+            {
+                "E_data": o.lambda_data * en["data"],
+                "E_rev": o.lambda_reverse * en["reverse"],
+                "E_rig": o.lambda_rigid * RIGIDITY_SCALE * en["rigidity"],
+                "E_bone": o.lambda_bone * BONE_SCALE * en["bone"],
+                "E_len": o.lambda_length * en["length"],
+            }
+        )
         if len(cands):
             part_patches = cands
             pv = np.isin(m.labels, part_patches)
@@ -214,8 +230,12 @@ def main() -> None:
             row["part_w_wrong"] = float(w[sel & wrong].sum() / ws)
         rows.append(row)
         if e.mean() > args.report or i % 25 == 0:
-            print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
-                           for k, v in row.items()), flush=True)  # fmt: skip
+            print(
+                " ".join(
+                    f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()
+                ),
+                flush=True,
+            )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     keys = list(dict.fromkeys(k for r in rows for k in r))
@@ -224,8 +244,10 @@ def main() -> None:
         wr.writeheader()
         wr.writerows(rows)
     E = np.array([r["mean_mm"] for r in rows])
-    print(f"{len(rows)} frames: mean {E.mean():.1f} mm, worst frame {E.max():.1f} mm; "
-          f"classes {[names[j] for j in cls_joint]}; wrote {out}")  # fmt: skip
+    print(
+        f"{len(rows)} frames: mean {E.mean():.1f} mm, worst frame {E.max():.1f} mm; "
+        f"classes {[names[j] for j in cls_joint]}; wrote {out}"
+    )
 
 
 if __name__ == "__main__":

@@ -85,10 +85,16 @@ def capture_of(name: str, work: Path, template: str):
     hits += sorted((DATA / "mocap" / "cmu" / "library").glob(f"{clip}.*"))
     motion = str(next(h for h in hits if h.suffix in (".amc", ".bvh")))
     fps = 60.0 * (30.0 / SOURCE_FPS[clip] if clip in SOURCE_FPS else 1.0)
-    spec = SynthSpec(motion=motion, template=template,
-                     rig="ring8" if "ring8" in flags else "humaneva4", fps=fps,
-                     start=rng[0], stop=rng[1], step=rng[2],
-                     degradation=DEGRADED if "deg" in flags else Degradation())  # fmt: skip
+    spec = SynthSpec(
+        motion=motion,
+        template=template,
+        rig="ring8" if "ring8" in flags else "humaneva4",
+        fps=fps,
+        start=rng[0],
+        stop=rng[1],
+        step=rng[2],
+        degradation=DEGRADED if "deg" in flags else Degradation(),
+    )
     folder = name.replace(":", "-").replace("+", "_")
     return synthesize(work / folder, spec, show_progress=False)
 
@@ -109,8 +115,19 @@ def main() -> None:
     with out.open("a", newline="") as fh:
         wr = csv.writer(fh)
         if new:
-            wr.writerow(["capture", "variant", "frames", "mean_mm", "worst_frame_mm",
-                         "worst_joint_mm", "frames_over_60", "s_per_frame", "load"])  # fmt: skip
+            wr.writerow(
+                [
+                    "capture",
+                    "variant",
+                    "frames",
+                    "mean_mm",
+                    "worst_frame_mm",
+                    "worst_joint_mm",
+                    "frames_over_60",
+                    "s_per_frame",
+                    "load",
+                ]
+            )
         for name in args.captures:
             cap = capture_of(name, work, args.template)
             n = len(cap) if args.frames is None else min(args.frames, len(cap))
@@ -120,24 +137,41 @@ def main() -> None:
             true[hidden] = np.nan
             for v in args.variants:
                 vname, _, rest = v.partition(":")
-                opts = {k: ast.literal_eval(x) for k, x in
-                        (s.split("=", 1) for s in rest.split(",") if s)}  # fmt: skip
+                opts = {
+                    k: ast.literal_eval(x)
+                    for k, x in (s.split("=", 1) for s in rest.split(",") if s)
+                }
                 if vname == "icp":
                     tracker = make_tracker("articulated_icp")
                 else:
                     tracker = PatchTracker(PatchOptions(**opts))
                 t0 = time.perf_counter()
-                track = track_sequence(tracker, t, cap, work / "tracks" / f"{name}-{v}",
-                                       frames=range(n), resume=False, show_progress=False,
-                                       vertices=False)  # fmt: skip
+                track = track_sequence(
+                    tracker,
+                    t,
+                    cap,
+                    work / "tracks" / f"{name}-{v}",
+                    frames=range(n),
+                    resume=False,
+                    show_progress=False,
+                    vertices=False,
+                )
                 sec = (time.perf_counter() - t0) / max(n - 1, 1)
                 e = np.linalg.norm(track.joints - true, axis=2)[1:] * 1000
                 seen = np.isfinite(true[1:, 0, 0])
                 e = e[seen]
                 ef = np.nan_to_num(e, nan=1e4).mean(axis=1)
-                row = [name, v, len(e), f"{np.nanmean(e):.1f}", f"{ef.max():.1f}",
-                       f"{np.nanmax(e):.0f}", int((ef > 60).sum()), f"{sec:.2f}",
-                       f"{os.getloadavg()[0]:.1f}"]  # fmt: skip
+                row = [
+                    name,
+                    v,
+                    len(e),
+                    f"{np.nanmean(e):.1f}",
+                    f"{ef.max():.1f}",
+                    f"{np.nanmax(e):.0f}",
+                    int((ef > 60).sum()),
+                    f"{sec:.2f}",
+                    f"{os.getloadavg()[0]:.1f}",
+                ]
                 wr.writerow(row)
                 fh.flush()
                 print(" ".join(map(str, row)), flush=True)

@@ -292,18 +292,33 @@ def test_files_not_found(tmp_path: Path, asf: AsfSkeleton) -> None:
 # ----------------------------------------------------------------------------- real CMU files
 #: ASF bone → joint of the MotionBuilder-friendly CMU BVH (the left side; right likewise).
 LEFT = {
-    "lhipjoint": "LHipJoint", "lfemur": "LeftUpLeg", "ltibia": "LeftLeg", "lfoot": "LeftFoot",
-    "ltoes": "LeftToeBase", "lclavicle": "LeftShoulder", "lhumerus": "LeftArm",
-    "lradius": "LeftForeArm", "lwrist": "LeftHand", "lhand": "LeftFingerBase",
-    "lfingers": "LFingers", "lthumb": "LThumb",
-}  # fmt: skip
+    "lhipjoint": "LHipJoint",
+    "lfemur": "LeftUpLeg",
+    "ltibia": "LeftLeg",
+    "lfoot": "LeftFoot",
+    "ltoes": "LeftToeBase",
+    "lclavicle": "LeftShoulder",
+    "lhumerus": "LeftArm",
+    "lradius": "LeftForeArm",
+    "lwrist": "LeftHand",
+    "lhand": "LeftFingerBase",
+    "lfingers": "LFingers",
+    "lthumb": "LThumb",
+}
 BONE_TO_BVH = {
-    "root": "Hips", "lowerback": "LowerBack", "upperback": "Spine", "thorax": "Spine1",
-    "lowerneck": "Neck", "upperneck": "Neck1", "head": "Head",
+    "root": "Hips",
+    "lowerback": "LowerBack",
+    "upperback": "Spine",
+    "thorax": "Spine1",
+    "lowerneck": "Neck",
+    "upperneck": "Neck1",
+    "head": "Head",
     **LEFT,
-    **{"r" + k[1:]: v.replace("Left", "Right") if v.startswith("Left") else "R" + v[1:]
-       for k, v in LEFT.items()},
-}  # fmt: skip
+    **{
+        "r" + k[1:]: v.replace("Left", "Right") if v.startswith("Left") else "R" + v[1:]
+        for k, v in LEFT.items()
+    },
+}
 
 
 @pytest.fixture(scope="module")

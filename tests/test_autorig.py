@@ -116,8 +116,9 @@ def test_bad_meshes_are_refused_in_one_line():
 
 def test_rig_mesh_decimates_after_the_fit(subject, rigged):
     t, V, _, _ = subject
-    small = rig_mesh(V, t.F, reference="neutral", name="walker", n_yaws=6, iterations=30,
-                     decimate=2000)  # fmt: skip
+    small = rig_mesh(
+        V, t.F, reference="neutral", name="walker", n_yaws=6, iterations=30, decimate=2000
+    )
     assert small.n_vertices == 2000 and template_problems(small) == []
     # the skeleton is fitted to the full mesh: the same as without decimation
     np.testing.assert_array_equal(small.skeleton.rest_positions, rigged.skeleton.rest_positions)
@@ -172,9 +173,15 @@ def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
 
     if not (shared_data / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz").is_file():
         pytest.skip("crane archive not available")
-    res = run_bench(tmp_path / "out", captures=["crane+humaneva4"], data=shared_data,
-                    methods=["articulated_icp", "cage"], max_frames=2, keep_fractions=(),
-                    show_progress=False)  # fmt: skip
+    res = run_bench(
+        tmp_path / "out",
+        captures=["crane+humaneva4"],
+        data=shared_data,
+        methods=["articulated_icp", "cage"],
+        max_frames=2,
+        keep_fractions=(),
+        show_progress=False,
+    )
     icp, cage = res.rows
     # two frames cannot make a pose manifold (a GPLVM needs q + 2 poses): said, not raised
     assert cage.status == "n/a" and "at least 3 frames" in cage.note

@@ -33,8 +33,11 @@ MOTIONS = {"walk": 5, "jog": 5, "squat": 10}
 def captures(tmp_path_factory):
     root = tmp_path_factory.mktemp("captures")
     for motion, n in MOTIONS.items():
-        synthesize(root / motion, SynthSpec(motion=motion, template="neutral_5k", stop=n),
-                   show_progress=False)  # fmt: skip
+        synthesize(
+            root / motion,
+            SynthSpec(motion=motion, template="neutral_5k", stop=n),
+            show_progress=False,
+        )
     return root
 
 
@@ -44,8 +47,13 @@ def alone(captures, tmp_path_factory):
     root = tmp_path_factory.mktemp("alone")
     template = load_template("neutral_5k")
     for motion in MOTIONS:
-        track_sequence(make_tracker(METHOD, template=template), template,
-                       Capture(captures / motion), root / motion, show_progress=False)  # fmt: skip
+        track_sequence(
+            make_tracker(METHOD, template=template),
+            template,
+            Capture(captures / motion),
+            root / motion,
+            show_progress=False,
+        )
     return root
 
 
@@ -99,13 +107,15 @@ def test_dask_results_are_bit_identical_to_tracking_alone(captures, alone, clust
     assert before == {m: (tmp_path / "b" / m / "result.json").stat().st_mtime_ns for m in MOTIONS}
 
 
-def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, cluster,
-                                                              tmp_path):  # fmt: skip
+def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, cluster, tmp_path):
     items = batch_items([str(captures / "squat")], method=METHOD)
     out = tmp_path / "b"
     done = {}
-    thread = threading.Thread(target=lambda: done.setdefault(
-        "res", run_batch(items, out, client=cluster, show_progress=False)))  # fmt: skip
+    thread = threading.Thread(
+        target=lambda: done.setdefault(
+            "res", run_batch(items, out, client=cluster, show_progress=False)
+        )
+    )
     thread.start()
     frames = out / "squat" / "track"
     deadline = time.monotonic() + 120
@@ -124,8 +134,7 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, c
     _same_frames(frames, alone / "squat")
 
 
-def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, cluster,
-                                                                   tmp_path):  # fmt: skip
+def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, cluster, tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "capture.json").write_text("{not json")
@@ -156,8 +165,10 @@ def test_without_dask_it_runs_serially_and_says_how_to_get_the_cluster(
 def test_items_from_folders_globs_lists_and_manifests(captures, tmp_path):
     (tmp_path / "list.txt").write_text(f"# my session\n{captures / 'walk'}\n\n{captures}/j*\n")
     items = batch_items([str(tmp_path / "list.txt")], method="patch", frames="0:3")
-    assert [(i.name, i.method, i.frames) for i in items] == [("walk", "patch", "0:3"),
-                                                             ("jog", "patch", "0:3")]  # fmt: skip
+    assert [(i.name, i.method, i.frames) for i in items] == [
+        ("walk", "patch", "0:3"),
+        ("jog", "patch", "0:3"),
+    ]
     (tmp_path / "m.csv").write_text(
         "capture,method,template,frames\n"
         f"{captures / 'walk'},cage,,\n{captures / 'walk'},,neutral,1:4\nsquat,,,\n"
@@ -196,8 +207,15 @@ def test_manifest_without_capture_column_is_refused(tmp_path):
 
 
 def test_batch_command_in_process(captures, tmp_path, capsys):
-    argv = ["batch", str(captures / "walk"), "--method", METHOD, "--out", str(tmp_path / "b"),
-            "--serial"]  # fmt: skip
+    argv = [
+        "batch",
+        str(captures / "walk"),
+        "--method",
+        METHOD,
+        "--out",
+        str(tmp_path / "b"),
+        "--serial",
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "batch: 1 of 1 captures tracked one after another" in out
@@ -208,6 +226,7 @@ def test_batch_command_in_process(captures, tmp_path, capsys):
     assert "is a batch folder; give no track folders" in capsys.readouterr().err
     assert main(["batch", str(tmp_path / "none"), "--out", str(tmp_path / "c")]) == 2
     assert "meshmocap: error: batch:" in capsys.readouterr().err
-    assert main(["batch", str(captures / "walk"), "--out", str(tmp_path / "d"),
-                 "--workers", "0"]) == 2  # fmt: skip
+    assert (
+        main(["batch", str(captures / "walk"), "--out", str(tmp_path / "d"), "--workers", "0"]) == 2
+    )
     assert "--workers must be an integer ≥ 1, found 0" in capsys.readouterr().err

@@ -20,8 +20,14 @@ PATCH = {"n_patches": 60, "max_iter": 3}
 
 
 def _bench(out, work, **kw):
-    kw = {"captures": ["walk"], "methods": ["articulated_icp", "patch"], "max_frames": FRAMES,
-          "keep_fractions": (0.25, 1.0), "method_options": {"patch": PATCH}, **kw}  # fmt: skip
+    kw = {
+        "captures": ["walk"],
+        "methods": ["articulated_icp", "patch"],
+        "max_frames": FRAMES,
+        "keep_fractions": (0.25, 1.0),
+        "method_options": {"patch": PATCH},
+        **kw,
+    }
     return run_bench(out, work=work, show_progress=False, **kw)
 
 
@@ -45,8 +51,15 @@ def test_writes_table_markdown_and_plots(bench):
         ("walk", "articulated_icp"),
         ("walk", "patch"),
     ]
-    numeric = ["mean_mm", "median_mm", "std_mm", "worst_frame_mm", "silhouette_error_ratio",
-               "bone_std_max_mm", "seconds_per_frame_s"]  # fmt: skip
+    numeric = [
+        "mean_mm",
+        "median_mm",
+        "std_mm",
+        "worst_frame_mm",
+        "silhouette_error_ratio",
+        "bone_std_max_mm",
+        "seconds_per_frame_s",
+    ]
     for r in rows:
         assert r["status"] == "ok" and r["metric"] == "joints" and int(r["frames"]) == FRAMES
         assert all(math.isfinite(float(r[k])) and float(r[k]) >= 0 for k in numeric)
@@ -76,8 +89,12 @@ def test_settings_beside_the_results_say_how_to_reproduce_them(bench):
     assert settings["methods"] == ["articulated_icp", "patch"]
     assert settings["method_options"] == {"patch": PATCH}
     assert settings["template"] == "neutral_5k" and len(settings["template_digest"]) == 16
-    assert set(settings["tracks"]) == {"walk/articulated_icp", "walk/patch",
-                                       "walk/patch[keep=0.25]", "walk/patch[keep=1]"}  # fmt: skip
+    assert set(settings["tracks"]) == {
+        "walk/articulated_icp",
+        "walk/patch",
+        "walk/patch[keep=0.25]",
+        "walk/patch[keep=1]",
+    }
     assert all(str(root / "work" / "tracks") in t for t in settings["tracks"].values())
     assert settings["versions"]["numpy"] == np.__version__
     assert settings["machine"]["cores"] >= 1 and len(settings["code_digest"]) == 8
@@ -119,9 +136,21 @@ def test_changed_tracking_code_tracks_afresh(bench, tmp_path, monkeypatch):
 
 def test_cli_prints_the_table_and_reuses_the_work_folder(bench, tmp_path, capsys):
     _, root = bench
-    argv = ["bench", "--captures", "walk", "--methods", "articulated_icp", "--max-frames",
-            str(FRAMES), "--keep-fractions", "none", "--work", str(root / "work"),
-            "--out", str(tmp_path)]  # fmt: skip
+    argv = [
+        "bench",
+        "--captures",
+        "walk",
+        "--methods",
+        "articulated_icp",
+        "--max-frames",
+        str(FRAMES),
+        "--keep-fractions",
+        "none",
+        "--work",
+        str(root / "work"),
+        "--out",
+        str(tmp_path),
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert f"| walk | articulated_icp | {FRAMES} |" in text and "0 tracked by this run" in text

@@ -264,8 +264,7 @@ def test_svc_with_two_points_in_a_class():
 
 def test_params():
     clf = BodyPartClassifier("logistic", C=3.0, max_train=50, random_state=4)
-    assert clf.get_params() == {"method": "logistic", "C": 3.0, "max_train": 50,
-                                "random_state": 4}  # fmt: skip
+    assert clf.get_params() == {"method": "logistic", "C": 3.0, "max_train": 50, "random_state": 4}
     assert clf.set_params(C=5.0) is clf and clf.C == 5.0
     assert "logistic" in repr(clf)
     assert BodyPartClassifier().method == "svc"

@@ -18,8 +18,9 @@ def test_surface_sample_follows_the_area():
     idx = surface_sample(t.V, t.F, 800, seed=0)
     assert len(idx) == 800 and np.all(np.diff(idx) > 0)  # sorted, no repeats
     assert np.array_equal(idx, surface_sample(t.V, t.F, 800, seed=0))  # seeded
-    A = 0.5 * np.linalg.norm(np.cross(t.V[t.F[:, 1]] - t.V[t.F[:, 0]],
-                                      t.V[t.F[:, 2]] - t.V[t.F[:, 0]]), axis=1)  # fmt: skip
+    A = 0.5 * np.linalg.norm(
+        np.cross(t.V[t.F[:, 1]] - t.V[t.F[:, 0]], t.V[t.F[:, 2]] - t.V[t.F[:, 0]]), axis=1
+    )
     area = np.bincount(t.F.ravel(), np.repeat(A, 3), minlength=t.n_vertices) / 3
     head = np.asarray(t.weights.argmax(axis=1)).ravel() == t.skeleton.index("Head")
     share = head[idx].mean()

@@ -147,11 +147,13 @@ def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setu
     assert manifold_digest(other) != digest
     opts = CageOptions(local_iters=0, alternations=1)
     frames = [0, 1]
-    track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", frames=frames,
-                   show_progress=False)  # fmt: skip
+    track_sequence(
+        CageTracker(gp, opts), t, cap, tmp_path / "tr", frames=frames, show_progress=False
+    )
     with pytest.raises(FormatError, match="other settings") as info:
-        track_sequence(CageTracker(other, opts), t, cap, tmp_path / "tr", frames=frames,
-                       show_progress=False)  # fmt: skip
+        track_sequence(
+            CageTracker(other, opts), t, cap, tmp_path / "tr", frames=frames, show_progress=False
+        )
     assert "\n" not in str(info.value)
     with pytest.raises(InputError, match="manifold_digest: gp must be a fitted GPLVM"):
         manifold_digest(GPLVM(2))
@@ -163,18 +165,31 @@ def test_a_manifold_of_other_motions_is_noticed_and_not_pulled_back_to(setup, tm
     (energy ``off_manifold``) and tracked without its pull; with ``off_manifold=0`` never,
     nor with a manifold of the walk's own generator."""
     t, gp, cap = setup
-    own = track_sequence(CageTracker(gp, CageOptions(local_iters=1, alternations=1)), t, cap,
-                         tmp_path / "c", frames=range(4), show_progress=False)  # fmt: skip
+    own = track_sequence(
+        CageTracker(gp, CageOptions(local_iters=1, alternations=1)),
+        t,
+        cap,
+        tmp_path / "c",
+        frames=range(4),
+        show_progress=False,
+    )
     assert not np.any(own.energies["off_manifold"] > 0)
     lib = library_poses(t, 400)
     dance = lib.configurations[lib.groups == "modern dance"][:60]
     other = GPLVM(2, back_constraint="rbf", max_iter=100, random_state=0).fit(dance)
     frames = range(4)
     opts = dict(local_iters=1, alternations=1)
-    off = track_sequence(CageTracker(other, CageOptions(**opts)), t, cap, tmp_path / "a",
-                         frames=frames, show_progress=False).energies["off_manifold"]  # fmt: skip
+    off = track_sequence(
+        CageTracker(other, CageOptions(**opts)),
+        t,
+        cap,
+        tmp_path / "a",
+        frames=frames,
+        show_progress=False,
+    ).energies["off_manifold"]
     assert np.sum(off[1:] > 0) >= 2
     never = CageTracker(other, CageOptions(off_manifold=0.0, **opts))
-    off = track_sequence(never, t, cap, tmp_path / "b", frames=frames,
-                         show_progress=False).energies["off_manifold"]  # fmt: skip
+    off = track_sequence(
+        never, t, cap, tmp_path / "b", frames=frames, show_progress=False
+    ).energies["off_manifold"]
     assert not np.any(off[1:] > 0)

@@ -283,10 +283,14 @@ def test_in_view_needs_every_camera():
     K = intrinsics(640, 480, 55.0)
     front = Camera(K, *look_at([0.0, -3.0, 1.0], [0.0, 0.0, 1.0]), 640, 480, None, "front")
     back = Camera(K, *look_at([0.0, 3.0, 1.0], [0.0, 0.0, 1.0]), 640, 480, None, "back")
-    X = np.array([[0.0, 0.0, 1.0],  # centre: both see it
-                  [1.4, 0.0, 1.0],  # inside both images (1.4 < 1.56)
-                  [1.7, 0.0, 1.0],  # outside both images
-                  [0.0, -3.5, 1.0]])  # behind the front camera, seen by the back one  # fmt: skip
+    X = np.array(
+        [
+            [0.0, 0.0, 1.0],  # centre: both see it
+            [1.4, 0.0, 1.0],  # inside both images (1.4 < 1.56)
+            [1.7, 0.0, 1.0],  # outside both images
+            [0.0, -3.5, 1.0],
+        ]
+    )  # behind the front camera, seen by the back one
     np.testing.assert_array_equal(in_view(X, [front]), [True, True, False, False])
     np.testing.assert_array_equal(in_view(X, [back]), [True, True, False, True])
     np.testing.assert_array_equal(in_view(X, [front, back]), [True, True, False, False])

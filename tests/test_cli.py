@@ -35,8 +35,22 @@ def test_retarget_a_cmu_clip(cmu, tmp_path):
 
 
 def test_render_rest_pose_and_clip(tmp_path):
-    assert main(["render", "--template", "neutral_5k", "--out", str(tmp_path / "rest"),
-                 "--width", "60", "--height", "80"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "render",
+                "--template",
+                "neutral_5k",
+                "--out",
+                str(tmp_path / "rest"),
+                "--width",
+                "60",
+                "--height",
+                "80",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "rest" / "frame_00000.png").is_file()
     args = ["render", "squat", "--template", "neutral_5k", "--fps", "10", "--frames", "0:12:3"]
     assert main([*args, "--out", str(tmp_path / "sq"), "--width", "60", "--height", "80"]) == 0
@@ -65,11 +79,14 @@ def test_demo_runs_on_bundled_defaults(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
-         "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n", "bad.bvh"),
+        (
+            "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
+            "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n",
+            "bad.bvh",
+        ),
         ("", "bad.bvh"),
     ],
-)  # fmt: skip
+)
 def test_user_mistakes_give_one_line_and_status_2(tmp_path, capsys, text, message):
     bad = tmp_path / "bad.bvh"
     bad.write_text(text)

@@ -69,8 +69,16 @@ def test_learn_from_the_cmu35_walk_jog_mat(cmu, tmp_path, capsys):
 def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys):
     _, t, manifold, cap = setup
     track_dir = tmp_path / "track"
-    args = ["track", str(cap.path), "--method", "cage_nolocal", "--manifold", str(manifold),
-            "--init", "truth"]  # fmt: skip
+    args = [
+        "track",
+        str(cap.path),
+        "--method",
+        "cage_nolocal",
+        "--manifold",
+        str(manifold),
+        "--init",
+        "truth",
+    ]
     assert main([*args, "--out", str(track_dir)]) == 0
     assert "tracked 3 frames with cage_nolocal" in capsys.readouterr().out
     track = read_track(track_dir)
@@ -80,8 +88,10 @@ def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys)
     cages = read_cage_track(track_dir).cages
     oqr = build_oqr(t)
     expected = GreenDeformer(oqr.rest_vertices, oqr.faces, t.V).deform(cages[2])
-    assert main(["transfer", str(track_dir), str(tmp_path / "me.obj"),
-                 "--out", str(tmp_path / "me")]) == 0  # fmt: skip
+    assert (
+        main(["transfer", str(track_dir), str(tmp_path / "me.obj"), "--out", str(tmp_path / "me")])
+        == 0
+    )
     captured = capsys.readouterr()
     assert "3 written, 0 already there; 0 vertices outside" in captured.out
     assert captured.err == ""
@@ -104,18 +114,36 @@ def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys)
 def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
     _, _, manifold, cap = setup
     cases = [
-        (["track", str(cap.path), "--method", "cage", "--manifold", str(manifold),
-          "--template", "heavy_male", "--out", str(tmp_path / "t")],
-         "manifold was built for template 'neutral_5k'"),
-        (["track", str(cap.path), "--manifold", str(manifold), "--out", str(tmp_path / "t")],
-         "a manifold is only used by"),
+        (
+            [
+                "track",
+                str(cap.path),
+                "--method",
+                "cage",
+                "--manifold",
+                str(manifold),
+                "--template",
+                "heavy_male",
+                "--out",
+                str(tmp_path / "t"),
+            ],
+            "manifold was built for template 'neutral_5k'",
+        ),
+        (
+            ["track", str(cap.path), "--manifold", str(manifold), "--out", str(tmp_path / "t")],
+            "a manifold is only used by",
+        ),
         (["learn", "walkk", "--out", str(tmp_path / "m.npz")], "expected one of"),
-        (["learn", "walk", "--samples", "0", "--out", str(tmp_path / "m.npz")],
-         "argument --samples: expected an integer from 3 to 100000, found '0'"),
+        (
+            ["learn", "walk", "--samples", "0", "--out", str(tmp_path / "m.npz")],
+            "argument --samples: expected an integer from 3 to 100000, found '0'",
+        ),
         (["learn", "walk", "--out", str(tmp_path / "no" / "m.npz")], "in an existing folder"),
-        (["transfer", str(tmp_path / "none"), "heavy_male", "--out", str(tmp_path / "x")],
-         "has no track.json"),
-    ]  # fmt: skip
+        (
+            ["transfer", str(tmp_path / "none"), "heavy_male", "--out", str(tmp_path / "x")],
+            "has no track.json",
+        ),
+    ]
     for args, message in cases:
         assert main(args) == 2
         err = capsys.readouterr().err.strip()
@@ -134,8 +162,16 @@ def test_cage_tracks_a_folder_of_meshes_in_millimetres(setup, tmp_path, capsys):
         write_mesh(folder / f"f{f.index:03d}.obj", f.truth.vertices * 1000, t.F)
     out = tmp_path / "t"
     # the manifold's body (the default would estimate one)
-    args = ["track", str(folder), "--method", "cage_nolocal", "--manifold", str(manifold),
-            "--template", "neutral_5k"]  # fmt: skip
+    args = [
+        "track",
+        str(folder),
+        "--method",
+        "cage_nolocal",
+        "--manifold",
+        str(manifold),
+        "--template",
+        "neutral_5k",
+    ]
     assert main([*args, "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "Z up, mm, a body 1.7" in text and "tracked 3 frames with cage_nolocal" in text

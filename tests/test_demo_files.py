@@ -10,8 +10,11 @@ from meshmocap.studio.synth import SynthSpec, synthesize
 
 
 def test_hull_meshes_are_rebuilt_from_the_voxels(tmp_path):
-    cap = synthesize(tmp_path / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=2),
-                     show_progress=False)  # fmt: skip
+    cap = synthesize(
+        tmp_path / "cap",
+        SynthSpec(motion="walk", template="neutral_5k", stop=2),
+        show_progress=False,
+    )
     before = [cap[k].hull_mesh for k in range(2)]
     size = sum(p.stat().st_size for p in (cap.path / "hulls").iterdir())
     assert drop_hull_meshes(cap.path) == 2
@@ -31,8 +34,16 @@ def test_resume_state_is_dropped_but_the_last(tmp_path):
     rng = np.random.default_rng(0)
     for i in range(4):
         state = {"R": rng.normal(size=(50, 3, 3)), "c": rng.normal(size=(50, 3))}
-        write_frame(tmp_path, FrameResult(i, rng.normal(size=(1, 3)), rng.normal(size=(9, 3)),
-                                          energies={"data": 1.0 + i}, state=state))  # fmt: skip
+        write_frame(
+            tmp_path,
+            FrameResult(
+                i,
+                rng.normal(size=(1, 3)),
+                rng.normal(size=(9, 3)),
+                energies={"data": 1.0 + i},
+                state=state,
+            ),
+        )
     before = read_track(tmp_path)
     assert drop_resume_state(tmp_path) == 3
     after = read_track(tmp_path)

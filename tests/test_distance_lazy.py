@@ -71,8 +71,14 @@ def test_inner_boundary_is_the_six_neighbour_definition(shape):
         occ = _blobs(2)
     pad = np.pad(occ, 1)
     c = pad[1:-1, 1:-1, 1:-1]
-    full = (pad[:-2, 1:-1, 1:-1] & pad[2:, 1:-1, 1:-1] & pad[1:-1, :-2, 1:-1]
-            & pad[1:-1, 2:, 1:-1] & pad[1:-1, 1:-1, :-2] & pad[1:-1, 1:-1, 2:])  # fmt: skip
+    full = (
+        pad[:-2, 1:-1, 1:-1]
+        & pad[2:, 1:-1, 1:-1]
+        & pad[1:-1, :-2, 1:-1]
+        & pad[1:-1, 2:, 1:-1]
+        & pad[1:-1, 1:-1, :-2]
+        & pad[1:-1, 1:-1, 2:]
+    )
     assert np.array_equal(_inner_boundary(occ), c & ~full)
     assert np.array_equal(_inner_boundary(np.asfortranarray(occ)), c & ~full)
 

@@ -23,8 +23,12 @@ def _track(capture, out, shift):
     """A 'track' that is the truth moved by ``shift`` metres."""
     from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
 
-    meta = {"method": "truth+shift", "template": "neutral_5k", "eval_names": list(EVAL_NAMES),
-            "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    meta = {
+        "method": "truth+shift",
+        "template": "neutral_5k",
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+    }
     start_track(out, meta, capture.truth_faces, resume=False)
     for f in capture:
         t = f.truth
@@ -57,8 +61,20 @@ def test_exact_truth_scores_zero(capture, tmp_path):
 
 def test_eval_command(capture, tmp_path, capsys):
     _track(capture, tmp_path / "tr", np.array([0.0, 0.0, 0.01]))
-    assert main(["eval", str(capture.path), str(tmp_path / "tr"), "--out", str(tmp_path / "r"),
-                 "--surface-frames", "1"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "eval",
+                str(capture.path),
+                str(tmp_path / "tr"),
+                "--out",
+                str(tmp_path / "r"),
+                "--surface-frames",
+                "1",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "3D joint error" in out and (tmp_path / "r" / "joint_errors.csv").is_file()
 

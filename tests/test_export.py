@@ -41,8 +41,13 @@ def track_dir(template, tmp_path_factory):
     m = procedural_motion("walk", template, duration=T / 60.0, fps=60.0)
     posed = template.pose(m.rotations[:T], m.root_positions[:T])
     rng = np.random.default_rng(0)
-    meta = {"method": "synthetic", "template": "neutral_5k", "capture": str(root / "cap"),
-            "eval_names": list(EVAL_NAMES), "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    meta = {
+        "method": "synthetic",
+        "template": "neutral_5k",
+        "capture": str(root / "cap"),
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+    }
     out = root / "track"
     start_track(out, meta, template.F, resume=False)
     for k in range(T):
@@ -98,11 +103,13 @@ def test_bvh_reads_back_with_bvhio(bvh, track):
 
 def _quat_matrix(q):
     x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def test_glb_skins_like_the_spec_says(glb, track, template):
@@ -193,9 +200,12 @@ def test_glb_and_gltf_pass_the_khronos_validator(track_dir, glb, tmp_path):
     for path in (glb[0], tmp_path / "walk.gltf", tmp_path / "morph.glb"):
         env = {**os.environ, "NODE_PATH": str(Path(base) / "node_modules")}
         res = subprocess.run(
-            [node, str(SCRIPTS / "gltf_validate.js"), str(path)], capture_output=True,
-            text=True, timeout=120, env=env,
-        )  # fmt: skip
+            [node, str(SCRIPTS / "gltf_validate.js"), str(path)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+        )
         assert res.returncode == 0, res.stderr
         report = json.loads(res.stdout)
         assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["messages"]
@@ -220,8 +230,9 @@ def test_c3d_reads_back_with_ezc3d(track_dir, track, tmp_path):
 
 
 def test_trc_header_and_rows(track_dir, track, tmp_path):
-    export_track(track_dir, tmp_path / "walk.trc", joints=["pelvis", "left_ankle"],
-                 frames=slice(10, 18, 2))  # fmt: skip
+    export_track(
+        track_dir, tmp_path / "walk.trc", joints=["pelvis", "left_ankle"], frames=slice(10, 18, 2)
+    )
     rows = list(csv.reader((tmp_path / "walk.trc").read_text().splitlines(), delimiter="\t"))
     assert rows[0][:3] == ["PathFileType", "4", "(X/Y/Z)"]
     info = dict(zip(rows[1], rows[2], strict=True))
@@ -310,8 +321,18 @@ def test_blender_imports_the_export(ext, bvh, glb, track, tmp_path):
         pytest.skip("blender is not installed (Debian: apt-get install blender)")
     path = (bvh if ext == "bvh" else glb)[0]
     out = tmp_path / "blender.json"
-    cmd = [blender, "-b", "--factory-startup", "--python", str(SCRIPTS / "blender_import.py"),
-           "--", str(path), "60", "LeftFoot", str(out)]  # fmt: skip
+    cmd = [
+        blender,
+        "-b",
+        "--factory-startup",
+        "--python",
+        str(SCRIPTS / "blender_import.py"),
+        "--",
+        str(path),
+        "60",
+        "LeftFoot",
+        str(out),
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.is_file(), res.stdout[-2000:] + res.stderr[-2000:]
     got = json.loads(out.read_text())

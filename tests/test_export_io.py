@@ -25,8 +25,14 @@ def test_trc_and_c3d_round_trip(points, tmp_path):
     assert m.labels == ("a", "b", "c") and m.fps == 50.0 and m.first_frame == 7
     assert np.allclose(Z_UP_TO_OPENSIM @ [0, -1, 0], [1, 0, 0])  # facing −Y → OpenSim's +X
     assert np.isclose(np.linalg.det(Z_UP_TO_OPENSIM), 1.0)
-    write_c3d(tmp_path / "a.c3d", points, ["a", "b", "c"], 50.0, first_frame=7,
-              valid=np.array([1, 1, 0, 1, 1], bool))  # fmt: skip
+    write_c3d(
+        tmp_path / "a.c3d",
+        points,
+        ["a", "b", "c"],
+        50.0,
+        first_frame=7,
+        valid=np.array([1, 1, 0, 1, 1], bool),
+    )
     c = read_c3d(tmp_path / "a.c3d")
     ok = np.arange(5) != 2
     np.testing.assert_allclose(c.points[ok], points[ok], atol=1e-7)  # float32 millimetres

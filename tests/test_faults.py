@@ -289,8 +289,18 @@ def test_point_clouds_without_normals_are_tracked_by_the_patch_tracker(cap, tmp_
         (seq / f"{f.index:03d}.ply").write_bytes(
             trimesh.PointCloud(f.hull_mesh[0][::2]).export(file_type="ply")
         )
-    argv = ["track", str(seq), "--frames", "0:2", "--max-iter", "2", "--n-patches", "40",
-            "--template", "neutral_5k"]  # fmt: skip
+    argv = [
+        "track",
+        str(seq),
+        "--frames",
+        "0:2",
+        "--max-iter",
+        "2",
+        "--n-patches",
+        "40",
+        "--template",
+        "neutral_5k",
+    ]
     assert main([*argv, "--out", str(tmp_path / "t")]) == 0
     t = read_track(tmp_path / "t")
     assert np.isfinite(t.vertices).all() and t.healthy.all()

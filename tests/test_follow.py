@@ -27,8 +27,9 @@ N = 6  # frames of the walk
 @pytest.fixture(scope="module")
 def walk(tmp_path_factory):
     out = tmp_path_factory.mktemp("walk")
-    return synthesize(out, SynthSpec(motion="walk", template="neutral_5k", stop=N),
-                      show_progress=False)  # fmt: skip
+    return synthesize(
+        out, SynthSpec(motion="walk", template="neutral_5k", stop=N), show_progress=False
+    )
 
 
 @pytest.fixture(scope="module")
@@ -36,8 +37,9 @@ def offline(walk, tmp_path_factory):
     """The same capture tracked the ordinary way (articulated ICP)."""
     out = tmp_path_factory.mktemp("offline")
     t = load_template("neutral_5k")
-    return track_sequence(make_tracker("articulated_icp", template=t), t, walk, out,
-                          show_progress=False)  # fmt: skip
+    return track_sequence(
+        make_tracker("articulated_icp", template=t), t, walk, out, show_progress=False
+    )
 
 
 def _studio(src: Path, dst: Path, frames, *, delay: float = 0.05) -> threading.Thread:
@@ -128,9 +130,13 @@ def test_a_mesh_folder_and_a_stop_callback(walk, tmp_path):
     th = threading.Thread(target=studio, daemon=True)
     th.start()
     tracked = follow_sequence(
-        make_tracker("articulated_icp", template=t), t, live, out, report=seen.append,
+        make_tracker("articulated_icp", template=t),
+        t,
+        live,
+        out,
+        report=seen.append,
         stop=lambda: len(seen) >= 2 and not th.is_alive(),
-    )  # fmt: skip
+    )
     th.join()
     assert tracked == [0, 1] and [f.index for f in seen] == [0, 1]
     assert all(f.latency >= f.seconds >= 0 and not f.flags for f in seen[1:])
@@ -143,8 +149,12 @@ def test_follow_needs_one_folder_and_idle_needs_follow(walk, tmp_path, capsys):
     assert "--idle goes with --follow" in capsys.readouterr().err
     assert main(["track", str(walk.path), "--follow", "--frames", "0:2", "--out", out]) == 2
     assert "give one folder" in capsys.readouterr().err
-    assert main(["track", str(tmp_path / "none"), "--follow", "--out", out,
-                 "--template", "neutral_5k"]) == 2  # fmt: skip
+    assert (
+        main(
+            ["track", str(tmp_path / "none"), "--follow", "--out", out, "--template", "neutral_5k"]
+        )
+        == 2
+    )
     assert "is not a folder" in capsys.readouterr().err
     (tmp_path / "meshes").mkdir()  # no capture.json naming a template, no frame yet
     assert main(["track", str(tmp_path / "meshes"), "--follow", "--out", out]) == 2

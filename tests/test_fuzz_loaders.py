@@ -18,12 +18,32 @@ from fuzzing import Loader, loaders, manifold_loader, run_one
 EXAMPLES = 15
 
 NAMES = [
-    "mesh_ply", "mesh_obj", "mesh_off", "mesh_stl", "mesh_glb", "mesh_gltf",
-    "points_npy", "points_ply", "points_xyz", "points_pcd", "archive_tar_gz",
-    "bvh", "asf", "amc", "cameras_json", "cameras_yaml", "silhouette_png", "template_npz",
-    "track_frame_npz", "track_frame_bytes", "track_json",
-    "capture_hull_npz", "capture_truth_npz", "capture_json", "manifold_npz",
-]  # fmt: skip
+    "mesh_ply",
+    "mesh_obj",
+    "mesh_off",
+    "mesh_stl",
+    "mesh_glb",
+    "mesh_gltf",
+    "points_npy",
+    "points_ply",
+    "points_xyz",
+    "points_pcd",
+    "archive_tar_gz",
+    "bvh",
+    "asf",
+    "amc",
+    "cameras_json",
+    "cameras_yaml",
+    "silhouette_png",
+    "template_npz",
+    "track_frame_npz",
+    "track_frame_bytes",
+    "track_json",
+    "capture_hull_npz",
+    "capture_truth_npz",
+    "capture_json",
+    "manifold_npz",
+]
 
 
 @pytest.fixture(scope="module")
@@ -52,8 +72,13 @@ def test_mutated_files_give_results_or_meshmocap_errors(fuzz, name):
     loader, work = fuzz[0][name], fuzz[1]
     outcomes = []
 
-    @settings(max_examples=EXAMPLES, deadline=None, database=None, derandomize=True,
-              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @settings(
+        max_examples=EXAMPLES,
+        deadline=None,
+        database=None,
+        derandomize=True,
+        suppress_health_check=list(HealthCheck),
+    )
     @given(data=loader.strategy)
     def prop(data: bytes) -> None:
         outcomes.append(run_one(loader, data, work))

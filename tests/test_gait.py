@@ -165,16 +165,23 @@ def test_bad_input(walking):
 def _capture(folder, J):
     """A capture folder with ground-truth joints only (no images): enough for gait."""
     (folder / "truth").mkdir(parents=True)
-    write_meta(folder / "capture.json", {"fps": FPS, "frames": list(range(len(J))),
-                                         "eval_names": list(EVAL_NAMES)})  # fmt: skip
+    write_meta(
+        folder / "capture.json",
+        {"fps": FPS, "frames": list(range(len(J))), "eval_names": list(EVAL_NAMES)},
+    )
     for i, j in enumerate(J):
         write_truth(folder / "truth" / f"{i:05d}.npz", Truth(j, j))
     return Capture(folder)
 
 
 def _track(folder, capture, J, *, lost=()):
-    meta = {"method": "jittered", "template": "neutral_5k", "capture": str(capture.path),
-            "eval_names": list(EVAL_NAMES), "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    meta = {
+        "method": "jittered",
+        "template": "neutral_5k",
+        "capture": str(capture.path),
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+    }
     start_track(folder, meta, np.zeros((1, 3), np.int64), resume=False)
     for i, j in enumerate(J):
         flags = ("lost",) if i in lost else ()
@@ -254,8 +261,11 @@ def test_report_gait_section(folders):
     html = table_html(t)
     assert "<tfoot>" in html and "events matched" in html
     # no walking: a note, no row, no plot
-    sq = _track(squat_cap.path.parent / "squat_track", squat_cap,
-                np.stack([f.truth.joints for f in squat_cap]))  # fmt: skip
+    sq = _track(
+        squat_cap.path.parent / "squat_track",
+        squat_cap,
+        np.stack([f.truth.joints for f in squat_cap]),
+    )
     s = gait_section(squat_cap, [read_track(sq)], ["squat"])
     assert s.tables[0].rows == () and s.images == ()
     assert any(n.startswith("squat: no gait: the pelvis travels") for n in s.tables[0].notes)

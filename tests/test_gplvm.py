@@ -167,8 +167,12 @@ def test_unfitted_model_raises_and_has_no_fitted_attributes():
     m = GPLVM(3, back_constraint="mlp", tol=1e-5)
     assert set(vars(m)) == set(m.get_params())  # __init__ only stores options
     assert not hasattr(m, "X_") and not hasattr(m, "alpha_")
-    for call in (lambda: m.predict(np.zeros((1, 3))), lambda: m.predict_with_gradient(np.zeros(3)),
-                 lambda: m.transform(np.zeros((1, 5))), lambda: m.save("x.npz")):  # fmt: skip
+    for call in (
+        lambda: m.predict(np.zeros((1, 3))),
+        lambda: m.predict_with_gradient(np.zeros(3)),
+        lambda: m.transform(np.zeros((1, 5))),
+        lambda: m.save("x.npz"),
+    ):
         with pytest.raises(InputError, match="not fitted"):
             call()
 
@@ -201,8 +205,16 @@ def test_save_load_round_trip_is_exact(tmp_path, curve_model):
     assert [p.name for p in tmp_path.iterdir()] == ["pose_manifold.npz"]  # no temp left over
     m2 = GPLVM.load(path)
     assert m2.get_params() == m.get_params()
-    for name in ("alpha_", "gamma_", "beta_", "Y_scale_", "n_iter_", "converged_",
-                 "log_likelihood_", "bc_gamma_"):  # fmt: skip
+    for name in (
+        "alpha_",
+        "gamma_",
+        "beta_",
+        "Y_scale_",
+        "n_iter_",
+        "converged_",
+        "log_likelihood_",
+        "bc_gamma_",
+    ):
         assert getattr(m2, name) == getattr(m, name)
     rng = np.random.default_rng(4)
     Xq = m.X_[:5] + 0.2 * rng.standard_normal((5, 2))

@@ -19,9 +19,21 @@ from meshmocap.geometry.green import GreenDeformer, green_coordinates
 
 CUBE_V = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
 CUBE_F = np.array(
-    [[0, 3, 2], [0, 1, 3], [4, 7, 5], [4, 6, 7], [0, 5, 1], [0, 4, 5],
-     [2, 7, 6], [2, 3, 7], [0, 6, 4], [0, 2, 6], [1, 7, 3], [1, 5, 7]]
-)  # fmt: skip
+    [
+        [0, 3, 2],
+        [0, 1, 3],
+        [4, 7, 5],
+        [4, 6, 7],
+        [0, 5, 1],
+        [0, 4, 5],
+        [2, 7, 6],
+        [2, 3, 7],
+        [0, 6, 4],
+        [0, 2, 6],
+        [1, 7, 3],
+        [1, 5, 7],
+    ]
+)
 OCTA_V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 OCTA_F = np.array(
     [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
@@ -155,8 +167,15 @@ def test_points_on_the_cage_get_the_interior_limit():
     """Exactly on a face, on an edge (incl. a flat diagonal) or at a vertex: the solid angles
     are undefined there; such points (within 1e-7 × diameter) get the interior limit."""
     on = np.array([[0.3, 0.4, 1.0], [0.5, 0.5, 0.0], [0.0, 0.5, 0.0], [0, 0, 0], [1, 0.3, 0.3]])
-    inside = np.array([[0.3, 0.4, 1 - 1e-6], [0.5, 0.5, 1e-6], [1e-6, 0.5, 1e-6], [1e-6] * 3,
-                       [1 - 1e-6, 0.3, 0.3]])  # fmt: skip
+    inside = np.array(
+        [
+            [0.3, 0.4, 1 - 1e-6],
+            [0.5, 0.5, 1e-6],
+            [1e-6, 0.5, 1e-6],
+            [1e-6] * 3,
+            [1 - 1e-6, 0.3, 0.3],
+        ]
+    )
     d = GreenDeformer(CUBE_V, CUBE_F, np.vstack([on, on + 1e-9, inside]))
     assert np.all(np.isfinite(d.phi_)) and np.all(np.isfinite(d.psi_))
     assert not d.outside_[:5].any()
@@ -292,7 +311,7 @@ def test_bad_inputs_raise_one_line_errors():
         (InputError, "dtype", lambda: GreenDeformer(V, F, P, dtype=np.int32)),
         (InputError, r"cage_V_new must have shape", lambda: GreenDeformer(V, F, P).deform(V[1:])),
         (InputError, "grad_points", lambda: GreenDeformer(V, F, P).vjp(V, np.zeros((3, 3)))),
-    ]  # fmt: skip
+    ]
     for cls, pattern, call in cases:
         with pytest.raises(cls, match=pattern) as info:
             call()

@@ -85,12 +85,21 @@ def test_check_refuses_another_template_or_rigging_in_one_line(tiny):
 
 def test_registry_cage_methods_and_their_ablations(tiny, tmp_path):
     t, _, pm = tiny
-    fixed = {"cage": {}, "cage_quads": {"space": "quads"}, "cage_noreg": {"variance_weight": 0.0},
-             "cage_nolocal": {"local_iters": 0}, "cage_nosil": {"silhouette_weight": 0.0},
-             "cage_nowiden": {"off_manifold": 0.0},
-             "cage_green": {"surface": "green", "joints": "green"},
-             "cage_paper": {"surface": "green", "joints": "green", "silhouette_weight": 0.0,
-                            "off_manifold": 0.0}}  # fmt: skip
+    fixed = {
+        "cage": {},
+        "cage_quads": {"space": "quads"},
+        "cage_noreg": {"variance_weight": 0.0},
+        "cage_nolocal": {"local_iters": 0},
+        "cage_nosil": {"silhouette_weight": 0.0},
+        "cage_nowiden": {"off_manifold": 0.0},
+        "cage_green": {"surface": "green", "joints": "green"},
+        "cage_paper": {
+            "surface": "green",
+            "joints": "green",
+            "silhouette_weight": 0.0,
+            "off_manifold": 0.0,
+        },
+    }
     assert set(MANIFOLD_METHODS) == set(fixed)
     assert set(MANIFOLD_METHODS) < set(METHODS)
     assert set(CAGE_ABLATIONS) < set(MANIFOLD_METHODS)

@@ -42,8 +42,9 @@ def _sphere(subdivisions: int = 1, radius: float = 1.0) -> tuple[np.ndarray, np.
 
 # Tolerances: OBJ is written with 10 decimals (≤ 5e-11 m); PLY and GLB store float32
 # (relative 6e-8, coordinates ≤ 1.1 m → < 1e-7 m); OFF is written by trimesh in full.
-@pytest.mark.parametrize(("suffix", "atol"), [(".obj", 1e-10), (".ply", 1e-7), (".off", 1e-7),
-                                              (".glb", 1e-7)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("suffix", "atol"), [(".obj", 1e-10), (".ply", 1e-7), (".off", 1e-7), (".glb", 1e-7)]
+)
 def test_write_then_read_keeps_vertex_and_face_order(tmp_path, suffix, atol):
     V, F = _sphere()
     path = write_mesh(tmp_path / f"m{suffix}", V, F)
@@ -106,8 +107,9 @@ def test_obj_whose_vertices_do_not_survive_warns(tmp_path):
         ("mesh.xyz", "0 0 0\n", InputError, "must end in"),
     ],
 )
-def test_bad_mesh_files_raise_one_line_errors_naming_the_file(tmp_path, name, content, error,
-                                                              match):  # fmt: skip
+def test_bad_mesh_files_raise_one_line_errors_naming_the_file(
+    tmp_path, name, content, error, match
+):
     path = tmp_path / name
     path.write_text(content)
     with pytest.raises(error, match=match) as info:

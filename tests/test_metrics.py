@@ -67,8 +67,11 @@ def test_statistics_match_numpy_and_failures_are_reported_not_propagated():
     assert np.array_equal(e.frames, keep) and np.allclose(e.errors, ref, rtol=1e-12)
     assert np.isfinite(e.errors).all() and np.isfinite(e.per_frame).all()
     o = e.overall
-    assert np.allclose([o.mean, o.median, o.std, o.max],
-                       [ref.mean(), np.median(ref), ref.std(), ref.max()], rtol=1e-12)  # fmt: skip
+    assert np.allclose(
+        [o.mean, o.median, o.std, o.max],
+        [ref.mean(), np.median(ref), ref.std(), ref.max()],
+        rtol=1e-12,
+    )
     assert np.isclose(e.per_joint[3].median, np.median(ref[:, 3]), rtol=1e-12)
     assert np.allclose(e.per_frame, ref.mean(axis=1), rtol=1e-12)
 
@@ -145,8 +148,11 @@ def test_xor_error_of_two_known_masks():
     # aggregate over 2 frames × 2 cameras: per camera, mean of ratios, pooled pixel ratio
     big = np.zeros((30, 40), bool)
     big[:, :10] = True  # 300 pixels, missed entirely by an empty prediction: ratio 1
-    s = silhouette_errors([[pred, true], [true, np.zeros_like(big)]],
-                          [[true, true], [true, big]], cameras=["c0", "c1"])  # fmt: skip
+    s = silhouette_errors(
+        [[pred, true], [true, np.zeros_like(big)]],
+        [[true, true], [true, big]],
+        cameras=["c0", "c1"],
+    )
     assert np.array_equal(s.errors, [[0.4, 0.0], [0.0, 1.0]])
     assert np.allclose(s.per_camera, [0.2, 0.5]) and s.overall == pytest.approx(0.35)
     assert s.pooled == pytest.approx((40 + 300) / (100 + 100 + 100 + 300))  # pixel-weighted
@@ -244,8 +250,12 @@ def _results():
     pred[3] = np.nan
     masks_t = RNG.random((4, 2, 12, 16)) > 0.4
     masks_p = masks_t ^ (RNG.random((4, 2, 12, 16)) > 0.9)
-    return (joint_errors(pred, true), correspondence_error(pred, true),
-            bone_length_stats(pred, EVAL_PARENTS), silhouette_errors(masks_p, masks_t))  # fmt: skip
+    return (
+        joint_errors(pred, true),
+        correspondence_error(pred, true),
+        bone_length_stats(pred, EVAL_PARENTS),
+        silhouette_errors(masks_p, masks_t),
+    )
 
 
 def test_tables_and_csv(tmp_path):

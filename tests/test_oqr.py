@@ -264,8 +264,9 @@ def test_a_template_lying_down_is_refused_in_one_line(built):
     t, _ = built["neutral_5k"]
     sk = t.skeleton
     R = so3_exp(np.array([0.0, np.pi / 2, 0.0]))  # its left (+X) now points down
-    lying = replace(t, skeleton=Skeleton(sk.names, sk.parents, sk.offsets @ R.T,
-                                         sk.end_offsets @ R.T))  # fmt: skip
+    lying = replace(
+        t, skeleton=Skeleton(sk.names, sk.parents, sk.offsets @ R.T, sk.end_offsets @ R.T)
+    )
     with pytest.raises(SkeletonError, match="upright") as info:
         build_oqr(lying)
     assert "\n" not in str(info.value)
@@ -341,9 +342,21 @@ def test_configuration_functions_validate_their_inputs(built):
 
 CUBE_V = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
 CUBE_F = np.array(
-    [[0, 3, 2], [0, 1, 3], [4, 7, 5], [4, 6, 7], [0, 5, 1], [0, 4, 5],
-     [2, 7, 6], [2, 3, 7], [0, 6, 4], [0, 2, 6], [1, 7, 3], [1, 5, 7]]
-)  # fmt: skip
+    [
+        [0, 3, 2],
+        [0, 1, 3],
+        [4, 7, 5],
+        [4, 6, 7],
+        [0, 5, 1],
+        [0, 4, 5],
+        [2, 7, 6],
+        [2, 3, 7],
+        [0, 6, 4],
+        [0, 2, 6],
+        [1, 7, 3],
+        [1, 5, 7],
+    ]
+)
 
 
 def test_winding_numbers_and_distances_on_a_cube():
@@ -360,8 +373,9 @@ def test_winding_numbers_and_distances_on_a_cube():
     for X in (P, (P @ C.T) @ C):
         d, f = surface_distances(X, CUBE_V, CUBE_F)
         for x, dx, fx in zip(X, d, f, strict=True):
-            all_d = np.array([surface_distances(x[None], CUBE_V, CUBE_F[[k]])[0][0]
-                              for k in range(len(CUBE_F))])  # fmt: skip
+            all_d = np.array(
+                [surface_distances(x[None], CUBE_V, CUBE_F[[k]])[0][0] for k in range(len(CUBE_F))]
+            )
             assert fx == np.flatnonzero(all_d <= all_d.min() + 1e-12)[0]
             assert abs(dx - all_d.min()) < 1e-12
 

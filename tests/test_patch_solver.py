@@ -51,8 +51,11 @@ def _system(m, mom, R, c, X, obs):
     patch, v, y, w = obs
     sys = System.empty(normal_pattern(m, 15))
     q = np.einsum("nij,nj->ni", R[patch], m.V0[v] - m.centres0[patch])
-    e = (add_point_terms(sys, patch, q, q + c[patch] - y, w, 1.0),
-         add_rigidity(sys, m, mom, R, c, 1.0), add_bone(sys, m, R, c, X, 1.0))  # fmt: skip
+    e = (
+        add_point_terms(sys, patch, q, q + c[patch] - y, w, 1.0),
+        add_rigidity(sys, m, mom, R, c, 1.0),
+        add_bone(sys, m, R, c, X, 1.0),
+    )
     return sys, e
 
 
@@ -153,8 +156,9 @@ def test_the_solve_agrees_with_a_direct_solve_on_the_coordinates(setup):
         put(6 * np.arange(m.P), base + 3 * j, sys.PJ[:, end])
         put(base + 3 * j, 6 * np.arange(m.P), np.swapaxes(sys.PJ[:, end], 1, 2))
     put(np.array([base]), np.array([base]), sys.JJ.reshape(1, 3 * K, 3 * K))
-    H = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(n, n))  # fmt: skip
+    H = sp.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    )
     d = H.diagonal()
     H = H + sp.diags(1e-4 * d + 1e-3 * np.median(d[d > 0]))
     assert abs(sys.matrix(1e-4) - H).max() <= 1e-12 * abs(H).max()

@@ -135,10 +135,14 @@ def test_bench_ablation_table_reports_each_change_against_patch():
     from meshmocap.apps.bench_report import ablation_table
     from meshmocap.apps.bench_rows import BenchRow, not_applicable
 
-    rows = [BenchRow("walk", "patch", mean_mm=10.0), BenchRow("walk", "patch_sil", mean_mm=12.5),
-            BenchRow("jog", "patch", mean_mm=20.0), BenchRow("jog", "patch_paper", mean_mm=19.0),
-            BenchRow("crane", "articulated_icp", mean_mm=30.0),
-            not_applicable("jog", "patch_sil", "no silhouettes")]  # fmt: skip
+    rows = [
+        BenchRow("walk", "patch", mean_mm=10.0),
+        BenchRow("walk", "patch_sil", mean_mm=12.5),
+        BenchRow("jog", "patch", mean_mm=20.0),
+        BenchRow("jog", "patch_paper", mean_mm=19.0),
+        BenchRow("crane", "articulated_icp", mean_mm=30.0),
+        not_applicable("jog", "patch_sil", "no silhouettes"),
+    ]
     table = ablation_table(rows).splitlines()
     assert table[0] == "| method | change | walk | jog |"
     assert table[2] == "| patch | — | 10.0 | 20.0 |"
@@ -164,8 +168,9 @@ def test_hull_points_deep_inside_the_model_fall_to_the_outlier_class():
     R = np.broadcast_to(np.eye(3), (t.skeleton.n_joints, 3, 3)).copy()
     weights = {}
     for scale in (0.0, 0.01):
-        tr = PatchTracker(PatchOptions(n_patches=60, interior_scale=scale,
-                                       joint_readout="skeleton"))  # fmt: skip
+        tr = PatchTracker(
+            PatchOptions(n_patches=60, interior_scale=scale, joint_readout="skeleton")
+        )
         tr.init(t, SimpleNamespace(index=0), R, np.zeros(3))
         Vc, Nc = tr.own_vertices()
         inside = Vc - 0.05 * Nc
@@ -209,10 +214,12 @@ def test_bench_says_where_patch_loses_to_its_baseline():
     from meshmocap.apps.bench_report import baseline_losses
     from meshmocap.apps.bench_rows import BenchRow
 
-    rows = [BenchRow("walk", "patch", mean_mm=10.0, worst_frame_mm=20.0),
-            BenchRow("walk", "articulated_icp", mean_mm=12.0, worst_frame_mm=25.0),
-            BenchRow("jog", "patch", mean_mm=22.0, worst_frame_mm=60.0),
-            BenchRow("jog", "articulated_icp", mean_mm=18.0, worst_frame_mm=30.5)]  # fmt: skip
+    rows = [
+        BenchRow("walk", "patch", mean_mm=10.0, worst_frame_mm=20.0),
+        BenchRow("walk", "articulated_icp", mean_mm=12.0, worst_frame_mm=25.0),
+        BenchRow("jog", "patch", mean_mm=22.0, worst_frame_mm=60.0),
+        BenchRow("jog", "articulated_icp", mean_mm=18.0, worst_frame_mm=30.5),
+    ]
     assert baseline_losses(rows) == (
         "**`patch` is worse than `articulated_icp` on:** `jog` "
         "(22.0 against 18.0 mm, worst frame 60.0 against 30.5)."

@@ -136,8 +136,9 @@ def test_options_are_validated():
         PatchOptions(max_iter=0)
 
 
-@pytest.mark.parametrize(("moved", "scale", "expected"), [(0.02, 2.0, 3), (0.08, 2.0, 6),
-                                                          (0.08, 1.0, 3)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("moved", "scale", "expected"), [(0.02, 2.0, 3), (0.08, 2.0, 6), (0.08, 1.0, 3)]
+)
 def test_fast_frames_get_more_iterations(walk, moved, scale, expected):
     """A frame after one where a joint moved more than ``fast_motion`` (5 cm) runs
     ``fast_iter_scale × max_iter`` EM iterations; ``tol=0`` never stops early."""
@@ -168,9 +169,26 @@ def test_track_and_eval_commands(walk, tmp_path, capsys):
         "--out",
         str(out),
     ]
-    assert main([*args, "--frames", "0:4", "--n-patches", "100", "--max-iter", "4",
-                 "--outlier-sigmas", "2.5", "--fast-iter-scale", "1.5",
-                 "--joint-readout", "skeleton"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                *args,
+                "--frames",
+                "0:4",
+                "--n-patches",
+                "100",
+                "--max-iter",
+                "4",
+                "--outlier-sigmas",
+                "2.5",
+                "--fast-iter-scale",
+                "1.5",
+                "--joint-readout",
+                "skeleton",
+            ]
+        )
+        == 0
+    )
     assert "tracked 4 frames with patch" in capsys.readouterr().out
     meta = json.loads((out / "track.json").read_text())
     assert meta["options"]["outlier_sigmas"] == 2.5 and meta["options"]["n_patches"] == 100

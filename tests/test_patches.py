@@ -31,8 +31,10 @@ def templates():
 @pytest.fixture(scope="module")
 def partitions(templates):
     """Default-option partitions of both templates (6 runs, ~0.1–0.35 s each)."""
-    return {(name, P): surface_patches(templates[name].V, templates[name].F, n_patches=P)
-            for name, P in CASES}  # fmt: skip
+    return {
+        (name, P): surface_patches(templates[name].V, templates[name].F, n_patches=P)
+        for name, P in CASES
+    }
 
 
 def _n_components_per_patch(F, labels):
@@ -216,11 +218,26 @@ def test_bone_labels_map_leaves_to_their_parent_bone():
     labels, classes = bone_labels(np.arange(15), EVAL_PARENTS)
     got = {names[i]: names[j] for i, j in enumerate(labels)}
     expected = {n: n for n in names}
-    expected.update(head="thorax", left_wrist="left_elbow", right_wrist="right_elbow",
-                    left_ankle="left_knee", right_ankle="right_knee")  # fmt: skip
+    expected.update(
+        head="thorax",
+        left_wrist="left_elbow",
+        right_wrist="right_elbow",
+        left_ankle="left_knee",
+        right_ankle="right_knee",
+    )
     assert got == expected
-    non_leaf = ["pelvis", "thorax", "left_shoulder", "left_elbow", "right_shoulder",
-                "right_elbow", "left_hip", "left_knee", "right_hip", "right_knee"]  # fmt: skip
+    non_leaf = [
+        "pelvis",
+        "thorax",
+        "left_shoulder",
+        "left_elbow",
+        "right_shoulder",
+        "right_elbow",
+        "left_hip",
+        "left_knee",
+        "right_hip",
+        "right_knee",
+    ]
     assert classes.dtype == np.int64 and classes.tolist() == sorted(map(names.index, non_leaf))
     same, all_classes = bone_labels(np.arange(15), EVAL_PARENTS, leaf_to_parent=False)
     assert np.array_equal(same, np.arange(15)) and np.array_equal(all_classes, np.arange(15))

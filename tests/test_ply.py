@@ -22,10 +22,20 @@ def _trimesh_arrays(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
 
 
-def _ply(vprops: str, vrows: bytes, faces: bytes, nv: int, nf: int, fmt="binary_little_endian",
-         flist="list uchar int vertex_indices", extra="") -> bytes:  # fmt: skip
-    head = (f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {nv}\n{vprops}"
-            f"element face {nf}\nproperty {flist}\n{extra}end_header\n")  # fmt: skip
+def _ply(
+    vprops: str,
+    vrows: bytes,
+    faces: bytes,
+    nv: int,
+    nf: int,
+    fmt="binary_little_endian",
+    flist="list uchar int vertex_indices",
+    extra="",
+) -> bytes:
+    head = (
+        f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {nv}\n{vprops}"
+        f"element face {nf}\nproperty {flist}\n{extra}end_header\n"
+    )
     return head.encode() + vrows + faces
 
 
@@ -43,23 +53,28 @@ def test_same_arrays_as_trimesh_for_exported_meshes():
 def test_extra_vertex_properties_and_doubles():
     rng = np.random.default_rng(0)
     P = rng.normal(size=(4, 3))
-    rows = np.zeros(4, dtype=[("x", "<f8"), ("nx", "<f4"), ("y", "<f8"), ("z", "<f8"),
-                              ("red", "u1")])  # fmt: skip
+    rows = np.zeros(
+        4, dtype=[("x", "<f8"), ("nx", "<f4"), ("y", "<f8"), ("z", "<f8"), ("red", "u1")]
+    )
     rows["x"], rows["y"], rows["z"] = P.T
     F = np.array([[0, 1, 2], [0, 2, 3]])
     faces = np.zeros(2, dtype=[("n", "u1"), ("i", "<u4", 3)])
     faces["n"], faces["i"] = 3, F
-    props = ("property double x\nproperty float nx\nproperty double y\nproperty double z\n"
-             "property uchar red\n")  # fmt: skip
-    data = _ply(props, rows.tobytes(), faces.tobytes(), 4, 2,
-                flist="list uchar uint vertex_indices")  # fmt: skip
+    props = (
+        "property double x\nproperty float nx\nproperty double y\nproperty double z\n"
+        "property uchar red\n"
+    )
+    data = _ply(
+        props, rows.tobytes(), faces.tobytes(), 4, 2, flist="list uchar uint vertex_indices"
+    )
     V, F2 = binary_ply_arrays(data)
     np.testing.assert_array_equal(V, P)  # doubles kept to the bit
     np.testing.assert_array_equal(F2, F)
 
 
-@pytest.mark.parametrize("case", ["ascii", "big_endian", "quad", "other_element", "truncated",
-                                  "out_of_range", "not_ply"])  # fmt: skip
+@pytest.mark.parametrize(
+    "case", ["ascii", "big_endian", "quad", "other_element", "truncated", "out_of_range", "not_ply"]
+)
 def test_other_layouts_fall_back(case):
     V = np.zeros(4, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
     props = "property float x\nproperty float y\nproperty float z\n"

@@ -73,14 +73,20 @@ def test_hand_labelled_quads_round_trip(rig, tmp_path):
     t, oqr = rig
     m = walk(t, duration=0.5, fps=10.0)
     c, Q = quads_from_pose(oqr, t, m.rotations, m.root_positions)
-    path = save_poses(tmp_path / "quads.npz", centres=c, rotations=Q,
-                      labels=[f"pose{k}" for k in range(len(c))], template=t.name)  # fmt: skip
+    path = save_poses(
+        tmp_path / "quads.npz",
+        centres=c,
+        rotations=Q,
+        labels=[f"pose{k}" for k in range(len(c))],
+        template=t.name,
+    )
     p = read_poses(path, t, oqr=oqr)
     np.testing.assert_allclose(p.configurations, configuration_vector(c, Q), atol=1e-15)
     assert list(p.trials[:2]) == ["pose0", "pose1"] and set(p.groups) == {"quads"}
     # the same file through the dispatcher
-    np.testing.assert_array_equal(load_pose_source(path, t, oqr=oqr).configurations,
-                                  p.configurations)  # fmt: skip
+    np.testing.assert_array_equal(
+        load_pose_source(path, t, oqr=oqr).configurations, p.configurations
+    )
 
 
 def test_hand_labelled_joint_rotations_axis_angle_and_matrices(rig, tmp_path):
@@ -100,8 +106,9 @@ def test_hand_labelled_joint_rotations_axis_angle_and_matrices(rig, tmp_path):
 
 def test_pose_file_errors_name_the_file_in_one_line(rig, tmp_path):
     t, oqr = rig
-    c, Q = quads_from_pose(oqr, t, np.tile(np.eye(3), (2, t.skeleton.n_joints, 1, 1)),
-                           np.zeros((2, 3)))  # fmt: skip
+    c, Q = quads_from_pose(
+        oqr, t, np.tile(np.eye(3), (2, t.skeleton.n_joints, 1, 1)), np.zeros((2, 3))
+    )
     cases = [
         (dict(centres=c, rotations=Q, template="heavy_male"), "labelled on template"),
         (dict(centres=c, rotations=2 * Q), "must be rotation matrices"),
@@ -152,8 +159,10 @@ def test_cmu35_mat_splits_into_its_31_named_trials(mat, cmu, rig):
     want = poses_from_motion(retarget(amc, t, floor="none"), t, oqr=oqr).configurations
     np.testing.assert_array_equal(p.configurations[p.trials == "35_01"], want)
     test = read_mat_trials(mat, test=True)
-    assert [(n, g, m.n_frames) for n, g, m in test] == [("35_18", "jog", 44),
-                                                         ("35_29", "walk", 125)]  # fmt: skip
+    assert [(n, g, m.n_frames) for n, g, m in test] == [
+        ("35_18", "jog", 44),
+        ("35_29", "walk", 125),
+    ]
 
 
 def test_other_mat_tables_bvh_and_amc_sources(mat, cmu, rig, tmp_path):

@@ -26,8 +26,9 @@ def test_the_library_is_diverse_in_farthest_point_order_and_holds_out_its_test_t
     # farthest-point order: each pick is no farther than the one before (to float32)
     assert np.all(np.diff(lib.radius[1:]) <= 1e-6)
     R = lib.rotations
-    np.testing.assert_allclose(R @ np.swapaxes(R, -1, -2), np.broadcast_to(np.eye(3), R.shape),
-                               atol=1e-4)  # fmt: skip
+    np.testing.assert_allclose(
+        R @ np.swapaxes(R, -1, -2), np.broadcast_to(np.eye(3), R.shape), atol=1e-4
+    )
     assert np.all(np.linalg.det(R) > 0.999)
     assert len(lib.digest) == 16 and load_pose_library() is lib  # cached
 
@@ -36,12 +37,16 @@ def test_a_file_in_another_format_is_refused(tmp_path):
     p = tmp_path / "lib.npz"
     q = np.zeros((2, 31, 4), dtype=np.int16)
     q[..., 3] = 32767
-    np.savez(p, format="other", skeleton="neutral", joint_names=np.array(["a"] * 31),
-             quaternions=q)  # fmt: skip
+    np.savez(p, format="other", skeleton="neutral", joint_names=np.array(["a"] * 31), quaternions=q)
     with pytest.raises(FormatError, match="expected format"):
         load_pose_library(p)
-    np.savez(p, format=LIBRARY_FORMAT, skeleton="neutral", joint_names=np.array(["a"] * 31),
-             quaternions=q)  # fmt: skip
+    np.savez(
+        p,
+        format=LIBRARY_FORMAT,
+        skeleton="neutral",
+        joint_names=np.array(["a"] * 31),
+        quaternions=q,
+    )
     with pytest.raises(FormatError, match="corrupt pose library"):
         load_pose_library(p)  # no categories, trials…
 
@@ -71,8 +76,9 @@ def test_the_quads_own_skinning_reproduces_the_skinned_template():
     s = SkinnedSurface(oqr, t, np.arange(len(t.V)))
     # the fingers' vertices (no quad follows them; a fifth of this mesh's) leave the data term
     part = np.asarray(t.weights.argmax(axis=1)).ravel()
-    hands = [j for j, n in enumerate(t.skeleton.names) if "Hand" in n or "Thumb" in n
-             or "Finger" in n]  # fmt: skip
+    hands = [
+        j for j, n in enumerate(t.skeleton.names) if "Hand" in n or "Thumb" in n or "Finger" in n
+    ]
     assert 0.7 < s.fitted.mean() < 1.0 and np.isin(part[~s.fitted], hands).all()
     for k in range(len(R)):
         V = s.points(Y[k], Q[k, 0], c[k, 0])
@@ -86,6 +92,8 @@ def test_a_clip_with_a_wrong_header_rate_takes_its_true_one(cmu):
     fixed = load_clip(cmu / "16_01.bvh", source_fps=120.0)
     assert fixed.fps == 120.0 and fixed.n_frames == m.n_frames
     assert load_clip(cmu / "16_01.bvh", source_fps=120.0, fps=60.0).n_frames in (
-        (m.n_frames + 1) // 2, m.n_frames // 2)  # fmt: skip
+        (m.n_frames + 1) // 2,
+        m.n_frames // 2,
+    )
     with pytest.raises(InputError, match="source_fps"):
         load_clip(cmu / "16_01.bvh", source_fps=0.0)

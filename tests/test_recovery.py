@@ -43,8 +43,23 @@ def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path, capsys):
     with pytest.raises(InputError, match="offset two numbers"):
         placed_motion(R, root, offset=(1.0, float("nan")))
     out = tmp_path / "c"
-    assert main(["synth", str(out), "--template", "neutral_5k", "--frames", "0:1",
-                 "--heading", "135", "--offset", "0.5,-0.25"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synth",
+                str(out),
+                "--template",
+                "neutral_5k",
+                "--frames",
+                "0:1",
+                "--heading",
+                "135",
+                "--offset",
+                "0.5,-0.25",
+            ]
+        )
+        == 0
+    )
     spec = json.loads((out / "capture.json").read_text())["spec"]
     assert spec["heading"] == 135.0 and spec["offset"] == [0.5, -0.25]
     plain = SynthSpec().as_dict()  # captures made before heading/offset keep their spec
@@ -70,26 +85,40 @@ def test_the_hull_misses_the_limb_only_on_its_frames(gap):
 
 def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     t = load_template("neutral_5k")
-    track = track_sequence(PatchTracker(), t, gap, tmp_path / "tr", init="truth",
-                           show_progress=False)  # fmt: skip
+    track = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "tr", init="truth", show_progress=False
+    )
     lost = [k for k, f in enumerate(track.flags) if "lost" in f]
     assert lost[:2] == [2, 3]  # the hull misses the arm from frame 2
     assert all("left_arm" in track.messages[k] for k in (2, 3))
     assert "not observed where it was last seen" in track.messages[2]
     assert set(track.energies) >= {"fit_outside", "fit_buried", "fit_unexplained"}
     assert json.loads((tmp_path / "tr" / "track.json").read_text())["init"] == "truth"
-    assert main(["eval", str(gap.path), str(tmp_path / "tr"), "--no-silhouettes",
-                 "--surface-frames", "0"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "eval",
+                str(gap.path),
+                str(tmp_path / "tr"),
+                "--no-silhouettes",
+                "--surface-frames",
+                "0",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "init truth: the first pose from ground truth" in out and "with a limb lost" in out
-    quiet = track_sequence(PatchTracker(), t, gap, tmp_path / "quiet", init="truth",
-                           recover=False, show_progress=False)  # fmt: skip
+    quiet = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "quiet", init="truth", recover=False, show_progress=False
+    )
     assert not any(quiet.flags) and "fit_outside" not in quiet.energies
     # the default flags and never moves the track; reseat acts on the lost limb
     assert not any("reinit" in f for f in track.flags)
     assert not any("held as last seen" in m for m in track.messages)
-    acted = track_sequence(PatchTracker(), t, gap, tmp_path / "acted", init="truth",
-                           reseat=True, show_progress=False)  # fmt: skip
+    acted = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "acted", init="truth", reseat=True, show_progress=False
+    )
     assert any("held as last seen" in m or "re-initialised" in m for m in acted.messages)
     assert json.loads((tmp_path / "acted" / "track.json").read_text())["reseat"] is True
 
@@ -128,11 +157,15 @@ def test_inputs_that_cannot_be_tracked_as_given_are_refused_in_one_line(gap, tmp
     cases = [
         (["track", str(far), "--out", str(tmp_path / "t")], "1000 km from the origin"),
         (["track", str(small), "--out", str(tmp_path / "t")], "set --units (m, cm or mm)"),
-        (["track", str(small), "--units", "cm", "--init", "truth", "--out",
-          str(tmp_path / "t")], "--init truth needs a capture with ground-truth poses"),
-        (["track", str(gap.path), "--up", "y", "--out", str(tmp_path / "t")],
-         "is a capture folder: metres, Z up"),
-    ]  # fmt: skip
+        (
+            ["track", str(small), "--units", "cm", "--init", "truth", "--out", str(tmp_path / "t")],
+            "--init truth needs a capture with ground-truth poses",
+        ),
+        (
+            ["track", str(gap.path), "--up", "y", "--out", str(tmp_path / "t")],
+            "is a capture folder: metres, Z up",
+        ),
+    ]
     for args, message in cases:
         assert main(args) == 2
         err = capsys.readouterr().err
@@ -145,15 +178,34 @@ def test_a_capture_without_truth_or_template_is_tracked_from_itself(tmp_path, mo
     iterations here: the default's accuracy is bench_subject's) and the first pose found from
     the hull. About 20 s of CPU (the subject fit and the first-pose search on its 12k
     vertices): the one end-to-end check of track's defaults."""
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=2, heading=200.0,
-                     offset=(0.7, -0.5), voxel_size=0.02)  # fmt: skip
+    spec = SynthSpec(
+        motion="walk",
+        template="neutral_5k",
+        stop=2,
+        heading=200.0,
+        offset=(0.7, -0.5),
+        voxel_size=0.02,
+    )
     cap = synthesize(tmp_path / "cap", spec, show_progress=False)
     real, out = tmp_path / "real", tmp_path / "t"
     shutil.copytree(cap.path, real, ignore=shutil.ignore_patterns("truth", "capture.json"))
     quick = functools.partial(estimate_subject, n_frames=1, iterations=8)
     monkeypatch.setattr(tt, "estimate_subject", quick)
-    assert main(["track", str(real), "--method", "articulated_icp", "--max-iter", "2",
-                 "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "track",
+                str(real),
+                "--method",
+                "articulated_icp",
+                "--max-iter",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     said = capsys.readouterr().out
     assert "template estimated from the capture" in said and "; init auto: " in said
     meta = json.loads((out / "track.json").read_text())

@@ -46,9 +46,14 @@ def tracked(capture, tmp_path_factory):
 
     out = tmp_path_factory.mktemp("icp")
     tr = track_sequence(
-        make_tracker("articulated_icp"), load_template("neutral_5k"), capture, out,
-        show_progress=False, init="truth", recover=False,
-    )  # fmt: skip
+        make_tracker("articulated_icp"),
+        load_template("neutral_5k"),
+        capture,
+        out,
+        show_progress=False,
+        init="truth",
+        recover=False,
+    )
     return out, tr
 
 
@@ -59,8 +64,12 @@ def shifted(capture, tmp_path_factory):
     from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
 
     out = tmp_path_factory.mktemp("shift")
-    meta = {"method": "truth+5cm", "template": "subject_body", "eval_names": list(EVAL_NAMES),
-            "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    meta = {
+        "method": "truth+5cm",
+        "template": "subject_body",
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+    }
     start_track(out, meta, capture.truth_faces, resume=False)
     shift = np.array([0.05, 0.0, 0.0])
     for f in list(capture)[1:]:
@@ -212,9 +221,23 @@ def test_track_frames_missing_from_the_capture(capture, tracked, tmp_path):
 
 def test_report_command(capture, tracked, shifted, tmp_path, capsys):
     out = tmp_path / "sub" / "report.html"
-    args = ["report", str(capture.path), str(tracked[0]), str(shifted[0]), "--out", str(out),
-            "--eval-dir", str(tmp_path / "e1"), "--eval-dir", str(tmp_path / "e2"),
-            "--max-frames", "2", "--no-silhouettes", "--surface-frames", "1"]  # fmt: skip
+    args = [
+        "report",
+        str(capture.path),
+        str(tracked[0]),
+        str(shifted[0]),
+        "--out",
+        str(out),
+        "--eval-dir",
+        str(tmp_path / "e1"),
+        "--eval-dir",
+        str(tmp_path / "e2"),
+        "--max-frames",
+        "2",
+        "--no-silhouettes",
+        "--surface-frames",
+        "1",
+    ]
     assert main(args) == 0
     assert "wrote" in capsys.readouterr().out
     text = out.read_text()
@@ -235,11 +258,22 @@ def _browser() -> str | None:
 
 
 def _chromium(browser, tmp_path, page, *args):
-    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu",
-           "--disable-background-networking", "--disable-component-update",
-           "--disable-default-apps", "--no-first-run", "--hide-scrollbars",
-           f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1200,900",
-           "--virtual-time-budget=10000", *args, page]  # fmt: skip
+    cmd = [
+        browser,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-default-apps",
+        "--no-first-run",
+        "--hide-scrollbars",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--window-size=1200,900",
+        "--virtual-time-budget=10000",
+        *args,
+        page,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180)
 
 

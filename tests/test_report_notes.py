@@ -18,16 +18,27 @@ from meshmocap.studio.synth import SynthSpec, synthesize
 def scored(tmp_path_factory):
     """A 4-frame capture and a track of its truth with flagged frames, evaluated."""
     root = tmp_path_factory.mktemp("notes")
-    cap = synthesize(root / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=4),
-                     show_progress=False)  # fmt: skip
-    meta = {"method": "patch", "template": "neutral_5k", "eval_names": list(EVAL_NAMES),
-            "eval_parents": EVAL_PARENTS.tolist()}  # fmt: skip
+    cap = synthesize(
+        root / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=4), show_progress=False
+    )
+    meta = {
+        "method": "patch",
+        "template": "neutral_5k",
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+    }
     start_track(root / "t", meta, cap.truth_faces, resume=False)
     flags = {1: (("lost",), "left arm below the quality threshold"), 2: (("missing",), "")}
     for f in cap:
         fl, msg = flags.get(f.index, ((), ""))
-        r = FrameResult(f.index, f.truth.joints, f.truth.vertices, flags=fl, message=msg,
-                        healthy=fl != ("missing",))  # fmt: skip
+        r = FrameResult(
+            f.index,
+            f.truth.joints,
+            f.truth.vertices,
+            flags=fl,
+            message=msg,
+            healthy=fl != ("missing",),
+        )
         write_frame(root / "t", r)
     track = read_track(root / "t")
     return track, evaluate(track, cap, silhouettes=False, surface_frames=0)

@@ -30,9 +30,16 @@ def test_frame_files_without_flags_read_as_failed_when_unhealthy(tmp_path):
     start_track(tmp_path, {"method": "test"}, np.array([[0, 1, 2]]))
     for index, healthy in ((0, True), (1, False)):
         r = _result(index)
-        np.savez_compressed(frame_path(tmp_path, index), index=index, joints=r.joints,
-                            vertices=r.vertices.astype(np.float32), n_iter=0, seconds=0.0,
-                            healthy=healthy, message=np.str_(""))  # fmt: skip
+        np.savez_compressed(
+            frame_path(tmp_path, index),
+            index=index,
+            joints=r.joints,
+            vertices=r.vertices.astype(np.float32),
+            n_iter=0,
+            seconds=0.0,
+            healthy=healthy,
+            message=np.str_(""),
+        )
     assert read_track(tmp_path).flags == ((), ("failed",))
 
 

@@ -104,8 +104,14 @@ def test_35_01_walk_keeps_both_feet_on_the_floor(cmu, neutral):
     # and at every frame of a walk one foot is on the floor (within 3 cm)
     assert np.all(np.abs(h.min(axis=1)) < 0.03)
     # no flipped limbs: every mapped bone points where its source bone points
-    pairs = {"LeftUpLeg": "lfemur", "LeftLeg": "ltibia", "RightLeg": "rtibia",
-             "LeftArm": "lhumerus", "RightForeArm": "rradius", "Head": "head"}  # fmt: skip
+    pairs = {
+        "LeftUpLeg": "lfemur",
+        "LeftLeg": "ltibia",
+        "RightLeg": "rtibia",
+        "LeftArm": "lhumerus",
+        "RightForeArm": "rradius",
+        "Head": "head",
+    }
     assert _bone_angles(src, out, pairs).max() < 1e-4  # degrees; arccos near 1 amplifies rounding
 
 

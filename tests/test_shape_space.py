@@ -25,8 +25,14 @@ def space():
 def body_vector(t):
     """A template as the space's body vector (vertices, heads, tails, head centre)."""
     P = t.skeleton.rest_positions
-    return np.concatenate([t.V.ravel(), P.ravel(), (P + t.skeleton.end_offsets).ravel(),
-                           t.eval_skeleton.rest_positions[2]])  # fmt: skip
+    return np.concatenate(
+        [
+            t.V.ravel(),
+            P.ravel(),
+            (P + t.skeleton.end_offsets).ravel(),
+            t.eval_skeleton.rest_positions[2],
+        ]
+    )
 
 
 def test_pca_reproduces_low_rank_data_and_standardises():
@@ -102,8 +108,10 @@ def test_silhouette_residual_derivatives_match_finite_differences(space):
         v, n, a = pose_points(articulated_model(t, n_points=t.n_vertices), R, root)
         S = shape_jacobian(space, t, R, root)
         sample = articulated_model(t, n_points=500, seed=0).sample
-        return {term: (r, Jp, Jz) for term, r, Jp, Jz in
-                _frame_terms(views, v, n, a, S, t.F, sample, 25.0).rows}  # fmt: skip
+        return {
+            term: (r, Jp, Jz)
+            for term, r, Jp, Jz in _frame_terms(views, v, n, a, S, t.F, sample, 25.0).rows
+        }
 
     base = terms(z, R, root)
     rng = np.random.default_rng(2)

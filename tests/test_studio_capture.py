@@ -134,10 +134,14 @@ def test_a_dropped_camera_frame_is_carved_from_the_others(walk_capture, tmp_path
     with pytest.warns(MissingFrameWarning, match="1 frames without hull") as info:
         run = compute_hulls(out)
     assert "\n" not in str(info[0].message)
-    assert run.partial == {0: "carved from 3 of 4 cameras (C2: empty mask)",
-                           2: "carved from 3 of 4 cameras (C3: no silhouette file)"}  # fmt: skip
-    assert run.missing == {4: "only 1 of 4 cameras see the subject (C1: empty mask, C2: empty "
-                              "mask, C4: empty mask); at least 2 needed"}  # fmt: skip
+    assert run.partial == {
+        0: "carved from 3 of 4 cameras (C2: empty mask)",
+        2: "carved from 3 of 4 cameras (C3: no silhouette file)",
+    }
+    assert run.missing == {
+        4: "only 1 of 4 cameras see the subject (C1: empty mask, C2: empty "
+        "mask, C4: empty mask); at least 2 needed"
+    }
     cap = run.capture
     assert len(cap) == 6 and cap[4].missing and cap[0].missing is None
     assert cap.notes() == {**run.partial, **run.missing}
@@ -157,8 +161,9 @@ def test_capture_loading_errors(tmp_path):
 
 @pytest.mark.slow
 def test_thirty_frame_cmu_walk_end_to_end(cmu, tmp_path):
-    cap = synthesize(tmp_path / "cap", SynthSpec(motion=str(cmu / "35_01.amc"), stop=30),
-                     show_progress=False)  # fmt: skip
+    cap = synthesize(
+        tmp_path / "cap", SynthSpec(motion=str(cmu / "35_01.amc"), stop=30), show_progress=False
+    )
     assert len(cap) == 30
     low = min(f.truth.vertices[:, 2].min() for f in cap)
     assert abs(low) < 0.03  # the retargeted subject walks on the floor
@@ -173,8 +178,9 @@ def test_crane_hulls_contain_the_real_surface(shared_data, tmp_path):
     src = shared_data / "meshes" / "crane" / "first10"
     ratios = {}
     for rig in ("ring8", "humaneva4"):
-        cap = synthesize_from_meshes(src, tmp_path / rig, rig=rig, frames=range(0, 10, 4),
-                                     show_progress=False)  # fmt: skip
+        cap = synthesize_from_meshes(
+            src, tmp_path / rig, rig=rig, frames=range(0, 10, 4), show_progress=False
+        )
         ratios[rig] = []
         for f in cap:
             V = f.truth.vertices

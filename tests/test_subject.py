@@ -23,8 +23,9 @@ from meshmocap.studio.synth import SynthSpec, synthesize
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     """Two frames of the procedural walk by small_female (1.55 m), made for neutral_5k."""
-    spec = SynthSpec(motion="walk", template="neutral_5k", subject="small_female", stop=2,
-                     voxel_size=0.02)  # fmt: skip
+    spec = SynthSpec(
+        motion="walk", template="neutral_5k", subject="small_female", stop=2, voxel_size=0.02
+    )
     return synthesize(tmp_path_factory.mktemp("small") / "cap", spec, show_progress=False)
 
 
@@ -91,9 +92,11 @@ def test_an_estimate_is_cached_in_the_track_folder(mesh_folder, tmp_path, monkey
     assert calls == ["auto"] and "reused" in again.note
     # a resumed run tracks with the very template the first run did (a cage track's
     # settings digest its manifold, learned on the template's joints): bit for bit
-    for a, b in ((again.template.V, c.template.V),
-                 (again.template.skeleton.end_offsets, c.template.skeleton.end_offsets),
-                 (again.template.weights.toarray(), c.template.weights.toarray())):  # fmt: skip
+    for a, b in (
+        (again.template.V, c.template.V),
+        (again.template.skeleton.end_offsets, c.template.skeleton.end_offsets),
+        (again.template.weights.toarray(), c.template.weights.toarray()),
+    ):
         np.testing.assert_array_equal(a, b)
     tt.tracking_template(mesh_folder, None, out, refresh=True)
     assert calls == ["auto", "auto"]
@@ -102,8 +105,16 @@ def test_an_estimate_is_cached_in_the_track_folder(mesh_folder, tmp_path, monkey
 def test_track_records_how_the_template_was_chosen(mesh_folder, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tt, "estimate_subject", stub_estimate([]))
     out = tmp_path / "t"
-    args = ["track", str(mesh_folder.path), "--out", str(out), "--method", "articulated_icp",
-            "--max-iter", "2"]  # fmt: skip
+    args = [
+        "track",
+        str(mesh_folder.path),
+        "--out",
+        str(out),
+        "--method",
+        "articulated_icp",
+        "--max-iter",
+        "2",
+    ]
     assert main(args) == 0
     assert "template estimated from the capture" in capsys.readouterr().out
     meta = json.loads((out / "track.json").read_text())

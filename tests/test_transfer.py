@@ -188,8 +188,9 @@ def test_read_cage_track_checks_its_input(rig, tracked, tmp_path):
         with np.load(frame_path(out, i)) as z:
             d = {k: z[k] for k in z.files if k != "state_cage"}
         np.savez(frame_path(old, i), **d)
-    np.testing.assert_allclose(read_cage_track(old, template=t, oqr=oqr).cages, ct.cages,
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        read_cage_track(old, template=t, oqr=oqr).cages, ct.cages, atol=1e-12
+    )
     # a stored cage its rigging does not rebuild
     d["state_cage"] = ct.cages[-1] + 0.01
     np.savez(frame_path(old, ct.frames[-1]), **d)

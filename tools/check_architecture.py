@@ -180,8 +180,10 @@ def main(argv: list[str]) -> int:
     for line in report.long_modules:
         print("long module:", line)
     if report.ok:
-        print(f"ok: {len(LAYERS)} layers, imports point down, no cycle, no module over "
-              f"{MAX_LINES} lines")  # fmt: skip
+        print(
+            f"ok: {len(LAYERS)} layers, imports point down, no cycle, no module over "
+            f"{MAX_LINES} lines"
+        )
     return 0 if report.ok else 1
 
 

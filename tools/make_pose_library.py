@@ -47,9 +47,21 @@ HELD_OUT = ("05_03", "60_01", "61_01")
 #: Evaluation clips of the benchmarks: refused if ever found in the folder.
 EVALUATION = ("05_01", "09_01", "01_01", "49_18", "16_01", "07_01")
 #: Category of a trial: by subject, with per-trial exceptions (module docstring).
-SUBJECTS = {"02": "walk", "03": "walk", "05": "modern dance", "06": "walk", "07": "walk",
-            "08": "walk", "09": "run", "10": "walk", "12": "walk", "13": "everyday",
-            "14": "everyday", "60": "salsa", "61": "salsa"}  # fmt: skip
+SUBJECTS = {
+    "02": "walk",
+    "03": "walk",
+    "05": "modern dance",
+    "06": "walk",
+    "07": "walk",
+    "08": "walk",
+    "09": "run",
+    "10": "walk",
+    "12": "walk",
+    "13": "everyday",
+    "14": "everyday",
+    "60": "salsa",
+    "61": "salsa",
+}
 TRIALS = {"13_39": "jump", "13_40": "jump", "13_41": "jump", "13_42": "jump"}
 SKELETON = "neutral"
 SOURCE = (
@@ -65,8 +77,14 @@ def category(trial: str) -> str:
 
 #: Joints left out of the features: the fingers (noisy in the sources, and no quad follows
 #: them), whose positions would otherwise decide a third of the picks.
-FINGERS = ("LeftFingerBase", "LeftHandIndex1", "LThumb", "RightFingerBase", "RightHandIndex1",
-           "RThumb")  # fmt: skip
+FINGERS = (
+    "LeftFingerBase",
+    "LeftHandIndex1",
+    "LThumb",
+    "RightFingerBase",
+    "RightHandIndex1",
+    "RThumb",
+)
 
 
 def features(skeleton, R: np.ndarray) -> np.ndarray:
@@ -133,19 +151,32 @@ def main() -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
-        out, format=np.str_(LIBRARY_FORMAT), skeleton=np.str_(SKELETON),
-        joint_names=np.array(sk.names), quaternions=np.rint(q * _QSCALE).astype(np.int16),
-        categories=np.array(cats), category=cat_of, trials=np.array(names),
-        trial=trial_of[pick].astype(np.uint16), frame=frame_of[pick].astype(np.uint16),
-        radius=radius.astype(np.float32), held_out=np.array(HELD_OUT), source=np.str_(SOURCE),
-    )  # fmt: skip
+        out,
+        format=np.str_(LIBRARY_FORMAT),
+        skeleton=np.str_(SKELETON),
+        joint_names=np.array(sk.names),
+        quaternions=np.rint(q * _QSCALE).astype(np.int16),
+        categories=np.array(cats),
+        category=cat_of,
+        trials=np.array(names),
+        trial=trial_of[pick].astype(np.uint16),
+        frame=frame_of[pick].astype(np.uint16),
+        radius=radius.astype(np.float32),
+        held_out=np.array(HELD_OUT),
+        source=np.str_(SOURCE),
+    )
     counts = {c: int(np.sum(cat_of == i)) for i, c in enumerate(cats)}
-    pool = {c: int(sum(np.sum(trial_of == i) for i, t in enumerate(names) if category(t) == c))
-            for c in cats}  # fmt: skip
-    print(f"wrote {out} ({out.stat().st_size / 1e3:.0f} kB): {len(pick)} of {len(R)} poses "
-          f"from {len(names)} trials in {time.perf_counter() - t0:.0f} s")  # fmt: skip
-    print("  picked / pooled per category: "
-          + ", ".join(f"{c} {counts[c]}/{pool[c]}" for c in cats))  # fmt: skip
+    pool = {
+        c: int(sum(np.sum(trial_of == i) for i, t in enumerate(names) if category(t) == c))
+        for c in cats
+    }
+    print(
+        f"wrote {out} ({out.stat().st_size / 1e3:.0f} kB): {len(pick)} of {len(R)} poses "
+        f"from {len(names)} trials in {time.perf_counter() - t0:.0f} s"
+    )
+    print(
+        "  picked / pooled per category: " + ", ".join(f"{c} {counts[c]}/{pool[c]}" for c in cats)
+    )
     for k in (100, 200, 400, 800, 1600):
         if k < len(pick):  # the next pick's distance: how far the farthest pose is left
             print(f"  first {k:5d}: every pooled pose within {radius[k] * 1000:.0f} mm RMS")

@@ -92,15 +92,21 @@ def main(argv: list[str] | None = None) -> None:
     pca = ShapeSpace(n_components=args.components).fit(X)
     mean, comps, std, ratio = pca.mean_, pca.components_, pca.std_, pca.explained_variance_ratio_
     explained = ", ".join(f"{ratio[:k].sum():.4f}" for k in (1, 2, 4, 8, args.components))
-    print(f"{args.bodies} bodies in {time.perf_counter() - t0:.0f} s; variance explained by "
-          f"1, 2, 4, 8, {args.components} components: {explained}")  # fmt: skip
+    print(
+        f"{args.bodies} bodies in {time.perf_counter() - t0:.0f} s; variance explained by "
+        f"1, 2, 4, 8, {args.components} components: {explained}"
+    )
 
     mean_body = dict(bodies[0], V=mean[: 3 * n].reshape(n, 3))
     mean_body["heads"] = mean[3 * n : 3 * n + 93].reshape(31, 3)
     mean_body["tails"] = mean[3 * n + 93 : 3 * n + 186].reshape(31, 3)
-    arrays = mt.make_template("shape_space_mean", **{k: mean_body[k] for k in ("V", "F")},
-                              heads=mean_body["heads"], tails=mean_body["tails"],
-                              W_dense=W)  # fmt: skip
+    arrays = mt.make_template(
+        "shape_space_mean",
+        **{k: mean_body[k] for k in ("V", "F")},
+        heads=mean_body["heads"],
+        tails=mean_body["tails"],
+        W_dense=W,
+    )
     arrays.update(
         format=np.str_(FORMAT),
         name=np.str_("anny_shape_space"),
@@ -117,8 +123,10 @@ def main(argv: list[str] | None = None) -> None:
     arrays["mean"] = arrays["mean"].astype(np.float32)
     with open(args.out, "wb") as f:
         np.savez_compressed(f, **arrays)
-    print(f"{args.out}: {args.components} components of {X.shape[1]} values, "
-          f"{args.out.stat().st_size / 1e6:.2f} MB")  # fmt: skip
+    print(
+        f"{args.out}: {args.components} components of {X.shape[1]} values, "
+        f"{args.out.stat().st_size / 1e6:.2f} MB"
+    )
 
     for name, p in mt.SHAPES.items():  # held out: not among the random samples
         x = body_vector(mt.body_in_world(mt.rest_body(model, p), cavities))
@@ -128,9 +136,11 @@ def main(argv: list[str] | None = None) -> None:
             rec = mean + comps[:k].T @ (comps[:k] @ (x - mean))
             dv = np.linalg.norm((rec - x)[: 3 * n].reshape(n, 3), axis=1)
             dj = np.linalg.norm((rec - x)[3 * n : 3 * n + 93].reshape(31, 3), axis=1)
-            print(f"  {name}, {k} components: vertices reproduced to "
-                  f"{dv.mean() * 1000:.2f} mm mean, {dv.max() * 1000:.2f} max; "
-                  f"joints {dj.mean() * 1000:.2f} mm mean")  # fmt: skip
+            print(
+                f"  {name}, {k} components: vertices reproduced to "
+                f"{dv.mean() * 1000:.2f} mm mean, {dv.max() * 1000:.2f} max; "
+                f"joints {dj.mean() * 1000:.2f} mm mean"
+            )
     print(f"done in {time.perf_counter() - t0:.0f} s")
 
 

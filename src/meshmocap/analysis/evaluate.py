@@ -118,9 +118,11 @@ def evaluate(
     truths = [f.truth for f in frames]
     hidden = _out_of_view(truths, capture.cameras) if in_view_only else np.zeros(0, np.int64)
     for k in hidden:  # scored as skipped frames (truth NaN): the cameras did not see it all
-        truths[k] = replace(truths[k], vertices=np.full_like(truths[k].vertices, np.nan),
-                            joints=None if truths[k].joints is None
-                            else np.full_like(truths[k].joints, np.nan))  # fmt: skip
+        truths[k] = replace(
+            truths[k],
+            vertices=np.full_like(truths[k].vertices, np.nan),
+            joints=None if truths[k].joints is None else np.full_like(truths[k].joints, np.nan),
+        )
     have_joints = all(t is not None and t.joints is not None for t in truths)
     names = track.meta.get("eval_names")
     parents = track.meta.get("eval_parents")
@@ -198,23 +200,29 @@ def _out_of_view(truths: list, cameras: list) -> np.ndarray:
 
 def summary(ev: Evaluation) -> str:
     """A short plain-text report of an evaluation."""
-    out = [f"method {ev.method}, template {ev.template}: {ev.n_frames} frames, "
-           f"{ev.unhealthy} flagged unhealthy, "
-           f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"]  # fmt: skip
+    out = [
+        f"method {ev.method}, template {ev.template}: {ev.n_frames} frames, "
+        f"{ev.unhealthy} flagged unhealthy, "
+        f"{ev.seconds.mean:.3f} s per frame (median {ev.seconds.median:.3f})"
+    ]
     if ev.init:
         out[0] += f"; init {ev.init}"
     if ev.lost:
         out[0] += f"; {ev.lost} frames with a limb lost ({ev.reinit} re-initialised)"
     if len(ev.out_of_view):
         f = ev.out_of_view
-        out.append(f"{len(f)} frames not scored: the subject leaves a camera's view "
-                   f"(frames {f[0]}..{f[-1]})")  # fmt: skip
+        out.append(
+            f"{len(f)} frames not scored: the subject leaves a camera's view "
+            f"(frames {f[0]}..{f[-1]})"
+        )
     if ev.joints is not None:
         out.append(table(ev.joints))
         if ev.joints14 is not None:
             o = ev.joints14.overall
-            out.append(f"14 joints (no pelvis): mean {o.mean:.1f} mm, median {o.median:.1f}, "
-                       f"std {o.std:.1f}, max {o.max:.1f}")  # fmt: skip
+            out.append(
+                f"14 joints (no pelvis): mean {o.mean:.1f} mm, median {o.median:.1f}, "
+                f"std {o.std:.1f}, max {o.max:.1f}"
+            )
     if ev.bones is not None:
         out.append(table(ev.bones))
     if ev.silhouettes is not None:
@@ -223,8 +231,14 @@ def summary(ev: Evaluation) -> str:
         s = ev.surface
         rows = [[int(f), m, h] for f, m, h in zip(s.frames, s.mean, s.hausdorff, strict=True)]
         rows.append(["mean", float(s.mean.mean()), float(s.hausdorff.mean())])
-        out.append(format_table(["frame", "mean (mm)", "hausdorff (mm)"], rows, digits=1,
-                                title=f"Surface distance to the {s.against}, mm"))  # fmt: skip
+        out.append(
+            format_table(
+                ["frame", "mean (mm)", "hausdorff (mm)"],
+                rows,
+                digits=1,
+                title=f"Surface distance to the {s.against}, mm",
+            )
+        )
     if ev.correspondence is not None:
         out.append(table(ev.correspondence))
     return "\n\n".join(out)

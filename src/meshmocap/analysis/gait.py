@@ -131,9 +131,15 @@ class GaitCycle:
 
 #: Fields of :class:`GaitSummary` with their units, in CSV order.
 SUMMARY_FIELDS = (
-    "cadence_steps_per_min", "stride_time_s", "stride_length_m", "speed_m_per_s",
-    "step_time_s", "step_length_m", "stance_pct", "swing_pct",
-)  # fmt: skip
+    "cadence_steps_per_min",
+    "stride_time_s",
+    "stride_length_m",
+    "speed_m_per_s",
+    "step_time_s",
+    "step_length_m",
+    "stance_pct",
+    "swing_pct",
+)
 
 
 @dataclass(frozen=True)
@@ -250,9 +256,18 @@ def _summary(g: Gait, side: str) -> GaitSummary:
     cadence = 60.0 / step_time if np.isfinite(step_time) else 120.0 / stride_time
     stance = mean(c.stance_pct for c in cyc)
     return GaitSummary(
-        side, len(cyc), len(st), cadence, stride_time, mean(c.stride_length for c in cyc),
-        mean(c.speed for c in cyc), step_time, mean(st[:, 2]), stance, 100.0 - stance,
-    )  # fmt: skip
+        side,
+        len(cyc),
+        len(st),
+        cadence,
+        stride_time,
+        mean(c.stride_length for c in cyc),
+        mean(c.speed for c in cyc),
+        step_time,
+        mean(st[:, 2]),
+        stance,
+        100.0 - stance,
+    )
 
 
 def gait_analysis(
@@ -350,8 +365,10 @@ def gait_analysis(
         planted = drop_short(close_gaps(planted, round(min_swing * fps)), round(min_stance * fps))
         s, e, hs, to = stance_events(planted, speed[:, k], height[:, k], v_on, v_off, gate)
         # the smoothing window of an event must not reach into frames filled by interpolation
-        hs, to = (np.array([p if event_usable(p, bad, bad_margin=margin) else np.nan for p in x])
-                  for x in (hs, to))  # fmt: skip
+        hs, to = (
+            np.array([p if event_usable(p, bad, bad_margin=margin) else np.nan for p in x])
+            for x in (hs, to)
+        )
         where = np.array([np.median(P[a:b, k, :2], axis=0) for a, b in zip(s, e, strict=True)])
         stances.append((s, e, where.reshape(-1, 2)))
         strikes.append(hs)
@@ -360,23 +377,38 @@ def gait_analysis(
     cycles = _cycles(strikes, offs, stances, steps, hip, knee, bad, fps, 2 * max_step)
     message = ""
     if v_prog < 0.15:
-        message = (f"the pelvis travels {v_prog:.2f} m/s (median over the clip); gait analysis "
-                   "needs a walk or a run (at least 0.15 m/s)")  # fmt: skip
+        message = (
+            f"the pelvis travels {v_prog:.2f} m/s (median over the clip); gait analysis "
+            "needs a walk or a run (at least 0.15 m/s)"
+        )
     elif not len(steps):
         n = [int(np.isfinite(h).sum()) for h in strikes]
-        message = (f"no step found in {T / fps:.1f} s: {n[0]} strikes of the left foot and "
-                   f"{n[1]} of the right (a step is a strike of one foot followed within "
-                   f"{max_step:g} s by one of the other)")  # fmt: skip
+        message = (
+            f"no step found in {T / fps:.1f} s: {n[0]} strikes of the left foot and "
+            f"{n[1]} of the right (a step is a strike of one foot followed within "
+            f"{max_step:g} s by one of the other)"
+        )
     if message:
         cycles, steps = (), np.zeros((0, 4))
     return Gait(
-        fps=float(fps), frames=fr, valid=ok, times=np.arange(T) / fps,
-        ankle_height=height, ankle_speed=speed, wrist_sagittal=wrist, hip_flexion=hip,
-        knee_flexion=knee, strikes=tuple(h[np.isfinite(h)] for h in strikes),  # type: ignore[arg-type]
+        fps=float(fps),
+        frames=fr,
+        valid=ok,
+        times=np.arange(T) / fps,
+        ankle_height=height,
+        ankle_speed=speed,
+        wrist_sagittal=wrist,
+        hip_flexion=hip,
+        knee_flexion=knee,
+        strikes=tuple(h[np.isfinite(h)] for h in strikes),  # type: ignore[arg-type]
         foot_offs=tuple(o[np.isfinite(o)] for o in offs),  # type: ignore[arg-type]
-        cycles=cycles, steps=steps, strike_speed=v_on, off_speed=v_off, progression_speed=v_prog,
+        cycles=cycles,
+        steps=steps,
+        strike_speed=v_on,
+        off_speed=v_off,
+        progression_speed=v_prog,
         message=message,
-    )  # fmt: skip
+    )
 
 
 def _steps(strikes, stances, pelvis, bad, fps, max_step) -> np.ndarray:
@@ -417,11 +449,20 @@ def _cycles(
             step_t, step_l = (step[0, 1], step[0, 2]) if len(step) else (np.nan, np.nan)
             s = a + pct * (b - a)
             curves = np.interp(s, t, hip[:, k]), np.interp(s, t, knee[:, k])
-            out.append(GaitCycle(
-                side, float(a), float(off), float(b), (b - a) / fps,
-                float(np.linalg.norm(where[r + 1] - where[r])), 100.0 * (off - a) / (b - a),
-                float(step_t), float(step_l), *curves,
-            ))  # fmt: skip
+            out.append(
+                GaitCycle(
+                    side,
+                    float(a),
+                    float(off),
+                    float(b),
+                    (b - a) / fps,
+                    float(np.linalg.norm(where[r + 1] - where[r])),
+                    100.0 * (off - a) / (b - a),
+                    float(step_t),
+                    float(step_l),
+                    *curves,
+                )
+            )
     return tuple(sorted(out, key=lambda c: c.strike))
 
 
@@ -512,8 +553,10 @@ def compare_gaits(test: Gait, reference: Gait, *, window: float = 0.2) -> GaitCo
             a = test.frame_numbers(getattr(test, ev)[k])
             b = reference.frame_numbers(getattr(reference, ev)[k])
             d = a[:, None] - b[None, :]
-            pairs = sorted(zip(*np.nonzero(np.abs(d) <= window * test.fps), strict=True),
-                           key=lambda ij: abs(d[ij]))  # fmt: skip
+            pairs = sorted(
+                zip(*np.nonzero(np.abs(d) <= window * test.fps), strict=True),
+                key=lambda ij: abs(d[ij]),
+            )
             used_a, used_b = set(), set()
             for i, j in pairs:
                 if i not in used_a and j not in used_b:
@@ -527,7 +570,10 @@ def compare_gaits(test: Gait, reference: Gait, *, window: float = 0.2) -> GaitCo
 
     s, r = test.summary(), reference.summary()
     return GaitComparison(
-        n_ref, len(offsets), spurious, np.asarray(offsets, dtype=float),
+        n_ref,
+        len(offsets),
+        spurious,
+        np.asarray(offsets, dtype=float),
         err(s.cadence_steps_per_min, r.cadence_steps_per_min),
         err(s.stride_length_m, r.stride_length_m),
-    )  # fmt: skip
+    )

@@ -66,8 +66,10 @@ def _pairs(pred, true, name: str, what: str) -> tuple[np.ndarray, ...]:
     P, G = np.asarray(pred, dtype=np.float64), np.asarray(true, dtype=np.float64)
     P, G = (P[None], G[None]) if P.ndim == 2 and G.ndim == 2 else (P, G)
     if P.ndim != 3 or P.shape[-1] != 3 or P.shape != G.shape:
-        raise InputError(f"{name}: prediction and truth must both be (T, {what}, 3), "
-                         f"found {np.shape(pred)} and {np.shape(true)}")  # fmt: skip
+        raise InputError(
+            f"{name}: prediction and truth must both be (T, {what}, 3), "
+            f"found {np.shape(pred)} and {np.shape(true)}"
+        )
     skipped = ~np.isfinite(G).all(axis=(1, 2))
     failed = ~np.isfinite(P).all(axis=(1, 2)) & ~skipped
     ok = np.flatnonzero(~skipped & ~failed)
@@ -123,8 +125,13 @@ class JointErrors(_FrameErrors):
         if unknown:
             raise InputError(f"exclude: unknown joints {unknown}; joints are {list(self.names)}")
         keep = [i for i, n in enumerate(self.names) if n not in names]
-        return JointErrors(self.frames, self.errors[:, keep], self.failed, self.skipped,
-                           tuple(self.names[i] for i in keep))  # fmt: skip
+        return JointErrors(
+            self.frames,
+            self.errors[:, keep],
+            self.failed,
+            self.skipped,
+            tuple(self.names[i] for i in keep),
+        )
 
 
 def joint_errors(
@@ -236,8 +243,9 @@ class SilhouetteErrors:
     def errors(self) -> np.ndarray:
         """(T, C) ratios; NaN where the camera does not see the subject (empty true mask)."""
         seen = self.true_pixels > 0
-        return np.divide(self.xor_pixels, self.true_pixels, out=np.full(seen.shape, np.nan),
-                         where=seen)  # fmt: skip
+        return np.divide(
+            self.xor_pixels, self.true_pixels, out=np.full(seen.shape, np.nan), where=seen
+        )
 
     @property
     def per_camera(self) -> np.ndarray:
@@ -281,8 +289,9 @@ def silhouette_errors(
             want = len(counts[0]) if counts else len(mt)
             raise InputError(f"frame {t}: {len(mp)} predicted, {len(mt)} true masks; want {want}")
         # a camera that does not see the subject (empty true mask) is not scored: (0, 0)
-        counts.append([_xor_true(a, b) if np.any(b) else (0, 0)
-                       for a, b in zip(mp, mt, strict=True)])  # fmt: skip
+        counts.append(
+            [_xor_true(a, b) if np.any(b) else (0, 0) for a, b in zip(mp, mt, strict=True)]
+        )
     if not counts or not counts[0]:
         raise InputError("silhouette_errors: no frames or no cameras given")
     X = np.array(counts, dtype=np.int64)  # (T, C, 2)
@@ -334,8 +343,9 @@ def bone_lengths(joints: np.ndarray, parents: Sequence[int]) -> np.ndarray:
     """
     J, par = np.asarray(joints, dtype=np.float64), np.asarray(parents, dtype=np.int64)
     if J.ndim not in (2, 3) or J.shape[-1] != 3 or par.shape != (J.shape[-2],):
-        raise InputError(f"joints must be (T, K, 3) with K = len(parents) = {par.size}, "
-                         f"found {J.shape}")  # fmt: skip
+        raise InputError(
+            f"joints must be (T, K, 3) with K = len(parents) = {par.size}, found {J.shape}"
+        )
     if (par >= len(par)).any() or (par < -1).any():
         raise InputError(f"parents must lie in [-1, {len(par) - 1}], found {par.tolist()}")
     child = np.flatnonzero(par >= 0)
@@ -405,8 +415,13 @@ class DistanceStats:
 
     @classmethod
     def of(cls, d: np.ndarray) -> DistanceStats:
-        return cls(float(d.mean()), float(np.sqrt((d**2).mean())),
-                   float(np.percentile(d, 95)), float(d.max()), int(d.size))  # fmt: skip
+        return cls(
+            float(d.mean()),
+            float(np.sqrt((d**2).mean())),
+            float(np.percentile(d, 95)),
+            float(d.max()),
+            int(d.size),
+        )
 
 
 @dataclass(frozen=True)

@@ -90,8 +90,10 @@ def _summary(r: Result) -> tuple[str, list[str], list[list[object]], float]:
         return title, heads, [_stats_row(r.errors.shape[1], r.overall)], 1.0
     if isinstance(r, SilhouetteErrors):
         E = r.errors  # NaN where a camera does not see the subject: not scored
-        rows = [[c, *(_finite_stat(f, E[:, i]) for f in (np.mean, np.median, np.max))]
-                for i, c in enumerate(r.cameras)]  # fmt: skip
+        rows = [
+            [c, *(_finite_stat(f, E[:, i]) for f in (np.mean, np.median, np.max))]
+            for i, c in enumerate(r.cameras)
+        ]
         rows.append(["all", r.overall, _finite_stat(np.median, E), _finite_stat(np.max, E)])
         rows.append(["pooled", r.pooled, math.nan, math.nan])
         title = f"Silhouette overlap error, % of true pixels ({len(E)} frames)"
@@ -101,8 +103,10 @@ def _summary(r: Result) -> tuple[str, list[str], list[list[object]], float]:
         title = f"Bone lengths, mm ({len(r.frames)} frames, {len(r.failed)} failed)"
         return title, ["bone", "mean_mm", "std_mm"], rows, 1.0
     if isinstance(r, SurfaceDistance):
-        rows = [[name, d.mean, d.rms, d.p95, d.max, d.n]
-                for name, d in (("A to B", r.a_to_b), ("B to A", r.b_to_a))]  # fmt: skip
+        rows = [
+            [name, d.mean, d.rms, d.p95, d.max, d.n]
+            for name, d in (("A to B", r.a_to_b), ("B to A", r.b_to_a))
+        ]
         title = f"Surface distance, mm (each sampled distance ≤ exact + {r.bound * 1e3:.2g} mm)"
         return title, ["direction", "mean_m", "rms_m", "p95_m", "max_m", "samples"], rows, 1e3
     raise InputError(f"expected one of {[t.__name__ for t in _TYPES]}, found {type(r).__name__}")
@@ -168,6 +172,7 @@ def write_csv(path: str | os.PathLike, result: Result, *, per_frame: bool = Fals
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(headers)
-    writer.writerows([["" if isinstance(x, float) and math.isnan(x) else x for x in row]
-                      for row in rows])  # fmt: skip
+    writer.writerows(
+        [["" if isinstance(x, float) and math.isnan(x) else x for x in row] for row in rows]
+    )
     return write_bytes_atomic(path, buf.getvalue().encode())

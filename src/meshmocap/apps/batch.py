@@ -75,8 +75,11 @@ def _hull_chunks(item: BatchItem) -> list[list[int]]:
     from meshmocap.studio.hulls import camera_file, silhouette_frames
 
     cameras = read_cameras(camera_file(path))
-    todo = [f for f in silhouette_frames(path, [c.name for c in cameras])
-            if not (path / "hulls" / f"{frame_name(f)}.npz").is_file()]  # fmt: skip
+    todo = [
+        f
+        for f in silhouette_frames(path, [c.name for c in cameras])
+        if not (path / "hulls" / f"{frame_name(f)}.npz").is_file()
+    ]
     return [todo[i : i + HULL_CHUNK] for i in range(0, len(todo), HULL_CHUNK)]
 
 
@@ -104,8 +107,9 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
         log.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} pid {os.getpid()}\n")
     attempts = len((folder / "attempts.log").read_text().splitlines())
     template = item.template or "default"
-    base = CaptureSummary(item.name, item.capture, item.method, template, "failed",
-                          attempts=attempts)  # fmt: skip
+    base = CaptureSummary(
+        item.name, item.capture, item.method, template, "failed", attempts=attempts
+    )
     try:
         summary = _track_and_score(item, folder, base)
     except Exception as exc:  # one capture's failure must not stop the batch
@@ -133,22 +137,37 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     frames = None
     if item.frames:
         frames = range(len(capture))[frame_slice(item.frames, what="batch: frames")]
-    track = track_sequence(tracker, template, capture, folder / "track", frames=frames,
-                           show_progress=False, template_info=choice.info)  # fmt: skip
+    track = track_sequence(
+        tracker,
+        template,
+        capture,
+        folder / "track",
+        frames=frames,
+        show_progress=False,
+        template_info=choice.info,
+    )
     flags = track.flags or tuple(() if h else ("failed",) for h in track.healthy)
     steady = track.seconds[1:] if len(track.seconds) > 1 else track.seconds
     summary = replace(
-        base, status="ok", frames=len(track.frames), template=template_label(track.meta),
-        flagged=sum(1 for f in flags if f), lost=sum("lost" in f for f in flags),
-        missing=sum("missing" in f for f in flags), seconds_per_frame=float(steady.mean()),
-    )  # fmt: skip
+        base,
+        status="ok",
+        frames=len(track.frames),
+        template=template_label(track.meta),
+        flagged=sum(1 for f in flags if f),
+        lost=sum("lost" in f for f in flags),
+        missing=sum("missing" in f for f in flags),
+        seconds_per_frame=float(steady.mean()),
+    )
     if isinstance(capture, Capture) and (Path(capture.path) / "truth").is_dir():
         ev = evaluate(track, capture, silhouettes=False, surface_frames=0)
         write_evaluation(ev, folder / "eval")
         errs = ev.joints if ev.joints is not None else ev.correspondence
         if errs is not None and errs.per_frame.size:
-            summary = replace(summary, mean_mm=float(errs.overall.mean),
-                              worst_frame_mm=float(errs.per_frame.max()))  # fmt: skip
+            summary = replace(
+                summary,
+                mean_mm=float(errs.overall.mean),
+                worst_frame_mm=float(errs.per_frame.max()),
+            )
     return summary
 
 
@@ -196,9 +215,11 @@ def _client(workers: int | None, scheduler: str | None):
     # the dashboard on a free port, shown or not: None still binds 8787, so a second batch
     # on the same machine would fail to start
     cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+        n_workers=workers or os.cpu_count() or 1,
+        threads_per_worker=1,
+        processes=True,
         dashboard_address=":0",
-    )  # fmt: skip
+    )
     return Client(cluster), cluster
 
 
@@ -272,17 +293,20 @@ def run_batch(
     mode, link = "serial", ""
     if todo and not serial and (client is not None or scheduler or have_dask()):
         mode = "dask"
-        own_client, cluster = (client, None) if client is not None else _client(
-            workers, scheduler)  # fmt: skip
+        own_client, cluster = (client, None) if client is not None else _client(workers, scheduler)
         try:
             link = getattr(own_client, "dashboard_link", "") or "" if dashboard else ""
             n = len(own_client.scheduler_info().get("workers", {}))
-            log(f"running {len(todo)} capture(s) on Dask ({n} workers)"
-                + (f"; dashboard {link}" if link else ""))  # fmt: skip
+            log(
+                f"running {len(todo)} capture(s) on Dask ({n} workers)"
+                + (f"; dashboard {link}" if link else "")
+            )
             futures = {}
             for it in todo:
-                hulls = [own_client.submit(_carve, it.capture, chunk, pure=False)
-                         for chunk in _hull_chunks(it)]  # fmt: skip
+                hulls = [
+                    own_client.submit(_carve, it.capture, chunk, pure=False)
+                    for chunk in _hull_chunks(it)
+                ]
                 futures[it.name] = own_client.submit(_track, it, str(out), *hulls, pure=False)
             pending = set(futures)
             name_of = {f.key: n for n, f in futures.items()}
@@ -295,8 +319,9 @@ def run_batch(
                         log(summary_line(results[name_of[f.key]]))
                 return not pending
 
-            for _ in progress(_watch(done, finished), total=total, label="batch",
-                              enabled=show_progress):  # fmt: skip
+            for _ in progress(
+                _watch(done, finished), total=total, label="batch", enabled=show_progress
+            ):
                 pass
         finally:
             if client is None:
@@ -305,8 +330,10 @@ def run_batch(
                     cluster.close()
     elif todo:
         if not serial and not have_dask():
-            log('batch: Dask is not installed, running the captures one after another in this '
-                'process; pip install "meshmocap[cluster]" runs them in parallel')  # fmt: skip
+            log(
+                "batch: Dask is not installed, running the captures one after another in this "
+                'process; pip install "meshmocap[cluster]" runs them in parallel'
+            )
         bar = iter(progress(range(total), total=total, label="batch", enabled=show_progress))
         for it in todo:
             for chunk in _hull_chunks(it):
@@ -332,5 +359,12 @@ def _collect(future: Any, name: str, todo: Sequence[BatchItem], out: Path) -> Ca
         it = next(i for i in todo if i.name == name)
         log_file = out / name / "attempts.log"
         attempts = len(log_file.read_text().splitlines()) if log_file.is_file() else 0
-        return CaptureSummary(name, it.capture, it.method, it.template, "failed",
-                              error=_one_line(exc), attempts=attempts)  # fmt: skip
+        return CaptureSummary(
+            name,
+            it.capture,
+            it.method,
+            it.template,
+            "failed",
+            error=_one_line(exc),
+            attempts=attempts,
+        )

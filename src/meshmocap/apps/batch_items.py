@@ -74,12 +74,14 @@ def _manifest(path: Path, *, method: str, template: str, frames: str) -> list[di
             if not (row.get("capture") or "").strip():
                 raise InputError(f"batch: {path}:{line}: empty capture")
             for cap in _expand(row["capture"], path.parent):
-                rows.append({
-                    "capture": cap,
-                    "method": (row.get("method") or "").strip() or method,
-                    "template": (row.get("template") or "").strip() or template,
-                    "frames": (row.get("frames") or "").strip() or frames,
-                })  # fmt: skip
+                rows.append(
+                    {
+                        "capture": cap,
+                        "method": (row.get("method") or "").strip() or method,
+                        "template": (row.get("template") or "").strip() or template,
+                        "frames": (row.get("frames") or "").strip() or frames,
+                    }
+                )
     return rows
 
 
@@ -118,8 +120,10 @@ def batch_items(
         if source.endswith(".csv") and Path(source).is_file():
             rows += _manifest(Path(source), method=method, template=template, frames=frames)
         else:
-            rows += [{"capture": c, "method": method, "template": template, "frames": frames}
-                     for c in _expand(source)]  # fmt: skip
+            rows += [
+                {"capture": c, "method": method, "template": template, "frames": frames}
+                for c in _expand(source)
+            ]
     items: list[BatchItem] = []
     seen: set[tuple[str, ...]] = set()
     names: set[str] = set()

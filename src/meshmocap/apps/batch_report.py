@@ -42,18 +42,43 @@ def build_batch_report(out: str | os.PathLike, batch: str | os.PathLike) -> Path
         if pngs:
             images = tuple((f"{name}: {p.stem.replace('_', ' ')}", p) for p in pngs)
             sections.append(Section(f"{name} ({s.method}, {s.template})", images=images))
-    headers = ("capture", "method", "template", "status", "frames", "flagged", "lost",
-               "s/frame", "mean mm", "worst frame mm", "error")  # fmt: skip
+    headers = (
+        "capture",
+        "method",
+        "template",
+        "status",
+        "frames",
+        "flagged",
+        "lost",
+        "s/frame",
+        "mean mm",
+        "worst frame mm",
+        "error",
+    )
     table = Table(f"{len(names)} captures", headers, tuple(rows), digits=1)
     ok = sum(r[3] == "ok" for r in rows)
-    intro = (f"batch {batch}: {ok} of {len(names)} captures tracked; errors against each "
-             "capture's ground truth where it has one (mean over all frame-joint pairs; "
-             "worst frame = the frame with the largest mean error)")  # fmt: skip
-    return write_report(out, title=f"meshmocap batch: {batch.name}", tables=[table],
-                        sections=sections, intro=intro)  # fmt: skip
+    intro = (
+        f"batch {batch}: {ok} of {len(names)} captures tracked; errors against each "
+        "capture's ground truth where it has one (mean over all frame-joint pairs; "
+        "worst frame = the frame with the largest mean error)"
+    )
+    return write_report(
+        out, title=f"meshmocap batch: {batch.name}", tables=[table], sections=sections, intro=intro
+    )
 
 
 def _row(s: CaptureSummary) -> tuple:
     retry = f" (attempt {s.attempts})" if s.attempts > 1 else ""
-    return (s.name, s.method, s.template, s.status + retry, s.frames, s.flagged, s.lost,
-            s.seconds_per_frame, s.mean_mm, s.worst_frame_mm, s.error)  # fmt: skip
+    return (
+        s.name,
+        s.method,
+        s.template,
+        s.status + retry,
+        s.frames,
+        s.flagged,
+        s.lost,
+        s.seconds_per_frame,
+        s.mean_mm,
+        s.worst_frame_mm,
+        s.error,
+    )

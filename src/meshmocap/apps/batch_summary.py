@@ -90,21 +90,53 @@ def write_summary(out: Path, summaries: Sequence[CaptureSummary]) -> tuple[Path,
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(SUMMARY_COLUMNS)
     for s in summaries:
-        w.writerow(["" if isinstance(v, float) and math.isnan(v) else v
-                    for v in asdict(s).values()])  # fmt: skip
+        w.writerow(
+            ["" if isinstance(v, float) and math.isnan(v) else v for v in asdict(s).values()]
+        )
     write_bytes_atomic(out / "summary.csv", buf.getvalue().encode())
-    head = ("capture", "method", "template", "status", "frames", "flagged", "lost", "missing",
-            "s/frame", "mean mm", "worst frame mm", "attempts", "error")  # fmt: skip
-    keys = ("name", "method", "template", "status", "frames", "flagged", "lost", "missing",
-            "seconds_per_frame", "mean_mm", "worst_frame_mm", "attempts", "error")  # fmt: skip
-    lines = ["# meshmocap batch", "",
-             f"{sum(s.status == 'ok' for s in summaries)} of {len(summaries)} captures "
-             "tracked. Errors are the mean over all (frame, joint) pairs of the 15 evaluation "
-             "joints (per-vertex error for captures without joints), against the capture's "
-             "ground truth where it has one; worst frame = the frame with the largest mean "
-             "error; flagged = frames flagged failed, missing or lost; attempts > 1: a worker "
-             "died and the capture was resumed elsewhere.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]  # fmt: skip
+    head = (
+        "capture",
+        "method",
+        "template",
+        "status",
+        "frames",
+        "flagged",
+        "lost",
+        "missing",
+        "s/frame",
+        "mean mm",
+        "worst frame mm",
+        "attempts",
+        "error",
+    )
+    keys = (
+        "name",
+        "method",
+        "template",
+        "status",
+        "frames",
+        "flagged",
+        "lost",
+        "missing",
+        "seconds_per_frame",
+        "mean_mm",
+        "worst_frame_mm",
+        "attempts",
+        "error",
+    )
+    lines = [
+        "# meshmocap batch",
+        "",
+        f"{sum(s.status == 'ok' for s in summaries)} of {len(summaries)} captures "
+        "tracked. Errors are the mean over all (frame, joint) pairs of the 15 evaluation "
+        "joints (per-vertex error for captures without joints), against the capture's "
+        "ground truth where it has one; worst frame = the frame with the largest mean "
+        "error; flagged = frames flagged failed, missing or lost; attempts > 1: a worker "
+        "died and the capture was resumed elsewhere.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
     for s in summaries:
         d = asdict(s)
         lines.append("| " + " | ".join(_fmt(d[k]).replace("|", "/") for k in keys) + " |")

@@ -132,8 +132,9 @@ def mesh_manifold(
     Y = configuration_vector(*quads_from_pose(oqr, template, R, root))
     trials = np.array([f"{capture.path.name}:{capture[int(k)].index}" for k in pick])
     poses = PoseSet(Y, trials, np.full(len(pick), "fitted"), template.name, ("fitted poses",))
-    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=min(n_components, len(pick) - 2),
-                           n_samples=len(pick))  # fmt: skip
+    pm = fit_pose_manifold(
+        poses, template, oqr=oqr, n_components=min(n_components, len(pick) - 2), n_samples=len(pick)
+    )
     pm.save(path)
     return pm.gp, ""
 
@@ -210,13 +211,15 @@ class _Run:
         method ``label``. The track folder is named by a digest of the tracker's options,
         the template, ``salt`` (e.g. the manifold's) and the tracking code
         (:func:`code_digest`); scores are cached beside it."""
-        digest = settings_key(tracker.name, tracker.options(), template.name,
-                              template_digest(template), salt, init)  # fmt: skip
+        digest = settings_key(
+            tracker.name, tracker.options(), template.name, template_digest(template), salt, init
+        )
         out = self.work / "tracks" / capture.path.name / f"{label.split('[')[0]}-{digest}"
         key = f"{capture.path.name}/{out.name}"
         before = len(done_frames(out)) if (out / "frames").is_dir() else 0
-        track = track_sequence(tracker, template, capture, out, show_progress=self.show_progress,
-                               init=init)  # fmt: skip
+        track = track_sequence(
+            tracker, template, capture, out, show_progress=self.show_progress, init=init
+        )
         if len(track.frames) > before:
             self.tracked.append(key)
         cache = out / _EVAL_CACHE
@@ -272,9 +275,13 @@ def _machine() -> dict[str, Any]:
     import platform
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (math.nan,) * 3
-    return {"platform": platform.platform(), "processor": platform.processor(),
-            "cores": os.cpu_count(), "load_average": [round(x, 2) for x in load],
-            "date": time.strftime("%Y-%m-%d %H:%M:%S %Z")}  # fmt: skip
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor(),
+        "cores": os.cpu_count(),
+        "load_average": [round(x, 2) for x in load],
+        "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+    }
 
 
 def _stamp(track: Path) -> str:
@@ -420,28 +427,51 @@ def run_bench(
                 rows.append(not_applicable(spec.name, m, why))
                 continue
             run.log(f"  {m}")
-            rows.append(run.track_and_score(spec.name, m, trackers[m], track_template, capture,
-                                            salt=track_salt.get(m, ""), init=init))  # fmt: skip
+            rows.append(
+                run.track_and_score(
+                    spec.name,
+                    m,
+                    trackers[m],
+                    track_template,
+                    capture,
+                    salt=track_salt.get(m, ""),
+                    init=init,
+                )
+            )
         if spec.name == sweep_on:
             for f in keep_fractions:
                 run.log(f"  patch, kept fraction {f:g} (Fig. 8)")
                 t = tracker("patch", keep_fraction=f)
-                r = run.track_and_score(spec.name, f"patch[keep={f:g}]", t, tmpl, capture,
-                                        init=init)  # fmt: skip
+                r = run.track_and_score(
+                    spec.name, f"patch[keep={f:g}]", t, tmpl, capture, init=init
+                )
                 tradeoff.append(TradeoffPoint(float(f), r))
     files = write_report(out, rows, tradeoff, sweep_on, skipped=skipped, template=template)
     settings = {
-        "captures": [asdict(s) for s in specs], "skipped": skipped, "methods": methods,
-        "method_options": method_options, "template": template, "init": init,
-        "template_digest": template_digest(tmpl), "keep_fractions": list(keep_fractions),
-        "tradeoff_capture": sweep_on, "tracks": {f"{r.capture}/{r.method}": r.track
-                                                  for r in [*rows, *(t.row for t in tradeoff)]},
-        "manifolds": {k: v for k, v in salt.items()}, "code_digest": code_digest(),
-        "versions": _versions(), "machine": _machine(),
-    }  # fmt: skip
+        "captures": [asdict(s) for s in specs],
+        "skipped": skipped,
+        "methods": methods,
+        "method_options": method_options,
+        "template": template,
+        "init": init,
+        "template_digest": template_digest(tmpl),
+        "keep_fractions": list(keep_fractions),
+        "tradeoff_capture": sweep_on,
+        "tracks": {f"{r.capture}/{r.method}": r.track for r in [*rows, *(t.row for t in tradeoff)]},
+        "manifolds": {k: v for k, v in salt.items()},
+        "code_digest": code_digest(),
+        "versions": _versions(),
+        "machine": _machine(),
+    }
     write_text_atomic(out / "settings.json", json.dumps(settings, indent=2, default=str) + "\n")
     files.append(out / "settings.json")
     return BenchResult(
-        tuple(rows), tuple(tradeoff), sweep_on, tuple(files), tuple(skipped),
-        tuple(run.tracked), tuple(run.evaluated), time.perf_counter() - t0,
-    )  # fmt: skip
+        tuple(rows),
+        tuple(tradeoff),
+        sweep_on,
+        tuple(files),
+        tuple(skipped),
+        tuple(run.tracked),
+        tuple(run.evaluated),
+        time.perf_counter() - t0,
+    )

@@ -76,11 +76,30 @@ class CaptureSet:
     keep_fractions: tuple[float, ...] = DEFAULT_KEEP_FRACTIONS
 
 
-_STANDARD = ("walk", "jog", "squat", "walk+ring8", "walk+degraded", "walk+heavy_male", "05_01",
-             "09_01", "crane")  # fmt: skip
-_FULL = (*PROCEDURAL_MOTIONS, "walk+ring8", "walk+degraded", "walk+heavy_male",
-         "walk+small_female", "jog+ring8+degraded", *CMU_CLIPS, "05_01+ring8", "05_01+degraded",
-         "09_01+heavy_male", "crane")  # fmt: skip
+_STANDARD = (
+    "walk",
+    "jog",
+    "squat",
+    "walk+ring8",
+    "walk+degraded",
+    "walk+heavy_male",
+    "05_01",
+    "09_01",
+    "crane",
+)
+_FULL = (
+    *PROCEDURAL_MOTIONS,
+    "walk+ring8",
+    "walk+degraded",
+    "walk+heavy_male",
+    "walk+small_female",
+    "jog+ring8+degraded",
+    *CMU_CLIPS,
+    "05_01+ring8",
+    "05_01+degraded",
+    "09_01+heavy_male",
+    "crane",
+)
 #: The named sets. ``quick`` runs in minutes: each paper's method and the baselines (the
 #: cage ablations are in the other sets) on 40 frames of a walk and a jog.
 CAPTURE_SETS: dict[str, CaptureSet] = {
@@ -198,13 +217,25 @@ def make_capture(
     deg = DEGRADED if spec.degraded else Degradation()
     if spec.kind == "meshes":
         return synthesize_from_meshes(
-            spec.source, out, rig=spec.rig, frames=range(spec.start or 0, spec.stop or 0),
-            up="y", degradation=deg, show_progress=show_progress,
-        )  # fmt: skip
+            spec.source,
+            out,
+            rig=spec.rig,
+            frames=range(spec.start or 0, spec.stop or 0),
+            up="y",
+            degradation=deg,
+            show_progress=show_progress,
+        )
     synth = SynthSpec(
-        motion=spec.source, template=template, subject=spec.subject, rig=spec.rig, fps=60.0,
-        start=spec.start, stop=spec.stop, degradation=deg, source_fps=spec.source_fps,
-    )  # fmt: skip
+        motion=spec.source,
+        template=template,
+        subject=spec.subject,
+        rig=spec.rig,
+        fps=60.0,
+        start=spec.start,
+        stop=spec.stop,
+        degradation=deg,
+        source_fps=spec.source_fps,
+    )
     return synthesize(out, synth, show_progress=show_progress)
 
 

@@ -48,12 +48,23 @@ def plot_mean_errors(rows: Sequence[BenchRow], path: str | os.PathLike) -> Path:
         got = [by.get((c, m)) for c in captures]
         mean = [r.mean_mm if r else np.nan for r in got]
         std = [r.std_mm if r else np.nan for r in got]
-        ax.bar(x + (i - (len(methods) - 1) / 2) * width, mean, width, yerr=std, capsize=2,
-               color=colour, alpha=0.85, label=m)  # fmt: skip
+        ax.bar(
+            x + (i - (len(methods) - 1) / 2) * width,
+            mean,
+            width,
+            yerr=std,
+            capsize=2,
+            color=colour,
+            alpha=0.85,
+            label=m,
+        )
     vertices = {r.capture for r in rows if r.metric == "vertices"}
-    ax.set_xticks(x, [f"{c}\n(vertices)" if c in vertices else c for c in captures],
-                  rotation=30 if len(captures) > 4 else 0, ha="right" if len(captures) > 4
-                  else "center")  # fmt: skip
+    ax.set_xticks(
+        x,
+        [f"{c}\n(vertices)" if c in vertices else c for c in captures],
+        rotation=30 if len(captures) > 4 else 0,
+        ha="right" if len(captures) > 4 else "center",
+    )
     ax.set_ylabel("mean error (mm), bars: ±1 std")
     ax.set_ylim(0, ax.get_ylim()[1] * 1.15)  # room for the legend
     ax.grid(axis="y", alpha=0.3)
@@ -72,8 +83,14 @@ def plot_bone_spread(rows: Sequence[BenchRow], path: str | os.PathLike, *, captu
     ax = fig.add_subplot()
     x, width = np.arange(len(names)), 0.8 / len(rows)
     for i, (r, colour) in enumerate(zip(rows, _colours(len(rows)), strict=True)):
-        bars = ax.bar(x + (i - (len(rows) - 1) / 2) * width, r.bone_std_mm, width,
-                      color=colour, alpha=0.85, label=r.method)  # fmt: skip
+        bars = ax.bar(
+            x + (i - (len(rows) - 1) / 2) * width,
+            r.bone_std_mm,
+            width,
+            color=colour,
+            alpha=0.85,
+            label=r.method,
+        )
         if len(rows) <= 3:  # the paper prints each bar's value on it
             ax.bar_label(bars, labels=[f"{s:.1f}" for s in r.bone_std_mm], fontsize=6, padding=1)
     ax.set_xticks(x, names, rotation=45, ha="right", fontsize=8)
@@ -89,8 +106,13 @@ def plot_frame_curves(rows: Sequence[BenchRow], path: str | os.PathLike, *, capt
     fig = _figure(8, 3.8)
     ax = fig.add_subplot()
     for r, colour in zip(rows, _colours(len(rows)), strict=True):
-        ax.plot(r.frame_numbers, r.per_frame_mm, linewidth=1, color=colour,
-                label=f"{r.method} (mean {r.mean_mm:.1f} mm)")  # fmt: skip
+        ax.plot(
+            r.frame_numbers,
+            r.per_frame_mm,
+            linewidth=1,
+            color=colour,
+            label=f"{r.method} (mean {r.mean_mm:.1f} mm)",
+        )
     what = "vertex" if rows and rows[0].metric == "vertices" else "joint"
     ax.set_xlabel("frame")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -124,8 +146,14 @@ def plot_tradeoff(
     for xi, yi, fi in zip(spf, err, f, strict=True):
         ax.annotate(f"{fi:g}", (xi, yi), textcoords="offset points", xytext=(5, 5), fontsize=8)
     if reference is not None:
-        ax.plot(reference.seconds_per_frame, reference.mean_mm, "*", ms=12, color="tab:blue",
-                label=f"{reference.method} (no classification)")  # fmt: skip
+        ax.plot(
+            reference.seconds_per_frame,
+            reference.mean_mm,
+            "*",
+            ms=12,
+            color="tab:blue",
+            label=f"{reference.method} (no classification)",
+        )
     ax.set_xlabel("seconds per frame")
     ax.set_ylabel("mean joint error (mm)")
     ax.grid(alpha=0.3)
@@ -139,8 +167,7 @@ def plot_tradeoff(
     cx.set_ylabel("silhouette overlap error (%)", color="tab:green")
     if reference is not None:
         bx.axhline(reference.seconds_per_frame, color="tab:red", linestyle="--", linewidth=1)
-        cx.axhline(reference.silhouette_error * 100, color="tab:green", linestyle="--",
-                   linewidth=1)  # fmt: skip
+        cx.axhline(reference.silhouette_error * 100, color="tab:green", linestyle="--", linewidth=1)
     bx.grid(alpha=0.3)
     bx.set_title("Paper's view (dashed: no classification)")
     fig.suptitle(f"Kept fraction of the body-part classifier (Fig. 8), {capture}")

@@ -26,18 +26,28 @@ from meshmocap.apps.bench_rows import BenchRow, TradeoffPoint
 
 #: results.csv columns: (header, row attribute)
 COLUMNS = (
-    ("capture", "capture"), ("method", "method"), ("status", "status"), ("metric", "metric"),
-    ("frames", "frames"), ("mean_mm", "mean_mm"), ("median_mm", "median_mm"),
-    ("std_mm", "std_mm"), ("worst_frame_mm", "worst_frame_mm"),
-    ("silhouette_error_ratio", "silhouette_error"), ("bone_std_max_mm", "bone_std_max_mm"),
-    ("seconds_per_frame_s", "seconds_per_frame"), ("flagged", "flagged"), ("note", "note"),
-)  # fmt: skip
+    ("capture", "capture"),
+    ("method", "method"),
+    ("status", "status"),
+    ("metric", "metric"),
+    ("frames", "frames"),
+    ("mean_mm", "mean_mm"),
+    ("median_mm", "median_mm"),
+    ("std_mm", "std_mm"),
+    ("worst_frame_mm", "worst_frame_mm"),
+    ("silhouette_error_ratio", "silhouette_error"),
+    ("bone_std_max_mm", "bone_std_max_mm"),
+    ("seconds_per_frame_s", "seconds_per_frame"),
+    ("flagged", "flagged"),
+    ("note", "note"),
+)
 
 
 def _inits(rows) -> str:
     """How the rows' first poses were found, in words (rows without one: ground truth)."""
-    kinds = {("truth" if not r.init or r.init == "truth" else "auto") for r in rows
-             if r.status == "ok"}  # fmt: skip
+    kinds = {
+        ("truth" if not r.init or r.init == "truth" else "auto") for r in rows if r.status == "ok"
+    }
     if kinds == {"auto"}:
         return "from the capture alone (automatic initialisation)"
     if kinds == {"truth", "auto"}:
@@ -60,8 +70,20 @@ def _num(x: float, digits: int, scale: float = 1.0) -> str:
 
 def markdown_table(rows: Sequence[BenchRow]) -> str:
     """The results as a markdown table (errors in mm, silhouette error in %)."""
-    head = ["capture", "method", "frames", "mean mm", "median", "std", "worst frame",
-            "silhouette %", "bone std max", "s/frame", "flagged", "template"]  # fmt: skip
+    head = [
+        "capture",
+        "method",
+        "frames",
+        "mean mm",
+        "median",
+        "std",
+        "worst frame",
+        "silhouette %",
+        "bone std max",
+        "s/frame",
+        "flagged",
+        "template",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "--:|" * (len(head) - 2)]
     for r in rows:
         if r.status != "ok":
@@ -69,11 +91,19 @@ def markdown_table(rows: Sequence[BenchRow]) -> str:
         else:
             unit = " (vertices)" if r.metric == "vertices" else ""
             cells = [
-                r.capture, r.method + unit, str(r.frames), _num(r.mean_mm, 1),
-                _num(r.median_mm, 1), _num(r.std_mm, 1), _num(r.worst_frame_mm, 1),
-                _num(r.silhouette_error, 2, 100), _num(r.bone_std_max_mm, 1),
-                _num(r.seconds_per_frame, 2), str(r.flagged), r.template,
-            ]  # fmt: skip
+                r.capture,
+                r.method + unit,
+                str(r.frames),
+                _num(r.mean_mm, 1),
+                _num(r.median_mm, 1),
+                _num(r.std_mm, 1),
+                _num(r.worst_frame_mm, 1),
+                _num(r.silhouette_error, 2, 100),
+                _num(r.bone_std_max_mm, 1),
+                _num(r.seconds_per_frame, 2),
+                str(r.flagged),
+                r.template,
+            ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -96,8 +126,10 @@ def ablation_table(
     lines = ["| method | change | " + " | ".join(caps) + " |", "|---|---|" + "--:|" * len(caps)]
     lines.append(f"| {base} | — | " + " | ".join(_num(ok[c, base], 1) for c in caps) + " |")
     for m in methods:
-        cells = [f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, base]:+.1f})" if (c, m) in ok
-                 else "" for c in caps]  # fmt: skip
+        cells = [
+            f"{_num(ok[c, m], 1)} ({ok[c, m] - ok[c, base]:+.1f})" if (c, m) in ok else ""
+            for c in caps
+        ]
         lines.append(f"| {m} | {ablations[m]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -109,14 +141,20 @@ def baseline_losses(
     ``baseline`` (the papers claim it never does), with both means and worst frames, mm;
     empty when it wins everywhere both ran."""
     ok = {(r.capture, r.method): r for r in rows if r.status == "ok"}
-    lost = [(c, ok[c, method], ok[c, baseline]) for c in dict.fromkeys(r.capture for r in rows)
-            if (c, method) in ok and (c, baseline) in ok
-            and ok[c, method].mean_mm > ok[c, baseline].mean_mm]  # fmt: skip
+    lost = [
+        (c, ok[c, method], ok[c, baseline])
+        for c in dict.fromkeys(r.capture for r in rows)
+        if (c, method) in ok
+        and (c, baseline) in ok
+        and ok[c, method].mean_mm > ok[c, baseline].mean_mm
+    ]
     if not lost:
         return ""
-    cells = [f"`{c}` ({_num(a.mean_mm, 1)} against {_num(b.mean_mm, 1)} mm, worst frame "
-             f"{_num(a.worst_frame_mm, 1)} against {_num(b.worst_frame_mm, 1)})"
-             for c, a, b in lost]  # fmt: skip
+    cells = [
+        f"`{c}` ({_num(a.mean_mm, 1)} against {_num(b.mean_mm, 1)} mm, worst frame "
+        f"{_num(a.worst_frame_mm, 1)} against {_num(b.worst_frame_mm, 1)})"
+        for c, a, b in lost
+    ]
     return f"**`{method}` is worse than `{baseline}` on:** " + "; ".join(cells) + "."
 
 
@@ -139,8 +177,13 @@ def tradeoff_table(points: Sequence[TradeoffPoint]) -> str:
     lines.append("|--:|--:|--:|--:|--:|")
     for p in points:
         r = p.row
-        cells = [f"{p.keep_fraction:g}", _num(r.seconds_per_frame, 2), _num(r.mean_mm, 1),
-                 _num(r.silhouette_error, 2, 100), str(r.flagged)]  # fmt: skip
+        cells = [
+            f"{p.keep_fraction:g}",
+            _num(r.seconds_per_frame, 2),
+            _num(r.mean_mm, 1),
+            _num(r.silhouette_error, 2, 100),
+            str(r.flagged),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -163,10 +206,18 @@ def write_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if r.status == "ok"]
-    files = [_csv(out / "results.csv", [h for h, _ in COLUMNS],
-                  [[getattr(r, a) for _, a in COLUMNS] for r in rows])]  # fmt: skip
-    frame_rows = [[r.capture, r.method, r.metric, int(f), float(e)] for r in ok
-                  for f, e in zip(r.frame_numbers, r.per_frame_mm, strict=True)]  # fmt: skip
+    files = [
+        _csv(
+            out / "results.csv",
+            [h for h, _ in COLUMNS],
+            [[getattr(r, a) for _, a in COLUMNS] for r in rows],
+        )
+    ]
+    frame_rows = [
+        [r.capture, r.method, r.metric, int(f), float(e)]
+        for r in ok
+        for f, e in zip(r.frame_numbers, r.per_frame_mm, strict=True)
+    ]
     heads = ["capture", "method", "metric", "frame", "error_mm"]
     files.append(_csv(out / "frame_errors.csv", heads, frame_rows))
     bone_rows = [
@@ -181,8 +232,9 @@ def write_report(
     captures = list(dict.fromkeys(r.capture for r in rows))
     plots: list[tuple[str, Path]] = []
     if ok:
-        plots.append(("Mean error per method and capture",
-                      plot_mean_errors(ok, out / "mean_error.png")))  # fmt: skip
+        plots.append(
+            ("Mean error per method and capture", plot_mean_errors(ok, out / "mean_error.png"))
+        )
     for c in captures:
         mine = [r for r in ok if r.capture == c]
         if any(r.bone_names for r in mine):
@@ -192,15 +244,37 @@ def write_report(
             p = plot_frame_curves(mine, out / f"frame_errors_{_slug(c)}.png", capture=c)
             plots.append((f"Error per frame, {c}", p))
     if tradeoff:
-        files.append(_csv(out / "keep_fraction.csv",
-                          ["capture", "keep_fraction", "seconds_per_frame_s", "mean_mm",
-                           "silhouette_error_ratio", "flagged"],
-                          [[tradeoff_capture, p.keep_fraction, p.row.seconds_per_frame,
-                            p.row.mean_mm, p.row.silhouette_error, p.row.flagged]
-                           for p in tradeoff]))  # fmt: skip
+        files.append(
+            _csv(
+                out / "keep_fraction.csv",
+                [
+                    "capture",
+                    "keep_fraction",
+                    "seconds_per_frame_s",
+                    "mean_mm",
+                    "silhouette_error_ratio",
+                    "flagged",
+                ],
+                [
+                    [
+                        tradeoff_capture,
+                        p.keep_fraction,
+                        p.row.seconds_per_frame,
+                        p.row.mean_mm,
+                        p.row.silhouette_error,
+                        p.row.flagged,
+                    ]
+                    for p in tradeoff
+                ],
+            )
+        )
         ref = [r for r in ok if r.capture == tradeoff_capture and r.method == "patch_noclf"]
-        p = plot_tradeoff(tradeoff, out / "keep_fraction.png", capture=tradeoff_capture,
-                          reference=ref[0] if ref else None)  # fmt: skip
+        p = plot_tradeoff(
+            tradeoff,
+            out / "keep_fraction.png",
+            capture=tradeoff_capture,
+            reference=ref[0] if ref else None,
+        )
         plots.append((f"Fig. 8: kept fraction of the body-part classifier, {tradeoff_capture}", p))
     files += [p for _, p in plots]
     md = [
@@ -222,8 +296,12 @@ def write_report(
     if skipped:
         md += ["", "Left out: " + "; ".join(f"`{c}` ({why})" for c, why in skipped) + "."]
     if tradeoff:
-        md += ["", f"## Fig. 8: kept fraction of on-bone points (patch, `{tradeoff_capture}`)",
-               "", tradeoff_table(tradeoff)]  # fmt: skip
+        md += [
+            "",
+            f"## Fig. 8: kept fraction of on-bone points (patch, `{tradeoff_capture}`)",
+            "",
+            tradeoff_table(tradeoff),
+        ]
     md += ["", "## Plots", ""] + [f"- {what}: ![{p.name}]({p.name})" for what, p in plots]
     write_text_atomic(out / "results.md", "\n".join(md) + "\n")
     files.insert(1, out / "results.md")

@@ -111,15 +111,25 @@ def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Pat
     o, per_frame = errs.overall, errs.per_frame
     bones = ev.bones if ev.bones is not None and ev.bones.lengths.size else None
     return BenchRow(
-        capture, method, metric=metric, frames=ev.n_frames, mean_mm=o.mean,
-        median_mm=o.median, std_mm=o.std,
+        capture,
+        method,
+        metric=metric,
+        frames=ev.n_frames,
+        mean_mm=o.mean,
+        median_mm=o.median,
+        std_mm=o.std,
         worst_frame_mm=float(per_frame.max()) if per_frame.size else _NAN,
         silhouette_error=ev.silhouettes.overall if ev.silhouettes is not None else _NAN,
         bone_std_max_mm=float(bones.std.max()) if bones is not None else _NAN,
-        seconds_per_frame=ev.seconds.mean, flagged=ev.unhealthy,
-        frame_numbers=np.asarray(errs.frames, dtype=np.int64), per_frame_mm=per_frame,
+        seconds_per_frame=ev.seconds.mean,
+        flagged=ev.unhealthy,
+        frame_numbers=np.asarray(errs.frames, dtype=np.int64),
+        per_frame_mm=per_frame,
         bone_names=bones.names if bones is not None else (),
         bone_mean_mm=bones.mean if bones is not None else np.zeros(0),
         bone_std_mm=bones.std if bones is not None else np.zeros(0),
-        track=str(track), init=ev.init, lost=ev.lost, template=ev.template,
-    )  # fmt: skip
+        track=str(track),
+        init=ev.init,
+        lost=ev.lost,
+        template=ev.template,
+    )

@@ -110,8 +110,9 @@ def run_demo(
         (``neutral_5k`` is the fastest).
     """
     if performer not in bundled_templates():
-        raise InputError(f"demo: performer must be one of {sorted(bundled_templates())}, "
-                         f"found {performer!r}")  # fmt: skip
+        raise InputError(
+            f"demo: performer must be one of {sorted(bundled_templates())}, found {performer!r}"
+        )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -121,13 +122,25 @@ def run_demo(
     bvh = write_bvh(out / "walk.bvh", walk)
     files.append(("walk.bvh (procedural walk, CMU MotionBuilder skeleton)", bvh))
     heavy = load_template("heavy_male")  # a CMU-style BVH onto another body shape
-    res = render_motion(heavy, retarget(read_bvh(bvh), heavy), out / "walk_heavy_male", step=2,
-                        frames=False, show_progress=show_progress)  # fmt: skip
+    res = render_motion(
+        heavy,
+        retarget(read_bvh(bvh), heavy),
+        out / "walk_heavy_male",
+        step=2,
+        frames=False,
+        show_progress=show_progress,
+    )
     files.append(("walk retargeted onto heavy_male", res.sheet))
     if clip:
         m = clip_on(neutral, clip, fps=30.0)
-        res = render_motion(neutral, m, out / "clip", step=max(1, m.n_frames // 60), frames=False,
-                            show_progress=show_progress)  # fmt: skip
+        res = render_motion(
+            neutral,
+            m,
+            out / "clip",
+            step=max(1, m.n_frames // 60),
+            frames=False,
+            show_progress=show_progress,
+        )
         files.append((f"{clip} retargeted onto neutral", res.sheet))
     for name in PROCEDURAL_MOTIONS:
         m = procedural_motion(name, neutral, duration=3.0, fps=20.0)
@@ -136,8 +149,13 @@ def run_demo(
     scores: list[TrackerScore] = []
     players, sections, evaluations, tracks, notes = [], [], [], [], []
     if track_frames > 0:
-        spec = SynthSpec(motion="walk", template="neutral_5k", subject=performer,
-                         rig="humaneva4", stop=track_frames)  # fmt: skip
+        spec = SynthSpec(
+            motion="walk",
+            template="neutral_5k",
+            subject=performer,
+            rig="humaneva4",
+            stop=track_frames,
+        )
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
         files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {performer})", cap.path))
         folders = [out / f"track_{method}" for method in DEMO_METHODS]
@@ -148,9 +166,14 @@ def run_demo(
                 folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
                 shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
             tracker = make_tracker(method, template=choice.template)
-            track = track_sequence(tracker, choice.template, cap, folder,
-                                   show_progress=show_progress,
-                                   template_info=choice.info)  # fmt: skip
+            track = track_sequence(
+                tracker,
+                choice.template,
+                cap,
+                folder,
+                show_progress=show_progress,
+                template_info=choice.info,
+            )
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
             written = write_evaluation(ev, out / f"eval_{method}")
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
@@ -169,13 +192,16 @@ def run_demo(
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(
-        out / "report.html", title="meshmocap demo", players=players,
+        out / "report.html",
+        title="meshmocap demo",
+        players=players,
         tables=[comparison_table(evaluations, no_silhouettes=NO_SILHOUETTES)] * bool(evaluations),
         sections=[*sections, Section("Motions rendered (contact sheets)", images=sheets)],
         intro="procedural motions, retargeting, and a synthetic capture tracked as a user "
-        "tracks their own: " + "; ".join(notes) if notes else "procedural motions and "
-        "retargeting",
-    )  # fmt: skip
+        "tracks their own: " + "; ".join(notes)
+        if notes
+        else "procedural motions and retargeting",
+    )
     files.append(("report (tables, plots, 3D player; open in a browser)", report))
     return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
 
@@ -183,9 +209,10 @@ def run_demo(
 def _first_pose(track) -> str:
     """How ``track``'s first pose was found, from its ``track.json``."""
     init = str(track.meta.get("init", "truth"))
-    return {"auto": "found from the capture (init auto)",
-            "truth": "copied from the ground truth (init truth, the papers' protocol)",
-            }.get(init, f"init {init}")  # fmt: skip
+    return {
+        "auto": "found from the capture (init auto)",
+        "truth": "copied from the ground truth (init truth, the papers' protocol)",
+    }.get(init, f"init {init}")
 
 
 def _exports_and_gait(track: Path, out: Path, method: str, files: list) -> list[str]:
@@ -207,8 +234,10 @@ def _exports_and_gait(track: Path, out: Path, method: str, files: list) -> list[
         written = write_gait(run.gait, out / "gait", reference=run.reference, title=method)
         files.append((f"{method} gait: cycles, events, curves (CSV) and plots", written[0].parent))
         s = run.gait.summary()
-        lines.append(f"{method} gait: {s.cadence_steps_per_min:.1f} steps/min, stride "
-                     f"{s.stride_length_m:.2f} m (meshmocap gait)")  # fmt: skip
+        lines.append(
+            f"{method} gait: {s.cadence_steps_per_min:.1f} steps/min, stride "
+            f"{s.stride_length_m:.2f} m (meshmocap gait)"
+        )
     else:
         lines.append(f"{method} gait: none found ({run.gait.message})")
     return lines

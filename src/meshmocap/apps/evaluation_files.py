@@ -26,13 +26,17 @@ def write_evaluation(ev: Evaluation, out: str | os.PathLike) -> list[Path]:
     write_text_atomic(out / "summary.txt", summary(ev) + "\n")
     written.append(out / "summary.txt")
     if ev.joints is not None:
-        written += [write_csv(out / "joint_errors.csv", ev.joints),
-                    write_csv(out / "joint_errors_per_frame.csv", ev.joints, per_frame=True),
-                    plot_frame_errors(ev.joints, out / "joint_error_per_frame.png"),
-                    plot_joint_errors(ev.joints, out / "joint_error_per_joint.png")]  # fmt: skip
+        written += [
+            write_csv(out / "joint_errors.csv", ev.joints),
+            write_csv(out / "joint_errors_per_frame.csv", ev.joints, per_frame=True),
+            plot_frame_errors(ev.joints, out / "joint_error_per_frame.png"),
+            plot_joint_errors(ev.joints, out / "joint_error_per_joint.png"),
+        ]
     if ev.bones is not None:
-        written += [write_csv(out / "bone_lengths.csv", ev.bones),
-                    plot_bone_lengths(ev.bones, out / "bone_lengths.png")]  # fmt: skip
+        written += [
+            write_csv(out / "bone_lengths.csv", ev.bones),
+            plot_bone_lengths(ev.bones, out / "bone_lengths.png"),
+        ]
     if ev.silhouettes is not None:
         written += [
             write_csv(out / "silhouette_errors.csv", ev.silhouettes),

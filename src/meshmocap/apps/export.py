@@ -215,9 +215,16 @@ def track_gltf(
         fit = pose_from_surface(template, track.vertices[rows], joints=track.joints[rows])
     times = (track.frames[rows] - track.frames[rows[0]]) / fps
     g = skinned_gltf(
-        template.V, template.F, template.skeleton, template.weights, fit.rotations,
-        fit.root_positions, times, name=name or template.name, color=color,
-    )  # fmt: skip
+        template.V,
+        template.F,
+        template.skeleton,
+        template.weights,
+        fit.rotations,
+        fit.root_positions,
+        times,
+        name=name or template.name,
+        color=color,
+    )
     return g, fit
 
 
@@ -332,11 +339,25 @@ def export_track(
     else:
         X, labels = _points(tr, rows, joints, "none", template)
         write_joints_csv(
-            out, X, labels, idx, rate, healthy=tr.healthy[rows],
+            out,
+            X,
+            labels,
+            idx,
+            rate,
+            healthy=tr.healthy[rows],
             flags=[tr.flags[r] for r in rows] if tr.flags else None,
-            messages=[tr.messages[r] for r in rows] if tr.messages else None, long=long,
-        )  # fmt: skip
+            messages=[tr.messages[r] for r in rows] if tr.messages else None,
+            long=long,
+        )
     return ExportResult(
-        out, fmt, len(rows), rate, out.stat().st_size, time.perf_counter() - t0,
-        verr, jerr, tuple(labels), source,
-    )  # fmt: skip
+        out,
+        fmt,
+        len(rows),
+        rate,
+        out.stat().st_size,
+        time.perf_counter() - t0,
+        verr,
+        jerr,
+        tuple(labels),
+        source,
+    )

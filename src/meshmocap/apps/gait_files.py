@@ -46,9 +46,22 @@ from meshmocap.io.results import read_track
 
 _COLOURS = {"left": "tab:red", "right": "tab:blue"}
 #: Columns of ``gait.csv``: one row per cycle, then the summaries of each side.
-CYCLE_COLUMNS = ("side", "cycle", "strike_frame", "foot_off_frame", "end_frame", "start_s",
-                 "stride_time_s", "stride_length_m", "speed_m_per_s", "step_time_s",
-                 "step_length_m", "stance_pct", "swing_pct", "cadence_steps_per_min")  # fmt: skip
+CYCLE_COLUMNS = (
+    "side",
+    "cycle",
+    "strike_frame",
+    "foot_off_frame",
+    "end_frame",
+    "start_s",
+    "stride_time_s",
+    "stride_length_m",
+    "speed_m_per_s",
+    "step_time_s",
+    "step_length_m",
+    "stance_pct",
+    "swing_pct",
+    "cadence_steps_per_min",
+)
 
 
 # --------------------------------------------------------------------------- plots
@@ -69,8 +82,12 @@ def plot_gait(
         for g, dashed in ((reference, True), (gait, False)):
             if g is None:
                 continue
-            style = dict(color=col, linewidth=1, alpha=0.55 if dashed else 0.9,
-                         linestyle="--" if dashed else "-")  # fmt: skip
+            style = dict(
+                color=col,
+                linewidth=1,
+                alpha=0.55 if dashed else 0.9,
+                linestyle="--" if dashed else "-",
+            )
             who = "truth " if dashed else ""
             h = np.where(g.valid, g.ankle_height[:, k], np.nan) * 100
             a.plot(g.frames, h, label=f"{who}{side} ankle", **style)
@@ -82,8 +99,11 @@ def plot_gait(
             a.plot(gait.frame_numbers(pos), y, marker, color=col, markersize=6, linestyle="none")
     a.set(xlabel="frame", ylabel="ankle height above the floor (cm)")
     a.set_title(f"ankle heights: ▼ foot strike, ▲ foot off ({len(gait.cycles)} cycles)")
-    b.set(xlabel="forward of the pelvis (cm)", ylabel="above the pelvis (cm)",
-          title="wrists, sagittal plane")  # fmt: skip
+    b.set(
+        xlabel="forward of the pelvis (cm)",
+        ylabel="above the pelvis (cm)",
+        title="wrists, sagittal plane",
+    )
     b.set_aspect("equal", adjustable="datalim")
     for ax in (a, b):
         ax.grid(alpha=0.3)
@@ -111,13 +131,29 @@ def plot_flexion(
             for c in cycles:
                 ax.plot(pct, getattr(c, what), color=col, linewidth=0.8, alpha=0.35)
             if cycles:
-                ax.plot(pct, np.mean([getattr(c, what) for c in cycles], axis=0), color=col,
-                        linewidth=2, label=f"mean of {len(cycles)} cycles")  # fmt: skip
-                ax.axvline(np.mean([c.stance_pct for c in cycles]), color=col, linestyle=":",
-                           linewidth=1, label="foot off")  # fmt: skip
+                ax.plot(
+                    pct,
+                    np.mean([getattr(c, what) for c in cycles], axis=0),
+                    color=col,
+                    linewidth=2,
+                    label=f"mean of {len(cycles)} cycles",
+                )
+                ax.axvline(
+                    np.mean([c.stance_pct for c in cycles]),
+                    color=col,
+                    linestyle=":",
+                    linewidth=1,
+                    label="foot off",
+                )
             if ref:
-                ax.plot(pct, np.mean([getattr(c, what) for c in ref], axis=0), "--", color="0.2",
-                        linewidth=1.5, label=f"truth, mean of {len(ref)}")  # fmt: skip
+                ax.plot(
+                    pct,
+                    np.mean([getattr(c, what) for c in ref], axis=0),
+                    "--",
+                    color="0.2",
+                    linewidth=1.5,
+                    label=f"truth, mean of {len(ref)}",
+                )
             if not cycles and not ref:
                 ax.text(0.5, 0.5, "no full cycle", ha="center", transform=ax.transAxes)
             ax.set_title(f"{side} {what} flexion")
@@ -154,18 +190,44 @@ def cycle_rows(gait: Gait) -> list[list[str]]:
     fr = lambda p: _num(float(gait.frame_numbers(p)), 2)  # noqa: E731
     for c in gait.cycles:
         count[c.side] += 1
-        rows.append([c.side, str(count[c.side]), fr(c.strike), fr(c.foot_off), fr(c.end),
-                     _num(c.strike / gait.fps, 4), _num(c.stride_time, 4),
-                     _num(c.stride_length, 4), _num(c.speed, 4), _num(c.step_time, 4),
-                     _num(c.step_length, 4), _num(c.stance_pct, 2), _num(c.swing_pct, 2),
-                     _num(120.0 / c.stride_time, 2)])  # fmt: skip
+        rows.append(
+            [
+                c.side,
+                str(count[c.side]),
+                fr(c.strike),
+                fr(c.foot_off),
+                fr(c.end),
+                _num(c.strike / gait.fps, 4),
+                _num(c.stride_time, 4),
+                _num(c.stride_length, 4),
+                _num(c.speed, 4),
+                _num(c.step_time, 4),
+                _num(c.step_length, 4),
+                _num(c.stance_pct, 2),
+                _num(c.swing_pct, 2),
+                _num(120.0 / c.stride_time, 2),
+            ]
+        )
     for side in (*SIDES, "both"):
         s = gait.summary(side).as_dict()
-        rows.append([side, "all", "", "", "", "", _num(s["stride_time_s"], 4),
-                     _num(s["stride_length_m"], 4), _num(s["speed_m_per_s"], 4),
-                     _num(s["step_time_s"], 4), _num(s["step_length_m"], 4),
-                     _num(s["stance_pct"], 2), _num(s["swing_pct"], 2),
-                     _num(s["cadence_steps_per_min"], 2)])  # fmt: skip
+        rows.append(
+            [
+                side,
+                "all",
+                "",
+                "",
+                "",
+                "",
+                _num(s["stride_time_s"], 4),
+                _num(s["stride_length_m"], 4),
+                _num(s["speed_m_per_s"], 4),
+                _num(s["step_time_s"], 4),
+                _num(s["step_length_m"], 4),
+                _num(s["stance_pct"], 2),
+                _num(s["swing_pct"], 2),
+                _num(s["cadence_steps_per_min"], 2),
+            ]
+        )
     return rows
 
 
@@ -178,9 +240,19 @@ def summary_rows(gait: Gait) -> list[list[object]]:
     return out
 
 
-SUMMARY_HEADERS = ("side", "cycles", "steps", "cadence (steps/min)", "stride time (s)",
-                   "stride length (m)", "speed (m/s)", "step time (s)", "step length (m)",
-                   "stance (%)", "swing (%)")  # fmt: skip
+SUMMARY_HEADERS = (
+    "side",
+    "cycles",
+    "steps",
+    "cadence (steps/min)",
+    "stride time (s)",
+    "stride length (m)",
+    "speed (m/s)",
+    "step time (s)",
+    "step length (m)",
+    "stance (%)",
+    "swing (%)",
+)
 assert len(SUMMARY_HEADERS) == 3 + len(SUMMARY_FIELDS)
 
 
@@ -206,27 +278,43 @@ def write_gait(
         for p in ev
     )
     rows = [["frame", "time_s", "side", "event"]]
-    rows += [[_num(float(gait.frame_numbers(p)), 2), _num(p / gait.fps, 4),
-              side, kind] for p, side, kind in events]  # fmt: skip
+    rows += [
+        [_num(float(gait.frame_numbers(p)), 2), _num(p / gait.fps, 4), side, kind]
+        for p, side, kind in events
+    ]
     files.append(_write_csv(out / "gait_events.csv", rows))
     rows = [["side", "cycle", "percent", "hip_flexion_deg", "knee_flexion_deg"]]
     count = dict.fromkeys(SIDES, 0)
     for c in gait.cycles:
         count[c.side] += 1
-        rows += [[c.side, count[c.side], p, _num(h, 3), _num(kn, 3)]
-                 for p, h, kn in zip(range(CYCLE_SAMPLES), c.hip, c.knee, strict=True)]  # fmt: skip
+        rows += [
+            [c.side, count[c.side], p, _num(h, 3), _num(kn, 3)]
+            for p, h, kn in zip(range(CYCLE_SAMPLES), c.hip, c.knee, strict=True)
+        ]
     files.append(_write_csv(out / "gait_curves.csv", rows))
     head = ["frame", "time_s", "valid"] + [
-        f"{s}_{q}" for s in SIDES for q in ("ankle_height_m", "ankle_speed_m_per_s",
-                                            "wrist_forward_m", "wrist_up_m", "hip_flexion_deg",
-                                            "knee_flexion_deg")
-    ]  # fmt: skip
+        f"{s}_{q}"
+        for s in SIDES
+        for q in (
+            "ankle_height_m",
+            "ankle_speed_m_per_s",
+            "wrist_forward_m",
+            "wrist_up_m",
+            "hip_flexion_deg",
+            "knee_flexion_deg",
+        )
+    ]
     rows = [head]
     for t in range(len(gait.frames)):
         row = [int(gait.frames[t]), _num(gait.times[t], 4), int(gait.valid[t])]
         for k in range(2):
-            vals = (gait.ankle_height[t, k], gait.ankle_speed[t, k], *gait.wrist_sagittal[t, k],
-                    gait.hip_flexion[t, k], gait.knee_flexion[t, k])  # fmt: skip
+            vals = (
+                gait.ankle_height[t, k],
+                gait.ankle_speed[t, k],
+                *gait.wrist_sagittal[t, k],
+                gait.hip_flexion[t, k],
+                gait.knee_flexion[t, k],
+            )
             row += [_num(float(v), 4) if gait.valid[t] else "" for v in vals]
         rows.append(row)
     files.append(_write_csv(out / "gait_frames.csv", rows))
@@ -279,8 +367,10 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
             ref = capture_gait(cap)
             if ref.found and g.found and abs(ref.fps - fps) < 1e-9:
                 cmp = compare_gaits(g, ref)
-        what = (f"{path.name} ({track.meta.get('method', '?')}, {len(track.frames)} frames at "
-                f"{fps:g} fps)")  # fmt: skip
+        what = (
+            f"{path.name} ({track.meta.get('method', '?')}, {len(track.frames)} frames at "
+            f"{fps:g} fps)"
+        )
         return GaitRun(g, what, ref, cmp)
     if (path / "capture.json").is_file():
         cap = Capture(path)
@@ -289,18 +379,30 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
         return GaitRun(g, what, None, None)
     if not path.exists():
         raise MeshmocapFileNotFoundError(f"gait: {path} does not exist")
-    raise InputError(f"gait: {path} is neither a track folder (track.json) nor a capture "
-                     "folder (capture.json)")  # fmt: skip
+    raise InputError(
+        f"gait: {path} is neither a track folder (track.json) nor a capture folder (capture.json)"
+    )
 
 
 # --------------------------------------------------------------------------- report
 
 
 #: Columns of the report's gait table.
-GAIT_HEADERS = ("source", "cycles", "steps", "cadence (steps/min)", "stride length (m)",
-                "stride time (s)", "speed (m/s)", "stance (%)", "events matched",
-                "mean offset (frames)", "max offset (frames)", "cadence error (%)",
-                "stride length error (%)")  # fmt: skip
+GAIT_HEADERS = (
+    "source",
+    "cycles",
+    "steps",
+    "cadence (steps/min)",
+    "stride length (m)",
+    "stride time (s)",
+    "speed (m/s)",
+    "stance (%)",
+    "events matched",
+    "mean offset (frames)",
+    "max offset (frames)",
+    "cadence error (%)",
+    "stride length error (%)",
+)
 EVENTS_NOTE = (
     "Gait events come from the ankle joints (the 15-joint skeleton has no toe or heel): a foot "
     "is planted while its ankle moves slower than the body walks (the pelvis's median speed) "
@@ -333,8 +435,10 @@ def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport
     nan = math.nan
     rows, notes, images = [], [EVENTS_NOTE], []
     if not (isinstance(capture, Capture) and "fps" in capture.meta):
-        notes.append(f"frame rate: the capture does not say; {capture.fps:g} fps assumed (times, "
-                     "speeds and cadence scale with it)")  # fmt: skip
+        notes.append(
+            f"frame rate: the capture does not say; {capture.fps:g} fps assumed (times, "
+            "speeds and cadence scale with it)"
+        )
     truth = None
     if _has_truth(capture):
         try:
@@ -343,9 +447,23 @@ def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport
             notes.append(f"ground truth: no gait: {exc}")
     if truth is not None and truth.found:
         s = truth.summary()
-        rows.append(("ground truth", s.n_cycles, s.n_steps, s.cadence_steps_per_min,
-                     s.stride_length_m, s.stride_time_s, s.speed_m_per_s, s.stance_pct,
-                     "", nan, nan, nan, nan))  # fmt: skip
+        rows.append(
+            (
+                "ground truth",
+                s.n_cycles,
+                s.n_steps,
+                s.cadence_steps_per_min,
+                s.stride_length_m,
+                s.stride_time_s,
+                s.speed_m_per_s,
+                s.stance_pct,
+                "",
+                nan,
+                nan,
+                nan,
+                nan,
+            )
+        )
         notes.append(
             "events matched: the truth's foot strikes and foot offs that the track reproduces "
             "(same foot and kind, within 0.2 s; +n: spurious events); offsets in frames at "
@@ -367,17 +485,31 @@ def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport
         matched = ""
         if c is not None:
             matched = f"{c.matched}/{c.reference_events}" + (f" +{c.spurious}" * bool(c.spurious))
-        rows.append((name, s.n_cycles, s.n_steps, s.cadence_steps_per_min, s.stride_length_m,
-                     s.stride_time_s, s.speed_m_per_s, s.stance_pct, matched,
-                     c.mean_offset if c else nan, c.max_offset if c else nan,
-                     c.cadence_error_pct if c else nan,
-                     c.stride_length_error_pct if c else nan))  # fmt: skip
+        rows.append(
+            (
+                name,
+                s.n_cycles,
+                s.n_steps,
+                s.cadence_steps_per_min,
+                s.stride_length_m,
+                s.stride_time_s,
+                s.speed_m_per_s,
+                s.stance_pct,
+                matched,
+                c.mean_offset if c else nan,
+                c.max_offset if c else nan,
+                c.cadence_error_pct if c else nan,
+                c.stride_length_error_pct if c else nan,
+            )
+        )
         ref = truth if truth is not None and truth.found else None
         out = Path(folder) / str(k)
         out.mkdir(parents=True, exist_ok=True)
         title = f"{name}{' (dashed: truth)' if ref else ''}"
-        plots = ((plot_gait, "gait.png", "ankle heights and wrist paths"),
-                 (plot_flexion, "gait_flexion.png", "hip and knee flexion"))  # fmt: skip
+        plots = (
+            (plot_gait, "gait.png", "ankle heights and wrist paths"),
+            (plot_flexion, "gait_flexion.png", "hip and knee flexion"),
+        )
         for plot, file, what in plots:
             p = plot(g, out / file, reference=ref, title=title)
             images.append((f"{name}: {what}", p.read_bytes()))

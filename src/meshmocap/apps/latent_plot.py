@@ -77,8 +77,9 @@ def plot_latent_space(
         raise InputError("plot_latent_space: model must be a fitted GPLVM")
     path = Path(path)
     if path.suffix.lower() not in _FORMATS:
-        raise InputError(f"plot_latent_space: path must end in one of {list(_FORMATS)}, "
-                         f"found {path.name!r}")  # fmt: skip
+        raise InputError(
+            f"plot_latent_space: path must end in one of {list(_FORMATS)}, found {path.name!r}"
+        )
     if not isinstance(resolution, int | np.integer) or resolution < 8:
         raise InputError(f"plot_latent_space: resolution must be an int ≥ 8, found {resolution!r}")
     X = model.X_
@@ -86,8 +87,9 @@ def plot_latent_space(
     if labels is not None:
         labels = np.asarray(labels)
         if labels.shape != (N,):
-            raise InputError(f"plot_latent_space: labels must have shape ({N},), "
-                             f"found {labels.shape}")  # fmt: skip
+            raise InputError(
+                f"plot_latent_space: labels must have shape ({N},), found {labels.shape}"
+            )
 
     fig = Figure(figsize=(6, 5) if q > 1 else (7, 3.5), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
@@ -112,9 +114,15 @@ def plot_latent_space(
         grid = centre + np.column_stack([U.ravel(), V.ravel()]) @ axes
         _, var = model.predict(grid, return_var=True)  # Eq. (9)
         var = np.maximum(var, var[var > 0].min() if np.any(var > 0) else 1e-300)
-        img = ax.imshow(var.reshape(U.shape), origin="lower", cmap="gray_r",
-                        norm=LogNorm(), extent=(u[0], u[-1], v[0], v[-1]),
-                        interpolation="bilinear", aspect="auto")  # fmt: skip
+        img = ax.imshow(
+            var.reshape(U.shape),
+            origin="lower",
+            cmap="gray_r",
+            norm=LogNorm(),
+            extent=(u[0], u[-1], v[0], v[-1]),
+            interpolation="bilinear",
+            aspect="auto",
+        )
         fig.colorbar(img, ax=ax, label="predictive variance (log scale)")
         if labels is None:
             ax.plot(P[:, 0], P[:, 1], "x", color="tab:blue", markersize=5, label="training poses")

@@ -221,9 +221,16 @@ def player_from_tracks(
             glb, first, err = gltf_bytes(g), int(t.frames[rows[0]]), 0.0
         parents = t.meta.get("eval_parents")
         ptracks.append(
-            PlayerTrack(name, glb, first, _y_up(t.joints[rows]), player_rows,
-                        tuple(int(p) for p in parents) if parents else None, err)
-        )  # fmt: skip
+            PlayerTrack(
+                name,
+                glb,
+                first,
+                _y_up(t.joints[rows]),
+                player_rows,
+                tuple(int(p) for p in parents) if parents else None,
+                err,
+            )
+        )
     true_J = parents = None
     if truth:
         truths = [capture[position[int(i)]].truth for i in frames]
@@ -236,8 +243,9 @@ def player_from_tracks(
         hull = tuple(_y_up(_hull_points(capture, position[int(i)], hull_points)) for i in frames)
         if not any(len(h) for h in hull):
             hull = None
-    return Player(title, frames.astype(np.int64), fps / stride, fps, tuple(ptracks), true_J,
-                  parents, hull)  # fmt: skip
+    return Player(
+        title, frames.astype(np.int64), fps / stride, fps, tuple(ptracks), true_J, parents, hull
+    )
 
 
 def encode_array(a: np.ndarray, *, origin: np.ndarray | None = None, step: float = 0.0) -> dict:

@@ -53,8 +53,16 @@ def _check(result: object, types: tuple[type, ...], func: str) -> None:
 def _mark_failures(ax, failed: np.ndarray, skipped: np.ndarray) -> None:
     for frames, colour, label in ((failed, "tab:red", "failed"), (skipped, "0.6", "skipped")):
         if len(frames):
-            ax.vlines(frames, 0, 1, transform=ax.get_xaxis_transform(), colors=colour,
-                      alpha=0.4, linewidth=1, label=f"{label} ({len(frames)})")  # fmt: skip
+            ax.vlines(
+                frames,
+                0,
+                1,
+                transform=ax.get_xaxis_transform(),
+                colors=colour,
+                alpha=0.4,
+                linewidth=1,
+                label=f"{label} ({len(frames)})",
+            )
 
 
 def plot_frame_errors(
@@ -83,8 +91,15 @@ def plot_frame_errors(
             out[result.frames] = values
             return out
 
-        ax.plot(x, full(result.per_frame), linewidth=1, color="tab:blue", marker=".", ms=3,
-                label=f"mean {what} error")  # fmt: skip
+        ax.plot(
+            x,
+            full(result.per_frame),
+            linewidth=1,
+            color="tab:blue",
+            marker=".",
+            ms=3,
+            label=f"mean {what} error",
+        )
         if isinstance(result, JointErrors) and result.errors.size:
             lo, hi = full(result.errors.min(axis=1)), full(result.errors.max(axis=1))
             ax.fill_between(x, lo, hi, alpha=0.2, color="tab:blue", label="min–max over joints")
@@ -110,10 +125,21 @@ def plot_joint_errors(
     fig = _figure(max(6, 0.5 * len(stats) + 2), 4)
     ax = fig.add_subplot()
     x = np.arange(len(stats))
-    ax.bar(x, [s.mean for s in stats], yerr=[s.std for s in stats], capsize=3,
-           color="tab:blue", alpha=0.8)  # fmt: skip
-    ax.axhline(result.overall.mean, color="tab:red", linestyle="--", linewidth=1,
-               label=f"mean {result.overall.mean:.1f} mm")  # fmt: skip
+    ax.bar(
+        x,
+        [s.mean for s in stats],
+        yerr=[s.std for s in stats],
+        capsize=3,
+        color="tab:blue",
+        alpha=0.8,
+    )
+    ax.axhline(
+        result.overall.mean,
+        color="tab:red",
+        linestyle="--",
+        linewidth=1,
+        label=f"mean {result.overall.mean:.1f} mm",
+    )
     ax.set_xticks(x, result.names, rotation=45, ha="right")
     ax.set_ylabel("joint error (mm)")
     ax.grid(axis="y", alpha=0.3)
@@ -145,8 +171,16 @@ def plot_bone_lengths(
         sets.append(("reference", reference, "0.55"))
     width = 0.8 / len(sets)
     for i, (label, r, colour) in enumerate(sets):
-        bars = ax.bar(x + (i - (len(sets) - 1) / 2) * width, r.mean, width, yerr=r.std,
-                      capsize=3, color=colour, alpha=0.85, label=label)  # fmt: skip
+        bars = ax.bar(
+            x + (i - (len(sets) - 1) / 2) * width,
+            r.mean,
+            width,
+            yerr=r.std,
+            capsize=3,
+            color=colour,
+            alpha=0.85,
+            label=label,
+        )
         if i == 0:  # the paper prints each bar's standard deviation on it
             ax.bar_label(bars, labels=[f"{s:.1f}" for s in r.std], fontsize=7, padding=2)
     ax.set_xticks(x, result.names, rotation=45, ha="right", fontsize=8)
@@ -166,10 +200,21 @@ def plot_silhouette_errors(
     fig = _figure(max(5, 0.6 * len(result.cameras) + 2), 3.5)
     ax = fig.add_subplot()
     x = np.arange(len(result.cameras))
-    ax.bar(x, result.per_camera * 100, yerr=result.errors.std(axis=0) * 100, capsize=3,
-           color="tab:green", alpha=0.8)  # fmt: skip
-    ax.axhline(result.overall * 100, color="tab:red", linestyle="--", linewidth=1,
-               label=f"mean {result.overall * 100:.2f} %")  # fmt: skip
+    ax.bar(
+        x,
+        result.per_camera * 100,
+        yerr=result.errors.std(axis=0) * 100,
+        capsize=3,
+        color="tab:green",
+        alpha=0.8,
+    )
+    ax.axhline(
+        result.overall * 100,
+        color="tab:red",
+        linestyle="--",
+        linewidth=1,
+        label=f"mean {result.overall * 100:.2f} %",
+    )
     ax.set_xticks(x, result.cameras)
     ax.set_ylabel("silhouette overlap error (%)")
     ax.grid(axis="y", alpha=0.3)

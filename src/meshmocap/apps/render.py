@@ -24,13 +24,26 @@ from meshmocap.geometry.mesh import face_normals
 from meshmocap.geometry.raster import rasterize
 
 #: 15 distinct colours (RGB 0–255), one per evaluation body part; left parts warm, right cool.
-PART_COLORS = np.array([
-    [200, 200, 200], [170, 150, 120], [235, 205, 175],
-    [230, 120, 60], [240, 160, 60], [250, 210, 80],
-    [60, 120, 220], [60, 170, 230], [90, 210, 210],
-    [210, 60, 80], [230, 90, 130], [240, 140, 180],
-    [80, 90, 200], [120, 100, 220], [170, 140, 240],
-], dtype=np.uint8)  # fmt: skip
+PART_COLORS = np.array(
+    [
+        [200, 200, 200],
+        [170, 150, 120],
+        [235, 205, 175],
+        [230, 120, 60],
+        [240, 160, 60],
+        [250, 210, 80],
+        [60, 120, 220],
+        [60, 170, 230],
+        [90, 210, 210],
+        [210, 60, 80],
+        [230, 90, 130],
+        [240, 140, 180],
+        [80, 90, 200],
+        [120, 100, 220],
+        [170, 140, 240],
+    ],
+    dtype=np.uint8,
+)
 
 
 @dataclass(frozen=True)
@@ -45,9 +58,14 @@ class View:
 
 
 def framing_view(
-    points: np.ndarray, *, size: tuple[int, int] = (480, 640), azimuth: float = 30.0,
-    elevation: float = 10.0, fov: float = 35.0, margin: float = 1.1,
-) -> View:  # fmt: skip
+    points: np.ndarray,
+    *,
+    size: tuple[int, int] = (480, 640),
+    azimuth: float = 30.0,
+    elevation: float = 10.0,
+    fov: float = 35.0,
+    margin: float = 1.1,
+) -> View:
     """Return a view that frames all ``points`` (..., 3) (metres, Z up).
 
     The camera looks at the points' bounding-box centre from ``azimuth`` degrees around Z
@@ -176,8 +194,9 @@ def contact_sheet(
         x, y = (k % cols) * w, (k // cols) * (h + band)
         sheet.paste(Image.fromarray(im), (x, y))
         if labels is not None:
-            draw.text((x + w / 2, y + h + band / 2), labels[k], fill=(25, 25, 25), font=font,
-                      anchor="mm")  # fmt: skip
+            draw.text(
+                (x + w / 2, y + h + band / 2), labels[k], fill=(25, 25, 25), font=font, anchor="mm"
+            )
     return np.asarray(sheet)
 
 

@@ -95,15 +95,33 @@ def _seconds(ev: Evaluation) -> tuple[float, float]:
 def evaluation_tables(ev: Evaluation, *, track: Track | None = None) -> list[Table]:
     """The tables of :func:`meshmocap.analysis.evaluate.summary`, as report tables, with the
     frames not scored or flagged (``track``'s flags, when given) and why."""
-    heads = ("method", "template", "init", "frames", "unhealthy", "lost (re-initialised)",
-             "s/frame mean", "s/frame median")  # fmt: skip
-    row = (ev.method, ev.template, ev.init or "truth", ev.n_frames, ev.unhealthy,
-           f"{ev.lost} ({ev.reinit})", *_seconds(ev))  # fmt: skip
+    heads = (
+        "method",
+        "template",
+        "init",
+        "frames",
+        "unhealthy",
+        "lost (re-initialised)",
+        "s/frame mean",
+        "s/frame median",
+    )
+    row = (
+        ev.method,
+        ev.template,
+        ev.init or "truth",
+        ev.n_frames,
+        ev.unhealthy,
+        f"{ev.lost} ({ev.reinit})",
+        *_seconds(ev),
+    )
     out = [Table("Overview", heads, (row,), digits=3)]
     skipped = frame_rows(ev, track)
     if skipped:
-        out.append(Table("Frames not scored or flagged", ("what", "frames", "which", "why"),
-                         tuple(skipped)))  # fmt: skip
+        out.append(
+            Table(
+                "Frames not scored or flagged", ("what", "frames", "which", "why"), tuple(skipped)
+            )
+        )
     for r in (ev.joints, ev.joints14, ev.bones, ev.silhouettes):
         if r is not None:
             t = table_of(r)
@@ -170,8 +188,9 @@ def comparison_table(
         "s/frame",
     )
     notes = [WORST_FRAME, silhouette_note(evaluations, no_silhouettes)]
-    return Table("Trackers compared", heads, tuple(rows), digits=2,
-                 notes=tuple(n for n in notes if n))  # fmt: skip
+    return Table(
+        "Trackers compared", heads, tuple(rows), digits=2, notes=tuple(n for n in notes if n)
+    )
 
 
 def evaluation_section(
@@ -224,8 +243,14 @@ html.mm-shot .mm-canvas{width:800px;height:600px;border-radius:0}
 """
 
 #: The player's layer switches (all on at first): data-layer key, label.
-_LAYERS = (("mesh", "meshes"), ("skeleton", "skeletons"), ("truth", "truth joints"),
-           ("hull", "hull points"), ("side", "side by side"), ("follow", "follow"))  # fmt: skip
+_LAYERS = (
+    ("mesh", "meshes"),
+    ("skeleton", "skeletons"),
+    ("truth", "truth joints"),
+    ("hull", "hull points"),
+    ("side", "side by side"),
+    ("follow", "follow"),
+)
 
 
 def _esc(x: object) -> str:
@@ -382,8 +407,13 @@ def gait_section(
     truth: a table, notes and each track's plots (Fig. 11, flexion over the cycle)."""
     with tempfile.TemporaryDirectory(prefix="meshmocap-gait-") as tmp:
         g = gait_report(capture, tracks, names, tmp)
-    table = Table("Gait from the tracked joints (and from the truth)", GAIT_HEADERS, g.rows,
-                  digits=2, notes=g.notes)  # fmt: skip
+    table = Table(
+        "Gait from the tracked joints (and from the truth)",
+        GAIT_HEADERS,
+        g.rows,
+        digits=2,
+        notes=g.notes,
+    )
     return Section("Gait", (table,), g.images)
 
 

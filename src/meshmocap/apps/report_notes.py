@@ -49,8 +49,14 @@ def frame_rows(ev: Evaluation, track: Track | None = None) -> list[tuple[str, in
     of the frames the track flagged; empty when every frame was scored and none flagged."""
     rows = []
     if len(ev.out_of_view):
-        rows.append(("not scored: out of view", len(ev.out_of_view),
-                     frame_ranges(ev.out_of_view), OUT_OF_VIEW))  # fmt: skip
+        rows.append(
+            (
+                "not scored: out of view",
+                len(ev.out_of_view),
+                frame_ranges(ev.out_of_view),
+                OUT_OF_VIEW,
+            )
+        )
     for r in (ev.joints, ev.correspondence):
         if r is not None and len(r.failed):
             why = "the track's joints or vertices are not finite there"
@@ -63,8 +69,14 @@ def frame_rows(ev: Evaluation, track: Track | None = None) -> list[tuple[str, in
                 continue
             said = list(dict.fromkeys(track.messages[i] for i in k if track.messages[i]))
             why = "; ".join(said[:3]) + (f"; … ({len(said) - 3} more)" if len(said) > 3 else "")
-            rows.append((f"flagged: {flag}", len(k), frame_ranges(track.frames[k]),
-                         why or FLAG_REASONS[flag]))  # fmt: skip
+            rows.append(
+                (
+                    f"flagged: {flag}",
+                    len(k),
+                    frame_ranges(track.frames[k]),
+                    why or FLAG_REASONS[flag],
+                )
+            )
     return rows
 
 
@@ -77,15 +89,19 @@ def bone_note(ev: Evaluation) -> str:
     if not fixed:
         return ""
     if ev.method.startswith("patch"):
-        how = ("the patch tracker's joint read-out keeps the bone lengths of its skeleton, set "
-               "at the first frame, so they cannot vary")  # fmt: skip
+        how = (
+            "the patch tracker's joint read-out keeps the bone lengths of its skeleton, set "
+            "at the first frame, so they cannot vary"
+        )
     elif ev.method == "articulated_icp":
         how = "articulated ICP moves a skeleton of rigid bones, so their lengths cannot vary"
     else:
         how = "this tracker keeps those bones' lengths fixed"
     which = "every bone" if len(fixed) == len(b.names) else f"{len(fixed)} of {len(b.names)} bones"
-    return (f"std 0.0 for {which} by construction, not a bug: {how}. The spread measures "
-            "nothing there; the joint errors show the accuracy.")  # fmt: skip
+    return (
+        f"std 0.0 for {which} by construction, not a bug: {how}. The spread measures "
+        "nothing there; the joint errors show the accuracy."
+    )
 
 
 def silhouette_note(evaluations: Sequence[Evaluation], why: str) -> str:

@@ -229,8 +229,16 @@ def point_motion_kernel(delta, P, q, indptr, cols, w, parents):  # pragma: no co
     OP = np.empty((J, 6))
     for j in range(J):
         o0, o1, o2 = delta[3 + 3 * j], delta[4 + 3 * j], delta[5 + 3 * j]
-        x = np.array([o0, o1, o2, o1 * P[j, 2] - o2 * P[j, 1], o2 * P[j, 0] - o0 * P[j, 2],
-                      o0 * P[j, 1] - o1 * P[j, 0]])  # fmt: skip
+        x = np.array(
+            [
+                o0,
+                o1,
+                o2,
+                o1 * P[j, 2] - o2 * P[j, 1],
+                o2 * P[j, 0] - o0 * P[j, 2],
+                o0 * P[j, 1] - o1 * P[j, 0],
+            ]
+        )
         p = parents[j]
         for a in range(6):
             OP[j, a] = x[a] + (OP[p, a] if p >= 0 else 0.0)

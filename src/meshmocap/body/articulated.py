@@ -58,10 +58,17 @@ Residual = Literal["point_to_plane", "point_to_point"]
 #: they are barely observed by a visual hull and drift in the data term's near-null space
 #: (e.g. LHipJoint swings the whole leg sideways into the hull's phantom volume).
 FIXED_JOINTS = (
-    "LHipJoint", "RHipJoint", "LeftToeBase", "RightToeBase",
-    "LeftFingerBase", "LeftHandIndex1", "LThumb",
-    "RightFingerBase", "RightHandIndex1", "RThumb",
-)  # fmt: skip
+    "LHipJoint",
+    "RHipJoint",
+    "LeftToeBase",
+    "RightToeBase",
+    "LeftFingerBase",
+    "LeftHandIndex1",
+    "LThumb",
+    "RightFingerBase",
+    "RightHandIndex1",
+    "RThumb",
+)
 
 
 def subtree_matrix(skeleton: Skeleton) -> np.ndarray:
@@ -117,10 +124,16 @@ def articulated_model(
     coo = W.tocoo()
     D = subtree_matrix(template.skeleton)
     return ArticulatedModel(
-        template=template, sample=sample, W=W, rows=coo.row.astype(np.int64),
-        cols=coo.col.astype(np.int64), X=V[sample], N0=vertex_normals(V, F)[sample],
-        W_acc=np.asarray(W @ D), D=D,
-    )  # fmt: skip
+        template=template,
+        sample=sample,
+        W=W,
+        rows=coo.row.astype(np.int64),
+        cols=coo.col.astype(np.int64),
+        X=V[sample],
+        N0=vertex_normals(V, F)[sample],
+        W_acc=np.asarray(W @ D),
+        D=D,
+    )
 
 
 def pose_points(

@@ -44,8 +44,16 @@ from meshmocap.body._articulated_kernels import (
 )
 from meshmocap.body.articulated import ArticulatedModel
 
-__all__ = ["MomentPlan", "PosedModel", "moment_plan", "normal_equations", "pair_moments",
-           "point_motion", "posed_model", "rotation_error"]  # fmt: skip
+__all__ = [
+    "MomentPlan",
+    "PosedModel",
+    "moment_plan",
+    "normal_equations",
+    "pair_moments",
+    "point_motion",
+    "posed_model",
+    "rotation_error",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,9 +76,12 @@ class MomentPlan:
 
 def moment_plan(model: ArticulatedModel) -> MomentPlan:
     """Precompute what :func:`normal_equations` needs of ``model``."""
-    return MomentPlan(model=model, Xe=model.X[model.rows],
-                      indptr=model.W.indptr.astype(np.int64),
-                      parents=model.template.skeleton.parents.astype(np.int64))  # fmt: skip
+    return MomentPlan(
+        model=model,
+        Xe=model.X[model.rows],
+        indptr=model.W.indptr.astype(np.int64),
+        parents=model.template.skeleton.parents.astype(np.int64),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,10 +109,17 @@ def posed_model(plan: MomentPlan, R: np.ndarray, root: np.ndarray) -> PosedModel
     :func:`~meshmocap.body.articulated.pose_points`."""
     model, sk = plan.model, plan.model.template.skeleton
     G, P, q, v, n = posed_kernel(
-        np.ascontiguousarray(R, dtype=np.float64), np.asarray(root, dtype=np.float64),
-        plan.parents, sk.offsets, sk.rest_positions, plan.indptr, model.cols, model.W.data,
-        plan.Xe, model.N0,
-    )  # fmt: skip
+        np.ascontiguousarray(R, dtype=np.float64),
+        np.asarray(root, dtype=np.float64),
+        plan.parents,
+        sk.offsets,
+        sk.rest_positions,
+        plan.indptr,
+        model.cols,
+        model.W.data,
+        plan.Xe,
+        model.N0,
+    )
     return PosedModel(G=G, P=P, q=q, v=v, n=n)
 
 
@@ -129,10 +147,13 @@ def pair_moments(
     r2 : (p,) float64, each pair's squared residual, metres²
     """
     return pair_moments_kernel(
-        np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(i, dtype=np.int64),
-        np.ascontiguousarray(y, dtype=np.float64), np.ascontiguousarray(ny, dtype=np.float64),
-        np.ascontiguousarray(s, dtype=np.float64), residual == "point_to_plane",
-    )  # fmt: skip
+        np.ascontiguousarray(v, dtype=np.float64),
+        np.ascontiguousarray(i, dtype=np.int64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        np.ascontiguousarray(ny, dtype=np.float64),
+        np.ascontiguousarray(s, dtype=np.float64),
+        residual == "point_to_plane",
+    )
 
 
 def normal_equations(
@@ -143,16 +164,24 @@ def normal_equations(
     parameters (t, ω_0 … ω_{J−1}) of :func:`~meshmocap.body.articulated.apply_increment`
     (see the module docstring)."""
     model = plan.model
-    return normal_equations_kernel(plan.indptr, model.cols, model.W.data, posed.q, S, b,
-                                   posed.P, plan.parents)  # fmt: skip
+    return normal_equations_kernel(
+        plan.indptr, model.cols, model.W.data, posed.q, S, b, posed.P, plan.parents
+    )
 
 
 def point_motion(plan: MomentPlan, posed: PosedModel, delta: np.ndarray) -> np.ndarray:
     """(m, 3) float64: the first-order displacement ``t + Σ_j ω_j × a_ij`` of every model
     point under the increment ``delta`` = (t, ω_0 … ω_{J−1}) (metres)."""
     model = plan.model
-    return point_motion_kernel(np.asarray(delta, dtype=np.float64), posed.P, posed.q,
-                               plan.indptr, model.cols, model.W.data, plan.parents)  # fmt: skip
+    return point_motion_kernel(
+        np.asarray(delta, dtype=np.float64),
+        posed.P,
+        posed.q,
+        plan.indptr,
+        model.cols,
+        model.W.data,
+        plan.parents,
+    )
 
 
 def rotation_error(
@@ -163,6 +192,9 @@ def rotation_error(
     vector (radians), the residual of a pull towards ``R_ref`` whose derivative with respect
     to the increments of :func:`~meshmocap.body.articulated.apply_increment` is about the
     identity."""
-    return rotation_error_kernel(np.ascontiguousarray(R, dtype=np.float64),
-                                 np.ascontiguousarray(R_ref, dtype=np.float64), posed.G,
-                                 plan.parents)  # fmt: skip
+    return rotation_error_kernel(
+        np.ascontiguousarray(R, dtype=np.float64),
+        np.ascontiguousarray(R_ref, dtype=np.float64),
+        posed.G,
+        plan.parents,
+    )

@@ -151,8 +151,19 @@ class SkeletonFit:
 class _Fitter:
     """State shared by the Gauss–Newton iterations of :func:`fit_skeleton`."""
 
-    def __init__(self, template, V, F, *, n_model_points, n_data_points, lambda_pose,
-                 fixed_joints, fit_scale, seed):  # fmt: skip
+    def __init__(
+        self,
+        template,
+        V,
+        F,
+        *,
+        n_model_points,
+        n_data_points,
+        lambda_pose,
+        fixed_joints,
+        fit_scale,
+        seed,
+    ):
         self.t = template
         self.sk = template.skeleton
         self.model = articulated_model(template, n_points=n_model_points, seed=seed)
@@ -290,19 +301,30 @@ def fit_skeleton(
     root = template.skeleton.rest_positions[0] if root is None else root
     root = np.array(root, dtype=np.float64)
     if R.shape != (J, 3, 3) or root.shape != (3,):
-        raise InputError(f"{func}: expected R ({J}, 3, 3) and root (3,), "
-                         f"found {R.shape} and {root.shape}")  # fmt: skip
+        raise InputError(
+            f"{func}: expected R ({J}, 3, 3) and root (3,), found {R.shape} and {root.shape}"
+        )
     if not (isinstance(iterations, int | np.integer) and iterations >= 0):
         raise InputError(f"{func}: iterations must be an integer ≥ 0, found {iterations!r}")
     d0, d1 = (float(x) for x in max_distance)
     if not (0 < d1 <= d0 and np.isfinite(d0)):
-        raise InputError(f"{func}: max_distance must be (start, end) with start ≥ end > 0, "
-                         f"found {max_distance!r}")  # fmt: skip
+        raise InputError(
+            f"{func}: max_distance must be (start, end) with start ≥ end > 0, "
+            f"found {max_distance!r}"
+        )
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"{func}: scale must be a positive number, found {scale!r}")
-    fitter = _Fitter(template, V, F, n_model_points=n_model_points, n_data_points=n_data_points,
-                     lambda_pose=lambda_pose, fixed_joints=tuple(fixed_joints),
-                     fit_scale=fit_scale, seed=seed)  # fmt: skip
+    fitter = _Fitter(
+        template,
+        V,
+        F,
+        n_model_points=n_model_points,
+        n_data_points=n_data_points,
+        lambda_pose=lambda_pose,
+        fixed_joints=tuple(fixed_joints),
+        fit_scale=fit_scale,
+        seed=seed,
+    )
     s = float(scale)
     for it in range(iterations):
         d = d0 * (d1 / d0) ** (it / max(iterations - 1, 1))
@@ -440,12 +462,36 @@ def rig_mesh(
         R = np.tile(np.eye(3), (sk.n_joints, 1, 1))
         R[0] = so3_exp(np.array([0.0, 0.0, yaw]))
         root = c_mesh - s0 * R[0] @ (c_ref - root_ref)
-        fits.append(fit_skeleton(ref, V, F, R=R, root=root, scale=s0, iterations=coarse,
-                                 max_distance=(0.3, 0.1), n_model_points=600,
-                                 n_data_points=1500, **opts))  # fmt: skip
+        fits.append(
+            fit_skeleton(
+                ref,
+                V,
+                F,
+                R=R,
+                root=root,
+                scale=s0,
+                iterations=coarse,
+                max_distance=(0.3, 0.1),
+                n_model_points=600,
+                n_data_points=1500,
+                **opts,
+            )
+        )
     best = sorted(fits, key=lambda f: f.rms)[:2]
-    final = [fit_skeleton(ref, V, F, R=f.R, root=f.root, scale=f.scale, iterations=iterations,
-                          max_distance=(0.1, 0.02), **opts) for f in best]  # fmt: skip
+    final = [
+        fit_skeleton(
+            ref,
+            V,
+            F,
+            R=f.R,
+            root=f.root,
+            scale=f.scale,
+            iterations=iterations,
+            max_distance=(0.1, 0.02),
+            **opts,
+        )
+        for f in best
+    ]
     fit = min(final, key=lambda f: f.rms)
     fitted = rest_in_pose(ref, fit.R, fit.root, scale=fit.scale, name=f"{ref.name}_fitted")
     return transfer_rig(fitted, *out, name=name, max_weights=max_weights)
@@ -479,8 +525,15 @@ def rest_in_pose(
     skel = Skeleton(sk.names, sk.parents, off, end)
     ev = template.eval_skeleton
     eval_sk = EvalSkeleton(ev.names, ev.parents.copy(), E, ev.weights.copy())
-    return Template(name, V, template.F.copy(), skel, template.weights.copy(),
-                    template.part_labels.copy(), eval_sk)  # fmt: skip
+    return Template(
+        name,
+        V,
+        template.F.copy(),
+        skel,
+        template.weights.copy(),
+        template.part_labels.copy(),
+        eval_sk,
+    )
 
 
 def _barycentric(Q: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:

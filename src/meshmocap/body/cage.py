@@ -29,10 +29,22 @@ from meshmocap.geometry.proximity import closest_points_on_triangles
 CORNER_SIGNS = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
 #: Chains of quads joined by tubes (indices into meshmocap.body.oqr.QUAD_NAMES).
 OQR_TUBES = (
-    (0, 1), (1, 2), (3, 4),  # pelvis → abdomen → chest; neck → head top
-    (5, 6), (6, 7), (7, 8), (9, 10), (10, 11), (11, 12),  # shoulder → elbow → wrist → hand
-    (13, 14), (14, 15), (15, 16), (17, 18), (18, 19), (19, 20),  # hip → knee → ankle → toe
-)  # fmt: skip
+    (0, 1),
+    (1, 2),
+    (3, 4),  # pelvis → abdomen → chest; neck → head top
+    (5, 6),
+    (6, 7),
+    (7, 8),
+    (9, 10),
+    (10, 11),
+    (11, 12),  # shoulder → elbow → wrist → hand
+    (13, 14),
+    (14, 15),
+    (15, 16),
+    (17, 18),
+    (18, 19),
+    (19, 20),  # hip → knee → ankle → toe
+)
 #: Chain ends closed by a flat cap (hand and toe tips); the head top gets a pyramid.
 OQR_CAPS = (8, 12, 16, 20)
 OQR_HEAD = 4
@@ -118,24 +130,48 @@ def oqr_faces(C: np.ndarray) -> np.ndarray:
     lfo, lfi, lbi, lbo = k(13, _F, _L), k(13, _F, R), k(13, B, R), k(13, B, _L)
     rfo, rfi, rbi, rbo = k(17, _F, R), k(17, _F, _L), k(17, B, _L), k(17, B, R)
     pants = [
-        (pFL, lfi, lfo), (pFR, rfo, rfi), (pFL, rfi, lfi), (pFL, pFR, rfi),  # front
-        (pBL, lbo, lbi), (pBR, rbi, rbo), (pBL, lbi, rbi), (pBL, rbi, pBR),  # back
-        (pFL, lbo, pBL), (pFL, lfo, lbo), (pFR, rbo, rfo), (pFR, pBR, rbo),  # hip sides
-        (lfi, rbi, lbi), (lfi, rfi, rbi),  # crotch
-    ]  # fmt: skip
+        (pFL, lfi, lfo),
+        (pFR, rfo, rfi),
+        (pFL, rfi, lfi),
+        (pFL, pFR, rfi),  # front
+        (pBL, lbo, lbi),
+        (pBR, rbi, rbo),
+        (pBL, lbi, rbi),
+        (pBL, rbi, pBR),  # back
+        (pFL, lbo, pBL),
+        (pFL, lfo, lbo),
+        (pFR, rbo, rfo),
+        (pFR, pBR, rbo),  # hip sides
+        (lfi, rbi, lbi),
+        (lfi, rfi, rbi),  # crotch
+    ]
     # chest 2, neck 3, left shoulder 5, right shoulder 9 (t/b: top/bottom, f/b: front/back)
     cFL, cFR, cBR, cBL = k(2, _F, _L), k(2, _F, R), k(2, B, R), k(2, B, _L)
     nFL, nFR, nBR, nBL = k(3, _F, _L), k(3, _F, R), k(3, B, R), k(3, B, _L)
     ltf, ltb, lbf, lbb = k(5, _U, _F), k(5, _U, B), k(5, -_U, _F), k(5, -_U, B)
     rtf, rtb, rbf, rbb = k(9, _U, _F), k(9, _U, B), k(9, -_U, _F), k(9, -_U, B)
     girdle = [
-        (cFL, lbf, ltf), (cFL, ltf, nFL), (cFR, rtf, rbf), (cFR, nFR, rtf),  # front
-        (cFL, nFL, nFR), (cFL, nFR, cFR),
-        (cBL, ltb, lbb), (cBL, nBL, ltb), (cBR, rbb, rtb), (cBR, rtb, nBR),  # back
-        (cBL, nBR, nBL), (cBL, cBR, nBR),
-        (cFL, cBL, lbb), (cFL, lbb, lbf), (cFR, rbf, rbb), (cFR, rbb, cBR),  # armpits
-        (nFL, ltf, ltb), (nFL, ltb, nBL), (nFR, nBR, rtb), (nFR, rtb, rtf),  # tops
-    ]  # fmt: skip
+        (cFL, lbf, ltf),
+        (cFL, ltf, nFL),
+        (cFR, rtf, rbf),
+        (cFR, nFR, rtf),  # front
+        (cFL, nFL, nFR),
+        (cFL, nFR, cFR),
+        (cBL, ltb, lbb),
+        (cBL, nBL, ltb),
+        (cBR, rbb, rtb),
+        (cBR, rtb, nBR),  # back
+        (cBL, nBR, nBL),
+        (cBL, cBR, nBR),
+        (cFL, cBL, lbb),
+        (cFL, lbb, lbf),
+        (cFR, rbf, rbb),
+        (cFR, rbb, cBR),  # armpits
+        (nFL, ltf, ltb),
+        (nFL, ltb, nBL),
+        (nFR, nBR, rtb),
+        (nFR, rtb, rtf),  # tops
+    ]
     for name, faces in (("pelvis", pants), ("chest", girdle)):
         used = np.unique(np.asarray(faces))
         if len(used) != 4 * len(np.unique(used // 4)):

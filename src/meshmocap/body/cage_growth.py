@@ -64,8 +64,9 @@ def enclose(
     for slide, size in ((False, step), (True, step), (True, step / 4)):
         if size < step:
             frozen = set()
-        it, done = _grow_pass(rects, F, points, apex_height, clearance, size, max_iter,
-                              slide, frozen)  # fmt: skip
+        it, done = _grow_pass(
+            rects, F, points, apex_height, clearance, size, max_iter, slide, frozen
+        )
         used += it
         if done:
             break
@@ -136,8 +137,10 @@ def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, 
                 frozen.add((q, a, s))
                 continue
             new = _pair_set(rect_cage(rects, apex_height), F, around) - before
-            if new and not (slide and _make_way(rects, F, points[check], V0, q, new, delta,
-                                                apex_height, clearance)):  # fmt: skip
+            if new and not (
+                slide
+                and _make_way(rects, F, points[check], V0, q, new, delta, apex_height, clearance)
+            ):
                 rects[q].grow(a, s, -delta)
                 frozen.add((q, a, s))
     return it, False

@@ -78,30 +78,64 @@ from meshmocap.errors import InputError, MeshError
 
 #: The 21 quads, in this order everywhere (index ``q``; corners ``4 q … 4 q + 3``).
 QUAD_NAMES = (
-    "pelvis", "abdomen", "chest", "neck", "head",
-    "left_shoulder", "left_elbow", "left_wrist", "left_hand",
-    "right_shoulder", "right_elbow", "right_wrist", "right_hand",
-    "left_hip", "left_knee", "left_ankle", "left_toe",
-    "right_hip", "right_knee", "right_ankle", "right_toe",
-)  # fmt: skip
+    "pelvis",
+    "abdomen",
+    "chest",
+    "neck",
+    "head",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "left_hand",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "right_hand",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "left_toe",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+    "right_toe",
+)
 #: The rig joint (CMU MotionBuilder name) each quad follows rigidly.
 QUAD_JOINTS = (
-    "Hips", "LowerBack", "Spine", "Neck", "Head",
-    "LeftArm", "LeftForeArm", "LeftHand", "LeftHand",
-    "RightArm", "RightForeArm", "RightHand", "RightHand",
-    "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-    "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
-)  # fmt: skip
+    "Hips",
+    "LowerBack",
+    "Spine",
+    "Neck",
+    "Head",
+    "LeftArm",
+    "LeftForeArm",
+    "LeftHand",
+    "LeftHand",
+    "RightArm",
+    "RightForeArm",
+    "RightHand",
+    "RightHand",
+    "LeftUpLeg",
+    "LeftLeg",
+    "LeftFoot",
+    "LeftToeBase",
+    "RightUpLeg",
+    "RightLeg",
+    "RightFoot",
+    "RightToeBase",
+)
 N_QUADS = len(QUAD_NAMES)
 PELVIS = 0
 
 
 #: build_oqr's numeric options: name, (lower bound, inclusive), upper bound, unit.
 _RANGES = (
-    ("margin", (1.0, True), 3.0, ""), ("pad", (0.0, False), 0.1, " metres"),
-    ("clearance", (0.0, True), 0.05, " metres"), ("slab", (0.0, False), 0.2, " metres"),
+    ("margin", (1.0, True), 3.0, ""),
+    ("pad", (0.0, False), 0.1, " metres"),
+    ("clearance", (0.0, True), 0.05, " metres"),
+    ("slab", (0.0, False), 0.2, " metres"),
     ("grow_step", (0.0, False), 0.05, " metres"),
-)  # fmt: skip
+)
 
 
 # ------------------------------------------------------------------------------ structures
@@ -263,9 +297,12 @@ def build_oqr(
     # the second placement boxes the upper arms; the later ones relax the cage for loose
     # clothing (a long dress): wider cross-sections, three times the growth, half and then
     # a quarter of the clearance
-    rounds = [(False, margin, clearance, max_grow), (True, margin, clearance, max_grow),
-              (True, min(margin * 1.15, 3.0), clearance / 2, 3 * max_grow),
-              (True, min(margin * 1.3, 3.0), clearance / 4, 3 * max_grow)]  # fmt: skip
+    rounds = [
+        (False, margin, clearance, max_grow),
+        (True, margin, clearance, max_grow),
+        (True, min(margin * 1.15, 3.0), clearance / 2, 3 * max_grow),
+        (True, min(margin * 1.3, 3.0), clearance / 4, 3 * max_grow),
+    ]
     for box_limbs, margin, clearance, max_grow in rounds:
         placer = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab))
         placer.box_limbs = box_limbs
@@ -279,8 +316,15 @@ def build_oqr(
         head = rects[OQR_HEAD]
         apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
         untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
-        enclose(rects, F, template.V @ C, apex_height=apex, clearance=clearance,
-                step=grow_step, max_iter=int(max_grow))  # fmt: skip
+        enclose(
+            rects,
+            F,
+            template.V @ C,
+            apex_height=apex,
+            clearance=clearance,
+            step=grow_step,
+            max_iter=int(max_grow),
+        )
         for r in rects:  # back to the world frame (lo, hi are in the quad's own frame)
             r.anchor, r.R = C @ r.anchor, C @ r.R
             if r.keep_out is not None:
@@ -290,8 +334,10 @@ def build_oqr(
         if not problems:
             return _assemble(template, rects, F, V)
         why.append("; ".join(problems))
-    raise MeshError(f"{func}: template {template.name!r}: {why[0]} (with the upper arms "
-                    f"boxed: {why[1]}; relaxed for loose clothing: {why[-1]})")  # fmt: skip
+    raise MeshError(
+        f"{func}: template {template.name!r}: {why[0]} (with the upper arms "
+        f"boxed: {why[1]}; relaxed for loose clothing: {why[-1]})"
+    )
 
 
 def _assemble(template: Template, rects: list[QuadRect], F: np.ndarray, V: np.ndarray) -> OQR:

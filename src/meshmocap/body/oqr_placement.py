@@ -14,8 +14,16 @@ from meshmocap.body.names import canonical_name_map
 from meshmocap.body.template import Template
 from meshmocap.errors import MeshError, SkeletonError
 
-_TORSO = ("Hips", "LHipJoint", "RHipJoint", "LowerBack", "Spine", "Spine1",
-          "LeftShoulder", "RightShoulder")  # fmt: skip
+_TORSO = (
+    "Hips",
+    "LHipJoint",
+    "RHipJoint",
+    "LowerBack",
+    "Spine",
+    "Spine1",
+    "LeftShoulder",
+    "RightShoulder",
+)
 _HEAD = ("Neck", "Neck1", "Head")
 _SIDES = (("Left", "left", "LThumb"), ("Right", "right", "RThumb"))
 _X, _Z = np.eye(3)[0], np.eye(3)[2]
@@ -58,8 +66,9 @@ def heading(template: Template) -> np.ndarray:
     if missing:
         raise SkeletonError(f"build_oqr: the template's skeleton lacks joints {missing}")
     P = sk.rest_positions
-    lat = sum(P[sk.index(canon[f"Left{j}"])] - P[sk.index(canon[f"Right{j}"])]
-              for j in ("UpLeg", "Arm"))  # fmt: skip
+    lat = sum(
+        P[sk.index(canon[f"Left{j}"])] - P[sk.index(canon[f"Right{j}"])] for j in ("UpLeg", "Arm")
+    )
     h = float(np.hypot(lat[0], lat[1]))
     if not h > 0.1 * np.linalg.norm(lat):
         raise SkeletonError(
@@ -80,8 +89,15 @@ class Placer:
     ``box_limbs`` set (default False) the shoulder and elbow quads also cover the upper
     arm's vertices between them, projected along the shoulder→elbow bone."""
 
-    def __init__(self, t: Template, C: np.ndarray, joints: tuple[str, ...], margin: float,
-                 pad: float, slab: float) -> None:  # fmt: skip
+    def __init__(
+        self,
+        t: Template,
+        C: np.ndarray,
+        joints: tuple[str, ...],
+        margin: float,
+        pad: float,
+        slab: float,
+    ) -> None:
         sk = t.skeleton
         canon = canonical_name_map(sk.names)
         missing = sorted((set(joints) | set(_TORSO) | set(_HEAD)) - set(canon))
@@ -134,8 +150,10 @@ class Placer:
         X = np.concatenate([V[np.abs(s) < self.pad], (1 - w) * V[E[:, 0]] + w * V[E[:, 1]]])
         X = X[X[:, 2] > max(P["LeftLeg"][2], P["RightLeg"][2])]
         if not len(X):
-            raise MeshError(f"build_oqr: template {self.t.name!r}: no surface between the "
-                            "legs above the knees on the mid-sagittal plane")  # fmt: skip
+            raise MeshError(
+                f"build_oqr: template {self.t.name!r}: no surface between the "
+                "legs above the knees on the mid-sagittal plane"
+            )
         return X[np.argmin(X[:, 2])]
 
     def clear(self, quads: list[QuadRect], other: np.ndarray) -> QuadRect:
@@ -161,8 +179,9 @@ class Placer:
         lateral = _unit(P["LeftUpLeg"] - P["RightUpLeg"])
         crotch = self.crotch(lateral)
         for s, side, thumb in _SIDES:
-            arm = part(f"{s}Arm", f"{s}ForeArm", f"{s}Hand", f"{s}FingerBase",
-                       f"{s}HandIndex1", thumb)  # fmt: skip
+            arm = part(
+                f"{s}Arm", f"{s}ForeArm", f"{s}Hand", f"{s}FingerBase", f"{s}HandIndex1", thumb
+            )
             hand = part(f"{s}Hand", f"{s}FingerBase", f"{s}HandIndex1", thumb)
             pa, pe, pw = P[f"{s}Arm"], P[f"{s}ForeArm"], P[f"{s}Hand"]
             d1, d2 = _unit(pe - pa), _unit(pw - pe)
@@ -200,8 +219,12 @@ class Placer:
         low = np.concatenate([out[f"{s}_shoulder"].corners() for s in ("left", "right")])
         base = P["Hips"]
         axis = _unit(P["Neck"] - base)
-        drop = np.mean([(out[f"{s}_shoulder"].hi[0] - out[f"{s}_shoulder"].lo[0]) / 4
-                        for s in ("left", "right")])  # fmt: skip
+        drop = np.mean(
+            [
+                (out[f"{s}_shoulder"].hi[0] - out[f"{s}_shoulder"].lo[0]) / 4
+                for s in ("left", "right")
+            ]
+        )
         chest = base + (((low - base) @ axis).min() - drop) * axis
         axis = _unit(chest - base)
         section = torso | part("LeftUpLeg", "RightUpLeg")

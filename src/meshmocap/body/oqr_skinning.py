@@ -53,8 +53,9 @@ def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     anti = c < -1 + 1e-9
     if anti.any():  # π about any axis orthogonal to a
         o = np.cross(a[anti], [1.0, 0.0, 0.0])
-        o = np.where(np.linalg.norm(o, axis=1, keepdims=True) < 1e-6,
-                     np.cross(a[anti], [0.0, 1.0, 0.0]), o)  # fmt: skip
+        o = np.where(
+            np.linalg.norm(o, axis=1, keepdims=True) < 1e-6, np.cross(a[anti], [0.0, 1.0, 0.0]), o
+        )
         o /= np.linalg.norm(o, axis=1, keepdims=True)
         R[anti] = 2 * o[:, :, None] * o[:, None, :] - np.eye(3)
     return R
@@ -84,8 +85,9 @@ class QuadSkinning:
         J, parents = sk.n_joints, np.asarray(sk.parents)
         jq = np.asarray(oqr.quads.joint_indices)
         if jq.max() >= J or tuple(sk.names[j] for j in jq) != oqr.quads.joints:
-            raise InputError(f"QuadSkinning: template {template.name!r} does not have the "
-                             "OQR's rig joints")  # fmt: skip
+            raise InputError(
+                f"QuadSkinning: template {template.name!r} does not have the OQR's rig joints"
+            )
         own = np.full(J, -1)
         for q in range(len(jq) - 1, -1, -1):  # a joint with two quads follows the first
             own[jq[q]] = q
@@ -128,11 +130,14 @@ class QuadSkinning:
             swing = [(j, t[0]) for j, t in steps[d] if len(t) == 1]
             fit = [(j, t) for j, t in steps[d] if len(t) > 1]
             keep = [j for j, t in steps[d] if not t]
-            self._steps.append((
-                np.array([j for j, _ in swing], dtype=np.int64),
-                np.array([k for _, k in swing], dtype=np.int64),
-                fit, np.array(keep, dtype=np.int64),
-            ))  # fmt: skip
+            self._steps.append(
+                (
+                    np.array([j for j, _ in swing], dtype=np.int64),
+                    np.array([k for _, k in swing], dtype=np.int64),
+                    fit,
+                    np.array(keep, dtype=np.int64),
+                )
+            )
         self._parents = parents
 
     def transforms(self, centres: np.ndarray, rotations: np.ndarray) -> np.ndarray:

@@ -80,10 +80,16 @@ def eval_joint_model(template: Template) -> ArticulatedModel:
     D = subtree_matrix(template.skeleton)
     K = len(ev.names)
     return ArticulatedModel(
-        template=template, sample=np.arange(K), W=W, rows=coo.row.astype(np.int64),
-        cols=coo.col.astype(np.int64), X=ev.rest_positions, N0=np.zeros((K, 3)),
-        W_acc=np.asarray(W @ D), D=D,
-    )  # fmt: skip
+        template=template,
+        sample=np.arange(K),
+        W=W,
+        rows=coo.row.astype(np.int64),
+        cols=coo.col.astype(np.int64),
+        X=ev.rest_positions,
+        N0=np.zeros((K, 3)),
+        W_acc=np.asarray(W @ D),
+        D=D,
+    )
 
 
 def rigid_alignment(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

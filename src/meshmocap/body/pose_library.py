@@ -113,8 +113,10 @@ class PoseLibrary:
         R = self.rotations[: len(self) if n is None else int(n)]
         source = load_template(self.skeleton).skeleton
         if source.names != template.skeleton.names:
-            raise InputError(f"pose library: template {template.name!r} has other joints than "
-                             f"the library's {self.skeleton!r} skeleton")  # fmt: skip
+            raise InputError(
+                f"pose library: template {template.name!r} has other joints than "
+                f"the library's {self.skeleton!r} skeleton"
+            )
         if np.array_equal(source.offsets, template.skeleton.offsets):
             return R.copy()
         m = Motion(source, R, np.zeros((len(R), 3)), 30.0)
@@ -133,8 +135,9 @@ def _load(path: str, stamp: float) -> PoseLibrary:
         q = d["quaternions"]
         names = tuple(str(s) for s in d["joint_names"])
         if q.dtype != np.int16 or q.ndim != 3 or q.shape[1:] != (len(names), 4) or not len(q):
-            raise ValueError(f"quaternions must be (N, {len(names)}, 4) int16, found "
-                             f"{q.shape} {q.dtype}")  # fmt: skip
+            raise ValueError(
+                f"quaternions must be (N, {len(names)}, 4) int16, found {q.shape} {q.dtype}"
+            )
         qf = q.astype(np.float64) / _QSCALE
         norm = np.linalg.norm(qf, axis=-1, keepdims=True)
         if np.abs(norm - 1).max() > 1e-3:
@@ -145,10 +148,17 @@ def _load(path: str, stamp: float) -> PoseLibrary:
         category, trial = d["category"].astype(np.int64), d["trial"].astype(np.int64)
         if category.shape != (n,) or trial.shape != (n,) or d["frame"].shape != (n,):
             raise ValueError("category, trial and frame need one entry per pose")
-        out = PoseLibrary(R, str(d["skeleton"]), names, cats[category], trials[trial],
-                          d["frame"].astype(np.int64), d["radius"].astype(np.float64),
-                          tuple(str(s) for s in d["held_out"]),
-                          hashlib.sha256(p.read_bytes()).hexdigest()[:16])  # fmt: skip
+        out = PoseLibrary(
+            R,
+            str(d["skeleton"]),
+            names,
+            cats[category],
+            trials[trial],
+            d["frame"].astype(np.int64),
+            d["radius"].astype(np.float64),
+            tuple(str(s) for s in d["held_out"]),
+            hashlib.sha256(p.read_bytes()).hexdigest()[:16],
+        )
     except (KeyError, ValueError, TypeError, IndexError) as exc:
         raise FormatError(f"{p}: corrupt pose library ({type(exc).__name__}: {exc})") from None
     for a in (out.rotations, out.categories, out.trials, out.frames, out.radius):

@@ -62,8 +62,11 @@ class _Rig:
         self.sk = skeleton
         self.T = T
         self.names = canonical_name_map(skeleton.names)
-        missing = [n for n in ("Hips", "LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg")
-                   if n not in self.names]  # fmt: skip
+        missing = [
+            n
+            for n in ("Hips", "LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg")
+            if n not in self.names
+        ]
         if missing:
             raise InputError(
                 f"procedural motions need MotionBuilder-named joints; skeleton lacks {missing}"
@@ -241,9 +244,19 @@ def jog(
 
     Parameters are those of :func:`walk` (degrees, steps per minute, metres).
     """
-    return walk(target, duration=duration, fps=fps, cadence=cadence,
-                hip_amplitude=hip_amplitude, knee_swing=knee_swing, arm_swing=arm_swing,
-                turn_rate=turn_rate, bounce=bounce, lean=8.0, elbow=85.0)  # fmt: skip
+    return walk(
+        target,
+        duration=duration,
+        fps=fps,
+        cadence=cadence,
+        hip_amplitude=hip_amplitude,
+        knee_swing=knee_swing,
+        arm_swing=arm_swing,
+        turn_rate=turn_rate,
+        bounce=bounce,
+        lean=8.0,
+        elbow=85.0,
+    )
 
 
 def squat(
@@ -303,8 +316,14 @@ def jumping_jacks(
     rig = _Rig(target.skeleton if isinstance(target, Template) else target, T)
     s = 0.5 * (1 - np.cos(2 * np.pi * t / period))
     for side in ("left", "right"):
-        _legs(rig, side, np.deg2rad(4.0) * np.ones(T), np.deg2rad(8.0) * np.ones(T),
-              np.zeros(T), abduction=np.deg2rad(3.0 + 14.0 * s))  # fmt: skip
+        _legs(
+            rig,
+            side,
+            np.deg2rad(4.0) * np.ones(T),
+            np.deg2rad(8.0) * np.ones(T),
+            np.zeros(T),
+            abduction=np.deg2rad(3.0 + 14.0 * s),
+        )
         _arms(rig, side, np.zeros(T), np.deg2rad(10.0) * np.ones(T), np.deg2rad(12.0 + 150.0 * s))
     _trunk(rig, 0.0)
     lift = jump_height * np.abs(np.sin(2 * np.pi * t / period))
@@ -335,9 +354,13 @@ def turn(
 
 
 _BY_NAME: dict[str, Callable[..., Motion]] = {
-    "walk": walk, "jog": jog, "squat": squat, "arm_raises": arm_raises,
-    "jumping_jacks": jumping_jacks, "turn": turn,
-}  # fmt: skip
+    "walk": walk,
+    "jog": jog,
+    "squat": squat,
+    "arm_raises": arm_raises,
+    "jumping_jacks": jumping_jacks,
+    "turn": turn,
+}
 
 
 def procedural_motion(name: ProceduralName, target: Template | Skeleton, **params: float) -> Motion:

@@ -129,8 +129,9 @@ class BodyShapeSpace:
         parents = self.joint_parents
         off = b.heads - np.where((parents >= 0)[:, None], b.heads[np.maximum(parents, 0)], 0.0)
         skel = Skeleton(self.joint_names, parents, off, b.tails - b.heads)
-        ev = EvalSkeleton(self.eval_names, self.eval_parents.copy(), b.eval_rest,
-                          self.eval_weights.copy())  # fmt: skip
+        ev = EvalSkeleton(
+            self.eval_names, self.eval_parents.copy(), b.eval_rest, self.eval_weights.copy()
+        )
         return Template(name, b.V, self.F, skel, self.weights, self.part_labels, ev)
 
 
@@ -174,10 +175,17 @@ def _read(path: Path) -> BodyShapeSpace:
         W = sp.csr_matrix(sp.diags(1.0 / np.asarray(W.sum(axis=1)).ravel()) @ W)
         eval_names = tuple(str(s) for s in d["eval_names"])
         space = BodyShapeSpace(
-            m, d["F"].astype(np.int64), names, d["joint_parents"].astype(np.int64), W,
-            d["part_labels"].astype(np.int64), eval_names, d["eval_parents"].astype(np.int64),
-            d["eval_weights"].astype(np.float64), eval_names.index("head"),
-        )  # fmt: skip
+            m,
+            d["F"].astype(np.int64),
+            names,
+            d["joint_parents"].astype(np.int64),
+            W,
+            d["part_labels"].astype(np.int64),
+            eval_names,
+            d["eval_parents"].astype(np.int64),
+            d["eval_weights"].astype(np.float64),
+            eval_names.index("head"),
+        )
     except KeyError as exc:
         raise MeshError(f"{path}: shape space is missing key {exc}") from None
     except ValueError as exc:

@@ -50,12 +50,22 @@ FORMAT = "meshmocap-template-1"
 
 #: The 15 evaluation joints (HumanEva-style), root first.
 EVAL_NAMES = (
-    "pelvis", "thorax", "head",
-    "left_shoulder", "left_elbow", "left_wrist",
-    "right_shoulder", "right_elbow", "right_wrist",
-    "left_hip", "left_knee", "left_ankle",
-    "right_hip", "right_knee", "right_ankle",
-)  # fmt: skip
+    "pelvis",
+    "thorax",
+    "head",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+)
 EVAL_PARENTS = np.array([-1, 0, 1, 1, 3, 4, 1, 6, 7, 0, 9, 10, 0, 12, 13])
 
 
@@ -223,8 +233,15 @@ def _read(path: Path) -> Template:
             t = _from_arrays(d)
     except KeyError as exc:
         raise MeshError(f"{path}: template is missing key {exc}") from None
-    except (ValueError, TypeError, IndexError, ArithmeticError, np.exceptions.ComplexWarning,
-            InputError, SkeletonError) as exc:  # fmt: skip
+    except (
+        ValueError,
+        TypeError,
+        IndexError,
+        ArithmeticError,
+        np.exceptions.ComplexWarning,
+        InputError,
+        SkeletonError,
+    ) as exc:
         why = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
         raise MeshError(f"{path}: template arrays are inconsistent ({why})") from None
     problems = template_problems(t)
@@ -253,8 +270,9 @@ def _from_arrays(d: dict[str, np.ndarray]) -> Template:
         d["eval_rest_positions"].astype(np.float64),
         d["eval_weights"].astype(np.float64),
     )
-    t = Template(str(d["name"]), V, d["F"].astype(np.int64), skel, W,
-                 d["part_labels"].astype(np.int64), ev)  # fmt: skip
+    t = Template(
+        str(d["name"]), V, d["F"].astype(np.int64), skel, W, d["part_labels"].astype(np.int64), ev
+    )
     return t
 
 
@@ -273,15 +291,23 @@ def save_template(path: str | os.PathLike, t: Template) -> Path:
     sk, ev = t.skeleton, t.eval_skeleton
     P = sk.rest_positions
     arrays = dict(
-        format=np.str_(FORMAT), name=np.str_(t.name), V=t.V,
-        F=t.F.astype(np.int32), joint_names=np.array(sk.names),
+        format=np.str_(FORMAT),
+        name=np.str_(t.name),
+        V=t.V,
+        F=t.F.astype(np.int32),
+        joint_names=np.array(sk.names),
         joint_parents=sk.parents.astype(np.int32),
-        joint_positions=P, end_positions=P + sk.end_offsets,
-        weights_data=W.data, weights_indices=W.indices.astype(np.int32),
-        weights_indptr=W.indptr.astype(np.int32), part_labels=t.part_labels.astype(np.int8),
-        eval_names=np.array(ev.names), eval_parents=ev.parents.astype(np.int32),
-        eval_rest_positions=ev.rest_positions, eval_weights=ev.weights,
-    )  # fmt: skip
+        joint_positions=P,
+        end_positions=P + sk.end_offsets,
+        weights_data=W.data,
+        weights_indices=W.indices.astype(np.int32),
+        weights_indptr=W.indptr.astype(np.int32),
+        part_labels=t.part_labels.astype(np.int8),
+        eval_names=np.array(ev.names),
+        eval_parents=ev.parents.astype(np.int32),
+        eval_rest_positions=ev.rest_positions,
+        eval_weights=ev.weights,
+    )
     with atomic_open(path) as f:
         np.savez_compressed(f, **arrays)
     return path

@@ -17,14 +17,27 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     gap = args.missed_limb_frames
     gap = None if gap is None else (gap.start or 0, gap.stop)
     spec = SynthSpec(
-        motion=args.motion, template=args.template, subject=args.subject, rig=args.rig,
-        fps=args.fps, start=rng.start, stop=rng.stop, step=rng.step, seed=args.seed,
-        voxel_size=args.voxel_size, heading=args.heading, offset=args.offset,
-        degradation=Degradation(jitter=args.jitter, holes=args.holes, blobs=args.blobs,
-                                missed_limb=args.missed_limb or gap is not None
-                                or args.missed_limb_joint is not None,
-                                missed_limb_frames=gap, missed_limb_joint=args.missed_limb_joint),
-    )  # fmt: skip
+        motion=args.motion,
+        template=args.template,
+        subject=args.subject,
+        rig=args.rig,
+        fps=args.fps,
+        start=rng.start,
+        stop=rng.stop,
+        step=rng.step,
+        seed=args.seed,
+        voxel_size=args.voxel_size,
+        heading=args.heading,
+        offset=args.offset,
+        degradation=Degradation(
+            jitter=args.jitter,
+            holes=args.holes,
+            blobs=args.blobs,
+            missed_limb=args.missed_limb or gap is not None or args.missed_limb_joint is not None,
+            missed_limb_frames=gap,
+            missed_limb_joint=args.missed_limb_joint,
+        ),
+    )
     t0 = time.perf_counter()
     cap = synthesize(args.out, spec)
     dt = time.perf_counter() - t0
@@ -38,9 +51,11 @@ def _cmd_hull(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     run = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
     cap = run.capture
-    print(f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
-          f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "
-          f"{time.perf_counter() - t0:.1f} s)")  # fmt: skip
+    print(
+        f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
+        f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "
+        f"{time.perf_counter() - t0:.1f} s)"
+    )
     return 0
 
 

@@ -10,8 +10,14 @@ from meshmocap.cli._args import number
 def _cmd_demo(args: argparse.Namespace) -> int:
     from meshmocap.apps.demo import run_demo
 
-    res = run_demo(args.out, seconds=args.seconds, track_frames=args.track_frames, clip=args.clip,
-                   performer=args.performer, template=args.template)  # fmt: skip
+    res = run_demo(
+        args.out,
+        seconds=args.seconds,
+        track_frames=args.track_frames,
+        clip=args.clip,
+        performer=args.performer,
+        template=args.template,
+    )
     print(f"meshmocap demo: wrote {args.out}/ in {res.seconds:.1f} s")
     for note in res.notes:
         print(f"  {note}")
@@ -39,8 +45,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=120,
         help="frames tracked (0: skip)",
     )
-    d.add_argument("--performer", default="heavy_male", help="bundled body that performs in "
-                   "the capture (default: %(default)s)")  # fmt: skip
-    d.add_argument("--template", default="auto", help="tracking template: auto estimates "
-                   "the performer's body from the hulls (default), or a name or .npz")  # fmt: skip
+    d.add_argument(
+        "--performer",
+        default="heavy_male",
+        help="bundled body that performs in the capture (default: %(default)s)",
+    )
+    d.add_argument(
+        "--template",
+        default="auto",
+        help="tracking template: auto estimates "
+        "the performer's body from the hulls (default), or a name or .npz",
+    )
     d.set_defaults(func=_cmd_demo)

@@ -37,10 +37,14 @@ def _cmd_report(args: argparse.Namespace) -> int:
         path = build_batch_report(args.out, args.capture)
     else:
         path = build_report(
-            args.out, args.capture, args.tracks, eval_dirs=args.eval_dir,
-            max_frames=args.max_frames, silhouettes=not args.no_silhouettes,
+            args.out,
+            args.capture,
+            args.tracks,
+            eval_dirs=args.eval_dir,
+            max_frames=args.max_frames,
+            silhouettes=not args.no_silhouettes,
             surface_frames=args.surface_frames,
-        )  # fmt: skip
+        )
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
     return 0
@@ -56,16 +60,29 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
     fractions = items(args.keep_fractions)
     try:
-        keep = (None if fractions is None else  # None: the set's sweep
-                [] if fractions == ["none"] else [float(f) for f in fractions])  # fmt: skip
+        keep = (
+            None
+            if fractions is None
+            # None: the set's sweep
+            else []
+            if fractions == ["none"]
+            else [float(f) for f in fractions]
+        )
     except ValueError:
         msg = f"bench: --keep-fractions must be numbers or none, found {fractions}"
         raise InputError(msg) from None
     res = run_bench(
-        args.out, captures=items(args.captures) or args.set, methods=items(args.methods),
-        data=args.data, work=args.work, max_frames=args.max_frames, keep_fractions=keep,
-        template=args.template, init=args.init, log=lambda line: print(line, flush=True),
-    )  # fmt: skip
+        args.out,
+        captures=items(args.captures) or args.set,
+        methods=items(args.methods),
+        data=args.data,
+        work=args.work,
+        max_frames=args.max_frames,
+        keep_fractions=keep,
+        template=args.template,
+        init=args.init,
+        log=lambda line: print(line, flush=True),
+    )
     print(f"\n{markdown_table(res.rows)}")
     if res.tradeoff:
         print(f"\nkept fraction of the patch classifier on {res.tradeoff_capture} (Fig. 8):")
@@ -73,8 +90,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for name, why in res.skipped:
         print(f"left out {name}: {why}")
     n = len(res.rows) + len(res.tradeoff)
-    print(f"\nwrote {len(res.files)} files to {args.out} in {res.seconds:.0f} s "
-          f"({n} results, {len(res.tracked)} tracked by this run)")  # fmt: skip
+    print(
+        f"\nwrote {len(res.files)} files to {args.out} in {res.seconds:.0f} s "
+        f"({n} results, {len(res.tracked)} tracked by this run)"
+    )
     return 0
 
 
@@ -96,8 +115,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument("capture", help="capture folder, or a batch folder (meshmocap batch)")
     o.add_argument("tracks", nargs="*", metavar="track", help="track folders to compare")
     o.add_argument("--out", required=True, help="HTML file to write (one self-contained file)")
-    o.add_argument("--eval-dir", action="append", help="keep each track's CSV/PNG evaluation "
-                   "here (repeat once per track, in order)")  # fmt: skip
+    o.add_argument(
+        "--eval-dir",
+        action="append",
+        help="keep each track's CSV/PNG evaluation here (repeat once per track, in order)",
+    )
     o.add_argument(
         "--max-frames",
         type=number(1, 100_000, integer=True),
@@ -132,7 +154,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument("--keep-fractions", nargs="+", help="Fig. 8 sweep of the patch tracker")
     b.add_argument("--template", default="neutral_5k", help="tracking template")
-    b.add_argument("--init", default="truth", choices=["truth", "auto"], help="first pose of "
-                   "the synthetic captures: from ground truth (the papers' protocol, default) "
-                   "or found from the capture (the crane always is)")  # fmt: skip
+    b.add_argument(
+        "--init",
+        default="truth",
+        choices=["truth", "auto"],
+        help="first pose of "
+        "the synthetic captures: from ground truth (the papers' protocol, default) "
+        "or found from the capture (the crane always is)",
+    )
     b.set_defaults(func=_cmd_bench)

@@ -13,18 +13,30 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     joints = [j for j in args.joints.split(",") if j] if args.joints else None
     res = export_track(
-        args.track, args.out, format=args.format, frames=args.frames, joints=joints,
-        markers=args.markers, long=args.long, fps=args.fps, template=args.template,
-        bvh_unit=args.bvh_unit, joint_weight=args.joint_weight,
-    )  # fmt: skip
+        args.track,
+        args.out,
+        format=args.format,
+        frames=args.frames,
+        joints=joints,
+        markers=args.markers,
+        long=args.long,
+        fps=args.fps,
+        template=args.template,
+        bvh_unit=args.bvh_unit,
+        joint_weight=args.joint_weight,
+    )
     fit = ""
     if not math.isnan(res.vertex_error_mm):
-        fit = (f"; the rig reproduces the tracked vertices to {res.vertex_error_mm:.1f} mm "
-               f"and joints to {res.joint_error_mm:.1f} mm (mean)")  # fmt: skip
+        fit = (
+            f"; the rig reproduces the tracked vertices to {res.vertex_error_mm:.1f} mm "
+            f"and joints to {res.joint_error_mm:.1f} mm (mean)"
+        )
     points = f", {len(res.points)} points" if res.points else ""
     size = res.size_bytes / 1e6
-    print(f"wrote {res.path} ({res.format}, {res.n_frames} frames at {res.fps:g} fps from "
-          f"{res.fps_source}{points}, {size:.2f} MB, {res.seconds:.1f} s){fit}")  # fmt: skip
+    print(
+        f"wrote {res.path} ({res.format}, {res.n_frames} frames at {res.fps:g} fps from "
+        f"{res.fps_source}{points}, {size:.2f} MB, {res.seconds:.1f} s){fit}"
+    )
     return 0
 
 
@@ -35,20 +47,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     x.add_argument("track", help="track folder (meshmocap track)")
     x.add_argument("--out", required=True, help="file to write: .bvh .c3d .trc .gltf .glb .csv")
-    x.add_argument("--format", choices=["bvh", "c3d", "trc", "gltf", "glb", "csv"],
-                   help="format (default: from the extension of --out)")  # fmt: skip
+    x.add_argument(
+        "--format",
+        choices=["bvh", "c3d", "trc", "gltf", "glb", "csv"],
+        help="format (default: from the extension of --out)",
+    )
     x.add_argument("--frames", type=frame_range, help="capture frames START:STOP[:STEP]")
     x.add_argument("--joints", help="evaluation joints to keep, comma-separated (c3d, trc, csv)")
-    x.add_argument("--markers", default="none", choices=["none", "lower_body"],
-                   help="add virtual markers on the template's surface (c3d, trc): "
-                   "lower_body is the conventional lower-body set (LASI ... RTOE)")  # fmt: skip
+    x.add_argument(
+        "--markers",
+        default="none",
+        choices=["none", "lower_body"],
+        help="add virtual markers on the template's surface (c3d, trc): "
+        "lower_body is the conventional lower-body set (LASI ... RTOE)",
+    )
     x.add_argument("--long", action="store_true", help="csv: one row per frame and joint")
-    x.add_argument("--fps", type=number(0, 1000, "frames per second", open_lo=True),
-                   help="frame rate (default: the capture's)")  # fmt: skip
+    x.add_argument(
+        "--fps",
+        type=number(0, 1000, "frames per second", open_lo=True),
+        help="frame rate (default: the capture's)",
+    )
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
-    x.add_argument("--bvh-unit", default="cm", choices=["m", "cm", "mm", "inch"],
-                   help="length unit of a BVH file (default cm)")  # fmt: skip
-    x.add_argument("--joint-weight", type=number(0, 1000), default=2.0,
-                   help="bvh, gltf: weight of the tracked joints against the tracked surface "
-                   "in the pose fit (default 2; 0 fits the surface alone)")  # fmt: skip
+    x.add_argument(
+        "--bvh-unit",
+        default="cm",
+        choices=["m", "cm", "mm", "inch"],
+        help="length unit of a BVH file (default cm)",
+    )
+    x.add_argument(
+        "--joint-weight",
+        type=number(0, 1000),
+        default=2.0,
+        help="bvh, gltf: weight of the tracked joints against the tracked surface "
+        "in the pose fit (default 2; 0 fits the surface alone)",
+    )
     x.set_defaults(func=_cmd_export)

@@ -12,8 +12,10 @@ def _cmd_gait(args: argparse.Namespace) -> int:
     run = gait_of(args.source, fps=args.fps, truth=not args.no_truth)
     g = run.gait
     files = write_gait(g, args.out, reference=run.reference, title=run.what)  # raises: no gait
-    print(f"gait of {run.what}: {len(g.steps)} step(s), {len(g.cycles)} full cycle(s) "
-          f"(walking speed {g.progression_speed:.2f} m/s)")  # fmt: skip
+    print(
+        f"gait of {run.what}: {len(g.steps)} step(s), {len(g.cycles)} full cycle(s) "
+        f"(walking speed {g.progression_speed:.2f} m/s)"
+    )
     print(format_table(SUMMARY_HEADERS, summary_rows(g), digits=2))
     if run.reference is not None:
         r, c = run.reference, run.comparison
@@ -21,11 +23,13 @@ def _cmd_gait(args: argparse.Namespace) -> int:
             print(f"ground truth: {r.message or 'not comparable'}")
         else:
             s = r.summary()
-            print(f"against the ground truth ({s.cadence_steps_per_min:.1f} steps/min, stride "
-                  f"{s.stride_length_m:.3f} m): {c.matched}/{c.reference_events} events matched "
-                  f"({c.spurious} spurious), offset mean {c.mean_offset:.2f} frames, max "
-                  f"{c.max_offset:.2f}; cadence {c.cadence_error_pct:+.2f} %, stride length "
-                  f"{c.stride_length_error_pct:+.2f} %")  # fmt: skip
+            print(
+                f"against the ground truth ({s.cadence_steps_per_min:.1f} steps/min, stride "
+                f"{s.stride_length_m:.3f} m): {c.matched}/{c.reference_events} events matched "
+                f"({c.spurious} spurious), offset mean {c.mean_offset:.2f} frames, max "
+                f"{c.max_offset:.2f}; cadence {c.cadence_error_pct:+.2f} %, stride length "
+                f"{c.stride_length_error_pct:+.2f} %"
+            )
     print(f"wrote {len(files)} files to {args.out}")
     return 0
 

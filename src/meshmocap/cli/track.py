@@ -10,8 +10,15 @@ from pathlib import Path
 from meshmocap.cli._args import flag, frame_range, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
-TRACK_OPTIONS = ("n_patches", "classifier", "keep_fraction", "outlier_sigmas", "max_iter",
-                 "fast_iter_scale", "joint_readout")  # fmt: skip
+TRACK_OPTIONS = (
+    "n_patches",
+    "classifier",
+    "keep_fraction",
+    "outlier_sigmas",
+    "max_iter",
+    "fast_iter_scale",
+    "joint_readout",
+)
 
 
 def _tracker_options(args: argparse.Namespace) -> dict:
@@ -44,11 +51,14 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 
     if len(sources) == 1:
         return open_oriented(sources[0], up=up, units=units)
-    capture_dirs = [s for s in sources if (Path(s) / "capture.json").is_file()
-                    or (Path(s) / "hulls").is_dir()]  # fmt: skip
+    capture_dirs = [
+        s for s in sources if (Path(s) / "capture.json").is_file() or (Path(s) / "hulls").is_dir()
+    ]
     if capture_dirs:
-        raise InputError(f"track: give one capture folder, or several mesh files and folders; "
-                         f"{capture_dirs[0]} is a capture folder")  # fmt: skip
+        raise InputError(
+            f"track: give one capture folder, or several mesh files and folders; "
+            f"{capture_dirs[0]} is a capture folder"
+        )
     return open_oriented(frame_files(sources), up=up, units=units)
 
 
@@ -65,31 +75,49 @@ def _cmd_track(args: argparse.Namespace) -> int:
         return _follow(args, options)
     capture, axes = _capture_source(args.capture, args.up, args.units)
     if axes is not None and (args.up == "auto" or args.units == "auto"):
-        print(f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
-              f"{axes.span:.2f} m long (--up, --units to set)")  # fmt: skip
+        print(
+            f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
+            f"{axes.span:.2f} m long (--up, --units to set)"
+        )
     frames = None
     if args.frames:
         frames = range(len(capture))[args.frames]
         if not frames:
-            raise InputError(f"track: --frames {_text(args.frames)} selects none of the "
-                             f"{len(capture)} frames of {args.capture[0]}")  # fmt: skip
+            raise InputError(
+                f"track: --frames {_text(args.frames)} selects none of the "
+                f"{len(capture)} frames of {args.capture[0]}"
+            )
         if args.frames.stop is not None and args.frames.stop > len(capture):
-            print(f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
-                  f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
-                  f"{len(frames)}", file=sys.stderr)  # fmt: skip
+            print(
+                f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
+                f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                f"{len(frames)}",
+                file=sys.stderr,
+            )
     choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
     template = choice.template
     print(choice.note)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
-        print(f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
-              f"procedural walk and jog on {template.name!r}")  # fmt: skip
+        print(
+            f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
+            f"procedural walk and jog on {template.name!r}"
+        )
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
-    track = track_sequence(tracker, template, capture, args.out, frames=frames,
-                           resume=not args.restart, vertices=False, init=args.init,
-                           recover=not args.no_recover, reseat=args.reseat,
-                           template_info=choice.info)  # fmt: skip
+    track = track_sequence(
+        tracker,
+        template,
+        capture,
+        args.out,
+        frames=frames,
+        resume=not args.restart,
+        vertices=False,
+        init=args.init,
+        recover=not args.no_recover,
+        reseat=args.reseat,
+        template_info=choice.info,
+    )
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
@@ -100,13 +128,17 @@ def _cmd_track(args: argparse.Namespace) -> int:
     done = f"tracked {new} frames"
     done += f" ({resumed} resumed from an earlier run)" if resumed else ""
     flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
-    print(f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
-          f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}")  # fmt: skip
+    print(
+        f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
+        f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}"
+    )
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
-        print(f"meshmocap: warning: {missing} frames had no observation and were coasted "
-              f"across, first {int(track.frames[first])}: {track.messages[first]}",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"meshmocap: warning: {missing} frames had no observation and were coasted "
+            f"across, first {int(track.frames[first])}: {track.messages[first]}",
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -117,8 +149,10 @@ def _lost(track) -> str:
         return ""
     reinit = sum("reinit" in f for f in track.flags)
     k = lost[0]
-    return (f", {len(lost)} with a limb lost ({reinit} re-initialised; first: frame "
-            f"{int(track.frames[k])}, {track.messages[k]})")  # fmt: skip
+    return (
+        f", {len(lost)} with a limb lost ({reinit} re-initialised; first: frame "
+        f"{int(track.frames[k])}, {track.messages[k]})"
+    )
 
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
@@ -140,21 +174,32 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     def report(f) -> None:
         seen.append(f.seconds)
         flags = f"  {','.join(f.flags)}: {f.message}" if f.flags else ""
-        print(f"frame {f.index}: {1000 * f.seconds:.0f} ms, latency {1000 * f.latency:.0f} ms"
-              f"{flags}", flush=True)  # fmt: skip
+        print(
+            f"frame {f.index}: {1000 * f.seconds:.0f} ms, latency {1000 * f.latency:.0f} ms{flags}",
+            flush=True,
+        )
 
     idle = f"; stops after {args.idle:g} s without a new frame" if args.idle else ""
     print(f"following {args.capture[0]} with {args.method} (Ctrl-C stops){idle}", flush=True)
     how = f"no new frame for {args.idle:g} s" if args.idle else "stopped"
     try:
-        follow_sequence(tracker, template, args.capture[0], args.out, idle=args.idle,
-                        resume=not args.restart, report=report,
-                        template_info=choice.info)  # fmt: skip
+        follow_sequence(
+            tracker,
+            template,
+            args.capture[0],
+            args.out,
+            idle=args.idle,
+            resume=not args.restart,
+            report=report,
+            template_info=choice.info,
+        )
     except KeyboardInterrupt:
         how = "Ctrl-C"
     per = sorted(seen)[len(seen) // 2] if seen else 0.0
-    print(f"{how}: tracked {len(seen)} frames (median {1000 * per:.0f} ms per frame); "
-          f"results in {args.out}")  # fmt: skip
+    print(
+        f"{how}: tracked {len(seen)} frames (median {1000 * per:.0f} ms per frame); "
+        f"results in {args.out}"
+    )
     return 0
 
 
@@ -175,8 +220,10 @@ def _follow_template(args: argparse.Namespace):
     named = isinstance(meta, dict) and (meta.get("spec") or {}).get("template")
     cached = (Path(args.out) / SUBJECT_FILE).is_file() and not args.restart
     if args.template in (None, "auto") and not (named and args.template is None) and not cached:
-        raise InputError("track --follow: give --template NAME|FILE (a folder being written "
-                         "has no frames yet to estimate the performer's body from)")  # fmt: skip
+        raise InputError(
+            "track --follow: give --template NAME|FILE (a folder being written "
+            "has no frames yet to estimate the performer's body from)"
+        )
     capture = SimpleNamespace(meta=meta if isinstance(meta, dict) else {})
     return tracking_template(capture, args.template, args.out, refresh=args.restart)
 
@@ -205,19 +252,29 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     oqr = build_oqr(template)
     poses = load_pose_sources(args.sources, template, oqr=oqr, asf=args.asf)
-    print(f"read {len(poses)} poses of {template.name!r} from {len(args.sources)} source(s) "
-          f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
-    pm = fit_pose_manifold(poses, template, oqr=oqr, n_components=args.latent_dim,
-                           n_samples=args.samples, random_state=args.seed)  # fmt: skip
+    print(
+        f"read {len(poses)} poses of {template.name!r} from {len(args.sources)} source(s) "
+        f"in {time.perf_counter() - t0:.1f} s"
+    )
+    pm = fit_pose_manifold(
+        poses,
+        template,
+        oqr=oqr,
+        n_components=args.latent_dim,
+        n_samples=args.samples,
+        random_state=args.seed,
+    )
     gp = pm.gp
     names, counts = np.unique(pm.groups, return_counts=True)
     err = gp.predict(gp.X_) - gp.Y_mean_ - gp.Y_scale_ * gp.Y_
     centres = np.linalg.norm(err.reshape(len(err), -1, 3, 3)[:, :, 0], axis=2).mean() * 1000
-    print(f"learned a {pm.n_components}-D manifold from {pm.n_samples} poses "
-          f"({', '.join(f'{n} {g}' for g, n in zip(names, counts, strict=True))}) in "
-          f"{pm.fit_seconds:.1f} s: final log-likelihood {gp.log_likelihood_:.1f} after "
-          f"{gp.n_iter_} L-BFGS-B iterations{'' if gp.converged_ else ' (not converged)'}; "
-          f"training quads reproduced to {centres:.1f} mm")  # fmt: skip
+    print(
+        f"learned a {pm.n_components}-D manifold from {pm.n_samples} poses "
+        f"({', '.join(f'{n} {g}' for g, n in zip(names, counts, strict=True))}) in "
+        f"{pm.fit_seconds:.1f} s: final log-likelihood {gp.log_likelihood_:.1f} after "
+        f"{gp.n_iter_} L-BFGS-B iterations{'' if gp.converged_ else ' (not converged)'}; "
+        f"training quads reproduced to {centres:.1f} mm"
+    )
     print(f"wrote {pm.save(args.out)}")
     if args.plot:
         labels = pm.groups if len(names) <= 10 else None
@@ -247,20 +304,32 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = write_transfer(track, V, F, args.out, fit=args.fit, outside=args.outside,
-                             tolerance=args.tolerance, ext=f".{args.format}",
-                             resume=not args.restart, name=args.mesh, fps=fps)  # fmt: skip
+        res = write_transfer(
+            track,
+            V,
+            F,
+            args.out,
+            fit=args.fit,
+            outside=args.outside,
+            tolerance=args.tolerance,
+            ext=f".{args.format}",
+            resume=not args.restart,
+            name=args.mesh,
+            fps=fps,
+        )
     for w in caught:
         print(f"meshmocap: warning: {w.message}", file=sys.stderr)
     s = res.placement.scale
     animated = args.format in ("glb", "gltf")
     where = f"animation in {res.files[0]}" if animated else f"meshes in {res.out}"
-    print(f"transferred {res.written + res.skipped} frames of {args.track} to {args.mesh!r} "
-          f"({len(V)} "
-          f"vertices, fit {args.fit}: scale {'/'.join(f'{v:.3f}' for v in s)}) in "
-          f"{time.perf_counter() - t0:.1f} s: {res.written} written, {res.skipped} already "
-          f"there; {res.n_outside} vertices outside the rest cage (up to "
-          f"{res.max_outside * 1000:.0f} mm); {where}")  # fmt: skip
+    print(
+        f"transferred {res.written + res.skipped} frames of {args.track} to {args.mesh!r} "
+        f"({len(V)} "
+        f"vertices, fit {args.fit}: scale {'/'.join(f'{v:.3f}' for v in s)}) in "
+        f"{time.perf_counter() - t0:.1f} s: {res.written} written, {res.skipped} already "
+        f"there; {res.n_outside} vertices outside the rest cage (up to "
+        f"{res.max_outside * 1000:.0f} mm); {where}"
+    )
     return 0
 
 
@@ -269,13 +338,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     k = sub.add_parser(
         "track", help="track a capture: skeleton joints and template shape per frame"
     )
-    k.add_argument("capture", nargs="+", help="capture folder (meshmocap synth/hull), or mesh "
-                   "or point-cloud files, folders or a quoted glob or archive of them")  # fmt: skip
-    k.add_argument("--method", default="patch", help="patch, patch_svc, patch_noclf, "
-                   "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal")  # fmt: skip
-    k.add_argument("--template", help="tracking template: a name or .npz, or auto to estimate "
-                   "the performer's body (default: the template capture.json names, else auto; "
-                   "an estimate is cached as subject.npz in --out)")  # fmt: skip
+    k.add_argument(
+        "capture",
+        nargs="+",
+        help="capture folder (meshmocap synth/hull), or mesh "
+        "or point-cloud files, folders or a quoted glob or archive of them",
+    )
+    k.add_argument(
+        "--method",
+        default="patch",
+        help="patch, patch_svc, patch_noclf, "
+        "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal",
+    )
+    k.add_argument(
+        "--template",
+        help="tracking template: a name or .npz, or auto to estimate "
+        "the performer's body (default: the template capture.json names, else auto; "
+        "an estimate is cached as subject.npz in --out)",
+    )
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
     k.add_argument(
@@ -287,41 +367,73 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=number(0, 1, open_lo=True),
         help="patch tracker: on-bone points kept",
     )
-    k.add_argument("--outlier-sigmas", type=number(0, 100, open_lo=True),
-                   help="patch tracker: a point this many σ "
-                   "from the model is as likely an outlier (default 3; 2 rejects more of a "
-                   "few-camera hull's phantom volumes, but also true points where the subject's "
-                   "surface differs from the template's)")  # fmt: skip
+    k.add_argument(
+        "--outlier-sigmas",
+        type=number(0, 100, open_lo=True),
+        help="patch tracker: a point this many σ "
+        "from the model is as likely an outlier (default 3; 2 rejects more of a "
+        "few-camera hull's phantom volumes, but also true points where the subject's "
+        "surface differs from the template's)",
+    )
     k.add_argument("--max-iter", type=number(1, 10_000, integer=True), help="iterations per frame")
-    k.add_argument("--fast-iter-scale", type=number(1, 100),
-                   help="patch tracker: iterations of a frame "
-                   "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
-                   "(default 2; 1 keeps every frame's cost the same)")  # fmt: skip
-    k.add_argument("--joint-readout", help="patch tracker: joints reported: blend (default: "
-                   "pelvis and thorax read off the surface, limbs mostly from the skeleton), "
-                   "skeleton (the paper's) or surface")  # fmt: skip
-    k.add_argument("--manifold", help="cage methods: pose manifold from 'meshmocap learn' "
-                   "(default: learn one from the procedural walk and jog)")  # fmt: skip
-    k.add_argument("--init", default="auto", choices=["auto", "truth"], help="first pose: "
-                   "found from the capture (auto, default) or copied from its ground truth "
-                   "(truth: the papers' protocol, synthetic captures only)")  # fmt: skip
-    k.add_argument("--up", default="auto", choices=["auto", "z", "y"],
-                   help="mesh/point-cloud files: their up axis (default: detected)")  # fmt: skip
+    k.add_argument(
+        "--fast-iter-scale",
+        type=number(1, 100),
+        help="patch tracker: iterations of a frame "
+        "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
+        "(default 2; 1 keeps every frame's cost the same)",
+    )
+    k.add_argument(
+        "--joint-readout",
+        help="patch tracker: joints reported: blend (default: "
+        "pelvis and thorax read off the surface, limbs mostly from the skeleton), "
+        "skeleton (the paper's) or surface",
+    )
+    k.add_argument(
+        "--manifold",
+        help="cage methods: pose manifold from 'meshmocap learn' "
+        "(default: learn one from the procedural walk and jog)",
+    )
+    k.add_argument(
+        "--init",
+        default="auto",
+        choices=["auto", "truth"],
+        help="first pose: "
+        "found from the capture (auto, default) or copied from its ground truth "
+        "(truth: the papers' protocol, synthetic captures only)",
+    )
+    k.add_argument(
+        "--up",
+        default="auto",
+        choices=["auto", "z", "y"],
+        help="mesh/point-cloud files: their up axis (default: detected)",
+    )
     k.add_argument(
         "--units",
         default="auto",
         choices=["auto", "m", "cm", "mm"],
         help="mesh/point-cloud files: their length unit (default: detected)",
     )
-    k.add_argument("--reseat", action="store_true", help="re-initialise a lost limb where a "
-                   "better pose is found and hold one the hulls miss as last seen (rescues a "
-                   "limb lost behind a hole; can mistake a fast limb for a lost one)")  # fmt: skip
-    k.add_argument("--no-recover", action="store_true", help="do not score frames, flag lost "
-                   "limbs or re-initialise them")  # fmt: skip
+    k.add_argument(
+        "--reseat",
+        action="store_true",
+        help="re-initialise a lost limb where a "
+        "better pose is found and hold one the hulls miss as last seen (rescues a "
+        "limb lost behind a hole; can mistake a fast limb for a lost one)",
+    )
+    k.add_argument(
+        "--no-recover",
+        action="store_true",
+        help="do not score frames, flag lost limbs or re-initialise them",
+    )
     k.add_argument("--restart", action="store_true", help="start over instead of resuming")
-    k.add_argument("--follow", action="store_true", help="live: track each frame as it is "
-                   "written into the folder (complete files: write, then rename), print its "
-                   "latency; Ctrl-C stops, a rerun resumes")  # fmt: skip
+    k.add_argument(
+        "--follow",
+        action="store_true",
+        help="live: track each frame as it is "
+        "written into the folder (complete files: write, then rename), print its "
+        "latency; Ctrl-C stops, a rerun resumes",
+    )
     k.add_argument(
         "--idle",
         type=number(0, 1e6, "seconds", open_lo=True),
@@ -329,8 +441,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     k.set_defaults(func=_cmd_track)
     m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")
-    m.add_argument("sources", nargs="+", metavar="SOURCE", help="walk, jog (procedural), "
-                   ".bvh/.amc/.mat mocap or a hand-labelled .npz pose file")  # fmt: skip
+    m.add_argument(
+        "sources",
+        nargs="+",
+        metavar="SOURCE",
+        help="walk, jog (procedural), .bvh/.amc/.mat mocap or a hand-labelled .npz pose file",
+    )
     m.add_argument("--template", default="neutral_5k", help="tracking template (name or .npz)")
     m.add_argument("--out", required=True, help="manifold file to write (.npz)")
     m.add_argument(
@@ -349,8 +465,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     x = sub.add_parser("transfer", help="replay a cage track with another mesh (motion transfer)")
     x.add_argument("track", help="track folder written by 'meshmocap track --method cage'")
     x.add_argument("mesh", help="a bundled template name or a mesh file (.obj, .ply, ...)")
-    x.add_argument("--out", required=True, help="folder for one mesh per frame, or for one "
-                   "animated glTF (--format glb/gltf: transfer.glb, Y up)")  # fmt: skip
+    x.add_argument(
+        "--out",
+        required=True,
+        help="folder for one mesh per frame, or for one "
+        "animated glTF (--format glb/gltf: transfer.glb, Y up)",
+    )
     x.add_argument("--template", help="tracking template, if not the bundled one in track.json")
     x.add_argument(
         "--fit",
@@ -359,9 +479,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="place the mesh where the template stands (default: as it is)",
     )
     x.add_argument("--up", default="z", choices=["z", "y"], help="the mesh file's up axis")
-    x.add_argument("--format", default="obj", choices=["obj", "ply", "off", "stl", "glb", "gltf"],
-                   help="obj, ply, off, stl: one mesh per frame; glb, gltf: one "
-                   "animation")  # fmt: skip
+    x.add_argument(
+        "--format",
+        default="obj",
+        choices=["obj", "ply", "off", "stl", "glb", "gltf"],
+        help="obj, ply, off, stl: one mesh per frame; glb, gltf: one animation",
+    )
     x.add_argument(
         "--outside",
         default="warn",

@@ -134,15 +134,19 @@ def open_oriented(
     -------
     capture, and the :class:`Axes` read (None for a capture folder).
     """
-    for name, value, choices in (("up", up, ("auto", "z", "y")),
-                                 ("units", units, ("auto", *UNITS))):  # fmt: skip
+    for name, value, choices in (
+        ("up", up, ("auto", "z", "y")),
+        ("units", units, ("auto", *UNITS)),
+    ):
         if value not in choices:
             raise InputError(f"track: --{name} must be one of {list(choices)}, found {value!r}")
     raw = open_capture(source)
     if isinstance(raw, Capture):
         if up not in ("auto", "z") or units not in ("auto", "m"):
-            raise InputError(f"track: {source} is a capture folder: metres, Z up; "
-                             "--up and --units apply to mesh and point-cloud files")  # fmt: skip
+            raise InputError(
+                f"track: {source} is a capture folder: metres, Z up; "
+                "--up and --units apply to mesh and point-cloud files"
+            )
         return raw, None
     axes = detect_axes(_first_readable(raw, source), up=up, units=units, source=str(source))
     return SequenceCapture(source, up=axes.up, scale=UNITS[axes.units]), axes

@@ -49,22 +49,32 @@ __all__ = [
 #: Aimed in order, each relative to its already-aimed parent.
 SEEDS: dict[str, dict[str, tuple[str, tuple[float, float, float]]]] = {
     "rest": {},
-    "t_pose": {"LeftArm": ("LeftForeArm", (1.0, 0.0, 0.0)),
-               "RightArm": ("RightForeArm", (-1.0, 0.0, 0.0))},
-    "arms_up": {"LeftArm": ("LeftForeArm", (0.25, 0.0, 1.0)),
-                "RightArm": ("RightForeArm", (-0.25, 0.0, 1.0))},
-    "stride_left": {"LeftUpLeg": ("LeftLeg", (0.0, 0.45, -1.0)),
-                    "RightUpLeg": ("RightLeg", (0.0, -0.45, -1.0)),
-                    "RightLeg": ("RightFoot", (0.0, -0.9, -1.0))},
-    "stride_right": {"RightUpLeg": ("RightLeg", (0.0, 0.45, -1.0)),
-                     "LeftUpLeg": ("LeftLeg", (0.0, -0.45, -1.0)),
-                     "LeftLeg": ("LeftFoot", (0.0, -0.9, -1.0))},
-    "crouch": {"LowerBack": ("Spine", (0.0, 0.5, 1.0)),
-               "LeftUpLeg": ("LeftLeg", (0.05, 1.0, -0.7)),
-               "RightUpLeg": ("RightLeg", (-0.05, 1.0, -0.7)),
-               "LeftLeg": ("LeftFoot", (0.0, -0.6, -1.0)),
-               "RightLeg": ("RightFoot", (0.0, -0.6, -1.0))},
-}  # fmt: skip
+    "t_pose": {
+        "LeftArm": ("LeftForeArm", (1.0, 0.0, 0.0)),
+        "RightArm": ("RightForeArm", (-1.0, 0.0, 0.0)),
+    },
+    "arms_up": {
+        "LeftArm": ("LeftForeArm", (0.25, 0.0, 1.0)),
+        "RightArm": ("RightForeArm", (-0.25, 0.0, 1.0)),
+    },
+    "stride_left": {
+        "LeftUpLeg": ("LeftLeg", (0.0, 0.45, -1.0)),
+        "RightUpLeg": ("RightLeg", (0.0, -0.45, -1.0)),
+        "RightLeg": ("RightFoot", (0.0, -0.9, -1.0)),
+    },
+    "stride_right": {
+        "RightUpLeg": ("RightLeg", (0.0, 0.45, -1.0)),
+        "LeftUpLeg": ("LeftLeg", (0.0, -0.45, -1.0)),
+        "LeftLeg": ("LeftFoot", (0.0, -0.9, -1.0)),
+    },
+    "crouch": {
+        "LowerBack": ("Spine", (0.0, 0.5, 1.0)),
+        "LeftUpLeg": ("LeftLeg", (0.05, 1.0, -0.7)),
+        "RightUpLeg": ("RightLeg", (-0.05, 1.0, -0.7)),
+        "LeftLeg": ("LeftFoot", (0.0, -0.6, -1.0)),
+        "RightLeg": ("RightFoot", (0.0, -0.6, -1.0)),
+    },
+}
 
 #: Limbs a re-initialisation can re-seed: name → (joints whose rotations it re-seeds, the
 #: bone aimed (joint, child)).
@@ -230,8 +240,9 @@ def initial_pose(
     P = np.asarray(P, dtype=np.float64)
     N = np.asarray(N, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) < 50 or N.shape != P.shape:
-        raise InputError(f"init: expected (p, 3) points and normals with p ≥ 50, found "
-                         f"{P.shape} and {N.shape}")  # fmt: skip
+        raise InputError(
+            f"init: expected (p, 3) points and normals with p ≥ 50, found {P.shape} and {N.shape}"
+        )
     if not (isinstance(n_headings, int) and n_headings >= 1 and keep >= 1):
         raise InputError(f"init: n_headings and keep must be ≥ 1, found {n_headings}, {keep}")
     Pc, Nc = subsample_points(P, N, 2000, seed)
@@ -244,9 +255,16 @@ def initial_pose(
             deg = 360.0 * h / n_headings
             R = _turned(R0, np.deg2rad(deg))
             root = _centred_root(coarse, R, centre)
-            fits.append(coarse.fit(R, root, iterations=coarse_iterations,
-                                   max_distance=(0.3, 0.1), lambda_pose=1e-3,
-                                   label=f"{name}@{deg:.0f}°"))  # fmt: skip
+            fits.append(
+                coarse.fit(
+                    R,
+                    root,
+                    iterations=coarse_iterations,
+                    max_distance=(0.3, 0.1),
+                    lambda_pose=1e-3,
+                    label=f"{name}@{deg:.0f}°",
+                )
+            )
     rank = ranking_key(template, cameras, masks)
     fits.sort(key=rank)
     Pf, Nf = subsample_points(P, N, 5000, seed)
@@ -254,11 +272,23 @@ def initial_pose(
     refined = []
     for f in fits[:keep]:
         f = refine_limbs(coarse, f, limbs=tuple(LIMBS), directions=limb_directions, key=rank)
-        f = fine.fit(f.R, f.root, iterations=iterations, max_distance=(0.15, 0.03),
-                     lambda_pose=1e-4, label=f.label)  # fmt: skip
+        f = fine.fit(
+            f.R,
+            f.root,
+            iterations=iterations,
+            max_distance=(0.15, 0.03),
+            lambda_pose=1e-4,
+            label=f.label,
+        )
         # then settle on the near surface, barely held (a long pull undoes small moves)
-        f = fine.fit(f.R, f.root, iterations=iterations // 2, max_distance=(0.04, 0.01),
-                     lambda_pose=1e-6, label=f.label)  # fmt: skip
+        f = fine.fit(
+            f.R,
+            f.root,
+            iterations=iterations // 2,
+            max_distance=(0.04, 0.01),
+            lambda_pose=1e-6,
+            label=f.label,
+        )
         refined.append(f)
     refined.sort(key=rank)
     best = refined[0]
@@ -281,8 +311,9 @@ def refine_limbs(
     best = PoseFit(fit.R, fit.root, fitter.score(fit.R, fit.root), fit.label)
     k_best = key(best)
     for limb in limbs:
-        cands = limb_candidates(fitter, best.R, best.root, limb, directions=directions,
-                                iterations=iterations)  # fmt: skip
+        cands = limb_candidates(
+            fitter, best.R, best.root, limb, directions=directions, iterations=iterations
+        )
         for c in cands[:4]:  # the best few by score, checked by the key
             k = key(c)
             if k < k_best:
@@ -338,9 +369,18 @@ def limb_candidates(
             Rs = R.copy()
             Rs[idx[2:]] = np.eye(3)
             Rs[m] = Gm.T @ rotation_between(P0[tip] - P0[m], d)
-            out.append(fitter.fit(Rs, root, iterations=iterations, max_distance=(0.2, 0.05),
-                                  joints=idx[1:], move_root=False, lambda_pose=0.0,
-                                  label=f"{limb}:lower:{np.round(d, 2).tolist()}"))  # fmt: skip
+            out.append(
+                fitter.fit(
+                    Rs,
+                    root,
+                    iterations=iterations,
+                    max_distance=(0.2, 0.05),
+                    joints=idx[1:],
+                    move_root=False,
+                    lambda_pose=0.0,
+                    label=f"{limb}:lower:{np.round(d, 2).tolist()}",
+                )
+            )
         return sorted(out, key=lambda f: f.score)
     for d in dirs:
         for bent in (False, True):
@@ -353,8 +393,16 @@ def limb_candidates(
                     continue
                 Gj = Rs[j] if sk.parents[j] < 0 else Gp @ Rs[j]
                 Rs[m] = Gj.T @ rotation_between(P0[tip] - P0[m], b)
-            out.append(fitter.fit(Rs, root, iterations=iterations, max_distance=(0.2, 0.05),
-                                  joints=idx, move_root=False, lambda_pose=0.0,
-                                  label=f"{limb}:{np.round(d, 2).tolist()}"
-                                        f"{':bent' if bent else ''}"))  # fmt: skip
+            out.append(
+                fitter.fit(
+                    Rs,
+                    root,
+                    iterations=iterations,
+                    max_distance=(0.2, 0.05),
+                    joints=idx,
+                    move_root=False,
+                    lambda_pose=0.0,
+                    label=f"{limb}:{np.round(d, 2).tolist()}{':bent' if bent else ''}",
+                )
+            )
     return sorted(out, key=lambda f: f.score)

@@ -128,9 +128,11 @@ class FitQuality:
     def energies(self) -> dict[str, float]:
         """The frame's quality as energy terms of its result: the largest outside fraction
         of any limb and the total unexplained fraction."""
-        return {"fit_outside": max(self.outside.values(), default=0.0),
-                "fit_buried": max(self.buried.values(), default=0.0),
-                "fit_unexplained": self.total_unexplained}  # fmt: skip
+        return {
+            "fit_outside": max(self.outside.values(), default=0.0),
+            "fit_buried": max(self.buried.values(), default=0.0),
+            "fit_unexplained": self.total_unexplained,
+        }
 
     def describe(self) -> str:
         """One line naming each lost limb and why (empty when none is lost)."""
@@ -243,6 +245,9 @@ def fit_quality(
     near = labels[np.asarray(i, dtype=np.int64)[far]]
     votes = np.bincount(near[near >= 0], minlength=len(limbs)) / max(len(P), 1)
     unexplained = {n: float(votes[k]) for k, n in enumerate(limbs)}
-    lost = tuple(n for n in limbs if outside[n] > OUTSIDE_LOST or buried[n] > BURIED_LOST
-                 or unexplained[n] > UNEXPLAINED_LOST)  # fmt: skip
+    lost = tuple(
+        n
+        for n in limbs
+        if outside[n] > OUTSIDE_LOST or buried[n] > BURIED_LOST or unexplained[n] > UNEXPLAINED_LOST
+    )
     return FitQuality(outside, buried, unexplained, lost)

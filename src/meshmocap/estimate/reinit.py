@@ -100,9 +100,10 @@ class Recovery:
         sk = template.skeleton
         #: each limb's joints (an arm's from the clavicle), their rotations when the limb was
         #: last seen, and the limbs the observations miss now
-        self.limb_joints = {n: np.array([sk.index(j) for j in (*_ROOTS.get(n, ()), *js)
-                                         if j in sk.names])
-                            for n, (js, _) in LIMBS.items()}  # fmt: skip
+        self.limb_joints = {
+            n: np.array([sk.index(j) for j in (*_ROOTS.get(n, ()), *js) if j in sk.names])
+            for n, (js, _) in LIMBS.items()
+        }
         self.held: np.ndarray | None = None
         self.missing: set[str] = set()
 
@@ -116,8 +117,16 @@ class Recovery:
     def check(self, frame, V: np.ndarray) -> FitQuality:
         """The fit quality of the tracked vertices ``V`` (n, 3) on ``frame``."""
         _, P, field, cameras, masks = self._inputs(frame)
-        return fit_quality(V, self.labels, P, field, F=self.template.F, cameras=cameras,
-                           masks=masks, seed=int(frame.index))  # fmt: skip
+        return fit_quality(
+            V,
+            self.labels,
+            P,
+            field,
+            F=self.template.F,
+            cameras=cameras,
+            masks=masks,
+            seed=int(frame.index),
+        )
 
     def assess(self, frame, V: np.ndarray) -> FitQuality:
         """The fit quality of ``V`` on ``frame`` (:meth:`check`), with each limb also posed
@@ -189,16 +198,18 @@ class Recovery:
         best = PoseFit(R, root, fitter.score(R, root))
         k_best, changed = key(best), []
         if quality.outside.get("torso", 0.0) > 0.25:  # the body itself is lost: search anew
-            res = initial_pose(t, *obs.points, cameras=cameras, masks=masks, field=field,
-                               seed=int(frame.index))  # fmt: skip
+            res = initial_pose(
+                t, *obs.points, cameras=cameras, masks=masks, field=field, seed=int(frame.index)
+            )
             cand = PoseFit(res.R, res.root, res.score)
             if key(cand) < k_best:
                 best, k_best, changed = cand, key(cand), ["body"]
         else:
             gains = []
             for limb in LIMBS:
-                cands = limb_candidates(fitter, best.R, best.root, limb, directions=8,
-                                        iterations=8)[:4]  # fmt: skip
+                cands = limb_candidates(
+                    fitter, best.R, best.root, limb, directions=8, iterations=8
+                )[:4]
                 if cands:
                     c = min(cands, key=key)
                     gains.append((k_best - key(c), limb, c))
@@ -206,8 +217,9 @@ class Recovery:
                 if gain <= MIN_GAIN:
                     break
                 if changed:  # re-fit this limb on the pose the first change left
-                    cands = limb_candidates(fitter, best.R, best.root, limb, directions=8,
-                                            iterations=8)[:4]  # fmt: skip
+                    cands = limb_candidates(
+                        fitter, best.R, best.root, limb, directions=8, iterations=8
+                    )[:4]
                     c = min(cands, key=key)
                 if k_best - key(c) > MIN_GAIN:
                     best, k_best = c, key(c)
@@ -215,8 +227,9 @@ class Recovery:
         if not changed:
             self.cooldown = COOLDOWN
             return None
-        fit = fitter.fit(best.R, best.root, iterations=8, max_distance=(0.1, 0.03),
-                         lambda_pose=1e-3)  # fmt: skip
+        fit = fitter.fit(
+            best.R, best.root, iterations=8, max_distance=(0.1, 0.03), lambda_pose=1e-3
+        )
         if key(fit) < k_best:
             best = fit
         q = self.check(frame, t.pose(best.R, best.root).V)
@@ -237,5 +250,10 @@ class Recovery:
 def _evidence(q: FitQuality) -> set[str]:
     """Limbs lost for what the observations show (outside, buried or unexplained), not only
     because they miss the limb."""
-    return {n for n in q.lost if q.outside[n] > OUTSIDE_LOST or q.buried[n] > BURIED_LOST
-            or q.unexplained[n] > UNEXPLAINED_LOST}  # fmt: skip
+    return {
+        n
+        for n in q.lost
+        if q.outside[n] > OUTSIDE_LOST
+        or q.buried[n] > BURIED_LOST
+        or q.unexplained[n] > UNEXPLAINED_LOST
+    }

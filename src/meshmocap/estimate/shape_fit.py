@@ -89,8 +89,11 @@ def silhouette_view(
     """Precompute a :class:`SilhouetteView` of a (H, W) bool ``mask`` seen by ``camera``."""
     mask = np.asarray(mask, dtype=bool)
     # zero level on the pixels' edges: ±0.5 on the pixels either side of the boundary
-    sdt = np.where(mask, 0.5 - ndimage.distance_transform_edt(mask),
-                   ndimage.distance_transform_edt(~mask) - 0.5)  # fmt: skip
+    sdt = np.where(
+        mask,
+        0.5 - ndimage.distance_transform_edt(mask),
+        ndimage.distance_transform_edt(~mask) - 0.5,
+    )
     sdt = ndimage.gaussian_filter(sdt.astype(np.float64), 0.7)
     gv, gu = np.gradient(sdt)
     edge = mask & ~ndimage.binary_erosion(mask)
@@ -111,8 +114,12 @@ def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     v = np.clip(uv[:, 1], 0, H - 1.001)
     u0, v0 = u.astype(np.int64), v.astype(np.int64)
     a, b = u - u0, v - v0
-    return (img[..., v0, u0] * (1 - a) * (1 - b) + img[..., v0, u0 + 1] * a * (1 - b)
-            + img[..., v0 + 1, u0] * (1 - a) * b + img[..., v0 + 1, u0 + 1] * a * b)  # fmt: skip
+    return (
+        img[..., v0, u0] * (1 - a) * (1 - b)
+        + img[..., v0, u0 + 1] * a * (1 - b)
+        + img[..., v0 + 1, u0] * (1 - a) * b
+        + img[..., v0 + 1, u0 + 1] * a * b
+    )
 
 
 def _projection(camera: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

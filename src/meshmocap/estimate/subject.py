@@ -99,8 +99,9 @@ def whole_in_view(frame) -> bool:
         masks = frame.silhouettes or []
     except (OSError, ValueError):  # a missing or unreadable mask: not a frame to fit
         return False
-    return not any(m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any() or not m.any()
-                   for m in masks)  # fmt: skip
+    return not any(
+        m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any() or not m.any() for m in masks
+    )
 
 
 def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
@@ -165,13 +166,38 @@ def _initial_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed: int
         R = np.tile(np.eye(3), (sk.n_joints, 1, 1))
         R[0] = so3_exp(np.array([0.0, 0.0, yaw]))
         root = centre - s0 * R[0] @ (c_t - sk.rest_positions[0])
-        fits.append(fit_skeleton(template, V, F, R=R, root=root, scale=s0, fit_scale=True,
-                                 iterations=10, max_distance=(0.3, 0.1), n_model_points=600,
-                                 n_data_points=1500, seed=seed))  # fmt: skip
+        fits.append(
+            fit_skeleton(
+                template,
+                V,
+                F,
+                R=R,
+                root=root,
+                scale=s0,
+                fit_scale=True,
+                iterations=10,
+                max_distance=(0.3, 0.1),
+                n_model_points=600,
+                n_data_points=1500,
+                seed=seed,
+            )
+        )
     best = sorted(fits, key=lambda f: f.rms)[:2]
-    final = [fit_skeleton(template, V, F, R=f.R, root=f.root, scale=f.scale, fit_scale=True,
-                          iterations=25, max_distance=(0.1, 0.03), seed=seed)
-             for f in best]  # fmt: skip
+    final = [
+        fit_skeleton(
+            template,
+            V,
+            F,
+            R=f.R,
+            root=f.root,
+            scale=f.scale,
+            fit_scale=True,
+            iterations=25,
+            max_distance=(0.1, 0.03),
+            seed=seed,
+        )
+        for f in best
+    ]
     return min(final, key=lambda f: f.rms)
 
 
@@ -229,17 +255,27 @@ def estimate_subject(
             )
         t = rig_mesh(V, F, name=name, decimate=decimate, seed=seed)
         J = t.skeleton.n_joints
-        return SubjectEstimate(t, "mesh", (first.index,), None, np.eye(3)[None, None].repeat(J, 1),
-                               t.skeleton.rest_positions[:1].copy(), 0.0,
-                               time.perf_counter() - t0)  # fmt: skip
+        return SubjectEstimate(
+            t,
+            "mesh",
+            (first.index,),
+            None,
+            np.eye(3)[None, None].repeat(J, 1),
+            t.skeleton.rest_positions[:1].copy(),
+            0.0,
+            time.perf_counter() - t0,
+        )
     if not capture.cameras:
-        raise InputError(f"{func}: the hull kind needs cameras and silhouettes; "
-                         f"{capture.path} has no cameras")  # fmt: skip
+        raise InputError(
+            f"{func}: the hull kind needs cameras and silhouettes; {capture.path} has no cameras"
+        )
     space = load_shape_space() if space is None else space
     positions = choose_frames(capture, int(n_frames))
     if not positions:
-        raise InputError(f"{func}: the performer is cut by an image border in every frame "
-                         f"sampled from {capture.path}; give a template instead")  # fmt: skip
+        raise InputError(
+            f"{func}: the performer is cut by an image border in every frame "
+            f"sampled from {capture.path}; give a template instead"
+        )
     frames = [capture[k] for k in positions]
     mean = space.template(np.zeros(space.n_components))
     inits = [_initial_pose(mean, *_hull_surface(fr), seed=seed) for fr in frames]
@@ -250,12 +286,28 @@ def estimate_subject(
         masks = fr.silhouettes
         if not masks:
             raise InputError(f"{func}: frame {fr.index} has no silhouettes")
-        views.append([silhouette_view(m, c, seed=seed) for m, c in zip(masks, fr.cameras,
-                                                                         strict=True)])  # fmt: skip
-    fit = fit_shape(space, views, np.stack([f.R for f in inits]),
-                    np.stack([f.root for f in inits]), z0=z0, iterations=iterations,
-                    seed=seed)  # fmt: skip
+        views.append(
+            [silhouette_view(m, c, seed=seed) for m, c in zip(masks, fr.cameras, strict=True)]
+        )
+    fit = fit_shape(
+        space,
+        views,
+        np.stack([f.R for f in inits]),
+        np.stack([f.root for f in inits]),
+        z0=z0,
+        iterations=iterations,
+        seed=seed,
+    )
     t = space.template(fit.z, name=name)
     notes = {"initial_scale": scale, "initial_rms": [float(f.rms) for f in inits]}
-    return SubjectEstimate(t, "hull", tuple(fr.index for fr in frames), fit.z, fit.R, fit.root,
-                           fit.rms, time.perf_counter() - t0, notes)  # fmt: skip
+    return SubjectEstimate(
+        t,
+        "hull",
+        tuple(fr.index for fr in frames),
+        fit.z,
+        fit.R,
+        fit.root,
+        fit.rms,
+        time.perf_counter() - t0,
+        notes,
+    )

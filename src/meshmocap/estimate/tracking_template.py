@@ -84,8 +84,10 @@ def tracking_template(
         return TemplateChoice(t, {}, note)
     if template is None and named is not None:
         t = load_template(named)
-        note = (f"template {t.name!r}, the one capture.json names (--template NAME|FILE to "
-                "use another, --template auto to estimate the performer's body)")  # fmt: skip
+        note = (
+            f"template {t.name!r}, the one capture.json names (--template NAME|FILE to "
+            "use another, --template auto to estimate the performer's body)"
+        )
         return TemplateChoice(t, {"template_source": "capture"}, note)
     path = Path(out) / SUBJECT_FILE
     info = {"template_source": "estimated", "template_file": SUBJECT_FILE}
@@ -98,7 +100,9 @@ def tracking_template(
     # tracked as read back from the file, as a resumed run will read it: the same template
     # to the bit, so the resumed run's settings (a cage manifold's digest) are the same
     t = load_template(path)
-    note = (f"template estimated from the capture ({est.kind} kind, frames "
-            f"{', '.join(map(str, est.frames))}; height {est.height:.3f} m; "
-            f"{est.seconds:.0f} s): {path}")  # fmt: skip
+    note = (
+        f"template estimated from the capture ({est.kind} kind, frames "
+        f"{', '.join(map(str, est.frames))}; height {est.height:.3f} m; "
+        f"{est.seconds:.0f} s): {path}"
+    )
     return TemplateChoice(t, info, note)

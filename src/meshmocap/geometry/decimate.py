@@ -59,21 +59,27 @@ def decimate_mesh(V: np.ndarray, F: np.ndarray, *, n_vertices: int) -> tuple[np.
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F)
     if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or F.dtype.kind not in "iu":
-        raise InputError(f"{func}: V must be (n, 3) floats and F (m, 3) integers, found "
-                         f"{V.shape} {V.dtype} and {F.shape} {F.dtype}")  # fmt: skip
+        raise InputError(
+            f"{func}: V must be (n, 3) floats and F (m, 3) integers, found "
+            f"{V.shape} {V.dtype} and {F.shape} {F.dtype}"
+        )
     if (
         isinstance(n_vertices, bool)
         or not isinstance(n_vertices, int | np.integer)
         or not MIN_TARGET <= n_vertices < len(V)
     ):
-        raise InputError(f"{func}: n_vertices must be an integer in [{MIN_TARGET}, {len(V)}) "
-                         f"(the mesh has {len(V)} vertices), found {n_vertices!r}")  # fmt: skip
+        raise InputError(
+            f"{func}: n_vertices must be an integer in [{MIN_TARGET}, {len(V)}) "
+            f"(the mesh has {len(V)} vertices), found {n_vertices!r}"
+        )
     problems: list[str] = []
     for agg in _AGGRESSIVENESS:
         Vd, Fd = fast_simplification.simplify(
-            np.ascontiguousarray(V), np.ascontiguousarray(F, dtype=np.int32),
-            target_count=2 * int(n_vertices) - 4, agg=agg,
-        )  # fmt: skip
+            np.ascontiguousarray(V),
+            np.ascontiguousarray(F, dtype=np.int32),
+            target_count=2 * int(n_vertices) - 4,
+            agg=agg,
+        )
         used = np.unique(Fd)
         remap = np.full(len(Vd), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
@@ -84,5 +90,7 @@ def decimate_mesh(V: np.ndarray, F: np.ndarray, *, n_vertices: int) -> tuple[np.
                 Fd = Fd[:, ::-1].copy()
             return Vd, Fd
     why = "; ".join(problems) or f"{len(Vd)} vertices left"
-    raise MeshError(f"{func}: no decimation to {n_vertices} vertices is a closed 2-manifold "
-                    f"(aggressiveness {_AGGRESSIVENESS}): {why}")  # fmt: skip
+    raise MeshError(
+        f"{func}: no decimation to {n_vertices} vertices is a closed 2-manifold "
+        f"(aggressiveness {_AGGRESSIVENESS}): {why}"
+    )

@@ -298,8 +298,10 @@ class LazyDistanceGrid(DistanceGrid):
         self.seconds = time.perf_counter() - t0
 
     def __repr__(self) -> str:
-        return (f"LazyDistanceGrid(shape={self.shape}, origin={self.origin}, "
-                f"spacing={self.spacing}, evaluated={self.n_evaluated})")  # fmt: skip
+        return (
+            f"LazyDistanceGrid(shape={self.shape}, origin={self.origin}, "
+            f"spacing={self.spacing}, evaluated={self.n_evaluated})"
+        )
 
     @property
     def values(self) -> np.ndarray:  # type: ignore[override]

@@ -405,9 +405,13 @@ class GreenDeformer:
         self._f = [np.ascontiguousarray(F[:, k], dtype=np.intp) for k in range(3)]
         # CSR pattern of pointwise_vjp's (3 nv, 3 nf) matrix, entry (j, k, a, b) (corner k of
         # face j) at row 3 F[j, k] + b, column 3 j + a; the order sorts them by row
-        rows, cols = (np.broadcast_to(x, (len(F), 3, 3, 3)).ravel() for x in (
-            3 * F[:, :, None, None] + np.arange(3), 3 * np.arange(len(F))[:, None, None, None]
-            + np.arange(3)[:, None]))  # fmt: skip
+        rows, cols = (
+            np.broadcast_to(x, (len(F), 3, 3, 3)).ravel()
+            for x in (
+                3 * F[:, :, None, None] + np.arange(3),
+                3 * np.arange(len(F))[:, None, None, None] + np.arange(3)[:, None],
+            )
+        )
         self._corner_order = np.lexsort((cols, rows))
         indptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=3 * len(V)))]
         self._corner_csr = (cols[self._corner_order].astype(np.int32), indptr.astype(np.int32))
@@ -437,8 +441,9 @@ class GreenDeformer:
         ok = V.shape[-2:] == self.rest_V_.shape and (V.ndim == 2 or (batch and V.ndim == 3))
         if not ok:
             want = f"{self.rest_V_.shape}" + (" or (k, *that)" if batch else "")
-            raise InputError(f"GreenDeformer.{func}: cage_V_new must have shape {want}, "
-                             f"found {V.shape}")  # fmt: skip
+            raise InputError(
+                f"GreenDeformer.{func}: cage_V_new must have shape {want}, found {V.shape}"
+            )
         if not np.all(np.isfinite(V)):
             raise InputError(f"GreenDeformer.{func}: cage_V_new contains NaN or infinite values")
         return V
@@ -446,8 +451,10 @@ class GreenDeformer:
     def _grads(self, func: str, grad_points) -> np.ndarray:
         G = _check_points(f"GreenDeformer.{func}", "grad_points", grad_points)
         if len(G) != self.n_points:
-            raise InputError(f"GreenDeformer.{func}: grad_points must have shape "
-                             f"({self.n_points}, 3), found {G.shape}")  # fmt: skip
+            raise InputError(
+                f"GreenDeformer.{func}: grad_points must have shape "
+                f"({self.n_points}, 3), found {G.shape}"
+            )
         return G
 
     def _faces(self, V: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -528,8 +535,10 @@ class GreenDeformer:
         V = self._cage("jvp", cage_V_new)
         dV = np.asarray(dV, dtype=np.float64)
         if dV.shape[-2:] != V.shape or dV.ndim not in (2, 3) or not np.all(np.isfinite(dV)):
-            raise InputError(f"GreenDeformer.jvp: dV must be finite with shape {V.shape} or "
-                             f"(k, *that), found {dV.shape}")  # fmt: skip
+            raise InputError(
+                f"GreenDeformer.jvp: dV must be finite with shape {V.shape} or "
+                f"(k, *that), found {dV.shape}"
+            )
         f0, f1, f2 = self._f
         n, au, av, ku, kv = self._face_terms(V)
         D = dV.reshape(-1, *V.shape)

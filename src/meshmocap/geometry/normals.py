@@ -117,8 +117,16 @@ def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1),
-                            np.linalg.norm(A - C, axis=1)]), axis=0)  # fmt: skip
+    edge = np.max(
+        np.stack(
+            [
+                np.linalg.norm(B - A, axis=1),
+                np.linalg.norm(C - B, axis=1),
+                np.linalg.norm(A - C, axis=1),
+            ]
+        ),
+        axis=0,
+    )
     m = np.clip(np.ceil(edge / spacing), 1, 64).astype(np.int64)  # subdivisions per face
     big = np.flatnonzero(m > 1)
     if not len(big):
@@ -129,6 +137,11 @@ def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
         keep = p + q <= s
         u, w = p[keep] / s, q[keep] / s
         f = big[m[big] == s]
-        out.append((A[f, None] * (1 - u - w)[None, :, None] + B[f, None] * u[None, :, None]
-                    + C[f, None] * w[None, :, None]).reshape(-1, 3))  # fmt: skip
+        out.append(
+            (
+                A[f, None] * (1 - u - w)[None, :, None]
+                + B[f, None] * u[None, :, None]
+                + C[f, None] * w[None, :, None]
+            ).reshape(-1, 3)
+        )
     return np.concatenate(out)

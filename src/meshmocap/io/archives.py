@@ -39,8 +39,10 @@ class TarArchive:
         except (tarfile.TarError, zlib.error, EOFError, OSError) as exc:
             raise FormatError(f"{path}: not a readable tar archive ({_one_line(exc)})") from None
         if len(members) > MAX_ARCHIVE_MEMBERS:
-            raise FormatError(f"{path}: {len(members)} members, above the "
-                              f"{MAX_ARCHIVE_MEMBERS} an archive may hold")  # fmt: skip
+            raise FormatError(
+                f"{path}: {len(members)} members, above the "
+                f"{MAX_ARCHIVE_MEMBERS} an archive may hold"
+            )
         self.names = [m.name for m in members]
         self._where = {m.name: (m.offset_data, m.size) for m in members}
 

@@ -116,9 +116,13 @@ def write_hull(
     carved (e.g. the cameras left out).
     """
     V, F = hull_mesh(hull) if mesh is None else mesh
-    arrays = {"bits": np.packbits(hull.occupancy.ravel()), "shape": np.array(hull.occupancy.shape),
-              "origin": hull.origin, "voxel_size": np.float64(hull.voxel_size),
-              "note": np.str_(note)}  # fmt: skip
+    arrays = {
+        "bits": np.packbits(hull.occupancy.ravel()),
+        "shape": np.array(hull.occupancy.shape),
+        "origin": hull.origin,
+        "voxel_size": np.float64(hull.voxel_size),
+        "note": np.str_(note),
+    }
     arrays.update(_pack_mesh(np.asarray(V, np.float64), np.asarray(F, np.int64), hull))
     with atomic_open(path) as f:
         np.savez_compressed(f, **arrays)
@@ -148,9 +152,11 @@ def _pack_mesh(V: np.ndarray, F: np.ndarray, hull: VoxelHull) -> dict[str, np.nd
     if not np.array_equal(hull.origin + K / 2 * hull.voxel_size, V):  # not on the grid
         return {"mesh_V": V.astype(np.float32), "mesh_F": F.astype(np.int32)}
     top = np.maximum.accumulate(F.max(axis=1))  # running maximum vertex index per face
-    return {"mesh_dK": _small_int(np.diff(K, axis=0, prepend=0), True),
-            "mesh_dtop": _small_int(np.diff(top, prepend=0), False),
-            "mesh_below": _small_int(top[:, None] - F, False)}  # fmt: skip
+    return {
+        "mesh_dK": _small_int(np.diff(K, axis=0, prepend=0), True),
+        "mesh_dtop": _small_int(np.diff(top, prepend=0), False),
+        "mesh_below": _small_int(top[:, None] - F, False),
+    }
 
 
 def _unpack_mesh(d: dict, origin: np.ndarray, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
@@ -524,8 +530,16 @@ class SequenceCapture:
         Metres per file unit (0.001 for millimetres).
     """
 
-    def __init__(self, source, *, cameras=None, silhouettes=None, up: str = "z", frames=None,
-                 scale: float = 1.0):  # fmt: skip
+    def __init__(
+        self,
+        source,
+        *,
+        cameras=None,
+        silhouettes=None,
+        up: str = "z",
+        frames=None,
+        scale: float = 1.0,
+    ):
         from meshmocap.io.meshes import MeshSequence
 
         self.seq = MeshSequence(source, up=up, frames=frames)

@@ -88,9 +88,12 @@ class _Builder:
         self.blob.extend(data)
         self.views.append(view)
         acc = g.Accessor(
-            bufferView=len(self.views) - 1, componentType=component, count=len(a),
-            type=_TYPES[width], normalized=True if normalized else None,
-        )  # fmt: skip
+            bufferView=len(self.views) - 1,
+            componentType=component,
+            count=len(a),
+            type=_TYPES[width],
+            normalized=True if normalized else None,
+        )
         if bounds:
             flat = a.reshape(len(a), width)
             acc.min = [float(x) for x in flat.min(axis=0)]
@@ -105,8 +108,10 @@ class _Builder:
         out = g.GLTF2(
             asset=g.Asset(version="2.0", generator="meshmocap"),
             buffers=[g.Buffer(byteLength=len(self.blob))],
-            bufferViews=self.views, accessors=self.accessors, **parts,
-        )  # fmt: skip
+            bufferViews=self.views,
+            accessors=self.accessors,
+            **parts,
+        )
         out.set_binary_blob(bytes(self.blob))
         return out
 
@@ -157,11 +162,12 @@ def _material(name: str, color):
 
     rgb = [float(c) for c in color]
     return g.Material(
-        name=name, doubleSided=False,
+        name=name,
+        doubleSided=False,
         pbrMetallicRoughness=g.PbrMetallicRoughness(
             baseColorFactor=[*rgb, 1.0], metallicFactor=0.0, roughnessFactor=0.8
         ),
-    )  # fmt: skip
+    )
 
 
 def skinned_gltf(
@@ -250,33 +256,45 @@ def skinned_gltf(
     for j in range(J):
         out = b.add(qi[:, j], _SHORT, normalized=True)
         samplers.append(g.AnimationSampler(input=t_acc, output=out, interpolation="LINEAR"))
-        channels.append(g.AnimationChannel(
-            sampler=j, target=g.AnimationChannelTarget(node=j + 1, path="rotation")))  # fmt: skip
+        channels.append(
+            g.AnimationChannel(
+                sampler=j, target=g.AnimationChannelTarget(node=j + 1, path="rotation")
+            )
+        )
     tr = b.add((root @ C.T).astype(np.float32), _FLOAT)
     samplers.append(g.AnimationSampler(input=t_acc, output=tr, interpolation="LINEAR"))
-    channels.append(g.AnimationChannel(
-        sampler=J, target=g.AnimationChannelTarget(node=1, path="translation")))  # fmt: skip
+    channels.append(
+        g.AnimationChannel(sampler=J, target=g.AnimationChannelTarget(node=1, path="translation"))
+    )
     # nodes: 0 the mesh, 1 + j the joints
     offsets = skeleton.offsets @ C.T
     q0 = matrix_to_quat(C @ R[0] @ C.T)
     nodes = [g.Node(name=name, mesh=0, skin=0)]
     for j in range(J):
-        nodes.append(g.Node(
-            name=skeleton.names[j], children=[k + 1 for k in skeleton.children[j]],
-            translation=[float(x) for x in (root[0] @ C.T if j == 0 else offsets[j])],
-            rotation=[float(x) for x in q0[j]],
-        ))  # fmt: skip
+        nodes.append(
+            g.Node(
+                name=skeleton.names[j],
+                children=[k + 1 for k in skeleton.children[j]],
+                translation=[float(x) for x in (root[0] @ C.T if j == 0 else offsets[j])],
+                rotation=[float(x) for x in q0[j]],
+            )
+        )
     primitive = g.Primitive(
         attributes=g.Attributes(**prim["attrs"]), indices=prim["indices"], material=0
     )
     mesh = g.Mesh(name=name, primitives=[primitive])
-    skin = g.Skin(name="skeleton", joints=list(range(1, J + 1)), skeleton=1,
-                  inverseBindMatrices=ibm_acc)  # fmt: skip
+    skin = g.Skin(
+        name="skeleton", joints=list(range(1, J + 1)), skeleton=1, inverseBindMatrices=ibm_acc
+    )
     return b.gltf(
-        scene=0, scenes=[g.Scene(nodes=[0, 1])], nodes=nodes, meshes=[mesh], skins=[skin],
+        scene=0,
+        scenes=[g.Scene(nodes=[0, 1])],
+        nodes=nodes,
+        meshes=[mesh],
+        skins=[skin],
         materials=[_material(name, color)],
         animations=[g.Animation(name="motion", samplers=samplers, channels=channels)],
-    )  # fmt: skip
+    )
 
 
 def morph_gltf(
@@ -324,18 +342,32 @@ def morph_gltf(
         w[np.arange(1, T), np.arange(T - 1)] = 255
         t_acc = b.add(t.astype(np.float32), _FLOAT, bounds=True)
         out = b.add(w.reshape(-1), _UBYTE, normalized=True)
-        parts["animations"] = [g.Animation(
-            name="motion", samplers=[g.AnimationSampler(input=t_acc, output=out,
-                                                        interpolation="LINEAR")],
-            channels=[g.AnimationChannel(sampler=0, target=g.AnimationChannelTarget(
-                node=0, path="weights"))])]  # fmt: skip
+        parts["animations"] = [
+            g.Animation(
+                name="motion",
+                samplers=[g.AnimationSampler(input=t_acc, output=out, interpolation="LINEAR")],
+                channels=[
+                    g.AnimationChannel(
+                        sampler=0, target=g.AnimationChannelTarget(node=0, path="weights")
+                    )
+                ],
+            )
+        ]
     prim_ = g.Primitive(
-        attributes=g.Attributes(**prim["attrs"]), indices=prim["indices"], material=0,
+        attributes=g.Attributes(**prim["attrs"]),
+        indices=prim["indices"],
+        material=0,
         targets=[g.Attributes(**x) for x in targets] or None,
-    )  # fmt: skip
+    )
     mesh = g.Mesh(name=name, primitives=[prim_], weights=[0.0] * (T - 1) if T > 1 else None)
-    return b.gltf(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(name=name, mesh=0)],
-                  meshes=[mesh], materials=[_material(name, color)], **parts)  # fmt: skip
+    return b.gltf(
+        scene=0,
+        scenes=[g.Scene(nodes=[0])],
+        nodes=[g.Node(name=name, mesh=0)],
+        meshes=[mesh],
+        materials=[_material(name, color)],
+        **parts,
+    )
 
 
 def gltf_bytes(gltf) -> bytes:

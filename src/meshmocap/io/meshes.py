@@ -89,8 +89,7 @@ def _load_scene(data: bytes, ext: str, label: str):
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")  # its parsers warn on what they then reject
-            return trimesh.load_scene(io.BytesIO(data), file_type=ext[1:], process=False,
-                                      **kwargs)  # fmt: skip
+            return trimesh.load_scene(io.BytesIO(data), file_type=ext[1:], process=False, **kwargs)
     except Exception as exc:  # trimesh raises anything from KeyError to IndexError
         raise MeshError(f"{label}: cannot read {ext[1:].upper()} file ({_one_line(exc)})") from None
     finally:
@@ -126,15 +125,19 @@ def _check_header(data: bytes, ext: str, label: str) -> None:
     if ext == ".ply":
         counts = [int(n) for n in re.findall(rb"element \w+ (\d{1,30})", data[:4096])]
     elif ext == ".off":
-        m = re.match(rb"\s*(?:#[^\n]*\n\s*)*[A-Z]*OFF\s+(?:#[^\n]*\n\s*)*(\d{1,30})\s+(\d{1,30})",
-                     data[:4096])  # fmt: skip
+        m = re.match(
+            rb"\s*(?:#[^\n]*\n\s*)*[A-Z]*OFF\s+(?:#[^\n]*\n\s*)*(\d{1,30})\s+(\d{1,30})",
+            data[:4096],
+        )
         counts = [int(n) for n in m.groups()] if m else []
     else:
         return
     big = max(counts, default=0)
     if big > MAX_MESH_ELEMENTS or big > len(data):
-        raise MeshError(f"{label}: header declares {big} elements in a file of {len(data)} "
-                        f"bytes (at most {MAX_MESH_ELEMENTS} are read)")  # fmt: skip
+        raise MeshError(
+            f"{label}: header declares {big} elements in a file of {len(data)} "
+            f"bytes (at most {MAX_MESH_ELEMENTS} are read)"
+        )
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -173,8 +176,9 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
     if len(V) == 0 or len(F) == 0:
         raise MeshError(f"{label}: empty mesh ({len(V)} vertices, {len(F)} faces)")
     if F.min() < 0 or F.max() >= len(V):
-        raise MeshError(f"{label}: face indices must lie in [0, {len(V) - 1}], found "
-                        f"[{F.min()}, {F.max()}]")  # fmt: skip
+        raise MeshError(
+            f"{label}: face indices must lie in [0, {len(V) - 1}], found [{F.min()}, {F.max()}]"
+        )
     _finite(V, label, "vertices")
     if ext == ".obj":
         n_file = len(re.findall(rb"(?m)^v[ \t]", data))
@@ -242,8 +246,9 @@ def _parse_points(
                     N = np.column_stack([np.ravel(raw[k]) for k in ("nx", "ny", "nz")])
                     N = N.astype(np.float64) if N.shape == A.shape else None
         except Exception as exc:  # trimesh's post-processing of a damaged file
-            raise MeshError(f"{label}: cannot read {ext[1:].upper()} points "
-                            f"({_one_line(exc)})") from None  # fmt: skip
+            raise MeshError(
+                f"{label}: cannot read {ext[1:].upper()} points ({_one_line(exc)})"
+            ) from None
     else:
         ok = list(dict.fromkeys(POINT_EXTENSIONS + MESH_EXTENSIONS))
         raise InputError(f"{label}: point files must end in {ok}, found {ext!r}")
@@ -283,8 +288,9 @@ def _parse_text_points(data: bytes, ext: str, label: str) -> np.ndarray:
         raise FormatError(f"{label}: not a table of numbers ({_one_line(exc)})") from None
     if A.size == 0 or cols is not None:
         if A.size and A.shape[1] <= max(cols):
-            raise FormatError(f"{label}: PCD FIELDS name {len(fields)} columns, the data has "
-                              f"{A.shape[1]}")  # fmt: skip
+            raise FormatError(
+                f"{label}: PCD FIELDS name {len(fields)} columns, the data has {A.shape[1]}"
+            )
         return A[:, cols] if A.size else np.zeros((0, 3))
     return A[:, :6] if A.shape[1] >= 6 else A[:, :3] if A.shape[1] >= 3 else A
 

@@ -136,8 +136,13 @@ class PoseSet:
             raise InputError(f"PoseSet.subsample: n must be a positive int, found {n!r}")
         N = len(self)
         pick = np.unique(np.linspace(0, N - 1, min(int(n), N)).round().astype(np.int64))
-        return PoseSet(self.configurations[pick], self.trials[pick], self.groups[pick],
-                       self.template_name, self.sources)  # fmt: skip
+        return PoseSet(
+            self.configurations[pick],
+            self.trials[pick],
+            self.groups[pick],
+            self.template_name,
+            self.sources,
+        )
 
     @staticmethod
     def concatenate(sets: list[PoseSet]) -> PoseSet:
@@ -196,9 +201,13 @@ def poses_from_motion(
         motion = retarget(motion, template, floor="none")
     c, Q = quads_from_pose(oqr, template, motion.rotations, motion.root_positions)
     T = motion.n_frames
-    return PoseSet(configuration_vector(c, Q), _strings(trial, T),
-                   _strings(group if group is not None else trial, T), template.name,
-                   (source or trial,))  # fmt: skip
+    return PoseSet(
+        configuration_vector(c, Q),
+        _strings(trial, T),
+        _strings(group if group is not None else trial, T),
+        template.name,
+        (source or trial,),
+    )
 
 
 # ------------------------------------------------------------------------------ .mat tables
@@ -278,8 +287,10 @@ def read_mat_trials(
     N = len(Y)
     L = np.asarray(d[lkey]) if lkey in d else np.ones((N, 1))
     if Y.ndim != 2 or L.shape[0] != N or L.ndim != 2 or not np.all(np.isin(L, (0, 1))):
-        raise FormatError(f"{path}: expected {ykey} (N, C) and one-hot {lkey} (N, K), "
-                          f"found {Y.shape} and {L.shape}")  # fmt: skip
+        raise FormatError(
+            f"{path}: expected {ykey} (N, C) and one-hot {lkey} (N, K), "
+            f"found {Y.shape} and {L.shape}"
+        )
     if not np.all(L.sum(axis=1) == 1):
         raise FormatError(f"{path}: {lkey} must have exactly one 1 per row")
     skel = read_asf(Path(asf) if asf is not None else _find_asf(path))
@@ -317,8 +328,9 @@ def save_poses(
     """
     arrays: dict[str, np.ndarray] = {"format": np.str_(POSES_FORMAT)}
     if (centres is None) == (joint_rotations is None):
-        raise InputError("save_poses: give either centres and rotations, or joint_names and "
-                         "joint_rotations")  # fmt: skip
+        raise InputError(
+            "save_poses: give either centres and rotations, or joint_names and joint_rotations"
+        )
     if centres is not None:
         arrays["centres"] = np.asarray(centres, dtype=np.float64)
         arrays["rotations"] = np.asarray(rotations, dtype=np.float64)
@@ -341,8 +353,9 @@ def _rotations(path: Path, key: str, R: np.ndarray, shape: tuple[int, ...]) -> n
     if R.shape == (*shape, 3) and R.ndim == len(shape) + 1:
         R = so3_exp(R)
     if R.shape != (*shape, 3, 3):
-        raise FormatError(f"{path}: {key} must have shape {(*shape, 3)} or {(*shape, 3, 3)}, "
-                          f"found {R.shape}")  # fmt: skip
+        raise FormatError(
+            f"{path}: {key} must have shape {(*shape, 3)} or {(*shape, 3, 3)}, found {R.shape}"
+        )
     if not np.all(np.isfinite(R)):
         raise FormatError(f"{path}: {key} contains NaN or infinite values")
     err = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max() if R.size else 0.0
@@ -365,11 +378,13 @@ def read_poses(path: str | os.PathLike, template: Template, *, oqr: OQR | None =
         raise MeshmocapFileNotFoundError(f"{path}: no such pose file")
     d = read_npz(path, "pose file")
     if str(d.get("format", "")) != POSES_FORMAT:
-        raise FormatError(f"{path}: expected format {POSES_FORMAT!r}, "
-                          f"found {str(d.get('format', 'none'))!r}")  # fmt: skip
+        raise FormatError(
+            f"{path}: expected format {POSES_FORMAT!r}, found {str(d.get('format', 'none'))!r}"
+        )
     if "template" in d and str(d["template"]) != template.name:
-        raise FormatError(f"{path}: poses labelled on template {str(d['template'])!r}, "
-                          f"expected {template.name!r}")  # fmt: skip
+        raise FormatError(
+            f"{path}: poses labelled on template {str(d['template'])!r}, expected {template.name!r}"
+        )
     oqr = oqr or build_oqr(template)
     if "centres" in d:
         c = np.asarray(d["centres"], dtype=np.float64)
@@ -383,8 +398,10 @@ def read_poses(path: str | os.PathLike, template: Template, *, oqr: OQR | None =
         unknown = sorted(set(names) - set(sk.names))
         if unknown or len(set(names)) != len(names):
             found = unknown or "duplicates"
-            raise FormatError(f"{path}: joint_names must be distinct joints of template "
-                              f"{template.name!r}, found {found}")  # fmt: skip
+            raise FormatError(
+                f"{path}: joint_names must be distinct joints of template "
+                f"{template.name!r}, found {found}"
+            )
         jr = np.asarray(d["joint_rotations"], dtype=np.float64)
         R = _rotations(path, "joint_rotations", jr, (jr.shape[0] if jr.ndim else 0, len(names)))
         full = np.tile(np.eye(3), (len(R), sk.n_joints, 1, 1))
@@ -392,16 +409,21 @@ def read_poses(path: str | os.PathLike, template: Template, *, oqr: OQR | None =
         root = np.broadcast_to(sk.rest_positions[0], (len(R), 3))
         Y = configuration_vector(*quads_from_pose(oqr, template, full, root))
     else:
-        raise FormatError(f"{path}: expected centres and rotations, or joint_names and "
-                          f"joint_rotations, found keys {sorted(d)}")  # fmt: skip
+        raise FormatError(
+            f"{path}: expected centres and rotations, or joint_names and "
+            f"joint_rotations, found keys {sorted(d)}"
+        )
     N = len(Y)
     if N == 0:
         raise FormatError(f"{path}: holds no poses")
     labels = d.get("labels")
     if labels is not None and np.shape(labels) != (N,):
         raise FormatError(f"{path}: labels must have shape ({N},), found {np.shape(labels)}")
-    trials = (np.asarray(labels, dtype=str) if labels is not None
-              else np.array([f"{path.stem}:{k}" for k in range(N)]))  # fmt: skip
+    trials = (
+        np.asarray(labels, dtype=str)
+        if labels is not None
+        else np.array([f"{path.stem}:{k}" for k in range(N)])
+    )
     return PoseSet(Y, trials, _strings(path.stem, N), template.name, (str(path),))
 
 
@@ -441,14 +463,17 @@ def load_pose_source(
         return library_poses(template, _library_count(name), oqr=oqr)
     if name in PROCEDURAL_MOTIONS:
         m = procedural_motion(name, template, duration=duration, fps=fps)  # type: ignore[arg-type]
-        return poses_from_motion(m, template, oqr=oqr, trial=name,
-                                 source=f"{name} ({duration:g} s at {fps:g} fps)")  # fmt: skip
+        return poses_from_motion(
+            m, template, oqr=oqr, trial=name, source=f"{name} ({duration:g} s at {fps:g} fps)"
+        )
     path = Path(name)
     suffix = path.suffix.lower()
     if suffix not in (".bvh", ".amc", ".mat", ".npz"):
-        raise InputError(f"pose source: expected one of {list(PROCEDURAL_MOTIONS)}, 'library' "
-                         "or 'library:N', or a .bvh, .amc, .mat or .npz file, "
-                         f"found {name!r}")  # fmt: skip
+        raise InputError(
+            f"pose source: expected one of {list(PROCEDURAL_MOTIONS)}, 'library' "
+            "or 'library:N', or a .bvh, .amc, .mat or .npz file, "
+            f"found {name!r}"
+        )
     if not path.is_file():
         raise MeshmocapFileNotFoundError(f"pose source: {path} does not exist")
     if suffix == ".npz":
@@ -457,11 +482,15 @@ def load_pose_source(
         trials = read_mat_trials(path, asf=asf)
         if not trials:
             raise FormatError(f"{path}: holds no rows")
-        sets = [poses_from_motion(m, template, oqr=oqr, trial=t, group=g)
-                for t, g, m in trials]  # fmt: skip
+        sets = [poses_from_motion(m, template, oqr=oqr, trial=t, group=g) for t, g, m in trials]
         all_ = PoseSet.concatenate(sets)
-        return PoseSet(all_.configurations, all_.trials, all_.groups, template.name,
-                       (f"{path} ({len(trials)} trials)",))  # fmt: skip
+        return PoseSet(
+            all_.configurations,
+            all_.trials,
+            all_.groups,
+            template.name,
+            (f"{path} ({len(trials)} trials)",),
+        )
     m = load_clip(path, asf=asf) if suffix == ".amc" else load_clip(path)
     return poses_from_motion(m, template, oqr=oqr, trial=path.stem, source=str(path))
 
@@ -487,8 +516,13 @@ def library_poses(template: Template, n: int | None = None, *, oqr: OQR | None =
     R = lib.on(template, n)
     root = np.broadcast_to(template.skeleton.rest_positions[0], (n, 3))
     Y = configuration_vector(*quads_from_pose(oqr, template, R, root))
-    return PoseSet(Y, lib.trials[:n].copy(), lib.categories[:n].copy(), template.name,
-                   (f"library:{n} (CMU pose library {lib.digest})",))  # fmt: skip
+    return PoseSet(
+        Y,
+        lib.trials[:n].copy(),
+        lib.categories[:n].copy(),
+        template.name,
+        (f"library:{n} (CMU pose library {lib.digest})",),
+    )
 
 
 def load_pose_sources(
@@ -502,5 +536,4 @@ def load_pose_sources(
     if not sources:
         raise InputError("pose sources: none given")
     oqr = oqr or build_oqr(template)
-    return PoseSet.concatenate([load_pose_source(s, template, oqr=oqr, **kwargs)
-                                for s in sources])  # fmt: skip
+    return PoseSet.concatenate([load_pose_source(s, template, oqr=oqr, **kwargs) for s in sources])

@@ -111,8 +111,11 @@ def frame_path(track: str | os.PathLike, index: int) -> Path:
 
 
 #: How a track's template was chosen (``track.json``'s ``template_source``; absent: given).
-TEMPLATE_SOURCES = {"given": "given", "capture": "named by capture.json",
-                    "estimated": "estimated from the capture"}  # fmt: skip
+TEMPLATE_SOURCES = {
+    "given": "given",
+    "capture": "named by capture.json",
+    "estimated": "estimated from the capture",
+}
 
 
 def template_label(meta: dict) -> str:
@@ -189,10 +192,17 @@ def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
     extra.update({f"state_{k}": np.asarray(v) for k, v in r.state.items()})
     with atomic_open(frame_path(path, r.index)) as f:
         np.savez_compressed(
-            f, index=r.index, joints=r.joints, vertices=r.vertices.astype(np.float32),
-            n_iter=r.n_iter, seconds=r.seconds, healthy=r.healthy, message=np.str_(r.message),
-            flags=np.str_(",".join(r.flags)), **extra,
-        )  # fmt: skip
+            f,
+            index=r.index,
+            joints=r.joints,
+            vertices=r.vertices.astype(np.float32),
+            n_iter=r.n_iter,
+            seconds=r.seconds,
+            healthy=r.healthy,
+            message=np.str_(r.message),
+            flags=np.str_(",".join(r.flags)),
+            **extra,
+        )
 
 
 def read_state(path: str | os.PathLike, index: int) -> dict[str, np.ndarray]:

@@ -72,13 +72,15 @@ def _check_points(func: str, name: str, X: object) -> np.ndarray:
     try:
         A = np.asarray(X, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InputError(f"{func}: {name} must be an (n, 3) float array of metres, "
-                         f"found {type(X).__name__}") from None  # fmt: skip
+        raise InputError(
+            f"{func}: {name} must be an (n, 3) float array of metres, found {type(X).__name__}"
+        ) from None
     if A.ndim != 2 or A.shape[1] != 3:
         raise InputError(f"{func}: {name} must have shape (n, 3), found {A.shape}")
     if not np.isfinite(A).all():
-        raise InputError(f"{func}: {name} has {int((~np.isfinite(A)).any(1).sum())} "
-                         "non-finite rows")  # fmt: skip
+        raise InputError(
+            f"{func}: {name} has {int((~np.isfinite(A)).any(1).sum())} non-finite rows"
+        )
     return A
 
 
@@ -88,8 +90,9 @@ def _stratified_subset(labels: np.ndarray, n_keep: int, rng: np.random.Generator
     if n <= n_keep:
         return np.arange(n)
     _, inv, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    quota = np.maximum(np.floor(counts * (n_keep / n)).astype(np.int64),
-                       np.minimum(counts, _MIN_PER_CLASS))  # fmt: skip
+    quota = np.maximum(
+        np.floor(counts * (n_keep / n)).astype(np.int64), np.minimum(counts, _MIN_PER_CLASS)
+    )
     order = rng.permutation(n)
     grouped = order[np.argsort(inv[order], kind="stable")]  # random order within each label
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
@@ -242,9 +245,11 @@ def _initial_logits(
     except (TypeError, ValueError):
         raise InputError(f"{func}: coef_init and intercept_init must be float arrays") from None
     if W.shape != (k, 3) or b.shape != (k,):
-        raise InputError(f"{func}: coef_init and intercept_init must have shapes ({k}, 3) "
-                         f"and ({k},) for {len(classes)} labels, found {W.shape} and "
-                         f"{b.shape}")  # fmt: skip
+        raise InputError(
+            f"{func}: coef_init and intercept_init must have shapes ({k}, 3) "
+            f"and ({k},) for {len(classes)} labels, found {W.shape} and "
+            f"{b.shape}"
+        )
     if not (np.isfinite(W).all() and np.isfinite(b).all()):
         raise InputError(f"{func}: coef_init and intercept_init must be finite")
     return W, b
@@ -322,8 +327,7 @@ class BodyPartClassifier:
         return self
 
     def __repr__(self) -> str:
-        return (f"BodyPartClassifier({self.method!r}, C={self.C!r}, "
-                f"max_train={self.max_train!r})")  # fmt: skip
+        return f"BodyPartClassifier({self.method!r}, C={self.C!r}, max_train={self.max_train!r})"
 
     def _check_options(self) -> None:
         check_choice("BodyPartClassifier", "method", self.method, METHODS)
@@ -368,19 +372,25 @@ class BodyPartClassifier:
         X = _check_points("BodyPartClassifier.fit", "X", X)
         lab = np.asarray(labels)
         if lab.shape != (len(X),):
-            raise InputError(f"BodyPartClassifier.fit: labels must have shape ({len(X)},) "
-                             f"to match X, found {lab.shape}")  # fmt: skip
+            raise InputError(
+                f"BodyPartClassifier.fit: labels must have shape ({len(X)},) "
+                f"to match X, found {lab.shape}"
+            )
         if not np.issubdtype(lab.dtype, np.integer):
             raise InputError(f"BodyPartClassifier.fit: labels must be integers, found {lab.dtype}")
         lab = lab.astype(np.int64)
         classes, counts = np.unique(lab, return_counts=True)
         if len(classes) < 2:
-            raise InputError(f"BodyPartClassifier.fit: labels must hold at least 2 distinct "
-                             f"values, found {len(classes)}")  # fmt: skip
+            raise InputError(
+                f"BodyPartClassifier.fit: labels must hold at least 2 distinct "
+                f"values, found {len(classes)}"
+            )
         if self.method == "svc" and counts.min() < 2:
-            raise InputError(f"BodyPartClassifier.fit: with method 'svc' every label needs ≥ 2 "
-                             f"points (Platt cross-validation), label "
-                             f"{int(classes[counts.argmin()])} has 1")  # fmt: skip
+            raise InputError(
+                f"BodyPartClassifier.fit: with method 'svc' every label needs ≥ 2 "
+                f"points (Platt cross-validation), label "
+                f"{int(classes[counts.argmin()])} has 1"
+            )
 
         rng = np.random.default_rng(self.random_state)
         idx = _stratified_subset(lab, int(self.max_train), rng)
@@ -414,8 +424,10 @@ class BodyPartClassifier:
     # -- prediction -------------------------------------------------------------------------
     def _check_fitted(self, func: str) -> None:
         if not hasattr(self, "model_"):
-            raise InputError(f"BodyPartClassifier.{func}: the classifier is not fitted; "
-                             "call fit(X, labels) first")  # fmt: skip
+            raise InputError(
+                f"BodyPartClassifier.{func}: the classifier is not fitted; "
+                "call fit(X, labels) first"
+            )
 
     def predict_proba(self, Y: np.ndarray) -> np.ndarray:
         """Posterior probability of every body part for each point.
@@ -530,18 +542,22 @@ def partition(
         if isinstance(v, bool) or not (np.isscalar(v) and np.isfinite(v)):
             raise InputError(f"{func}: {name} must be a finite float, found {v!r}")
     if not 0.0 <= outlier < on_bone <= 1.0:
-        raise InputError(f"{func}: thresholds must satisfy 0 ≤ outlier < on_bone ≤ 1, found "
-                         f"outlier={outlier!r}, on_bone={on_bone!r}")  # fmt: skip
+        raise InputError(
+            f"{func}: thresholds must satisfy 0 ≤ outlier < on_bone ≤ 1, found "
+            f"outlier={outlier!r}, on_bone={on_bone!r}"
+        )
     if not 0.0 < keep_fraction <= 1.0:
         raise InputError(f"{func}: keep_fraction must be in (0, 1], found {keep_fraction!r}")
     if max_distance is not None and not (
         np.isscalar(max_distance) and np.isfinite(max_distance) and max_distance > 0
     ):
-        raise InputError(f"{func}: max_distance must be a positive float or None, "
-                         f"found {max_distance!r}")  # fmt: skip
+        raise InputError(
+            f"{func}: max_distance must be a positive float or None, found {max_distance!r}"
+        )
     if not isinstance(classifier, BodyPartClassifier):
-        raise InputError(f"{func}: classifier must be a BodyPartClassifier, "
-                         f"found {type(classifier).__name__}")  # fmt: skip
+        raise InputError(
+            f"{func}: classifier must be a BodyPartClassifier, found {type(classifier).__name__}"
+        )
     classifier._check_fitted(func)
     Y = _check_points(func, "Y", Y)
 

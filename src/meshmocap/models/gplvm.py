@@ -269,8 +269,18 @@ class GPLVM:
         self.random_state = random_state
 
     # -- scikit-learn plumbing ------------------------------------------------------------
-    _PARAMS = ("n_components", "back_constraint", "alpha", "gamma", "beta", "bc_gamma",
-               "n_hidden", "max_iter", "tol", "random_state")  # fmt: skip
+    _PARAMS = (
+        "n_components",
+        "back_constraint",
+        "alpha",
+        "gamma",
+        "beta",
+        "bc_gamma",
+        "n_hidden",
+        "max_iter",
+        "tol",
+        "random_state",
+    )
 
     def get_params(self, deep: bool = True) -> dict:
         """The constructor options, as a dict."""
@@ -292,8 +302,10 @@ class GPLVM:
             check_choice("GPLVM", "back_constraint", self.back_constraint, _BC_CHOICES[:-1])
         q = self.n_components
         if not isinstance(q, int | np.integer) or not 1 <= q <= min(D, N - 2):
-            raise InputError(f"GPLVM: n_components must be an int in [1, {min(D, N - 2)}] "
-                             f"for data of shape ({N}, {D}), found {q!r}")  # fmt: skip
+            raise InputError(
+                f"GPLVM: n_components must be an int in [1, {min(D, N - 2)}] "
+                f"for data of shape ({N}, {D}), found {q!r}"
+            )
         for name in ("alpha", "gamma", "beta", "tol"):
             v = getattr(self, name)
             if not (np.isscalar(v) and np.isfinite(v) and v > 0):
@@ -342,8 +354,9 @@ class GPLVM:
             d2y = sqdist(Ys)
             pair = d2y[np.triu_indices(N, 1)]
             pair = pair[pair > 0]  # duplicated rows would bias the median heuristic to 0
-            bc_gamma = (float(self.bc_gamma) if self.bc_gamma is not None
-                        else 1.0 / float(np.median(pair)))  # fmt: skip
+            bc_gamma = (
+                float(self.bc_gamma) if self.bc_gamma is not None else 1.0 / float(np.median(pair))
+            )
             Kbc = rbf(d2y, 1.0, bc_gamma)
             # A0: least squares K_bc A0 ≈ X0 (ridge 1e-6 keeps it bounded when K_bc is
             # near singular)
@@ -377,10 +390,20 @@ class GPLVM:
             history.append(-(f if f is not None else fun(phi)[0]))
             last.clear()
 
-        res = minimize(fun, phi0, jac=True, method="L-BFGS-B", bounds=bounds,
-                       callback=callback,
-                       options={"maxiter": int(self.max_iter), "ftol": float(self.tol),
-                                "gtol": float(self.tol) * N * D, "maxcor": 20})  # fmt: skip
+        res = minimize(
+            fun,
+            phi0,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=bounds,
+            callback=callback,
+            options={
+                "maxiter": int(self.max_iter),
+                "ftol": float(self.tol),
+                "gtol": float(self.tol) * N * D,
+                "maxcor": 20,
+            },
+        )
         res.x = prob.to_model(res.x)
         alpha, gamma, beta, w = prob.unpack(res.x)
         X, _ = prob.latent(w)
@@ -437,8 +460,10 @@ class GPLVM:
         if self.back_constraint == "mlp":
             W1, b1, W2, b2 = self.mlp_weights_
             return np.tanh(Ys @ W1 + b1) @ W2 + b2
-        raise InputError("GPLVM.transform: needs a back-constraint; this model was fitted "
-                         "with back_constraint=None")  # fmt: skip
+        raise InputError(
+            "GPLVM.transform: needs a back-constraint; this model was fitted "
+            "with back_constraint=None"
+        )
 
     def fit_transform(self, Y: np.ndarray, y: None = None) -> np.ndarray:
         """``fit(Y)`` then return ``X_`` (N, q)."""
@@ -503,8 +528,9 @@ class GPLVM:
         x = np.asarray(x, dtype=np.float64)
         q = XT.shape[0]
         if x.shape != (q,):
-            raise InputError(f"GPLVM.predict_with_gradient: x must have shape ({q},), "
-                             f"found {x.shape}")  # fmt: skip
+            raise InputError(
+                f"GPLVM.predict_with_gradient: x must have shape ({q},), found {x.shape}"
+            )
         J = np.empty((q + 1, XT.shape[1]))  # rows: k_x, then dk_x/dx transposed
         diff = np.subtract(XT, x[:, None], out=J[1:])  # x_i - x, (q, N)
         kx = np.exp(np.einsum("ij,ij->j", diff, diff) * (-0.5 * self.gamma_))
@@ -532,14 +558,28 @@ class GPLVM:
         if not isinstance(opts["random_state"], int | type(None)):
             opts["random_state"] = None  # a Generator is not serialisable
         arrays = {
-            "kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
+            "kind": np.array(_KIND),
+            "format_version": np.array(FORMAT_VERSION),
             "options": np.array(json.dumps(opts)),
-            "X_": self.X_, "Y_": self.Y_, "Y_mean_": self.Y_mean_, "Kinv_": self.Kinv_,
-            "KinvY_": self.KinvY_, "history": self.log_likelihood_history_,
-            "scalars": np.array([self.alpha_, self.gamma_, self.beta_, self.bc_gamma_,
-                                 self.Y_scale_, self.log_likelihood_, self.n_iter_,
-                                 float(self.converged_)]),
-        }  # fmt: skip
+            "X_": self.X_,
+            "Y_": self.Y_,
+            "Y_mean_": self.Y_mean_,
+            "Kinv_": self.Kinv_,
+            "KinvY_": self.KinvY_,
+            "history": self.log_likelihood_history_,
+            "scalars": np.array(
+                [
+                    self.alpha_,
+                    self.gamma_,
+                    self.beta_,
+                    self.bc_gamma_,
+                    self.Y_scale_,
+                    self.log_likelihood_,
+                    self.n_iter_,
+                    float(self.converged_),
+                ]
+            ),
+        }
         if self.A_ is not None:
             arrays["A_"] = self.A_
         if self.mlp_weights_ is not None:
@@ -571,8 +611,10 @@ class GPLVM:
     def _from_arrays(cls, d: dict, path: Path) -> GPLVM:
         version = int(d["format_version"])
         if version != FORMAT_VERSION:
-            raise FormatError(f"{path}: GPLVM format version {version}, "
-                              f"this meshmocap reads version {FORMAT_VERSION}")  # fmt: skip
+            raise FormatError(
+                f"{path}: GPLVM format version {version}, "
+                f"this meshmocap reads version {FORMAT_VERSION}"
+            )
         self = cls(**json.loads(str(d["options"])))
         a, g, b, bcg, s, ll, nit, conv = d["scalars"].tolist()
         self.alpha_, self.gamma_, self.beta_, self.bc_gamma_ = a, g, b, bcg
@@ -582,8 +624,16 @@ class GPLVM:
             int(nit),
             bool(conv),
         )
-        keys = ["X_", "Y_", "Y_mean_", "history", "Kinv_", "KinvY_", "A_",
-                *(f"mlp{i}" for i in range(4))]  # fmt: skip
+        keys = [
+            "X_",
+            "Y_",
+            "Y_mean_",
+            "history",
+            "Kinv_",
+            "KinvY_",
+            "A_",
+            *(f"mlp{i}" for i in range(4)),
+        ]
         for key in (k for k in keys if k in d):
             a = d[key]
             if a.dtype.kind not in "fiu" or not np.isfinite(a).all():

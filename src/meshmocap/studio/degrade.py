@@ -86,13 +86,15 @@ class Degradation:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.jitter) and 0 <= self.jitter <= MAX_JITTER):
-            raise InputError(f"Degradation: jitter must be from 0 to {MAX_JITTER:g} pixels, "
-                             f"found {self.jitter}")  # fmt: skip
+            raise InputError(
+                f"Degradation: jitter must be from 0 to {MAX_JITTER:g} pixels, found {self.jitter}"
+            )
         for name in ("holes", "blobs"):
             v = getattr(self, name)
             if not isinstance(v, int | np.integer) or isinstance(v, bool) or not 0 <= v <= 100:
-                raise InputError(f"Degradation: {name} must be a whole number from 0 to 100, "
-                                 f"found {v!r}")  # fmt: skip
+                raise InputError(
+                    f"Degradation: {name} must be a whole number from 0 to 100, found {v!r}"
+                )
         for name in ("hole_radius", "blob_radius"):
             v = getattr(self, name)
             if not (np.isfinite(v) and 1 <= v <= 100):
@@ -107,8 +109,9 @@ class Degradation:
                 )
             object.__setattr__(self, "missed_limb_frames", (int(r[0]), int(r[1])))
         if (r is not None or self.missed_limb_joint is not None) and not self.missed_limb:
-            raise InputError("Degradation: missed_limb_frames and missed_limb_joint need "
-                             "missed_limb=True")  # fmt: skip
+            raise InputError(
+                "Degradation: missed_limb_frames and missed_limb_joint need missed_limb=True"
+            )
 
 
 def degrade(

@@ -69,8 +69,11 @@ def carve_seen(
     used = [k for k, c in enumerate(cameras) if c.name not in why]
     left_out = ", ".join(f"{n}: {w}" for n, w in why.items())
     if len(used) < min_cameras:
-        return CarvedFrame(None, f"only {len(used)} of {len(cameras)} cameras see the subject "
-                                 f"({left_out}); at least {min_cameras} needed")  # fmt: skip
+        return CarvedFrame(
+            None,
+            f"only {len(used)} of {len(cameras)} cameras see the subject "
+            f"({left_out}); at least {min_cameras} needed",
+        )
     hull = carve([masks[k] for k in used], [cameras[k] for k in used], voxel_size=voxel_size)
     if not hull.occupancy.any():
         return CarvedFrame(None, "the silhouettes do not intersect: the hull is empty")
@@ -209,9 +212,12 @@ def compute_hulls(
         if carved.note:
             (missing if carved.hull is None else partial)[f] = carved.note
     if grey:
-        warnings.warn(f"hull: {grey} masks in {path / 'silhouettes'} are not binary (grey "
-                      "levels); thresholded at 50 % of full scale", GreyMaskWarning,
-                      stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"hull: {grey} masks in {path / 'silhouettes'} are not binary (grey "
+            "levels); thresholded at 50 % of full scale",
+            GreyMaskWarning,
+            stacklevel=2,
+        )
     if partial or missing:
         warnings.warn(frames_note(partial, missing), MissingFrameWarning, stacklevel=2)
     return HullRun(Capture(path), len(todo), partial, missing, grey)
@@ -221,8 +227,10 @@ def frames_note(partial: dict[int, str], missing: dict[int, str]) -> str:
     """One line: how many frames were carved from fewer cameras or left without hull, with
     the first of each."""
     parts = []
-    for what, notes in (("without hull (trackers coast across them)", missing),
-                        ("carved from fewer cameras", partial)):  # fmt: skip
+    for what, notes in (
+        ("without hull (trackers coast across them)", missing),
+        ("carved from fewer cameras", partial),
+    ):
         if notes:
             first = min(notes)
             parts.append(f"{len(notes)} frames {what}, first {frame_name(first)}: {notes[first]}")

@@ -90,19 +90,24 @@ class SynthSpec:
     source_fps: float | None = None
 
     def __post_init__(self) -> None:
-        checks = (("fps", self.fps, 0.0, 1000.0, "frames per second"),
-                  ("voxel_size", self.voxel_size, 0.002, 0.1, "metres"))  # fmt: skip
+        checks = (
+            ("fps", self.fps, 0.0, 1000.0, "frames per second"),
+            ("voxel_size", self.voxel_size, 0.002, 0.1, "metres"),
+        )
         for name, v, lo, hi, unit in checks:
             ok = isinstance(v, int | float) and not isinstance(v, bool) and lo < v <= hi
             if not ok:
-                raise InputError(f"synth: {name} must be above {lo:g} up to {hi:g} {unit}, "
-                                 f"found {v!r}")  # fmt: skip
+                raise InputError(
+                    f"synth: {name} must be above {lo:g} up to {hi:g} {unit}, found {v!r}"
+                )
         if not (isinstance(self.seed, int) and 0 <= self.seed < 2**32):
-            raise InputError(f"synth: seed must be an integer from 0 to 2**32 - 1, found "
-                             f"{self.seed!r}")  # fmt: skip
+            raise InputError(
+                f"synth: seed must be an integer from 0 to 2**32 - 1, found {self.seed!r}"
+            )
         if not isinstance(self.degradation, Degradation):
-            raise InputError(f"synth: degradation must be a Degradation, found "
-                             f"{type(self.degradation).__name__}")  # fmt: skip
+            raise InputError(
+                f"synth: degradation must be a Degradation, found {type(self.degradation).__name__}"
+            )
 
     def as_dict(self) -> dict:
         """JSON-ready parameters (``heading`` and ``offset`` only where set, so captures
@@ -129,8 +134,10 @@ def placed_motion(
     frame Z up. Returns new arrays."""
     off = np.asarray(offset, dtype=np.float64)
     if not (np.isfinite(heading) and off.shape == (2,) and np.all(np.isfinite(off))):
-        raise InputError(f"synth: heading must be a number of degrees and offset two numbers "
-                         f"(x, y metres), found {heading!r} and {offset!r}")  # fmt: skip
+        raise InputError(
+            f"synth: heading must be a number of degrees and offset two numbers "
+            f"(x, y metres), found {heading!r} and {offset!r}"
+        )
     a = np.deg2rad(float(heading))
     Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     R = np.array(R, dtype=np.float64)
@@ -162,8 +169,9 @@ def synthesize(
     subject = load_template(spec.subject or spec.template)
     fix = {"source_fps": spec.source_fps} if spec.source_fps is not None else {}
     motion = clip_on(subject, spec.motion, fps=spec.fps, **fix)
-    rotations, roots = placed_motion(motion.rotations, motion.root_positions,
-                                     heading=spec.heading, offset=spec.offset)  # fmt: skip
+    rotations, roots = placed_motion(
+        motion.rotations, motion.root_positions, heading=spec.heading, offset=spec.offset
+    )
     frames = _check_range(spec, motion.n_frames, os.fspath(spec.motion))
     cameras = _cameras(spec.rig)
     if spec.degradation.missed_limb_joint is not None:  # checked before any frame is made
@@ -202,8 +210,7 @@ def _warn_notes(notes: dict[int, str]) -> None:
     partial = {f: n for f, n in notes.items() if n.startswith("carved from")}
     missing = {f: n for f, n in notes.items() if n and f not in partial}
     if partial or missing:
-        warnings.warn(f"synth: {frames_note(partial, missing)}", MissingFrameWarning,
-                      stacklevel=3)  # fmt: skip
+        warnings.warn(f"synth: {frames_note(partial, missing)}", MissingFrameWarning, stacklevel=3)
 
 
 def _check_range(spec: SynthSpec, n_frames: int, source: str) -> list[int]:
@@ -265,8 +272,9 @@ def hidden_faces(subject: Template, joint: str) -> np.ndarray:
     and of the joints below it (a missed limb)."""
     ev = subject.eval_skeleton
     if joint not in ev.names:
-        raise InputError(f"synth: missed_limb_joint must be one of {list(ev.names)}, "
-                         f"found {joint!r}")  # fmt: skip
+        raise InputError(
+            f"synth: missed_limb_joint must be one of {list(ev.names)}, found {joint!r}"
+        )
     parts = {ev.names.index(joint)}
     for k in range(len(ev.names)):  # parents come first: one pass collects the subtree
         if ev.parents[k] in parts:
@@ -300,8 +308,9 @@ def write_frame(
         else:  # the rest of the body, an open mesh: every face drawn
             mask = silhouette(V, F[~hidden], cam)
         if degradation != Degradation():
-            mask = degrade(mask, degradation, seed=np.random.SeedSequence([seed, index, c]),
-                           frame=index)  # fmt: skip
+            mask = degrade(
+                mask, degradation, seed=np.random.SeedSequence([seed, index, c]), frame=index
+            )
         write_mask(out / "silhouettes" / cam.name / f"{frame_name(index)}.png", mask)
         masks.append(mask)
     # a subject that walks out of a camera's view is carved from the cameras that see it

@@ -146,9 +146,15 @@ class ICPOptions:
             v = getattr(self, key)
             if not isinstance(v, int | np.integer) or isinstance(v, bool) or v < low:
                 raise InputError(f"{name}: {key} must be an integer ≥ {low}, found {v!r}")
-        bounds = {"max_distance": (0, False), "tol": (0, False), "normal_cos": (-1, True),
-                  "data_to_model_weight": (0, True), "lambda_pose": (0, True),
-                  "lambda_root": (0, True), "damping": (0, True)}  # fmt: skip
+        bounds = {
+            "max_distance": (0, False),
+            "tol": (0, False),
+            "normal_cos": (-1, True),
+            "data_to_model_weight": (0, True),
+            "lambda_pose": (0, True),
+            "lambda_root": (0, True),
+            "damping": (0, True),
+        }
         for key, (low, closed) in bounds.items():
             v = getattr(self, key)
             real = isinstance(v, int | float | np.floating) and not isinstance(v, bool)
@@ -249,10 +255,20 @@ class ArticulatedICP:
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         posed = self.template.pose(self.R, self.root)
-        state = {"R": self.R.copy(), "root": self.root.copy(),
-                 "R_prev": self.prev[0].copy(), "root_prev": self.prev[1].copy()}  # fmt: skip
-        return FrameResult(index=index, joints=posed.eval_joints, vertices=posed.V,
-                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+        state = {
+            "R": self.R.copy(),
+            "root": self.root.copy(),
+            "R_prev": self.prev[0].copy(),
+            "root_prev": self.prev[1].copy(),
+        }
+        return FrameResult(
+            index=index,
+            joints=posed.eval_joints,
+            vertices=posed.V,
+            energies=energies,
+            n_iter=n_iter,
+            state=state,
+        )
 
     # ------------------------------------------------------------------ tracking
     def observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray]:

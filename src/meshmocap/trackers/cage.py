@@ -165,8 +165,11 @@ class CageTracker:
         """JSON-ready settings, with the manifold's latent dimension and its
         :func:`~meshmocap.trackers.cage_options.manifold_digest` (a run resumed with another
         manifold is refused by the driver)."""
-        return {**asdict(self.opts), "n_components": int(self.gp.X_.shape[1]),
-                "manifold": manifold_digest(self.gp)}  # fmt: skip
+        return {
+            **asdict(self.opts),
+            "n_components": int(self.gp.X_.shape[1]),
+            "manifold": manifold_digest(self.gp),
+        }
 
     def setup(self, template: Template) -> None:
         """Build the rig and the Green coordinates of the template (all and sampled)."""
@@ -180,8 +183,9 @@ class CageTracker:
         self._coverage: tuple = ()  # this step's coverage terms and weights
         self._memo: list = []  # _distance's last results
         q, sk = self.oqr.quads, template.skeleton
-        self._articulation = Articulation(q.centres, q.rotations, q.joint_indices,
-                                          sk.rest_positions, sk.parents)  # fmt: skip
+        self._articulation = Articulation(
+            q.centres, q.rotations, q.joint_indices, sk.rest_positions, sk.parents
+        )
         c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
         self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
         self.joint_deformer: GreenDeformer | None = None
@@ -189,8 +193,9 @@ class CageTracker:
         # joint in that quad's frame (constant: quads follow their joints rigidly)
         ev, jq = template.eval_skeleton, self.oqr.quads.joint_indices
         one = [np.flatnonzero(w) for w in ev.weights]
-        self._joint_quad = np.array([np.r_[np.flatnonzero(jq == j[0]), -1][0] if len(j) == 1
-                                     else -1 for j in one])  # fmt: skip
+        self._joint_quad = np.array(
+            [np.r_[np.flatnonzero(jq == j[0]), -1][0] if len(j) == 1 else -1 for j in one]
+        )
         q = np.maximum(self._joint_quad, 0)
         rel = ev.rest_positions - self.oqr.quads.centres[q]
         self._joint_offset = np.einsum("kji,kj->ki", self.oqr.quads.rotations[q], rel)
@@ -260,8 +265,11 @@ class CageTracker:
         lam = state.get("lm_damping", np.full(len(_LM_KEYS), np.nan))
         self._lam = {k: float(v) for k, v in zip(_LM_KEYS, lam, strict=True) if np.isfinite(v)}
         v = [state.get(f"velocity_{k}") for k in "ywc"]
-        self._velocity = (tuple(a.copy() for a in v) if v[0] is not None
-                          else (np.zeros_like(self.local), np.zeros(3), np.zeros(3)))  # fmt: skip
+        self._velocity = (
+            tuple(a.copy() for a in v)
+            if v[0] is not None
+            else (np.zeros_like(self.local), np.zeros(3), np.zeros(3))
+        )
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         cage = self._rig(self.local, self.pelvis_R, self.pelvis_c)[0]
@@ -272,14 +280,24 @@ class CageTracker:
             q = self._joint_quad[on]
             joints[on] = np.einsum("kij,kj->ki", R[q], self._joint_offset[on]) + c[q]
         # "cage": this frame's cage vertices (85, 3), replayed by motion transfer
-        state = {"x": self.x, "local": self.local, "pelvis_R": self.pelvis_R,
-                 "pelvis_c": self.pelvis_c, "cage0": self.cage0, "joints0": self.joints0,
-                 "cage": cage, "keep": self._keep, "velocity_y": self._velocity[0],
-                 "velocity_w": self._velocity[1], "velocity_c": self._velocity[2],
-                 "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS])}  # fmt: skip
+        state = {
+            "x": self.x,
+            "local": self.local,
+            "pelvis_R": self.pelvis_R,
+            "pelvis_c": self.pelvis_c,
+            "cage0": self.cage0,
+            "joints0": self.joints0,
+            "cage": cage,
+            "keep": self._keep,
+            "velocity_y": self._velocity[0],
+            "velocity_w": self._velocity[1],
+            "velocity_c": self._velocity[2],
+            "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS]),
+        }
         V = self.surface.vertices(self.local, self.pelvis_R, self.pelvis_c)
-        return FrameResult(index=index, joints=joints, vertices=V, energies=energies,
-                           n_iter=n_iter, state=state)  # fmt: skip
+        return FrameResult(
+            index=index, joints=joints, vertices=V, energies=energies, n_iter=n_iter, state=state
+        )
 
     # -------------------------------------------------------------- the model
     def _rig(self, y, Rp, cp, *, derivatives=False):
@@ -321,16 +339,22 @@ class CageTracker:
             except (MeshmocapFileNotFoundError, FormatError):
                 cams, masks = [], None
             if cams and masks and len(masks) == len(cams):
-                sil = SilhouetteCoverage(cams, masks, o.n_silhouette, o.silhouette_margin,
-                                         seed=[o.seed, frame.index, 1],
-                                         cap=o.silhouette_cap,
-                                         min_component=o.silhouette_clean)  # fmt: skip
+                sil = SilhouetteCoverage(
+                    cams,
+                    masks,
+                    o.n_silhouette,
+                    o.silhouette_margin,
+                    seed=[o.seed, frame.index, 1],
+                    cap=o.silhouette_cap,
+                    min_component=o.silhouette_clean,
+                )
                 if len(sil):
                     out.append((sil, o.silhouette_weight, True))
         if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)
             B = field.boundary
             pick = np.random.default_rng([o.seed, frame.index]).choice(
-                len(B), min(o.n_coverage, len(B)), replace=False)  # fmt: skip
+                len(B), min(o.n_coverage, len(B)), replace=False
+            )
             out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
         return out
 
@@ -433,8 +457,10 @@ class CageTracker:
             E = 0.5 * (r @ r + w * np.sum(e * e))
             quads = None
             if wa:  # pelvis-relative quads, the pelvis's included
-                quads = (np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]]),
-                         np.concatenate([I0, R]))  # fmt: skip
+                quads = (
+                    np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]]),
+                    np.concatenate([I0, R]),
+                )
                 a = self._articulation.residuals(*quads)
                 E += 0.5 * wa * a @ a
             return E, (r, g, P, e, quads)
@@ -443,8 +469,12 @@ class CageTracker:
             y, Rp, cp = s
             r, g, P, e, quads = cache
             G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
-            J = np.concatenate([self.surface.quad_rows(y, Rp, cp, G),
-                                pose_jacobian(np.tile(P, (len(G), 1)), g, cp)])  # fmt: skip
+            J = np.concatenate(
+                [
+                    self.surface.quad_rows(y, Rp, cp, G),
+                    pose_jacobian(np.tile(P, (len(G), 1)), g, cp),
+                ]
+            )
             grad, H = J @ r, J @ J.T
             if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
                 Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
@@ -484,8 +514,9 @@ class CageTracker:
         hull = frame_hull(frame)  # a capture's hull, or the solid a mesh or point cloud bounds
         k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
         stride = max(1, round(o.field_spacing / hull.voxel_size))
-        field = clock.field = LazyDistanceGrid(hull.occupancy, hull.origin, hull.voxel_size,
-                                               pad=k, stride=stride)  # fmt: skip
+        field = clock.field = LazyDistanceGrid(
+            hull.occupancy, hull.origin, hull.voxel_size, pad=k, stride=stride
+        )
         if self._trail is not None:  # speed only: the grid cells this frame will likely
             field.prefetch(self._trail)  # need, in one batch (LazyDistanceGrid.prefetch)
         clock.lap("distance")
@@ -523,10 +554,13 @@ class CageTracker:
         elif anchor is not None:  # the last quads, still and moving on, get a pelvis fit
             starts = [(anchor, *pelvis)]
             dy, dw, dc = self._velocity  # (the pelvis turns by exp(dw): a rotation, exactly)
-            for y, R, c in [previous, (_orthonormal(previous[0] + dy), so3_exp(dw) @ previous[1],
-                                       previous[2] + dc)][: 1 + bool(np.any(dy))]:  # fmt: skip
-                moved, _, _, n = self._lm((R, c), o.pose_iters, *self._pose_problem(field, y),
-                                          key=2)  # fmt: skip
+            for y, R, c in [
+                previous,
+                (_orthonormal(previous[0] + dy), so3_exp(dw) @ previous[1], previous[2] + dc),
+            ][: 1 + bool(np.any(dy))]:
+                moved, _, _, n = self._lm(
+                    (R, c), o.pose_iters, *self._pose_problem(field, y), key=2
+                )
                 starts.append((y, *moved))
                 it += n
             fit = self._local_problem(field, None)[0]
@@ -548,8 +582,11 @@ class CageTracker:
         )
         U, _, Vt = np.linalg.svd(self.pelvis_R)  # no rounding drift from a rotation
         self.pelvis_R = U @ Vt
-        self._velocity = (self.local - previous[0], so3_log(self.pelvis_R @ previous[1].T),
-                          self.pelvis_c - previous[2])  # fmt: skip
+        self._velocity = (
+            self.local - previous[0],
+            so3_log(self.pelvis_R @ previous[1].T),
+            self.pelvis_c - previous[2],
+        )
         it += n
         P = cache[2]
         r = cache[0][: len(P)]

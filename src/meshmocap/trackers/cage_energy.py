@@ -65,8 +65,7 @@ def surface_sample(V: np.ndarray, F: np.ndarray, n: int, *, seed: int) -> np.nda
     A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     area = np.bincount(F.ravel(), np.repeat(A, 3), minlength=len(V)) / 3.0
     p = area + 1e-12 * area.max()  # isolated vertices: possible, last
-    pick = np.random.default_rng(seed).choice(len(V), min(n, len(V)), replace=False,
-                                              p=p / p.sum())  # fmt: skip
+    pick = np.random.default_rng(seed).choice(len(V), min(n, len(V)), replace=False, p=p / p.sum())
     return np.sort(pick).astype(np.int64)
 
 
@@ -201,8 +200,9 @@ class Articulation:
         ``g`` the RMS over the poses of a pair's joint gap, ``σ`` (metres) the gap taken
         for exact. Returns the RMS gaps (k,), metres."""
         self.weights = np.ones(len(self.child))
-        gaps = np.stack([self.residuals(a, b)[: 3 * len(self.child)]
-                         for a, b in zip(c, R, strict=True)])  # fmt: skip
+        gaps = np.stack(
+            [self.residuals(a, b)[: 3 * len(self.child)] for a, b in zip(c, R, strict=True)]
+        )
         g = np.sqrt(np.mean(gaps.reshape(len(c), -1, 3) ** 2, axis=(0, 2)) * 3)
         self.weights = sigma / np.sqrt(sigma**2 + g**2)
         return g
@@ -225,8 +225,7 @@ class Articulation:
         r = np.flatnonzero(self.rigid)
         u = R[q[r]][:, :, :2]  # rigid pairs: the child's u and v where the parent carries them
         v = R[p[r]] @ self.B[r][:, :, :2]
-        e = np.concatenate([((a + c[p]) - (b + c[q])).ravel(),
-                            (u - v).transpose(0, 2, 1).ravel()])  # fmt: skip
+        e = np.concatenate([((a + c[p]) - (b + c[q])).ravel(), (u - v).transpose(0, 2, 1).ravel()])
         w = np.concatenate([np.repeat(self.weights, 3), np.repeat(self.weights[r], 6)])
         if not jacobian:
             return w * e
@@ -309,8 +308,9 @@ class SilhouetteCoverage:
                 rows, cols = rows[pick], cols[pick]
             q = np.stack([cols, rows], axis=1).astype(np.float64)  # (x, y) = (column, row)
             K = np.asarray(cam.K, dtype=np.float64)
-            self.views.append((q, K, np.asarray(cam.R, dtype=np.float64),
-                               np.asarray(cam.t, dtype=np.float64)))  # fmt: skip
+            self.views.append(
+                (q, K, np.asarray(cam.R, dtype=np.float64), np.asarray(cam.t, dtype=np.float64))
+            )
         self.margin, self.cap = float(margin), float(cap)
         self.n = sum(len(v[0]) for v in self.views)
 
@@ -347,8 +347,9 @@ class SilhouetteCoverage:
             dX = np.concatenate([e, dz[:, None]], axis=1)
             u = (dX @ R) * rho[:, None]  # ρ ∂ρ/∂P, world frame
             rr += np.bincount(i, rho * rho, minlength=n)
-            g += np.bincount((3 * i[:, None] + np.arange(3)).ravel(), u.ravel(),
-                             minlength=3 * n).reshape(n, 3)  # fmt: skip
+            g += np.bincount(
+                (3 * i[:, None] + np.arange(3)).ravel(), u.ravel(), minlength=3 * n
+            ).reshape(n, 3)
         r = np.sqrt(rr)
         return r, g / np.where(r > 0, r, np.inf)[:, None]
 

@@ -12,10 +12,14 @@ from meshmocap.body.oqr import QUAD_NAMES
 from meshmocap.geometry.rotations import cross, so3_exp
 
 #: The limbs (their quads) and the trunk quad (pelvis 0, chest 2) each hangs from.
-LIMBS = tuple((QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") for q in qs]))
-               for b, qs in (("chest", ("shoulder", "elbow", "wrist", "hand")),
-                             ("pelvis", ("hip", "knee", "ankle", "toe")))
-               for side in ("left", "right"))  # fmt: skip
+LIMBS = tuple(
+    (QUAD_NAMES.index(b), np.array([QUAD_NAMES.index(f"{side}_{q}") for q in qs]))
+    for b, qs in (
+        ("chest", ("shoulder", "elbow", "wrist", "hand")),
+        ("pelvis", ("hip", "knee", "ankle", "toe")),
+    )
+    for side in ("left", "right")
+)
 _DU = np.hstack([np.eye(3), np.zeros((3, 3))]).T.copy()  # the 6 unit directions of (u, v)
 _DV = np.hstack([np.zeros((3, 3)), np.eye(3)]).T.copy()
 
@@ -108,8 +112,12 @@ def rig(y, Rp, cp, quad, loc, derivatives=False):
     Y = y.reshape(-1, 3, 3)
     if derivatives:  # Gram–Schmidt along the 6 unit directions of (u, v) per quad
         n = len(Y)
-        R6, dR = _gs_forward(np.repeat(Y[:, 1], 6, 0), np.repeat(Y[:, 2], 6, 0),
-                             np.tile(_DU, (n, 1)), np.tile(_DV, (n, 1)))  # fmt: skip
+        R6, dR = _gs_forward(
+            np.repeat(Y[:, 1], 6, 0),
+            np.repeat(Y[:, 2], 6, 0),
+            np.tile(_DU, (n, 1)),
+            np.tile(_DV, (n, 1)),
+        )
         R, dR = R6[::6], dR.reshape(n, 6, 3, 3)
     else:
         R = _gs(Y[:, 1], Y[:, 2])

@@ -171,13 +171,22 @@ class CageOptions:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:
             raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
-        if not (self.max_model_error > 0 and self.coverage_weight >= 0 and self.articulation >= 0
-                and self.coverage_margin >= 0 and self.n_coverage >= 1
-                and self.field_spacing > 0 and self.silhouette_weight >= 0
-                and self.silhouette_margin >= 0 and self.n_silhouette >= 1
-                and self.outside_margin >= 0 and self.off_manifold >= 0
-                and self.outside_cap >= 0 and self.silhouette_cap >= 0
-                and 0 <= self.silhouette_clean < 1):  # fmt: skip
+        if not (
+            self.max_model_error > 0
+            and self.coverage_weight >= 0
+            and self.articulation >= 0
+            and self.coverage_margin >= 0
+            and self.n_coverage >= 1
+            and self.field_spacing > 0
+            and self.silhouette_weight >= 0
+            and self.silhouette_margin >= 0
+            and self.n_silhouette >= 1
+            and self.outside_margin >= 0
+            and self.off_manifold >= 0
+            and self.outside_cap >= 0
+            and self.silhouette_cap >= 0
+            and 0 <= self.silhouette_clean < 1
+        ):
             raise InputError(
                 "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
                 "coverage_margin, silhouette_weight, silhouette_margin, silhouette_cap, "

@@ -100,8 +100,9 @@ class GreenSurface:
         for g in G:
             n = len(g)
             W = self.deform.pointwise_vjp(cage, g).transpose(1, 2, 0)  # (85, 3, n)
-            Jq = np.matmul(M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1),
-                           W[slots].reshape(nq, 3 * k, n))  # fmt: skip
+            Jq = np.matmul(
+                M6.reshape(nq, 3 * k, 6).transpose(0, 2, 1), W[slots].reshape(nq, 3 * k, n)
+            )
             out.append(Jq.reshape(6 * nq, n))
         return np.concatenate(out, axis=1)
 
@@ -197,8 +198,12 @@ class SkinnedSurface:
         D = dy.reshape(-1, 3, 3, k)  # (20, (c, a, b), 3, k)
         a = np.repeat(Y[:, 1], k, 0)
         b = np.repeat(Y[:, 2], k, 0)
-        R, dR = _gs_forward(a, b, D[:, 1].transpose(0, 2, 1).reshape(-1, 3),
-                            D[:, 2].transpose(0, 2, 1).reshape(-1, 3))  # fmt: skip
+        R, dR = _gs_forward(
+            a,
+            b,
+            D[:, 1].transpose(0, 2, 1).reshape(-1, 3),
+            D[:, 2].transpose(0, 2, 1).reshape(-1, 3),
+        )
         R, dR = R.reshape(-1, k, 3, 3)[:, 0], dR.reshape(-1, k, 3, 3)
         on = self._pb > 0
         q = self._pb[on] - 1
@@ -221,5 +226,6 @@ class SkinnedSurface:
         vals = np.concatenate([gi @ Rp, cross(arm, gi) @ Rp], axis=2) * w[:, None]
         rows = (np.arange(s)[:, None] * n + i).ravel()  # (s m',)
         idx = ((6 * np.tile(b, s))[:, None] + np.arange(6)) * (s * n) + rows[:, None]
-        return np.bincount(idx.ravel(), vals.reshape(-1, 6).ravel(),
-                           minlength=120 * s * n).reshape(120, s * n)  # fmt: skip
+        return np.bincount(idx.ravel(), vals.reshape(-1, 6).ravel(), minlength=120 * s * n).reshape(
+            120, s * n
+        )

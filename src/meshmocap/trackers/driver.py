@@ -206,8 +206,14 @@ def _carry(
     next real frame is fitted from there)."""
     tracker.set_state(read_state(out, good))
     prev = read_track_frame(out, good)
-    return replace(prev, index=index, seconds=time.perf_counter() - t0, healthy=False,
-                   message=why, flags=(flag,))  # fmt: skip
+    return replace(
+        prev,
+        index=index,
+        seconds=time.perf_counter() - t0,
+        healthy=False,
+        message=why,
+        flags=(flag,),
+    )
 
 
 def _initialise(
@@ -235,14 +241,21 @@ def _initialise(
             skipped.append((index, reason))
             continue
         state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
-        write_frame(out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how,
-                                 state=state))  # fmt: skip
+        write_frame(
+            out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
+        )
         for index, why in skipped:
-            write_frame(out, replace(r, index=index, seconds=0.0, healthy=False, message=why,
-                                     flags=("missing",)))  # fmt: skip
+            write_frame(
+                out,
+                replace(
+                    r, index=index, seconds=0.0, healthy=False, message=why, flags=("missing",)
+                ),
+            )
         return
-    raise InputError(f"track: no frame of {capture.path} has an observation to start from "
-                     f"(frame {skipped[0][0]}: {skipped[0][1]})")  # fmt: skip
+    raise InputError(
+        f"track: no frame of {capture.path} has an observation to start from "
+        f"(frame {skipped[0][0]}: {skipped[0][1]})"
+    )
 
 
 def _truth(frame):
@@ -256,13 +269,17 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
     """One frame's result from a track folder."""
     z = read_frame_arrays(out, index)
     return FrameResult(
-        index=int(z["index"]), joints=z["joints"].astype(np.float64),
+        index=int(z["index"]),
+        joints=z["joints"].astype(np.float64),
         vertices=z["vertices"].astype(np.float64),
         energies={k[7:]: float(v) for k, v in z.items() if k.startswith("energy_")},
-        n_iter=int(z["n_iter"]), seconds=float(z["seconds"]), healthy=bool(z["healthy"]),
-        message=str(z["message"]), flags=frame_flags(z),
+        n_iter=int(z["n_iter"]),
+        seconds=float(z["seconds"]),
+        healthy=bool(z["healthy"]),
+        message=str(z["message"]),
+        flags=frame_flags(z),
         state={k[6:]: v for k, v in z.items() if k.startswith("state_")},
-    )  # fmt: skip
+    )
 
 
 #: Automatic first poses found in this process: (template, capture, frame) → result, so
@@ -296,11 +313,12 @@ def first_pose(
     obs = observed(frame)
     P, N = obs.points
     if len(P) < 50:
-        raise InputError(f"track: frame {frame.index} has {len(P)} observed points; "
-                         "--init auto needs a body to start from")  # fmt: skip
+        raise InputError(
+            f"track: frame {frame.index} has {len(P)} observed points; "
+            "--init auto needs a body to start from"
+        )
     masks = obs.silhouettes if obs.cameras else None
-    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks,
-                       field=obs.field)  # fmt: skip
+    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
     found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
     if key is not None:
         _FOUND[key] = found
@@ -339,8 +357,9 @@ def recovered(
             r = tracker.reseat(frame, recovery.coast_pose(), recovery.root)
             message += f"; {', '.join(held)} held as last seen"
     state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
-    return replace(r, flags=flags, message=message, energies={**r.energies, **q.energies()},
-                   state=state)  # fmt: skip
+    return replace(
+        r, flags=flags, message=message, energies={**r.energies, **q.energies()}, state=state
+    )
 
 
 def _last_pose(out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:

@@ -148,8 +148,11 @@ class PoseManifold:
             )
         if oqr is not None:
             cage = oqr.rest_vertices
-            gap = (float(np.abs(cage - self.rest_cage).max())
-                   if cage.shape == self.rest_cage.shape else np.inf)  # fmt: skip
+            gap = (
+                float(np.abs(cage - self.rest_cage).max())
+                if cage.shape == self.rest_cage.shape
+                else np.inf
+            )
             if gap > CAGE_TOLERANCE:
                 raise InputError(
                     f"{what} was built for another quad rigging of template "
@@ -202,10 +205,17 @@ class PoseManifold:
             if cage.dtype.kind != "f" or cage.shape != (85, 3) or not np.isfinite(cage).all():
                 raise ValueError(f"rest cage must be finite (85, 3) floats, found {cage.shape}")
             n_poses, seconds = d["manifold_stats"].tolist()
-            return cls(gp, str(d["manifold_template"]), str(d["manifold_digest"]),
-                       d["manifold_rest_cage"], d["manifold_trials"], d["manifold_groups"],
-                       tuple(str(s) for s in d["manifold_sources"]), int(n_poses),
-                       float(seconds))  # fmt: skip
+            return cls(
+                gp,
+                str(d["manifold_template"]),
+                str(d["manifold_digest"]),
+                d["manifold_rest_cage"],
+                d["manifold_trials"],
+                d["manifold_groups"],
+                tuple(str(s) for s in d["manifold_sources"]),
+                int(n_poses),
+                float(seconds),
+            )
         except (KeyError, ValueError, TypeError) as e:
             why = f"{type(e).__name__}: {e}".splitlines()[0][:160]
             raise FormatError(f"{path}: corrupt pose manifold ({why})") from None
@@ -265,17 +275,27 @@ def fit_pose_manifold(
         L-BFGS-B iterations at most.
     """
     if poses.template_name != template.name:
-        raise InputError(f"fit_pose_manifold: poses of template {poses.template_name!r}, "
-                         f"expected {template.name!r}")  # fmt: skip
+        raise InputError(
+            f"fit_pose_manifold: poses of template {poses.template_name!r}, "
+            f"expected {template.name!r}"
+        )
     oqr = oqr or build_oqr(template)
     train = poses.subsample(n_samples)
     gp = GPLVM(n_components, back_constraint="rbf", max_iter=max_iter, random_state=random_state)
     t0 = time.perf_counter()
     gp.fit(train.configurations)
     seconds = time.perf_counter() - t0
-    return PoseManifold(gp, template.name, template_digest(template),
-                        np.array(oqr.rest_vertices), train.trials, train.groups, poses.sources,
-                        len(poses), seconds)  # fmt: skip
+    return PoseManifold(
+        gp,
+        template.name,
+        template_digest(template),
+        np.array(oqr.rest_vertices),
+        train.trials,
+        train.groups,
+        poses.sources,
+        len(poses),
+        seconds,
+    )
 
 
 def learn_pose_manifold(
@@ -294,9 +314,15 @@ def learn_pose_manifold(
     (:func:`fit_pose_manifold`)."""
     oqr = oqr or build_oqr(template)
     poses = load_pose_sources(list(sources), template, oqr=oqr, asf=asf)
-    return fit_pose_manifold(poses, template, oqr=oqr, n_components=n_components,
-                             n_samples=n_samples, random_state=random_state,
-                             max_iter=max_iter)  # fmt: skip
+    return fit_pose_manifold(
+        poses,
+        template,
+        oqr=oqr,
+        n_components=n_components,
+        n_samples=n_samples,
+        random_state=random_state,
+        max_iter=max_iter,
+    )
 
 
 def resolve_manifold(
@@ -344,8 +370,10 @@ def resolve_manifold(
         pm = PoseManifold.load(manifold)
         pm.check(template, oqr, source=manifold)
         return pm
-    raise InputError(f"cage: manifold must be a GPLVM, PoseManifold, path or None, "
-                     f"found {type(manifold).__name__}")  # fmt: skip
+    raise InputError(
+        f"cage: manifold must be a GPLVM, PoseManifold, path or None, "
+        f"found {type(manifold).__name__}"
+    )
 
 
 def _cache_dir() -> Path | None:
@@ -367,8 +395,15 @@ def default_manifold_path(template: Template) -> Path | None:
     if folder is None:
         return None
     h = hashlib.sha256()
-    parts = (MANIFOLD_FORMAT, template_digest(template), load_pose_library().digest,
-             *DEFAULT_SOURCES, DEFAULT_COMPONENTS, DEFAULT_POSES, ON_THE_FLY_MAX_ITER)  # fmt: skip
+    parts = (
+        MANIFOLD_FORMAT,
+        template_digest(template),
+        load_pose_library().digest,
+        *DEFAULT_SOURCES,
+        DEFAULT_COMPONENTS,
+        DEFAULT_POSES,
+        ON_THE_FLY_MAX_ITER,
+    )
     for part in parts:
         h.update(f"{part}\0".encode())
     return folder / f"manifold-{template.name}-{h.hexdigest()[:16]}.npz"
@@ -387,14 +422,27 @@ def default_manifold(template: Template, oqr: OQR | None = None) -> PoseManifold
             pm.check(template, oqr, source=path)
             return pm
         except (FormatError, InputError) as e:
-            log.warning("cage: cached default manifold %s unusable (%s); learning it again",
-                        path, str(e).splitlines()[0][:120])  # fmt: skip
-    pm = learn_pose_manifold(template, DEFAULT_SOURCES, n_components=DEFAULT_COMPONENTS,
-                             n_samples=DEFAULT_POSES, oqr=oqr,
-                             max_iter=ON_THE_FLY_MAX_ITER)  # fmt: skip
-    log.info("cage: no manifold given; learned a %d-D one from %s on %r (%d poses, %.1f s "
-             "fit)", pm.n_components, "+".join(DEFAULT_SOURCES), template.name, pm.n_samples,
-             pm.fit_seconds)  # fmt: skip
+            log.warning(
+                "cage: cached default manifold %s unusable (%s); learning it again",
+                path,
+                str(e).splitlines()[0][:120],
+            )
+    pm = learn_pose_manifold(
+        template,
+        DEFAULT_SOURCES,
+        n_components=DEFAULT_COMPONENTS,
+        n_samples=DEFAULT_POSES,
+        oqr=oqr,
+        max_iter=ON_THE_FLY_MAX_ITER,
+    )
+    log.info(
+        "cage: no manifold given; learned a %d-D one from %s on %r (%d poses, %.1f s fit)",
+        pm.n_components,
+        "+".join(DEFAULT_SOURCES),
+        template.name,
+        pm.n_samples,
+        pm.fit_seconds,
+    )
     if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -208,15 +208,31 @@ class PatchTracker:
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         Rp, cp, Xp = self.prev
-        state = {"R": self.R, "c": self.c, "X": self.X, "sigma": np.float64(self.sigma),
-                 "R_prev": Rp, "c_prev": cp, "X_prev": Xp, "gamma": self.model.gamma,
-                 "delta0": self.model.delta0, "bone_w": self.model.bone_w,
-                 "lengths": self.lengths, "X_prev2": self.X_prev2}  # fmt: skip
+        state = {
+            "R": self.R,
+            "c": self.c,
+            "X": self.X,
+            "sigma": np.float64(self.sigma),
+            "R_prev": Rp,
+            "c_prev": cp,
+            "X_prev": Xp,
+            "gamma": self.model.gamma,
+            "delta0": self.model.delta0,
+            "bone_w": self.model.bone_w,
+            "lengths": self.lengths,
+            "X_prev2": self.X_prev2,
+        }
         if self.logits is not None:
             state["clf_coef"], state["clf_intercept"] = self.logits
         V = self.vertices()
-        return FrameResult(index=index, joints=self.joints(V), vertices=V,
-                           energies=energies, n_iter=n_iter, state=state)  # fmt: skip
+        return FrameResult(
+            index=index,
+            joints=self.joints(V),
+            vertices=V,
+            energies=energies,
+            n_iter=n_iter,
+            state=state,
+        )
 
     def joints(self, V: np.ndarray) -> np.ndarray:
         """The reported joints (K, 3) for the output mesh ``V`` (n, 3): the skeleton's, or
@@ -227,8 +243,9 @@ class PatchTracker:
         w = self.surface_weight[:, None]
         # unheld, the read-out lets the spine chord wobble (pelvis→thorax length std 13 mm
         # on CMU 01_01, 5 mm in truth); holding the lengths also lowers the joint error
-        return _held_lengths((1.0 - w) * self.X + w * (self.regressor @ V), self.pairs,
-                             self.lengths)  # fmt: skip
+        return _held_lengths(
+            (1.0 - w) * self.X + w * (self.regressor @ V), self.pairs, self.lengths
+        )
 
     # ------------------------------------------------------------------ geometry
     def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
@@ -277,9 +294,14 @@ class PatchTracker:
         if o.classifier == "logistic":
             self.logits = (clf.coef_, clf.intercept_)
         part = partition(
-            clf, V, on_bone=o.on_bone, outlier=o.outlier, keep_fraction=o.keep_fraction,
-            max_distance=o.max_distance, random_state=rng.integers(1 << 31),
-        )  # fmt: skip
+            clf,
+            V,
+            on_bone=o.on_bone,
+            outlier=o.outlier,
+            keep_fraction=o.keep_fraction,
+            max_distance=o.max_distance,
+            random_state=rng.integers(1 << 31),
+        )
         keep = part.keep
         self.last_partition = part  # for diagnostics (benchmarks/diag_patch.py)
         if o.part_matching == "none":
@@ -363,15 +385,23 @@ class PatchTracker:
             e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
             e_len = 0.0
             if o.lambda_length > 0:
-                e_len = add_bone_lengths(sys, self.X, self.pairs, self.lengths,
-                                         o.lambda_length / len(self.pairs))  # fmt: skip
+                e_len = add_bone_lengths(
+                    sys, self.X, self.pairs, self.lengths, o.lambda_length / len(self.pairs)
+                )
             e_sil = e_tmp = 0.0
             if rays is not None:
                 s = self.cover_sample
                 qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
-                e_sil, _ = add_silhouette(sys, rays, Vc[s], m.labels[s], qs,
-                                          radius=self.cover_radius, scale=o.silhouette_scale,
-                                          weight=o.lambda_silhouette)  # fmt: skip
+                e_sil, _ = add_silhouette(
+                    sys,
+                    rays,
+                    Vc[s],
+                    m.labels[s],
+                    qs,
+                    radius=self.cover_radius,
+                    scale=o.silhouette_scale,
+                    weight=o.lambda_silhouette,
+                )
             if o.lambda_temporal > 0:
                 K = len(self.X)
                 e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
@@ -387,10 +417,16 @@ class PatchTracker:
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
             self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
-            energies = {"data": e_data / wd, "rigidity": e_rig / m.rig_w.sum(),
-                        "bone": e_bone / m.bone_w.sum(), "sigma": self.sigma,
-                        "length": e_len / max(len(self.pairs), 1), "reverse": e_rev,
-                        "silhouette": e_sil, "temporal": e_tmp}  # fmt: skip
+            energies = {
+                "data": e_data / wd,
+                "rigidity": e_rig / m.rig_w.sum(),
+                "bone": e_bone / m.bone_w.sum(),
+                "sigma": self.sigma,
+                "length": e_len / max(len(self.pairs), 1),
+                "reverse": e_rev,
+                "silhouette": e_sil,
+                "temporal": e_tmp,
+            }
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
             if move < o.tol and n_iter > o.coarse_iter:
@@ -462,11 +498,17 @@ class PatchTracker:
         # classes, on the point's body part (§III-B); posterior against an outlier class
         cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
         i, patch, v, w = assign_kernel(
-            d.astype(np.float64), idx, np.ascontiguousarray(Nc, dtype=np.float64),
-            np.ascontiguousarray(NY, dtype=np.float64), cls, m.labels.astype(np.int64),
-            m.bone_of_patch.astype(np.int64), float(o.normal_cos), self.sigma**2,
+            d.astype(np.float64),
+            idx,
+            np.ascontiguousarray(Nc, dtype=np.float64),
+            np.ascontiguousarray(NY, dtype=np.float64),
+            cls,
+            m.labels.astype(np.int64),
+            m.bone_of_patch.astype(np.int64),
+            float(o.normal_cos),
+            self.sigma**2,
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
-        )  # fmt: skip
+        )
         return patch, v, w, Y[i], NY[i]
 
     def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx):
@@ -537,8 +579,11 @@ def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
     and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: on
     CMU 05_01 a right hip flipped to the left side, 19 cm off, for 20 frames)."""
     b = np.flatnonzero(ev.parents >= 0)
-    extra = [(ev.names.index(a), ev.names.index(c)) for a, c in RIGID_PAIRS
-             if a in ev.names and c in ev.names]  # fmt: skip
+    extra = [
+        (ev.names.index(a), ev.names.index(c))
+        for a, c in RIGID_PAIRS
+        if a in ev.names and c in ev.names
+    ]
     return np.vstack([np.stack([b, ev.parents[b]], 1), np.reshape(extra, (-1, 2))]).astype(int)
 
 

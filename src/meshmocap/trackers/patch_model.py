@@ -141,11 +141,27 @@ def build_patch_model(
     cross = (j[rig_k] != j[rig_l]) | (child[rig_k] != child[rig_l])
     rig_w = np.where(cross, joint_rigidity * rig_w, rig_w)
     return PatchModel(
-        V0=V0, N0=vertex_normals(V0, F), F=F, labels=labels, P=P, centres0=centres0,
-        pairs=pairs, rig_v=rig_v, rig_k=rig_k, rig_l=rig_l, rig_w=rig_w,
-        bone_of_patch=bone_of_patch, classes=np.asarray(classes), vertex_class=vertex_class,
-        bone_j=j, bone_child=child, gamma=gamma, delta0=delta0, bone_w=bone_w, blend=blend,
-    )  # fmt: skip
+        V0=V0,
+        N0=vertex_normals(V0, F),
+        F=F,
+        labels=labels,
+        P=P,
+        centres0=centres0,
+        pairs=pairs,
+        rig_v=rig_v,
+        rig_k=rig_k,
+        rig_l=rig_l,
+        rig_w=rig_w,
+        bone_of_patch=bone_of_patch,
+        classes=np.asarray(classes),
+        vertex_class=vertex_class,
+        bone_j=j,
+        bone_child=child,
+        gamma=gamma,
+        delta0=delta0,
+        bone_w=bone_w,
+        blend=blend,
+    )
 
 
 def _ranges(n: np.ndarray) -> np.ndarray:

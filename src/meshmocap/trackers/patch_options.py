@@ -224,9 +224,13 @@ class PatchOptions:
         for name in ("lambda_silhouette", "lambda_temporal", "accel_gate", "interior_scale"):
             if not getattr(self, name) >= 0:  # also rejects NaN
                 raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
-        for name, unit in (("outlier_sigmas", ""), ("fast_motion", " metres"),
-                           ("reverse_cap", " metres"), ("reverse_scale", " metres"),
-                           ("silhouette_scale", " metres")):  # fmt: skip
+        for name, unit in (
+            ("outlier_sigmas", ""),
+            ("fast_motion", " metres"),
+            ("reverse_cap", " metres"),
+            ("reverse_scale", " metres"),
+            ("silhouette_scale", " metres"),
+        ):
             if not getattr(self, name) > 0:  # also rejects NaN
                 raise InputError(
                     f"PatchOptions: {name} must be > 0{unit}, found {getattr(self, name)}"

@@ -129,8 +129,9 @@ def normal_pattern(model: PatchModel, n_joints: int) -> Pattern:
     # fill-reducing order: SuperLU's minimum degree on the structure (values only need to
     # keep the diagonal pivots safe); lu.perm_c sends unknown i to position perm_c[i]
     S = sp.csc_matrix((np.where(rows == cols, float(n), 1.0), (rows, cols)), shape=(n, n))
-    lu = spla.splu(S, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                   options={"SymmetricMode": True})  # fmt: skip
+    lu = spla.splu(
+        S, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
     order = np.argsort(lu.perm_c)
     inv = lu.perm_c
     r, c = inv[rows], inv[cols]
@@ -160,8 +161,14 @@ class System:
         P, K = pattern.n_patches, pattern.n_joints
         E = len(pattern.pairs)
         zeros = np.zeros
-        return cls(pattern, zeros((P, 6, 6)), zeros((E, 6, 6)), zeros((P, 2, 6, 3)),
-                   zeros((3 * K, 3 * K)), zeros(pattern.n))  # fmt: skip
+        return cls(
+            pattern,
+            zeros((P, 6, 6)),
+            zeros((E, 6, 6)),
+            zeros((P, 2, 6, 3)),
+            zeros((3 * K, 3 * K)),
+            zeros(pattern.n),
+        )
 
     @property
     def n(self) -> int:
@@ -198,9 +205,16 @@ class System:
 
     def _damped(self, damping: float) -> np.ndarray:
         """Stored entries of ``H + μ diag(H) + ε I`` in the pattern's order (see :meth:`solve`)."""
-        vals = np.concatenate([self.D.ravel(), self.O.ravel(), np.swapaxes(self.O, 1, 2).ravel(),
-                               self.PJ.ravel(), np.swapaxes(self.PJ, 2, 3).ravel(),
-                               self.JJ.ravel()])  # fmt: skip
+        vals = np.concatenate(
+            [
+                self.D.ravel(),
+                self.O.ravel(),
+                np.swapaxes(self.O, 1, 2).ravel(),
+                self.PJ.ravel(),
+                np.swapaxes(self.PJ, 2, 3).ravel(),
+                self.JJ.ravel(),
+            ]
+        )
         data = vals[self.pattern.gather]
         d = data[self.pattern.diag]
         floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
@@ -227,8 +241,9 @@ class System:
         # on the pattern's minimum-degree order, is a sparse Cholesky in all but name —
         # 2-3x faster here than the block-Jacobi conjugate gradients it replaced, and exact.
         try:
-            lu = spla.splu(H, permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                           options={"SymmetricMode": True})  # fmt: skip
+            lu = spla.splu(
+                H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+            )
         except RuntimeError as exc:  # "Factor is exactly singular": the driver flags the frame
             raise FloatingPointError(f"singular normal equations ({exc})") from None
         delta = np.empty(self.n)
@@ -278,10 +293,12 @@ def group_basis(groups: np.ndarray, c: np.ndarray, n_joints: int) -> sp.csr_matr
     j = np.arange(3 * n_joints)
     rows.append(6 * P + j), cols.append(6 * G + j), vals.append(np.ones(3 * n_joints))
     return sp.csr_matrix(
-        (np.concatenate([v.ravel() for v in vals]),
-         (np.concatenate([x.ravel() for x in rows]), np.concatenate([x.ravel() for x in cols]))),
+        (
+            np.concatenate([v.ravel() for v in vals]),
+            (np.concatenate([x.ravel() for x in rows]), np.concatenate([x.ravel() for x in cols])),
+        ),
         shape=(n, r),
-    )  # fmt: skip
+    )
 
 
 #: Upper-triangle indices of a 3×3 matrix (``np.triu_indices`` costs 0.2 ms a call).

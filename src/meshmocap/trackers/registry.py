@@ -111,8 +111,9 @@ def make_tracker(
         raise InputError(f"track: method must be one of {sorted(METHODS)}, found {method!r}")
     module, cls, opts_cls, fixed = METHODS[method]
     if manifold is not None and method not in MANIFOLD_METHODS:
-        raise InputError(f"track: a manifold is only used by {list(MANIFOLD_METHODS)}, "
-                         f"not {method!r}")  # fmt: skip
+        raise InputError(
+            f"track: a manifold is only used by {list(MANIFOLD_METHODS)}, not {method!r}"
+        )
     mod = importlib.import_module(module)
     try:
         opts = getattr(mod, opts_cls)(**{**options, **fixed})

@@ -124,8 +124,9 @@ def read_cage_track(
         raise MeshmocapFileNotFoundError(f"track: {path} has no track.json")
     meta = json.loads(meta_path.read_text())
     if meta.get("method") != "cage":
-        raise InputError(f"{path}: motion transfer needs a cage track, found method "
-                         f"{meta.get('method')!r}")  # fmt: skip
+        raise InputError(
+            f"{path}: motion transfer needs a cage track, found method {meta.get('method')!r}"
+        )
     name = str(meta.get("template"))
     if template is None:
         template = tracked_template(path, meta)
@@ -145,18 +146,28 @@ def read_cage_track(
         if "cage" in s:
             cage = np.asarray(s["cage"], dtype=np.float64)
             if cage.shape != oqr.rest_vertices.shape:
-                raise FormatError(f"{path}: frame {i} cage has shape {cage.shape}, expected "
-                                  f"{oqr.rest_vertices.shape}")  # fmt: skip
+                raise FormatError(
+                    f"{path}: frame {i} cage has shape {cage.shape}, expected "
+                    f"{oqr.rest_vertices.shape}"
+                )
             if rebuilt is not None and np.abs(rebuilt - cage).max() > 1e-6:
-                raise InputError(f"{path}: frame {i} cage does not follow the quad rigging of "
-                                 f"template {name!r} (tracked with another rigging?)")  # fmt: skip
+                raise InputError(
+                    f"{path}: frame {i} cage does not follow the quad rigging of "
+                    f"template {name!r} (tracked with another rigging?)"
+                )
         elif rebuilt is not None:
             cage = rebuilt
         else:
             raise FormatError(f"{path}: frame {i} stores neither its cage nor its quads")
         cages.append(cage)
-    return CageTrack(path, template, np.array(frames, dtype=np.int64), np.stack(cages),
-                     np.array(oqr.rest_vertices), np.array(oqr.faces))  # fmt: skip
+    return CageTrack(
+        path,
+        template,
+        np.array(frames, dtype=np.int64),
+        np.stack(cages),
+        np.array(oqr.rest_vertices),
+        np.array(oqr.faces),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -239,8 +250,9 @@ def outside_distances(
     for start in range(0, len(idx), 2048):
         p = points[idx[start : start + 2048]]
         pp = np.repeat(p, nf, axis=0)
-        Q = closest_points_on_triangles(pp, np.tile(A, (len(p), 1)), np.tile(B, (len(p), 1)),
-                                        np.tile(C, (len(p), 1)))  # fmt: skip
+        Q = closest_points_on_triangles(
+            pp, np.tile(A, (len(p), 1)), np.tile(B, (len(p), 1)), np.tile(C, (len(p), 1))
+        )
         d[idx[start : start + 2048]] = np.linalg.norm(pp - Q, axis=1).reshape(-1, nf).min(1)
     return d
 
@@ -256,11 +268,16 @@ def _encode(track: CageTrack, points, fit, outside: Outside, tolerance: float, f
     d = outside_distances(P, track.rest_cage, track.faces, deformer.outside_)
     far = d > tolerance
     if far.any() and outside != "ignore":
-        hint = ("place the body with fit='scale' or 'stretch'" if fit == "none"
-                else "they may deform less smoothly")  # fmt: skip
-        msg = (f"{func}: {int(far.sum())} of {len(P)} vertices lie outside the rest cage by more "
-               f"than {tolerance * 1000:g} mm (up to {d.max() * 1000:.0f} mm) and follow the "
-               f"nearest cage face's extension; {hint}")  # fmt: skip
+        hint = (
+            "place the body with fit='scale' or 'stretch'"
+            if fit == "none"
+            else "they may deform less smoothly"
+        )
+        msg = (
+            f"{func}: {int(far.sum())} of {len(P)} vertices lie outside the rest cage by more "
+            f"than {tolerance * 1000:g} mm (up to {d.max() * 1000:.0f} mm) and follow the "
+            f"nearest cage face's extension; {hint}"
+        )
         if outside == "raise":
             raise InputError(msg)
         warnings.warn(msg, MeshmocapWarning, stacklevel=3)
@@ -300,8 +317,9 @@ def transfer_motion(
         vertices up to their float32 storage (< 2e-7 m).
     """
     deformer, _, _ = _encode(track, points, fit, outside, tolerance, "transfer_motion")
-    return np.concatenate([deformer.deform(track.cages[k : k + _CHUNK])
-                           for k in range(0, len(track.cages), _CHUNK)])  # fmt: skip
+    return np.concatenate(
+        [deformer.deform(track.cages[k : k + _CHUNK]) for k in range(0, len(track.cages), _CHUNK)]
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -377,10 +395,17 @@ def write_transfer(
     out.mkdir(parents=True, exist_ok=True)
     h = hashlib.sha256(np.ascontiguousarray(V, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(Fa, dtype=np.int64).tobytes())
-    settings = {"format": TRANSFER_FORMAT, "track": str(track.path.resolve()), "mesh": name,
-                "mesh_digest": h.hexdigest()[:16], "fit": fit if isinstance(fit, str) else
-                {"scale": placement.scale.tolist(), "offset": placement.offset.tolist()},
-                "ext": ext, "frames": track.frames.tolist()}  # fmt: skip
+    settings = {
+        "format": TRANSFER_FORMAT,
+        "track": str(track.path.resolve()),
+        "mesh": name,
+        "mesh_digest": h.hexdigest()[:16],
+        "fit": fit
+        if isinstance(fit, str)
+        else {"scale": placement.scale.tolist(), "offset": placement.offset.tolist()},
+        "ext": ext,
+        "frames": track.frames.tolist(),
+    }
     if animated:
         settings["fps"] = float(fps)
     meta = out / "transfer.json"
@@ -391,8 +416,10 @@ def write_transfer(
     )
     if meta.is_file() and resume:
         if json.loads(meta.read_text()) != json.loads(json.dumps(settings)):
-            raise FormatError(f"{meta}: holds a transfer made with other settings; use another "
-                              "folder or start over")  # fmt: skip
+            raise FormatError(
+                f"{meta}: holds a transfer made with other settings; use another "
+                "folder or start over"
+            )
     else:
         for p in out.glob(f"transfer{ext}" if animated else f"frame_*{ext}"):
             p.unlink()
@@ -407,12 +434,26 @@ def write_transfer(
             times = (track.frames - track.frames[0]) / fps
             write_gltf(files[0], morph_gltf(X, Fa, times, name=Path(name).stem or "mesh"))
             written, skipped = T, 0
-        return TransferResult(out, tuple(files), written, skipped, placement,
-                              int(deformer.outside_.sum()), float(d.max()))  # fmt: skip
+        return TransferResult(
+            out,
+            tuple(files),
+            written,
+            skipped,
+            placement,
+            int(deformer.outside_.sum()),
+            float(d.max()),
+        )
     todo = [k for k, p in enumerate(files) if not p.is_file()]
     for start in range(0, len(todo), _CHUNK):
         ks = todo[start : start + _CHUNK]
         for k, X in zip(ks, deformer.deform(track.cages[ks]), strict=True):
             write_mesh(files[k], X, Fa)
-    return TransferResult(out, tuple(files), len(todo), len(files) - len(todo), placement,
-                          int(deformer.outside_.sum()), float(d.max()))  # fmt: skip
+    return TransferResult(
+        out,
+        tuple(files),
+        len(todo),
+        len(files) - len(todo),
+        placement,
+        int(deformer.outside_.sum()),
+        float(d.max()),
+    )
