@@ -19,7 +19,7 @@ view at the end of both clips) are skipped by ``evaluate``; the counts are print
 
 Speed: seconds per frame of the tracker's ``step`` (the driver's timer; frame 0, the
 initialisation, left out) and the tracker's own stage breakdown
-(:attr:`~meshmocap.trackers.cage.CageTracker.stage_seconds`): distance field (hull read,
+(:attr:`~meshmocap.trackers.cage.tracker.CageTracker.stage_seconds`): distance field (hull read,
 lazy distance grid), pose steps, latent shape steps (with the restarts), local adjustment,
 output deformation (every vertex and the joints). The speed table tracks a 60-frame
 procedural walk with the 12k-vertex ``neutral`` and the 5k ``neutral_5k`` templates.
@@ -42,9 +42,9 @@ import numpy as np
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.bench_captures import make_capture, parse_capture
 from meshmocap.body.template import load_template
-from meshmocap.trackers.cage import STAGES
+from meshmocap.trackers.cage.manifold import PoseManifold, learn_pose_manifold
+from meshmocap.trackers.cage.tracker import STAGES
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.manifold import PoseManifold, learn_pose_manifold
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

@@ -31,7 +31,7 @@ each frame's tracked cage (saved with the frame) deforms it; those positions are
 compared with the truth. Full-resolution vertices outside the rest cage (the decimated
 surface lies within 3.4 mm of the full one; the cage encloses it 4 mm deep) would follow
 the exterior continuation of :mod:`meshmocap.geometry.green`; their number is printed.
-Where :func:`~meshmocap.body.oqr.build_oqr` fails on the template, the row says why.
+Where :func:`~meshmocap.trackers.cage.oqr.build_oqr` fails on the template, the row says why.
 
 Run: ``python benchmarks/bench_crane.py [--frames 175] [--methods patch cage ...]
 [--work /tmp/meshmocap-crane]``. Captures, rigged templates, the manifold and tracks are
@@ -54,23 +54,23 @@ from pykdtree.kdtree import KDTree
 from meshmocap.analysis.metrics import correspondence_error
 from meshmocap.apps.bench import code_digest
 from meshmocap.body.autorig import fit_sequence, rig_mesh
-from meshmocap.body.cage import winding_numbers
-from meshmocap.body.oqr import (
+from meshmocap.body.template import Template, load_template, save_template
+from meshmocap.errors import MeshError
+from meshmocap.geometry.green import GreenDeformer
+from meshmocap.io.meshes import MeshSequence
+from meshmocap.io.results import read_state
+from meshmocap.studio.synth import synthesize_from_meshes
+from meshmocap.trackers.cage.cage_mesh import winding_numbers
+from meshmocap.trackers.cage.manifold import PoseManifold, fit_pose_manifold, template_digest
+from meshmocap.trackers.cage.oqr import (
     OQR,
     build_oqr,
     cage_vertices,
     configuration_vector,
     quads_from_pose,
 )
-from meshmocap.body.template import Template, load_template, save_template
-from meshmocap.errors import MeshError
-from meshmocap.geometry.green import GreenDeformer
-from meshmocap.io.meshes import MeshSequence
-from meshmocap.io.pose_data import PoseSet
-from meshmocap.io.results import read_state
-from meshmocap.studio.synth import synthesize_from_meshes
+from meshmocap.trackers.cage.training_poses import PoseSet
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold, template_digest
 from meshmocap.trackers.registry import make_tracker
 
 CRANE = (

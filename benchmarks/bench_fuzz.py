@@ -28,10 +28,10 @@ from fuzzing import Defect, loaders, manifold_loader, run_one
 
 
 def _manifold(work: Path) -> Path:
-    from meshmocap.body.oqr import build_oqr
     from meshmocap.body.template import load_template
-    from meshmocap.io.pose_data import load_pose_sources
-    from meshmocap.trackers.manifold import fit_pose_manifold
+    from meshmocap.trackers.cage.manifold import fit_pose_manifold
+    from meshmocap.trackers.cage.oqr import build_oqr
+    from meshmocap.trackers.cage.training_poses import load_pose_sources
 
     t = load_template("neutral_5k")
     oqr = build_oqr(t)

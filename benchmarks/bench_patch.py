@@ -13,7 +13,7 @@ Speed (``--speed``): a 60-frame procedural walk (``humaneva4``) tracked by ``pat
 the ~5k-vertex ``neutral_5k`` and the ~12k-vertex ``neutral`` templates, ``--repeats``
 runs each: seconds per frame of the tracker's ``step`` (the driver's timer; frame 0, the
 initialisation, left out; hull files are read inside ``step``) and the tracker's stage
-breakdown (:data:`meshmocap.trackers.patch.STAGES`) of the fastest run. Wall clock on a
+breakdown (:data:`meshmocap.trackers.patch.tracker.STAGES`) of the fastest run. Wall clock on a
 shared machine: the load average is printed with it.
 
 Run: ``python benchmarks/bench_patch.py [--clips 05_01 09_01 01_01] [--methods patch ...]
@@ -37,7 +37,7 @@ from meshmocap.apps.bench_captures import CMU_CLIPS, make_capture, parse_capture
 from meshmocap.apps.bench_report import markdown_table
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.patch import STAGES, PatchOptions, PatchTracker
+from meshmocap.trackers.patch.tracker import STAGES, PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

@@ -40,8 +40,8 @@ from meshmocap.body.template import load_template
 from meshmocap.geometry.proximity import point_to_surface
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.patch import BONE_SCALE, RIGIDITY_SCALE, PatchOptions, PatchTracker
-from meshmocap.trackers.patch_solver import System, add_bone, add_point_terms, add_rigidity
+from meshmocap.trackers.patch.solver import System, add_bone, add_point_terms, add_rigidity
+from meshmocap.trackers.patch.tracker import BONE_SCALE, RIGIDITY_SCALE, PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

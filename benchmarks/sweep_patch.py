@@ -68,7 +68,7 @@ from meshmocap.body.template import load_template
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.patch import PatchOptions, PatchTracker
+from meshmocap.trackers.patch.tracker import PatchOptions, PatchTracker
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

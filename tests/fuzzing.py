@@ -7,7 +7,7 @@ Each loader gets a few seed files (valid, small) and reads byte-level mutations 
 loader either returns a well-formed result (finite numbers, indices in range) or raises one
 of meshmocap's own errors (:class:`~meshmocap.errors.MeshmocapError`) — anything else (a
 ``KeyError``, ``zipfile.BadZipFile``, a NumPy warning turned error, a ``MemoryError``) is a
-defect. Used by ``tests/test_fuzz_loaders.py`` (a few hundred examples) and by
+defect. Used by ``tests/io/test_fuzz_loaders.py`` (a few hundred examples) and by
 ``benchmarks/bench_fuzz.py`` (≥ 10,000).
 """
 
@@ -515,7 +515,7 @@ def _result_loaders(workdir: Path) -> list[Loader]:
 
 def manifold_loader(path: Path) -> Loader:
     """The pose-manifold loader, seeded with the manifold file at ``path`` (slow to make)."""
-    from meshmocap.trackers.manifold import PoseManifold
+    from meshmocap.trackers.cage.manifold import PoseManifold
 
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}

@@ -1,4 +1,5 @@
-"""Check the package's architecture: imports point down the layers, no import cycle, small modules.
+"""Check the package's architecture: imports point down the layers, no import cycle, a
+method package never imports another, no private name crosses a module boundary.
 
 Walks ``src/meshmocap`` with :mod:`ast` (nothing is imported) and reports:
 
@@ -6,10 +7,16 @@ Walks ``src/meshmocap`` with :mod:`ast` (nothing is imported) and reports:
 * import cycles between files and between packages (strongly connected components of the
   import graph, with ``TYPE_CHECKING`` and function-level imports counted: a cycle hidden
   in a function is still a knot);
-* modules over ``MAX_LINES`` lines.
+* imports between method packages (the sub-packages of ``trackers``: ``trackers/patch/``,
+  ``trackers/cage/``): each method is whole in its folder, and shares only what lies in
+  the layers below;
+* a private name (``_name``) imported from another module: what a module shares, it names
+  publicly.
+
+A module is as long as its one concept needs: there is no line limit.
 
 Usage: ``python tools/check_architecture.py [SRC]``; exit status 1 when anything is found.
-The test suite runs the same check (``tests/test_architecture.py``).
+The test suite runs the same check (``tests/tools/test_check_architecture.py``).
 """
 
 from __future__ import annotations
@@ -35,7 +42,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("apps",),
     ("cli",),
 )
-MAX_LINES = 600
+#: The package whose sub-packages are methods (one folder each, never importing a sibling).
+METHODS_PACKAGE = "meshmocap.trackers"
 
 
 @dataclass(frozen=True)
@@ -45,11 +53,18 @@ class Report:
     upward: list[str]
     file_cycles: list[list[str]]
     package_cycles: list[list[str]]
-    long_modules: list[str]
+    sibling_methods: list[str]
+    private_imports: list[str]
 
     @property
     def ok(self) -> bool:
-        return not (self.upward or self.file_cycles or self.package_cycles or self.long_modules)
+        return not (
+            self.upward
+            or self.file_cycles
+            or self.package_cycles
+            or self.sibling_methods
+            or self.private_imports
+        )
 
 
 def module_name(path: Path, src: Path) -> str:
@@ -85,6 +100,37 @@ def imports(path: Path, name: str, known: set[str]) -> set[str]:
             if target and target != name and target.count(".") >= 1:
                 found.add(target)
     return found
+
+
+def private_imports(path: Path, name: str, known: set[str]) -> list[str]:
+    """``from M import _x`` in the file at ``path`` (module ``name``), ``M`` another module of
+    ``known``: one line each."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    is_package = path.name == "__init__.py"
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        if node.level:
+            base = name.split(".")
+            keep = len(base) - node.level + (1 if is_package else 0)
+            module = ".".join(base[:keep] + ([node.module] if node.module else []))
+        else:
+            module = node.module or ""
+        if module not in known or module == name:
+            continue
+        for alias in node.names:
+            if alias.name.startswith("_") and not alias.name.startswith("__"):
+                found.append(f"{name} imports {alias.name} from {module}")
+    return found
+
+
+def method_package(module: str, packages: set[str]) -> str | None:
+    """The method package (a sub-package of :data:`METHODS_PACKAGE`) that holds ``module``."""
+    for pkg in packages:
+        if module == pkg or module.startswith(pkg + "."):
+            return pkg
+    return None
 
 
 def unit(module: str) -> str:
@@ -160,12 +206,22 @@ def check(src: Path) -> Report:
     packages: dict[str, set[str]] = defaultdict(set)
     for name, targets in graph.items():
         packages[unit(name)] |= {unit(t) for t in targets} - {unit(name)}
-    long_modules = []
-    for name, path in files.items():
-        n = len(path.read_text(encoding="utf-8").splitlines())
-        if n > MAX_LINES:
-            long_modules.append(f"{name}: {n} lines (at most {MAX_LINES})")
-    return Report(upward, cycles(graph), cycles(dict(packages)), long_modules)
+
+    methods = {
+        name
+        for name, path in files.items()
+        if path.name == "__init__.py" and name.rpartition(".")[0] == METHODS_PACKAGE
+    }
+    sibling = []
+    for name in sorted(graph):
+        own = method_package(name, methods)
+        for target in sorted(graph[name]):
+            other = method_package(target, methods)
+            if own and other and other != own:
+                sibling.append(f"{name} imports {target} (method {other} from method {own})")
+
+    private = [line for name, path in files.items() for line in private_imports(path, name, known)]
+    return Report(upward, cycles(graph), cycles(dict(packages)), sibling, sorted(private))
 
 
 def main(argv: list[str]) -> int:
@@ -177,12 +233,14 @@ def main(argv: list[str]) -> int:
         print("file cycle:", " <-> ".join(c))
     for c in report.package_cycles:
         print("package cycle:", " <-> ".join(c))
-    for line in report.long_modules:
-        print("long module:", line)
+    for line in report.sibling_methods:
+        print("method imports method:", line)
+    for line in report.private_imports:
+        print("private import:", line)
     if report.ok:
         print(
-            f"ok: {len(LAYERS)} layers, imports point down, no cycle, no module over "
-            f"{MAX_LINES} lines"
+            f"ok: {len(LAYERS)} layers, imports point down, no cycle, methods apart, "
+            "no private name imported across modules"
         )
     return 0 if report.ok else 1
 

@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from meshmocap.body.template import load_template
-from meshmocap.trackers.manifold import learn_pose_manifold
+from meshmocap.trackers.cage.manifold import learn_pose_manifold
 
 template = load_template("neutral_5k")
 manifold = learn_pose_manifold(template, ["walk", "jog"], n_samples=80, max_iter=500)

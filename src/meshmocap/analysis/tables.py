@@ -77,7 +77,7 @@ def _counts(r: JointErrors | CorrespondenceErrors) -> str:
     return f"{len(r.frames)} frames, {len(r.failed)} failed, {len(r.skipped)} skipped"
 
 
-def _summary(r: Result) -> tuple[str, list[str], list[list[object]], float]:
+def summary_table(r: Result) -> tuple[str, list[str], list[list[object]], float]:
     """Return (title, headers, rows, display scale) of a result's summary in CSV units."""
     if isinstance(r, JointErrors):
         rows = [_stats_row(n, s) for n, s in zip(r.names, r.per_joint, strict=True)]
@@ -118,7 +118,7 @@ def table(result: Result, *, digits: int = 1) -> str:
     Joint, vertex and bone values in millimetres, surface distances in millimetres,
     silhouette errors in percent; ``digits`` decimals.
     """
-    title, headers, rows, scale = _summary(result)
+    title, headers, rows, scale = summary_table(result)
     shown = [[x * scale if isinstance(x, float) else x for x in row] for row in rows]
     unit = "%" if scale == 100.0 else "mm"
     heads = [h.rsplit("_", 1)[0] if h.endswith(("_mm", "_m", "_ratio")) else h for h in headers]
@@ -168,7 +168,7 @@ def write_csv(path: str | os.PathLike, result: Result, *, per_frame: bool = Fals
     if per_frame:
         headers, rows = _per_frame(result)
     else:
-        _, headers, rows, _ = _summary(result)
+        _, headers, rows, _ = summary_table(result)
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(headers)

@@ -23,7 +23,7 @@ Captures are named ``BASE[+VARIANT...]``, e.g. ``walk``, ``walk+ring8+degraded``
   tracked with frame 0's true mesh rigged by :func:`~meshmocap.body.autorig.rig_mesh` as
   template, started from that template's own pose, the cage methods with a manifold of 16
   poses fitted to the sequence (:func:`mesh_manifold`; not applicable where
-  :func:`~meshmocap.body.oqr.build_oqr` fails on the rigged frame);
+  :func:`~meshmocap.trackers.cage.oqr.build_oqr` fails on the rigged frame);
 * VARIANT: a rig (``humaneva4``, the default, or ``ring8``), ``degraded`` silhouettes
   (:data:`DEGRADED`) or another subject body (``heavy_male``, ``small_female``).
 
@@ -83,8 +83,8 @@ from meshmocap.body.template import Template, load_template
 from meshmocap.errors import InputError
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import done_frames
+from meshmocap.trackers.cage.manifold import template_digest
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.manifold import template_digest
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
 _EVAL_CACHE = "bench_eval.json"
@@ -106,12 +106,12 @@ def mesh_manifold(
     skeleton, an ``n_components``-D GPLVM learned; cached as ``work/manifold-<capture>-
     <key>.npz`` (the key: the template, the frames, the settings and the tracking code).
     Returns ``(GPLVM, "")``, or ``(None, why)`` when the template's quad rigging cannot be
-    built (:func:`~meshmocap.body.oqr.build_oqr` fails)."""
+    built (:func:`~meshmocap.trackers.cage.oqr.build_oqr` fails)."""
     from meshmocap.body.autorig import fit_sequence
-    from meshmocap.body.oqr import build_oqr, configuration_vector, quads_from_pose
     from meshmocap.errors import MeshError
-    from meshmocap.io.pose_data import PoseSet
-    from meshmocap.trackers.manifold import PoseManifold, fit_pose_manifold
+    from meshmocap.trackers.cage.manifold import PoseManifold, fit_pose_manifold
+    from meshmocap.trackers.cage.oqr import build_oqr, configuration_vector, quads_from_pose
+    from meshmocap.trackers.cage.training_poses import PoseSet
 
     try:
         oqr = build_oqr(template)
@@ -143,12 +143,12 @@ def bench_manifold(manifold: Any, template: Template, work: str | os.PathLike) -
     """The pose manifold shared by every cage method (:data:`MANIFOLD_METHODS`), resolved
     once and checked against ``template``: ``manifold`` as given (GPLVM, PoseManifold or
     path), or None: learned on the fly as the cage tracker learns it
-    (:func:`~meshmocap.trackers.manifold.resolve_manifold`) and cached as
+    (:func:`~meshmocap.trackers.cage.manifold.resolve_manifold`) and cached as
     ``work/manifold-<template>-<key>.npz`` (the key: the template, the pose library and the
     tracking code).
     Returns the fitted GPLVM."""
     from meshmocap.body.pose_library import load_pose_library
-    from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
+    from meshmocap.trackers.cage.manifold import PoseManifold, resolve_manifold
 
     key = settings_key(template_digest(template), "default manifold", load_pose_library().digest)
     path = Path(work) / f"manifold-{template.name}-{key}.npz"

@@ -22,7 +22,7 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 
 from meshmocap.apps.bench_rows import BenchRow, TradeoffPoint
-from meshmocap.apps.plots import _figure, _save
+from meshmocap.apps.plots import new_figure, save_figure
 
 
 def _methods(rows: Sequence[BenchRow]) -> list[str]:
@@ -41,7 +41,7 @@ def plot_mean_errors(rows: Sequence[BenchRow], path: str | os.PathLike) -> Path:
     bar = its standard deviation over (frame, joint) pairs."""
     captures, methods = list(dict.fromkeys(r.capture for r in rows)), _methods(rows)
     by = {(r.capture, r.method): r for r in rows}
-    fig = _figure(max(6, 0.35 * len(captures) * len(methods) + 2), 4.5)
+    fig = new_figure(max(6, 0.35 * len(captures) * len(methods) + 2), 4.5)
     ax = fig.add_subplot()
     x, width = np.arange(len(captures)), 0.8 / len(methods)
     for i, (m, colour) in enumerate(zip(methods, _colours(len(methods)), strict=True)):
@@ -70,7 +70,7 @@ def plot_mean_errors(rows: Sequence[BenchRow], path: str | os.PathLike) -> Path:
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize="small", ncols=min(4, len(methods)))
     ax.set_title("Mean joint error per method and capture")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_bone_spread(rows: Sequence[BenchRow], path: str | os.PathLike, *, capture: str) -> Path:
@@ -79,7 +79,7 @@ def plot_bone_spread(rows: Sequence[BenchRow], path: str | os.PathLike, *, captu
     rows = [r for r in rows if r.bone_names]
     names = rows[0].bone_names
     rows = [r for r in rows if r.bone_names == names]
-    fig = _figure(max(7, 0.25 * len(names) * len(rows) + 2), 4.5)
+    fig = new_figure(max(7, 0.25 * len(names) * len(rows) + 2), 4.5)
     ax = fig.add_subplot()
     x, width = np.arange(len(names)), 0.8 / len(rows)
     for i, (r, colour) in enumerate(zip(rows, _colours(len(rows)), strict=True)):
@@ -98,12 +98,12 @@ def plot_bone_spread(rows: Sequence[BenchRow], path: str | os.PathLike, *, captu
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize="small", ncols=min(4, len(rows)))
     ax.set_title(f"Bone-length spread (Fig. 6), {capture}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_frame_curves(rows: Sequence[BenchRow], path: str | os.PathLike, *, capture: str) -> Path:
     """Error of every frame (mean over joints, or vertices), one curve per method."""
-    fig = _figure(8, 3.8)
+    fig = new_figure(8, 3.8)
     ax = fig.add_subplot()
     for r, colour in zip(rows, _colours(len(rows)), strict=True):
         ax.plot(
@@ -121,7 +121,7 @@ def plot_frame_curves(rows: Sequence[BenchRow], path: str | os.PathLike, *, capt
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small", ncols=2)
     ax.set_title(f"Error per frame, {capture}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_tradeoff(
@@ -140,7 +140,7 @@ def plot_tradeoff(
     spf = np.array([p.row.seconds_per_frame for p in pts])
     err = np.array([p.row.mean_mm for p in pts])
     sil = np.array([p.row.silhouette_error for p in pts]) * 100
-    fig = _figure(11, 4.2)
+    fig = new_figure(11, 4.2)
     ax, bx = fig.subplots(1, 2)
     ax.plot(spf, err, "-o", color="tab:red", label="patch (classifier)")
     for xi, yi, fi in zip(spf, err, f, strict=True):
@@ -171,4 +171,4 @@ def plot_tradeoff(
     bx.grid(alpha=0.3)
     bx.set_title("Paper's view (dashed: no classification)")
     fig.suptitle(f"Kept fraction of the body-part classifier (Fig. 8), {capture}")
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -39,7 +39,7 @@ from meshmocap.analysis.gait import (
     compare_gaits,
     track_gait,
 )
-from meshmocap.apps.plots import _figure, _save
+from meshmocap.apps.plots import new_figure, save_figure
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import read_track
@@ -73,7 +73,7 @@ def plot_gait(
     """Fig. 11 of the cage paper: absolute ankle heights over the frames with foot strikes
     (▼) and foot offs (▲) and the left cycles shaded, and the wrists' paths relative to the
     pelvis in the sagittal plane; ``reference`` dashed."""
-    fig = _figure(11, 4.2)
+    fig = new_figure(11, 4.2)
     a, b = fig.subplots(1, 2, width_ratios=(1.6, 1))
     for c in gait.side_cycles("left"):
         a.axvspan(*gait.frame_numbers(np.array([c.strike, c.end])), color="0.93", zorder=0)
@@ -110,7 +110,7 @@ def plot_gait(
         ax.legend(loc="upper right", fontsize="small")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_flexion(
@@ -119,7 +119,7 @@ def plot_flexion(
     """Hip and knee flexion (degrees) over the gait cycle (0–100 %, from a foot strike to
     the next of the same foot), left and right: each cycle thin, the mean thick, the mean
     foot off as a dotted line; ``reference``'s mean dashed."""
-    fig = _figure(10, 6)
+    fig = new_figure(10, 6)
     axes = fig.subplots(2, 2, sharex=True)
     pct = np.linspace(0, 100, CYCLE_SAMPLES)
     for j, side in enumerate(SIDES):
@@ -165,7 +165,7 @@ def plot_flexion(
         ax.set_xlabel("% of the gait cycle (foot strike → next foot strike)")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # --------------------------------------------------------------------------- tables

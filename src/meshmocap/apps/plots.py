@@ -29,13 +29,13 @@ from meshmocap.errors import InputError
 _DPI = 100
 
 
-def _figure(width: float, height: float) -> Figure:
+def new_figure(width: float, height: float) -> Figure:
     fig = Figure(figsize=(width, height), dpi=_DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
-def _save(fig: Figure, path: str | os.PathLike) -> Path:
+def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise InputError(f"plot path must end in .png, found {path.name!r}")
@@ -74,7 +74,7 @@ def plot_frame_errors(
     """Plot the error of every frame: mean joint or vertex error (mm), or the silhouette
     error of each camera (%). Failed frames are red ticks, skipped frames grey ticks."""
     _check(result, (JointErrors, CorrespondenceErrors, SilhouetteErrors), "plot_frame_errors")
-    fig = _figure(8, 3.5)
+    fig = new_figure(8, 3.5)
     ax = fig.add_subplot()
     if isinstance(result, SilhouetteErrors):
         for c, name in enumerate(result.cameras):
@@ -113,7 +113,7 @@ def plot_frame_errors(
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize="small")
     ax.set_title(title if title is not None else default)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_joint_errors(
@@ -122,7 +122,7 @@ def plot_joint_errors(
     """Bar chart of the mean error of each joint (mm) with its standard deviation."""
     _check(result, (JointErrors,), "plot_joint_errors")
     stats = result.per_joint
-    fig = _figure(max(6, 0.5 * len(stats) + 2), 4)
+    fig = new_figure(max(6, 0.5 * len(stats) + 2), 4)
     ax = fig.add_subplot()
     x = np.arange(len(stats))
     ax.bar(
@@ -145,7 +145,7 @@ def plot_joint_errors(
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize="small")
     ax.set_title(title if title is not None else f"Error per joint ({len(result.frames)} frames)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_bone_lengths(
@@ -163,7 +163,7 @@ def plot_bone_lengths(
     _check(result, (BoneLengths,), "plot_bone_lengths")
     if reference is not None and tuple(reference.names) != tuple(result.names):
         raise InputError("plot_bone_lengths: reference must have the same bones as result")
-    fig = _figure(max(6, 0.55 * len(result.names) + 2), 4.5)
+    fig = new_figure(max(6, 0.55 * len(result.names) + 2), 4.5)
     ax = fig.add_subplot()
     x = np.arange(len(result.names))
     sets = [("tracked", result, "tab:blue")]
@@ -189,7 +189,7 @@ def plot_bone_lengths(
     if reference is not None:
         ax.legend(fontsize="small")
     ax.set_title(title if title is not None else f"Bone lengths ({len(result.frames)} frames)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_silhouette_errors(
@@ -197,7 +197,7 @@ def plot_silhouette_errors(
 ) -> Path:
     """Bar chart of the mean silhouette overlap error of each camera (%), with its std."""
     _check(result, (SilhouetteErrors,), "plot_silhouette_errors")
-    fig = _figure(max(5, 0.6 * len(result.cameras) + 2), 3.5)
+    fig = new_figure(max(5, 0.6 * len(result.cameras) + 2), 3.5)
     ax = fig.add_subplot()
     x = np.arange(len(result.cameras))
     ax.bar(
@@ -221,4 +221,4 @@ def plot_silhouette_errors(
     ax.legend(fontsize="small")
     default = f"Silhouette error per camera ({len(result.errors)} frames)"
     ax.set_title(title if title is not None else default)
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -28,7 +28,7 @@ import numpy as np
 from meshmocap import __version__
 from meshmocap._atomic import write_text_atomic
 from meshmocap.analysis.evaluate import Evaluation, evaluate
-from meshmocap.analysis.tables import _summary
+from meshmocap.analysis.tables import summary_table
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.gait_files import GAIT_HEADERS, gait_report
 from meshmocap.apps.player import (
@@ -78,7 +78,7 @@ class Section:
 def table_of(result: object, *, digits: int = 1) -> Table:
     """A metrics result (joint, vertex, silhouette, bone or surface) as a report table, in
     the display units of :func:`meshmocap.analysis.tables.table` (mm or %)."""
-    title, headers, rows, scale = _summary(result)
+    title, headers, rows, scale = summary_table(result)
     unit = "%" if scale == 100.0 else "mm"
     heads = []
     for h in headers:

@@ -4,7 +4,7 @@ Each loop runs once per Gauss–Newton iteration over a few thousand small terms
 products per nonzero skinning weight, per pair of weights, per correspondence): as numpy
 array expressions the normal equations alone cost 3–6 ms an iteration, compiled 0.2 ms.
 Compiled on first use and cached beside this file (``cache=True``); the arithmetic is the
-numpy functions' own, in the same order (``tests/test_articulated_icp.py`` compares).
+numpy functions' own, in the same order (``tests/trackers/test_articulated_icp.py`` compares).
 """
 
 from __future__ import annotations

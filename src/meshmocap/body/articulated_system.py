@@ -25,7 +25,7 @@ that touch only the nonzero skinning weights:
    (``[x]×ᵀ = −[x]×``). The cost is about 11,000 3×3 products for 1,500 model points
    whatever the number of pairs: 0.3–0.6 ms instead of 10–30.
 
-The result equals the dense ``Σ JᵀJ`` to rounding (``tests/test_articulated_icp.py``).
+The result equals the dense ``Σ JᵀJ`` to rounding (``tests/trackers/test_articulated_icp.py``).
 """
 
 from __future__ import annotations

@@ -238,11 +238,11 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     import numpy as np
 
     from meshmocap.apps.latent_plot import plot_latent_space
-    from meshmocap.body.oqr import build_oqr
     from meshmocap.body.template import load_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-    from meshmocap.io.pose_data import load_pose_sources
-    from meshmocap.trackers.manifold import fit_pose_manifold
+    from meshmocap.trackers.cage.manifold import fit_pose_manifold
+    from meshmocap.trackers.cage.oqr import build_oqr
+    from meshmocap.trackers.cage.training_poses import load_pose_sources
 
     out = Path(args.out)
     if out.suffix != ".npz" or not out.parent.is_dir():  # fail before the work
@@ -291,7 +291,7 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     from meshmocap.apps.export import capture_fps
     from meshmocap.body.template import bundled_templates, load_template
     from meshmocap.io.meshes import read_mesh
-    from meshmocap.trackers.transfer import read_cage_track, write_transfer
+    from meshmocap.trackers.cage.transfer import read_cage_track, write_transfer
 
     template = load_template(args.template) if args.template else None
     track = read_cage_track(args.track, template=template)

@@ -35,7 +35,7 @@ from meshmocap.io.capture import (
     SequenceFrame,
     frame_name,
 )
-from meshmocap.io.meshes import _is_frame, natural_key
+from meshmocap.io.meshes import is_frame_file, natural_key
 
 #: A file that fails to read while younger than this (seconds) is tried again later.
 SETTLE_SECONDS = 2.0
@@ -112,7 +112,9 @@ class FrameFolder:
         return [f for f in files if f is not None]
 
     def _mesh_files(self) -> list[FrameFile]:
-        names = sorted((p.name for p in _listing(self.path) if _is_frame(p.name)), key=natural_key)
+        names = sorted(
+            (p.name for p in _listing(self.path) if is_frame_file(p.name)), key=natural_key
+        )
         known = set(self._names)
         for name in names:
             if name in known:

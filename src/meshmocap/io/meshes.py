@@ -449,22 +449,22 @@ class MeshSequence:
         path, what = Path(source), "folder"
         if source.lower().endswith(_ARCHIVE_SUFFIXES) and path.is_file():
             self._archive, what = TarArchive(path, _check_size), "archive"
-            names = [n for n in self._archive.names if _is_frame(n)]
+            names = [n for n in self._archive.names if is_frame_file(n)]
         elif path.is_dir():
-            names = [str(p) for p in path.iterdir() if p.is_file() and _is_frame(p.name)]
+            names = [str(p) for p in path.iterdir() if p.is_file() and is_frame_file(p.name)]
             exts = sorted({_ext(n) for n in names})
             if len(exts) > 1:
                 glob = path / ("*" + exts[0])
                 raise InputError(f"{source}: folder mixes {exts}; pass a glob like '{glob}'")
         elif path.is_file():
-            if not _is_frame(path.name):
+            if not is_frame_file(path.name):
                 raise InputError(f"{source}: not a frame file {list(_FRAME_EXTENSIONS)}")
             return [source]
         elif globlib.has_magic(source):
             names = [p for p in globlib.glob(source) if os.path.isfile(p)]
             if not names:
                 raise NotFound(f"{source}: glob matches no files")
-            bad = sorted({_ext(n) for n in names if not _is_frame(n)})
+            bad = sorted({_ext(n) for n in names if not is_frame_file(n)})
             if bad:
                 raise InputError(f"{source}: glob matches non-frame files {bad}; narrow it")
         else:
@@ -536,7 +536,7 @@ def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
     for source in map(os.fspath, sources):
         path = Path(source)
         if path.is_file():
-            if not _is_frame(path.name):
+            if not is_frame_file(path.name):
                 raise InputError(f"{source}: not a frame file {list(_FRAME_EXTENSIONS)}")
             names.append(source)
         elif path.is_dir() or globlib.has_magic(source):
@@ -549,7 +549,7 @@ def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
     return sorted(dict.fromkeys(names), key=natural_key)
 
 
-def _is_frame(name: str) -> bool:
+def is_frame_file(name: str) -> bool:
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
 

@@ -29,7 +29,7 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
 Joints that motion capture does not animate (:data:`FIXED_JOINTS`) keep their rotation.
 
 Defaults (measured on 40-frame synthetic walks and jogs, 4-camera hulls, see
-``tests/test_articulated_icp.py``): point-to-plane both ways with λ_pose = 1e-3 and no
+``tests/trackers/test_articulated_icp.py``): point-to-plane both ways with λ_pose = 1e-3 and no
 prediction is the most stable setting; point-to-point lets arms slide into the torso's
 hull, model→data alone lets the legs drift into the phantom volume between them, a weak
 λ_pose lets the pelvis yaw in its point-to-plane null space, and constant-velocity

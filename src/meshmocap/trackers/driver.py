@@ -63,7 +63,7 @@ Init = Literal["auto", "truth"]
 NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
 
 
-def _finite(r: FrameResult) -> bool:
+def is_finite_result(r: FrameResult) -> bool:
     return bool(np.all(np.isfinite(r.joints)) and np.all(np.isfinite(r.vertices)))
 
 
@@ -142,7 +142,7 @@ def track_sequence(
     with folder_lock(out, "track"):  # a second run into the same folder is refused
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
-            _initialise(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, template, capture, out, positions, init)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -167,18 +167,18 @@ def track_sequence(
                     if reason is None:
                         frame = observed(frame)  # points, normals, occupancy: made once
                         r = tracker.step(frame)
-                        if not _finite(r):
+                        if not is_finite_result(r):
                             raise FloatingPointError("non-finite joints or vertices")
                         if recovery is not None:
                             r = recovered(tracker, recovery, frame, r, reseat=reseat)
                         r = replace(r, index=index, seconds=time.perf_counter() - t0)
                         good = index
                 except NUMERICAL_ERRORS as exc:
-                    r = _carry(tracker, out, good, index, t0, "failed", _why(exc))
+                    r = coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
                 except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
-                    reason = _why(exc)
+                    reason = failure_reason(exc)
                 if reason is not None:
-                    r = _carry(tracker, out, good, index, t0, "missing", reason)
+                    r = coast_frame(tracker, out, good, index, t0, "missing", reason)
                 write_frame(out, r)
     return read_track(out, vertices=vertices)
 
@@ -194,11 +194,11 @@ def missing_reason(frame: object) -> str | None:
     return str(reason) if reason else None
 
 
-def _why(exc: BaseException) -> str:
+def failure_reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
 
 
-def _carry(
+def coast_frame(
     tracker: Tracker, out, good: int, index: int, t0: float, flag: str, why: str
 ) -> FrameResult:
     """Coast across frame ``index``: the tracker goes back to the state of the last good
@@ -216,7 +216,7 @@ def _carry(
     )
 
 
-def _initialise(
+def initialise_tracker(
     tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
@@ -229,14 +229,14 @@ def _initialise(
             frame = capture[k]  # a mesh sequence reads the file here
             reason = missing_reason(frame)
         except FRAME_ERRORS as exc:
-            reason = _why(exc)
+            reason = failure_reason(exc)
         if reason is None:
             t0 = time.perf_counter()
             try:
                 R, root, how = first_pose(template, frame, init, capture=capture)
                 r = tracker.init(template, frame, R, root)
             except FRAME_ERRORS as exc:
-                reason = _why(exc)
+                reason = failure_reason(exc)
         if reason is not None:
             skipped.append((index, reason))
             continue

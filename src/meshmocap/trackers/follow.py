@@ -32,10 +32,10 @@ from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.driver import (
     FRAME_ERRORS,
     NUMERICAL_ERRORS,
-    _carry,
-    _finite,
-    _initialise,
-    _why,
+    coast_frame,
+    failure_reason,
+    initialise_tracker,
+    is_finite_result,
     missing_reason,
     read_track_frame,
 )
@@ -182,7 +182,7 @@ def _start(tracker, template, folder, files: list[FrameFile], out) -> list:
     """Initialise on the first of ``files`` with an observation (the driver's way); the
     frames written, with their results, or none when no file has an observation yet."""
     try:
-        _initialise(tracker, template, _Pending(folder, files), out, list(range(len(files))))
+        initialise_tracker(tracker, template, _Pending(folder, files), out, list(range(len(files))))
     except InputError:  # no observation in any of them: wait for more frames
         return []
     written = set(done_frames(out))
@@ -199,13 +199,13 @@ def _track_frame(tracker, folder: FrameFolder, f: FrameFile, out, good: int):
         reason = missing_reason(frame)
         if reason is None:
             r = tracker.step(frame)
-            if not _finite(r):
+            if not is_finite_result(r):
                 raise FloatingPointError("non-finite joints or vertices")
             return replace(r, index=f.index, seconds=time.perf_counter() - t0)
     except NUMERICAL_ERRORS as exc:
-        return _carry(tracker, out, good, f.index, t0, "failed", _why(exc))
+        return coast_frame(tracker, out, good, f.index, t0, "failed", failure_reason(exc))
     except FRAME_ERRORS as exc:
         if young(f):
             return None
-        reason = _why(exc)
-    return _carry(tracker, out, good, f.index, t0, "missing", reason)
+        reason = failure_reason(exc)
+    return coast_frame(tracker, out, good, f.index, t0, "missing", reason)

@@ -12,22 +12,22 @@ from meshmocap.trackers.base import Tracker
 if TYPE_CHECKING:
     from meshmocap.body.template import Template
     from meshmocap.models.gplvm import GPLVM
-    from meshmocap.trackers.manifold import PoseManifold
+    from meshmocap.trackers.cage.manifold import PoseManifold
 
-_CAGE = ("meshmocap.trackers.cage", "CageTracker", "CageOptions")
+_CAGE = ("meshmocap.trackers.cage.tracker", "CageTracker", "CageOptions")
 
 #: method name → (module, tracker class, options class, fixed options)
 METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
-    "patch": ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", {}),
+    "patch": ("meshmocap.trackers.patch.tracker", "PatchTracker", "PatchOptions", {}),
     # the paper's classifier (libsvm linear SVC, Platt probabilities) instead of the default
     "patch_svc": (
-        "meshmocap.trackers.patch",
+        "meshmocap.trackers.patch.tracker",
         "PatchTracker",
         "PatchOptions",
         {"classifier": "svc"},
     ),
     "patch_noclf": (
-        "meshmocap.trackers.patch",
+        "meshmocap.trackers.patch.tracker",
         "PatchTracker",
         "PatchOptions",
         {"classifier": "none"},
@@ -35,7 +35,7 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
     # the patch tracker with or without each of its extensions beyond the paper (issue 20;
     # PATCH_ABLATIONS), and with none of them (the paper's method with earlier fixes)
     **{
-        name: ("meshmocap.trackers.patch", "PatchTracker", "PatchOptions", fixed)
+        name: ("meshmocap.trackers.patch.tracker", "PatchTracker", "PatchOptions", fixed)
         for name, fixed in (
             ("patch_gate", {"accel_gate": 72.0}),
             ("patch_interior", {"interior_scale": 0.01}),
@@ -98,7 +98,7 @@ def make_tracker(
         A key of :data:`METHODS`.
     manifold : GPLVM, PoseManifold, path or None
         Cage methods (:data:`MANIFOLD_METHODS`) only: the pose manifold, see
-        :func:`~meshmocap.trackers.manifold.resolve_manifold` (None: the template's
+        :func:`~meshmocap.trackers.cage.manifold.resolve_manifold` (None: the template's
         default manifold, learned from the bundled pose library at first use and cached).
     template : Template, optional
         The tracking template. Cage methods need it unless ``manifold`` is a fitted GPLVM:
@@ -121,7 +121,7 @@ def make_tracker(
         raise InputError(f"track: {exc}") from None
     if method not in MANIFOLD_METHODS:
         return getattr(mod, cls)(opts)
-    from meshmocap.trackers.manifold import PoseManifold, resolve_manifold
+    from meshmocap.trackers.cage.manifold import PoseManifold, resolve_manifold
 
     pm = resolve_manifold(manifold, template)
     tracker = getattr(mod, cls)(pm.gp if isinstance(pm, PoseManifold) else pm, opts)

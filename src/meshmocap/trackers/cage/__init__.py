@@ -1,0 +1,22 @@
+"""The cage tracker (Duveau, Boyer et al., 3DIMPVT 2012; ``papers/cage-manifold-tracking.txt``).
+
+One method, one folder, read like its paper:
+
+* :mod:`~meshmocap.trackers.cage.oqr`, :mod:`~meshmocap.trackers.cage.oqr_placement`,
+  :mod:`~meshmocap.trackers.cage.oqr_skinning` — Oriented Quads Rigging (§3);
+* :mod:`~meshmocap.trackers.cage.cage_mesh`, :mod:`~meshmocap.trackers.cage.growth` — the
+  procedural cage built on the quads and grown until it encloses the template (§3.2);
+* :mod:`~meshmocap.trackers.cage.training_poses` — the poses the manifold learns from;
+* :mod:`~meshmocap.trackers.cage.manifold` — the GPLVM pose manifold (§4);
+* :mod:`~meshmocap.trackers.cage.quad_frames`, :mod:`~meshmocap.trackers.cage.surface`,
+  :mod:`~meshmocap.trackers.cage.energy` — the quads' frames, the deformed surface and the
+  energy (§5);
+* :mod:`~meshmocap.trackers.cage.options` and :mod:`~meshmocap.trackers.cage.tracker` —
+  :class:`CageTracker`, one frame at a time (§5–6);
+* :mod:`~meshmocap.trackers.cage.transfer` — motion transfer to another body (§7).
+"""
+
+from meshmocap.trackers.cage.options import CageOptions
+from meshmocap.trackers.cage.tracker import CageTracker
+
+__all__ = ["CageOptions", "CageTracker"]

@@ -1,0 +1,628 @@
+"""The patch tracker of patch-skeleton-tracking.txt (Huang, Boyer, Ilic, 3DV 2013).
+
+Per frame: a body-part classifier trained on the previous fitted mesh sorts the observed
+points into on-bone, near-joint and outlier points (§III-B, Eq. 4–6); an EM loop then
+alternates soft assignments of the kept points to patches plus an outlier class (E-step,
+correspondences by distance and normal compatibility) with one Gauss–Newton step on every
+patch rotation/centre and joint position of
+
+    E(Θ, J) = λr Er(Θ) + λd Edata(Θ) + λb Ebone(Θ, J)                              # Eq. (1)
+
+(M-step; :mod:`meshmocap.trackers.patch.solver`), warm-started from the previous frame.
+Each term is normalised by its total weight, so the λs weigh mean squared residuals
+(metres²) whatever the number of points, patches or vertices.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+
+from meshmocap.body.joint_regressor import joint_regressor, training_poses
+from meshmocap.body.template import EvalSkeleton, Template
+from meshmocap.estimate.observe import frame_points
+from meshmocap.geometry.camera import in_view
+from meshmocap.geometry.rotations import so3_exp, so3_log
+from meshmocap.io.capture import CaptureFrame
+from meshmocap.io.results import FrameResult
+from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
+from meshmocap.trackers.patch.kernels import assign_kernel
+from meshmocap.trackers.patch.model import (
+    PatchModel,
+    build_patch_model,
+    fit_patches,
+    rebind_bones,
+    skeleton_floor,
+)
+from meshmocap.trackers.patch.options import PatchOptions
+from meshmocap.trackers.patch.solver import (
+    System,
+    add_bone,
+    add_bone_lengths,
+    add_plane_terms,
+    add_point_terms,
+    add_rigidity,
+    group_basis,
+    length_residuals,
+    normal_pattern,
+    rigidity_moments,
+)
+from meshmocap.trackers.patch.terms import add_joint_prior, add_silhouette, silhouette_rays
+
+#: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
+PLANE_POINT_MIX = 0.1
+
+#: Scale of the rigidity and bone terms relative to the data term after each is normalised
+#: by its total weight (mean squared residuals). Neighbouring patches' predictions and the
+#: bone points stay within millimetres, the data within centimetres: without this factor the
+#: paper's λr = λb = 1 against λd = 10 lets patches drift apart (tuned on synthetic walks;
+#: see benchmarks/bench_patch.py).
+RIGIDITY_SCALE = 10.0
+BONE_SCALE = 100.0
+#: Divergence guards (metres): no joint moves this far in one frame (10 m/s at 60 fps) ...
+MAX_JOINT_JUMP = 0.5
+#: ... and the patch centres' mean stays this close to the observed points' mean.
+MAX_CENTRE_OFFSET = 0.3
+#: Largest predicted displacement (metres) and rotation (radians) of a patch or joint.
+MAX_PREDICTION = 0.06
+MAX_PREDICTION_ANGLE = 0.3
+#: Largest predicted displacement (metres) of a joint when patches follow their bones
+#: (a running foot moves ~13 cm per frame at 60 fps).
+MAX_BONE_PREDICTION = 0.15
+#: ``accel_gate``: a joint's velocity change beyond this multiple of its last speed (and
+#: beyond ``accel_gate``) stops its extrapolation.
+GATE_RATIO = 0.5
+#: Frame rate assumed where a capture states none (``accel_gate``).
+DEFAULT_FPS = 60.0
+#: Largest rotation (radians) of a patch in one Gauss–Newton step.
+MAX_STEP_ANGLE = 0.3
+#: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
+#: classification (training and prediction), E-steps, building the normal equations,
+#: solving them, and the output mesh with the frame's result.
+STAGES = ("observations", "classify", "assign", "system", "solve", "output")
+#: Joint pairs of the evaluation skeleton held at their first-frame distance by the length
+#: prior besides the bones: the pelvis and the shoulder girdle move as rigid triangles.
+RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
+#: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
+REACQUIRE_OFFSET = 0.15
+#: Typical error (metres) of joints read off a tracked surface by the joint regressor
+#: (surface read-out over all joints of CMU 05_01, 09_01, 01_01: 13–14 mm); sets how much of each
+#: joint ``joint_readout="blend"`` takes from the surface (see PatchOptions).
+SURFACE_JOINT_ERROR = 0.01
+#: Every k-th training pose enters the skeleton's floor (skeleton_floor).
+FLOOR_POSE_STEP = 4
+#: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
+REVERSE_SAMPLES = 2000
+#: Depth (metres) inside the model below which a hull point is not yet suspect
+#: (``interior_scale``): hull boundaries eroded by silhouette jitter, a model a little fat.
+INTERIOR_MARGIN = 0.01
+#: Template vertices (every k-th) whose projections must cover the silhouettes.
+COVERAGE_SAMPLES = 6000
+
+
+class PatchTracker:
+    """Patch-based shape and skeleton tracker (see the module docstring).
+
+    Parameters
+    ----------
+    options : PatchOptions
+
+    Attributes
+    ----------
+    stage_seconds : dict of str → float
+        Wall time spent in each of :data:`STAGES` over all :meth:`step` calls, seconds.
+    n_steps : int
+        Number of :meth:`step` calls.
+    """
+
+    name = "patch"
+
+    def __init__(self, options: PatchOptions = PatchOptions()):
+        self.opts = options
+        self.model: PatchModel | None = None
+        self.template: Template | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        self.n_steps = 0
+        self.logits: tuple[np.ndarray, np.ndarray] | None = None  # last classifier's logits
+
+    def _lap(self, stage: str) -> None:
+        t = time.perf_counter()
+        self.stage_seconds[stage] += t - self._t
+        self._t = t
+
+    def options(self) -> dict:
+        """JSON-ready settings."""
+        from dataclasses import asdict
+
+        return asdict(self.opts)
+
+    # ------------------------------------------------------------------ state
+    def setup(self, template: Template) -> None:
+        """Cut ``template`` into patches and precompute the solver's constant parts."""
+        o = self.opts
+        self.template = template
+        self.model = build_patch_model(
+            template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
+        )
+        self.moments = rigidity_moments(self.model)
+        self.pairs = _held_pairs(template.eval_skeleton)
+        self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
+        n = len(self.model.V0)
+        self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
+        # coverage vertices and the radius each covers: 1.5 × their median spacing at rest
+        self.cover_sample = np.arange(0, n, max(1, n // COVERAGE_SAMPLES))
+        d, _ = KDTree(self.model.V0[self.cover_sample]).query(self.model.V0[self.cover_sample], k=2)
+        self.cover_radius = 1.5 * float(np.median(d[:, 1]))
+        # Joint read-out (joint_readout): share of each reported joint taken from the surface
+        self.regressor = None
+        self.surface_weight = np.zeros(len(template.eval_skeleton.names))
+        if o.joint_readout != "skeleton":
+            V, X = training_poses(template, seed=o.seed)
+            self.regressor = joint_regressor(template, poses=(V, X), seed=o.seed)
+            self.surface_weight = np.ones(len(template.eval_skeleton.names))
+            if o.joint_readout == "blend":
+                f2 = skeleton_floor(self.model, V[::FLOOR_POSE_STEP], X[::FLOOR_POSE_STEP]) ** 2
+                self.surface_weight = f2 / (f2 + SURFACE_JOINT_ERROR**2)
+
+    def init(
+        self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray
+    ) -> FrameResult:
+        """Place the patches on the template posed by ``R``, ``root`` (ground truth)."""
+        if self.template is not template:
+            self.setup(template)
+        self._place(template.pose(R, root))
+        self.lengths = _pair_lengths(self.X, self.pairs)
+        self.model = rebind_bones(self.model, self.R, self.c, self.X)
+        return self._result(frame.index, {}, 0)
+
+    def reseat(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Place the patches and joints on the template posed by ``R``, ``root`` (a
+        re-initialisation), keeping the first frame's bone binding and lengths."""
+        self._place(self.template.pose(R, root))
+        return self._result(frame.index, {}, 0)
+
+    def _place(self, posed) -> None:
+        """Patches and joints on a posed template; no velocity, a fresh classifier."""
+        self.R, self.c = fit_patches(self.model, posed.V)
+        self.X = posed.eval_joints.copy()
+        self.sigma = self.opts.sigma0
+        self.prev = (self.R.copy(), self.c.copy(), self.X.copy())
+        self.X_prev2 = self.X.copy()  # joints two frames back (accel_gate)
+        self.logits = None
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore patch transforms, joints and σ saved with a frame."""
+        self.R, self.c, self.X = state["R"].copy(), state["c"].copy(), state["X"].copy()
+        self.sigma = float(state["sigma"])
+        self.lengths = state["lengths"].copy()
+        # the last classifier fit, the next fit's starting point (absent in older tracks)
+        self.logits = (state["clf_coef"], state["clf_intercept"]) if "clf_coef" in state else None
+        self.prev = (state["R_prev"].copy(), state["c_prev"].copy(), state["X_prev"].copy())
+        self.X_prev2 = state.get("X_prev2", state["X_prev"]).copy()  # absent in older tracks
+        self.model = replace(
+            self.model, gamma=state["gamma"], delta0=state["delta0"], bone_w=state["bone_w"]
+        )
+
+    def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
+        Rp, cp, Xp = self.prev
+        state = {
+            "R": self.R,
+            "c": self.c,
+            "X": self.X,
+            "sigma": np.float64(self.sigma),
+            "R_prev": Rp,
+            "c_prev": cp,
+            "X_prev": Xp,
+            "gamma": self.model.gamma,
+            "delta0": self.model.delta0,
+            "bone_w": self.model.bone_w,
+            "lengths": self.lengths,
+            "X_prev2": self.X_prev2,
+        }
+        if self.logits is not None:
+            state["clf_coef"], state["clf_intercept"] = self.logits
+        V = self.vertices()
+        return FrameResult(
+            index=index,
+            joints=self.joints(V),
+            vertices=V,
+            energies=energies,
+            n_iter=n_iter,
+            state=state,
+        )
+
+    def joints(self, V: np.ndarray) -> np.ndarray:
+        """The reported joints (K, 3) for the output mesh ``V`` (n, 3): the skeleton's, or
+        the surface read-out or its per-joint blend with the skeleton (``joint_readout``),
+        moved the least to keep the skeleton's bone lengths (``_held_lengths``)."""
+        if self.regressor is None:
+            return self.X.copy()
+        w = self.surface_weight[:, None]
+        # unheld, the read-out lets the spine chord wobble (pelvis→thorax length std 13 mm
+        # on CMU 01_01, 5 mm in truth); holding the lengths also lowers the joint error
+        return _held_lengths(
+            (1.0 - w) * self.X + w * (self.regressor @ V), self.pairs, self.lengths
+        )
+
+    # ------------------------------------------------------------------ geometry
+    def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each vertex as predicted by its own patch, and its normal: (n, 3), (n, 3)."""
+        m = self.model
+        Rl = self.R[m.labels]
+        V = np.einsum("nij,nj->ni", Rl, m.V0 - m.centres0[m.labels]) + self.c[m.labels]
+        return V, np.einsum("nij,nj->ni", Rl, m.N0)
+
+    def vertices(self) -> np.ndarray:
+        """The output mesh: patch predictions blended over neighbouring patches (n, 3)."""
+        m = self.model
+        B = m.blend.tocoo()
+        pred = (
+            np.einsum("nij,nj->ni", self.R[B.col], m.V0[B.row] - m.centres0[B.col]) + self.c[B.col]
+        )
+        return np.stack(
+            [np.bincount(B.row, B.data * pred[:, a], minlength=len(m.V0)) for a in range(3)], 1
+        )
+
+    # ------------------------------------------------------------------ tracking
+    def observations(
+        self, frame: CaptureFrame
+    ) -> tuple[np.ndarray, np.ndarray, np.random.Generator]:
+        """Observed points (hull vertices, subsampled), their normals, and the frame's
+        random generator (seeded by frame, so resumed runs repeat exactly)."""
+        o = self.opts
+        rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
+        V, N = frame_points(frame)  # a mesh's vertex normals, a point cloud's own or estimated
+        if len(V) > o.max_points:
+            pick = rng.choice(len(V), o.max_points, replace=False)
+            V, N = V[pick], N[pick]
+        return V, N, rng
+
+    def classify(self, V: np.ndarray, N: np.ndarray, rng: np.random.Generator):
+        """Sort observed points by body part (§III-B, Eq. 4–6); returns the kept points,
+        their normals and classes (None without a classifier)."""
+        o = self.opts
+        if o.classifier == "none":
+            return V, N, None
+        clf = BodyPartClassifier(o.classifier, random_state=o.seed)
+        # trained on the previous fit (§III-B); logistic regression starts from the last
+        # frame's solution (same optimum, a fifth of the iterations)
+        coef, intercept = self.logits or (None, None)
+        clf.fit(self.vertices(), self.model.vertex_class, coef_init=coef, intercept_init=intercept)
+        if o.classifier == "logistic":
+            self.logits = (clf.coef_, clf.intercept_)
+        part = partition(
+            clf,
+            V,
+            on_bone=o.on_bone,
+            outlier=o.outlier,
+            keep_fraction=o.keep_fraction,
+            max_distance=o.max_distance,
+            random_state=rng.integers(1 << 31),
+        )
+        keep = part.keep
+        self.last_partition = part  # for diagnostics (benchmarks/diag_patch.py)
+        if o.part_matching == "none":
+            return V[keep], N[keep], None
+        labels = part.labels.copy()
+        if o.part_matching == "on_bone":
+            labels[part.kind != ON_BONE] = -1  # near-joint points: any patch
+        return V[keep], N[keep], labels[keep]
+
+    def step(self, frame: CaptureFrame) -> FrameResult:
+        """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
+        o, m = self.opts, self.model
+        self._t = time.perf_counter()
+        Y, NY, rng = self.observations(frame)
+        if len(Y) < 10:
+            raise FloatingPointError(f"only {len(Y)} observed points")
+        last = (self.R.copy(), self.c.copy(), self.X.copy())
+        # A fast frame gets more EM iterations: nearest-point correspondences close a gap
+        # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
+        speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
+        budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
+        budget += o.coarse_iter
+        if o.prediction == "bones":
+            self._predict_by_bones(
+                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
+            )
+        elif o.prediction == "patches":
+            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
+            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
+            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
+            Rp, cp, Xp = self.prev
+            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
+            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
+            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
+            self.R = so3_exp(w) @ self.R
+        self.X_prev2 = self.prev[2].copy()
+        self.prev = last
+        # Re-acquisition after a lost frame: if the model stands far from the data (the
+        # driver restored an old state), move it horizontally onto the observations' centre.
+        shift = Y.mean(axis=0) - self.c.mean(axis=0)
+        shift[2] = 0.0
+        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
+            self.c, self.X = self.c + shift, self.X + shift
+        X_hat = self.X.copy()  # the temporal prior's prediction (lambda_temporal)
+        rays = None
+        cameras = getattr(frame, "cameras", [])
+        if o.lambda_silhouette > 0 and cameras:
+            masks = _masks(frame)
+            rays = silhouette_rays(cameras, masks) if masks else None
+        self._lap("observations")
+        Y, NY, ycls = self.classify(Y, NY, rng)
+        self._lap("classify")
+        if len(Y) < 10:
+            raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
+        tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
+        self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
+        energies: dict[str, float] = {}
+        n_iter = 0
+        while n_iter < budget:
+            n_iter += 1
+            Vc, Nc = self.own_vertices()
+            coarse = n_iter <= o.coarse_iter
+            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
+            self._lap("assign")
+            sys = System.empty(self.pattern)
+            q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
+            r = q + self.c[patch] - y
+            wd = max(float(w.sum()), 1e-12)
+            if o.residual == "point_to_plane":  # slide along the surface, with a little pull
+                s_n = np.sum(ny * r, axis=1)
+                e_data = add_plane_terms(sys, patch, q, ny, s_n, w, o.lambda_data / wd)
+                add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * o.lambda_data / wd)
+            else:  # Eq. (7) as printed
+                e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
+            e_rev = 0.0
+            if tree_y is not None:
+                e_rev = self._add_reverse(sys, tree_y, Y, NY, Vc, Nc, cameras)
+            w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
+            e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
+            w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
+            e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
+            e_len = 0.0
+            if o.lambda_length > 0:
+                e_len = add_bone_lengths(
+                    sys, self.X, self.pairs, self.lengths, o.lambda_length / len(self.pairs)
+                )
+            e_sil = e_tmp = 0.0
+            if rays is not None:
+                s = self.cover_sample
+                qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
+                e_sil, _ = add_silhouette(
+                    sys,
+                    rays,
+                    Vc[s],
+                    m.labels[s],
+                    qs,
+                    radius=self.cover_radius,
+                    scale=o.silhouette_scale,
+                    weight=o.lambda_silhouette,
+                )
+            if o.lambda_temporal > 0:
+                K = len(self.X)
+                e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
+            self._lap("system")
+            if coarse:  # body parts as rigid groups first (coarse_iter)
+                S = group_basis(m.bone_of_patch, self.c, len(self.X))
+                delta = sys.solve_grouped(o.damping, S)
+            else:
+                delta = sys.solve(o.damping)
+            self._lap("solve")
+            if not np.all(np.isfinite(delta)):
+                raise FloatingPointError("singular normal equations")
+            self._apply(delta)
+            # EM update of σ from the weighted residuals (one Gaussian per correspondence)
+            self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
+            energies = {
+                "data": e_data / wd,
+                "rigidity": e_rig / m.rig_w.sum(),
+                "bone": e_bone / m.bone_w.sum(),
+                "sigma": self.sigma,
+                "length": e_len / max(len(self.pairs), 1),
+                "reverse": e_rev,
+                "silhouette": e_sil,
+                "temporal": e_tmp,
+            }
+            d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
+            move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
+            if move < o.tol and n_iter > o.coarse_iter:
+                break
+        energies["total"] = (
+            o.lambda_data * energies["data"]
+            + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
+            + o.lambda_bone * BONE_SCALE * energies["bone"]
+            + o.lambda_length * energies["length"]
+            + o.lambda_reverse * energies["reverse"]
+            + o.lambda_silhouette * energies["silhouette"]
+            + o.lambda_temporal * energies["temporal"]
+        )
+        # the last E-step and the kept points, for diagnostics (benchmarks/diag_patch.py)
+        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": (patch, v, w, y)}
+        self._check_divergence(Y, last[2])
+        result = self._result(frame.index, energies, n_iter)
+        self._lap("output")
+        self.n_steps += 1
+        return result
+
+    def _predict_by_bones(self, fps: float = DEFAULT_FPS) -> None:
+        """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
+        every patch moved rigidly with its bone: the rotation turning the bone's old
+        direction into its new one, about the patch's bone point Δ (Eq. 8). Joints average
+        many patches, so a patch that slipped last frame is not thrown further."""
+        m = self.model
+        _, _, Xp = self.prev
+        v = self.X - Xp
+        gate = self.opts.accel_gate / fps**2  # m/s² → metres per frame²
+        if gate > 0:  # no extrapolation of a velocity that just jumped
+            v_old = Xp - self.X_prev2
+            jump = np.linalg.norm(v - v_old, axis=1)
+            v = v * (jump <= np.maximum(gate, GATE_RATIO * np.linalg.norm(v_old, axis=1)))[:, None]
+        X_new = self.X + _clip_rows(v, MAX_BONE_PREDICTION)
+        j, ch, g = m.bone_j, m.bone_child, m.gamma[:, None]
+        a, b = self.X[ch] - self.X[j], X_new[ch] - X_new[j]
+        R_b = _rotation_between(a, b)
+        D_old = g * self.X[j] + (1 - g) * self.X[ch]
+        D_new = g * X_new[j] + (1 - g) * X_new[ch]
+        self.c = np.einsum("kij,kj->ki", R_b, self.c - D_old) + D_new
+        self.R = R_b @ self.R
+        self.X = X_new
+
+    def _check_divergence(self, Y: np.ndarray, X_last: np.ndarray) -> None:
+        """Raise (the driver flags the frame and restores the last good state) when the fit
+        has left the observations: joints jumping more than :data:`MAX_JOINT_JUMP` in a
+        frame, or the model's centre more than :data:`MAX_CENTRE_OFFSET` from the data's."""
+        jump = float(np.linalg.norm(self.X - X_last, axis=1).max())
+        offset = float(np.linalg.norm(self.c.mean(axis=0) - Y.mean(axis=0)))
+        if jump > MAX_JOINT_JUMP or offset > MAX_CENTRE_OFFSET:
+            raise FloatingPointError(
+                f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)"
+            )
+
+    def _assign(self, Y, NY, ycls, Vc, Nc):
+        """E-step: soft assignments of observed points to patches (+ an outlier class).
+
+        Returns, per (point, patch) correspondence, the patch, the chosen vertex, the
+        posterior weight and the observed point.
+        """
+        o, m = self.opts, self.model
+        K = min(o.k_neighbours, len(Vc))
+        d, idx = KDTree(Vc).query(Y, k=K)
+        d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
+        if o.interior_scale > 0:  # the E-step with depth penalties, in numpy
+            return self._assign_interior(Y, NY, ycls, Vc, Nc, d, idx)
+        # per point, the nearest vertex per patch among those whose normals agree and, with
+        # classes, on the point's body part (§III-B); posterior against an outlier class
+        cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
+        i, patch, v, w = assign_kernel(
+            d.astype(np.float64),
+            idx,
+            np.ascontiguousarray(Nc, dtype=np.float64),
+            np.ascontiguousarray(NY, dtype=np.float64),
+            cls,
+            m.labels.astype(np.int64),
+            m.bone_of_patch.astype(np.int64),
+            float(o.normal_cos),
+            self.sigma**2,
+            float(np.exp(-0.5 * o.outlier_sigmas**2)),
+        )
+        return patch, v, w, Y[i], NY[i]
+
+    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx):
+        """:meth:`_assign` with ``interior_scale``: each metre a point lies deeper than
+        :data:`INTERIOR_MARGIN` behind its candidate vertex adds ``σ / interior_scale`` to
+        their distance (in quadrature), so points deep inside the model fall to the outlier
+        class."""
+        o, m = self.opts, self.model
+        ok = np.einsum("pkj,pj->pk", np.take(Nc, idx, axis=0), NY) > o.normal_cos
+        if ycls is not None:  # only patches of the point's body part (§III-B)
+            ok &= (m.bone_of_patch[m.labels[idx]] == ycls[:, None]) | (ycls[:, None] < 0)
+        i, j = np.nonzero(ok)  # row-major: per point, candidates by increasing distance
+        patch = m.labels[idx[i, j]]
+        _, first = np.unique(i * m.P + patch, return_index=True)  # nearest per patch
+        i, j, patch = i[first], j[first], patch[first]
+        vx = idx[i, j]
+        depth = np.einsum("ij,ij->i", Vc[vx] - Y[i], Nc[vx]) - INTERIOR_MARGIN
+        d2 = d[i, j].astype(np.float64) ** 2
+        d2 = d2 + (np.maximum(depth, 0.0) / o.interior_scale * self.sigma) ** 2
+        p = np.exp(-0.5 * d2 / self.sigma**2)
+        denom = np.bincount(i, p, minlength=len(Y)) + np.exp(-0.5 * o.outlier_sigmas**2)
+        return patch, vx, p / denom[i], Y[i], NY[i]
+
+    def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
+        """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
+        its own patch predicts it) to its nearest observed point, with a Cauchy weight
+        (``reverse_scale``), where their normals agree, they lie within ``reverse_cap``, and
+        every camera of ``cameras`` sees the vertex (carving removes what a camera does not
+        see: feet outside an image have no hull to be pulled onto). Returns the weighted
+        mean squared distance (metres²)."""
+        o, m = self.opts, self.model
+        v = self.reverse_sample
+        d, j = tree_y.query(Vc[v], k=1)
+        j = j.astype(np.int64)
+        ok = (np.einsum("ij,ij->i", Nc[v], NY[j]) > o.normal_cos) & (d < o.reverse_cap)
+        ok &= in_view(Vc[v], cameras)
+        v, y = v[ok], Y[j[ok]]
+        if len(v) == 0:
+            return 0.0
+        patch = m.labels[v]
+        q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
+        w = 1.0 / (1.0 + (d[ok] / o.reverse_scale) ** 2)  # Cauchy IRLS weights
+        e = add_point_terms(sys, patch, q, q + self.c[patch] - y, w, o.lambda_reverse / len(v))
+        return e / len(v)
+
+    def _apply(self, delta: np.ndarray) -> None:
+        P = self.model.P
+        d = delta[: 6 * P].reshape(P, 6).copy()
+        # trust region: no patch turns more than MAX_STEP_ANGLE radians in one step
+        angle = np.linalg.norm(d[:, :3], axis=1, keepdims=True)
+        d[:, :3] *= np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(angle, 1e-12))
+        self.R = so3_exp(d[:, :3]) @ self.R
+        self.c = self.c + d[:, 3:]
+        self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def _masks(frame: CaptureFrame) -> list[np.ndarray]:
+    """The frame's silhouettes, one per camera, or [] where the capture has none."""
+    try:
+        masks = frame.silhouettes
+    except (OSError, AttributeError, ValueError):
+        return []
+    return masks if len(masks) == len(frame.cameras) else []
+
+
+def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
+    """(m, 2) joint pairs whose distance the length prior holds: every bone (child, parent)
+    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: on
+    CMU 05_01 a right hip flipped to the left side, 19 cm off, for 20 frames)."""
+    b = np.flatnonzero(ev.parents >= 0)
+    extra = [
+        (ev.names.index(a), ev.names.index(c))
+        for a, c in RIGID_PAIRS
+        if a in ev.names and c in ev.names
+    ]
+    return np.vstack([np.stack([b, ev.parents[b]], 1), np.reshape(extra, (-1, 2))]).astype(int)
+
+
+def _held_lengths(
+    B: np.ndarray, pairs: np.ndarray, lengths: np.ndarray, *, iters: int = 8
+) -> np.ndarray:
+    """The joints (K, 3) nearest to ``B`` (K, 3) whose ``pairs`` (m, 2) lie ``lengths`` (m,)
+    apart: Gauss–Newton on ``|X − B|² + μ Σ (|X_a − X_b| − L)²`` with μ = 1e4 (lengths
+    then hold to 1e-4 of their error in ``B``)."""
+    mu, K, m = 1e4, len(B), len(pairs)
+    X = B.copy()
+    rows = np.repeat(np.arange(m), 6)
+    cols = (3 * pairs[:, [0, 0, 0, 1, 1, 1]] + np.array([0, 1, 2, 0, 1, 2])).ravel()
+    for _ in range(iters):
+        u, r = length_residuals(X, pairs, lengths)
+        J = np.zeros((m, 3 * K))
+        J[rows, cols] = np.concatenate([u, -u], axis=1).ravel()
+        H = np.eye(3 * K) + mu * J.T @ J
+        g = (X - B).ravel() + mu * J.T @ r
+        X = X - np.linalg.solve(H, g).reshape(K, 3)
+    return X
+
+
+def _pair_lengths(X: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Distance (m,) between the joints of each pair of ``X`` (K, 3)."""
+    return np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1)
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotations (k, 3, 3) turning the directions of ``a`` (k, 3) into ``b``."""
+    a = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-12)
+    b = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = np.arctan2(s[:, 0], np.sum(a * b, axis=1))
+    return so3_exp(axis / np.maximum(s, 1e-12) * angle[:, None])
+
+
+def _clip_rows(A: np.ndarray, limit: float) -> np.ndarray:
+    """Rows of ``A`` (k, 3) scaled down to a norm of at most ``limit``."""
+    n = np.linalg.norm(A, axis=1, keepdims=True)
+    return A * np.minimum(1.0, limit / np.maximum(n, 1e-12))

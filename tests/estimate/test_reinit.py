@@ -1,0 +1,221 @@
+"""Tracking from the capture alone: the studio's heading, offset and missed limb, loss
+flags and re-seating, point clouds, and the one-line refusals of inputs that cannot be
+tracked as given."""
+
+import functools
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from meshmocap.body.template import load_template
+from meshmocap.cli import main
+from meshmocap.errors import InputError
+from meshmocap.estimate import tracking_template as tt
+from meshmocap.estimate.subject import estimate_subject
+from meshmocap.geometry.carving import distance_grid
+from meshmocap.io.capture import SequenceFrame
+from meshmocap.io.meshes import write_mesh
+from meshmocap.io.results import read_track
+from meshmocap.studio.degrade import Degradation
+from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
+from meshmocap.trackers.articulated_icp import ArticulatedICP
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.patch.tracker import PatchTracker
+
+
+@pytest.fixture(scope="module")
+def gap(tmp_path_factory):
+    """A 5-frame procedural walk whose hulls miss the left forearm and hand on frames 2–3."""
+    deg = Degradation(missed_limb=True, missed_limb_joint="left_elbow", missed_limb_frames=(2, 4))
+    spec = SynthSpec(motion="walk", template="neutral_5k", stop=5, degradation=deg)
+    return synthesize(tmp_path_factory.mktemp("gap"), spec, show_progress=False)
+
+
+def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path, capsys):
+    R = np.tile(np.eye(3), (2, 3, 1, 1))
+    root = np.array([[1.0, 0.0, 0.9], [0.0, 2.0, 0.9]])
+    R2, root2 = placed_motion(R, root, heading=90.0, offset=(0.5, -0.3))
+    np.testing.assert_allclose(root2, [[0.5, 0.7, 0.9], [-1.5, -0.3, 0.9]], atol=1e-12)
+    np.testing.assert_allclose(R2[:, 0] @ [1.0, 0, 0], [[0, 1.0, 0]] * 2, atol=1e-12)
+    np.testing.assert_array_equal(R2[:, 1:], R[:, 1:])  # only the root's turn changes
+    with pytest.raises(InputError, match="offset two numbers"):
+        placed_motion(R, root, offset=(1.0, float("nan")))
+    out = tmp_path / "c"
+    assert (
+        main(
+            [
+                "synth",
+                str(out),
+                "--template",
+                "neutral_5k",
+                "--frames",
+                "0:1",
+                "--heading",
+                "135",
+                "--offset",
+                "0.5,-0.25",
+            ]
+        )
+        == 0
+    )
+    spec = json.loads((out / "capture.json").read_text())["spec"]
+    assert spec["heading"] == 135.0 and spec["offset"] == [0.5, -0.25]
+    plain = SynthSpec().as_dict()  # captures made before heading/offset keep their spec
+    assert "heading" not in plain and "offset" not in plain
+    assert "missed_limb_frames" not in plain["degradation"]
+    capsys.readouterr()
+    assert main(["synth", str(tmp_path / "d"), "--offset", "1;2"]) == 2
+    err = capsys.readouterr().err
+    assert "expected X,Y with two numbers, found '1;2'" in err and err.count("\n") == 1
+
+
+def test_the_hull_misses_the_limb_only_on_its_frames(gap):
+    t = load_template("neutral_5k")
+    wrist = t.eval_skeleton.names.index("left_wrist")
+    outside = [float(distance_grid(f.hull)(f.truth.joints[wrist : wrist + 1])[0]) for f in gap]
+    assert all(d < 0 for k, d in enumerate(outside) if k not in (2, 3))  # inside the hull
+    assert outside[2] > 0.02 and outside[3] > 0.02  # measured 5-6 cm outside
+    with pytest.raises(InputError, match="missed_limb_frames and missed_limb_joint need"):
+        Degradation(missed_limb_frames=(0, 2))
+    with pytest.raises(InputError, match="start < stop"):
+        Degradation(missed_limb=True, missed_limb_frames=(3, 3))
+
+
+def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
+    t = load_template("neutral_5k")
+    track = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "tr", init="truth", show_progress=False
+    )
+    lost = [k for k, f in enumerate(track.flags) if "lost" in f]
+    assert lost[:2] == [2, 3]  # the hull misses the arm from frame 2
+    assert all("left_arm" in track.messages[k] for k in (2, 3))
+    assert "not observed where it was last seen" in track.messages[2]
+    assert set(track.energies) >= {"fit_outside", "fit_buried", "fit_unexplained"}
+    assert json.loads((tmp_path / "tr" / "track.json").read_text())["init"] == "truth"
+    assert (
+        main(
+            [
+                "eval",
+                str(gap.path),
+                str(tmp_path / "tr"),
+                "--no-silhouettes",
+                "--surface-frames",
+                "0",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "init truth: the first pose from ground truth" in out and "with a limb lost" in out
+    quiet = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "quiet", init="truth", recover=False, show_progress=False
+    )
+    assert not any(quiet.flags) and "fit_outside" not in quiet.energies
+    # the default flags and never moves the track; reseat acts on the lost limb
+    assert not any("reinit" in f for f in track.flags)
+    assert not any("held as last seen" in m for m in track.messages)
+    acted = track_sequence(
+        PatchTracker(), t, gap, tmp_path / "acted", init="truth", reseat=True, show_progress=False
+    )
+    assert any("held as last seen" in m or "re-initialised" in m for m in acted.messages)
+    assert json.loads((tmp_path / "acted" / "track.json").read_text())["reseat"] is True
+
+
+@pytest.mark.parametrize("tracker", [ArticulatedICP, PatchTracker])
+def test_reseat_places_the_template_at_the_given_pose(gap, tracker):
+    t = load_template("neutral_5k")
+    tr = tracker()
+    tr.init(t, gap[0], gap[0].truth.rotations, gap[0].truth.root)
+    truth = gap[4].truth
+    r = tr.reseat(gap[4], truth.rotations, truth.root)
+    err = np.linalg.norm(r.joints - truth.joints, axis=1)
+    assert err.max() < 0.01  # ICP exactly; patch: its surface read-out, 4 mm
+    assert np.isfinite(tr.step(gap[4]).joints).all()  # and it tracks on from there
+
+
+@pytest.mark.parametrize("tracker", [ArticulatedICP, PatchTracker])
+def test_trackers_follow_a_point_cloud_without_normals(gap, tracker):
+    t = load_template("neutral_5k")
+    tr = tracker()
+    tr.init(t, gap[0], gap[0].truth.rotations, gap[0].truth.root)
+    V = gap[1].truth.vertices  # the true surface's points alone, no faces, no normals
+    r = tr.step(SequenceFrame(1, (V, None), None))
+    err = np.linalg.norm(r.joints - gap[1].truth.joints, axis=1)
+    assert err.mean() < 0.02  # measured 8 mm (ICP), 6 mm (patch)
+
+
+def test_inputs_that_cannot_be_tracked_as_given_are_refused_in_one_line(gap, tmp_path, capsys):
+    t = load_template("neutral_5k")
+    far, small = tmp_path / "far", tmp_path / "small"
+    far.mkdir()
+    small.mkdir()
+    V = gap[0].truth.vertices
+    write_mesh(far / "f0.obj", V + [1e6, 0.0, 0.0], t.F)
+    write_mesh(small / "f0.obj", V * 10, t.F)
+    cases = [
+        (["track", str(far), "--out", str(tmp_path / "t")], "1000 km from the origin"),
+        (["track", str(small), "--out", str(tmp_path / "t")], "set --units (m, cm or mm)"),
+        (
+            ["track", str(small), "--units", "cm", "--init", "truth", "--out", str(tmp_path / "t")],
+            "--init truth needs a capture with ground-truth poses",
+        ),
+        (
+            ["track", str(gap.path), "--up", "y", "--out", str(tmp_path / "t")],
+            "is a capture folder: metres, Z up",
+        ),
+    ]
+    for args, message in cases:
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+
+
+def test_a_capture_without_truth_or_template_is_tracked_from_itself(tmp_path, monkeypatch, capsys):
+    """A user's default path, ``meshmocap track CAPTURE``: no ground truth, no capture.json,
+    the performer turned 200° and 0.86 m from the origin. The body is estimated (1 frame, 8
+    iterations here: the default's accuracy is bench_subject's) and the first pose found from
+    the hull. About 20 s of CPU (the subject fit and the first-pose search on its 12k
+    vertices): the one end-to-end check of track's defaults."""
+    spec = SynthSpec(
+        motion="walk",
+        template="neutral_5k",
+        stop=2,
+        heading=200.0,
+        offset=(0.7, -0.5),
+        voxel_size=0.02,
+    )
+    cap = synthesize(tmp_path / "cap", spec, show_progress=False)
+    real, out = tmp_path / "real", tmp_path / "t"
+    shutil.copytree(cap.path, real, ignore=shutil.ignore_patterns("truth", "capture.json"))
+    quick = functools.partial(estimate_subject, n_frames=1, iterations=8)
+    monkeypatch.setattr(tt, "estimate_subject", quick)
+    assert (
+        main(
+            [
+                "track",
+                str(real),
+                "--method",
+                "articulated_icp",
+                "--max-iter",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    said = capsys.readouterr().out
+    assert "template estimated from the capture" in said and "; init auto: " in said
+    meta = json.loads((out / "track.json").read_text())
+    assert meta["init"] == "auto" and meta["template_source"] == "estimated"
+    assert meta["template"] == "subject" and (out / meta["template_file"]).is_file()
+    track = read_track(out)
+    truth = cap[0].truth.joints
+    assert np.linalg.norm(truth[0, :2]) > 0.8  # the rest pose at the origin is ~1 m off
+    err = np.linalg.norm(track.joints[0] - truth, axis=1)
+    assert err.mean() < 0.04 and err.max() < 0.1  # measured 23 and 55 mm
+    assert main(["eval", str(cap.path), str(out), "--no-silhouettes", "--surface-frames", "0"]) == 0
+    said = capsys.readouterr().out
+    assert "template subject (estimated from the capture)" in said and "; init auto: " in said
