@@ -98,10 +98,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
     template = choice.template
     print(choice.note)
     if args.method in MANIFOLD_METHODS and args.manifold is None:
-        print(
-            f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
-            f"procedural walk and jog on {template.name!r}"
-        )
+        from meshmocap.trackers.cage.manifold import default_manifold_note
+
+        print(default_manifold_note(template))
     tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
@@ -392,7 +391,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument(
         "--manifold",
         help="cage methods: pose manifold from 'meshmocap learn' "
-        "(default: learn one from the procedural walk and jog)",
+        "(default: learned from the bundled CMU pose library at first use, cached)",
     )
     k.add_argument(
         "--init",

@@ -320,8 +320,8 @@ def green_coordinates(
     -----
     ``points[p] == phi[p] @ cage_V + psi[p] @ n`` to rounding (about 1e-14 m for a
     1 m cage; see the module notes near edges) with ``n`` the unit outward face normals.
-    Cost: O(n · nf), ~130 array operations per (point, face) pair; 0.4–0.6 s for 12k
-    points in a 166-face cage on one core.
+    Cost: O(n · nf), ~130 array operations per (point, face) pair (timings:
+    ``benchmarks/bench_green.py``).
     """
     func = "green_coordinates"
     check_choice(func, "exterior", exterior, _EXTERIOR)
@@ -354,8 +354,8 @@ class GreenDeformer:
     dtype : {numpy.float64, numpy.float32}
         Storage of the coordinates: ``(nv + nf) × n`` numbers, written chunk by chunk
         (no full-size temporary: memory is the storage plus one chunk's temporaries).
-        float32 halves the memory and the traffic of :meth:`deform` (about 2× faster for
-        large point sets) at ~2e-6 relative accuracy (2 µm on a human-sized cage); the
+        float32 halves the memory and the traffic of :meth:`deform` (faster for large
+        point sets) at ~2e-6 relative accuracy (micrometres on a human-sized cage); the
         derivatives compute in float64 from the stored coordinates.
     chunk_size : int, optional
         See :func:`green_coordinates`.
@@ -507,7 +507,7 @@ class GreenDeformer:
         B = np.empty((k, 3, self._GT.shape[0]), dtype=self._GT.dtype)
         B[:, :, :nv] = V.reshape(k, nv, 3).transpose(0, 2, 1)
         B[:, :, nv:] = (n * s[..., None]).reshape(k, -1, 3).transpose(0, 2, 1)  # s_j n'_j
-        if k == 1 and B.dtype == np.float64:  # 3 gemv: dgemm on 3 rows packs G first (1.4×)
+        if k == 1 and B.dtype == np.float64:  # 3 gemv: dgemm on 3 rows packs G first
             X = np.stack([b @ self._GT for b in B[0]])[None]
         else:
             X = (B.reshape(3 * k, -1) @ self._GT).reshape(k, 3, -1)
@@ -521,7 +521,7 @@ class GreenDeformer:
         u, v, cn, n, J1, J2, s = self._faces(V)
         # s² = (|J1|² + |J2|²)/2, J1 = a u', J2 = b (v' − c u'):
         # ds/du' = (a J1 − c b J2)/(2s), ds/dv' = b J2/(2s)
-        inv2s = 0.5 / np.where(s > 0, s, np.inf)[:, None]  # np.divide(where=) is 3× slower
+        inv2s = 0.5 / np.where(s > 0, s, np.inf)[:, None]  # faster than np.divide(where=)
         dsu = (self._a[:, None] * J1 - (self._c * self._b)[:, None] * J2) * inv2s
         dsv = self._b[:, None] * J2 * inv2s
         # dn' = (I − n'n'ᵀ) dc / |c|, dc = du' × v' + u' × dv', (I − n'n'ᵀ)[x]× = [x]× −
@@ -577,7 +577,7 @@ class GreenDeformer:
         """Return ``W`` (n, nv, 3), ``W[p] = d(grad_points[p] · x'_p) / dV'``: each point's own
         :meth:`vjp` (``W.sum(0) == vjp``; normals and stretch factors included), i.e. the
         Jacobian of n residuals ``g_p · x'_p`` (Gauss–Newton, Eq. (6) of the cage paper)
-        without the dense :meth:`jacobian`; ~2 ms for 800 points in a 166-face cage."""
+        without the dense :meth:`jacobian`."""
         V = self._cage("pointwise_vjp", cage_V_new)
         G = self._grads("pointwise_vjp", grad_points)
         nv, nf = len(V), len(self.cage_F_)

@@ -15,6 +15,8 @@ if TYPE_CHECKING:
     from meshmocap.trackers.cage.manifold import PoseManifold
 
 _CAGE = ("meshmocap.trackers.cage.tracker", "CageTracker", "CageOptions")
+#: The cage tracker's terms (meshmocap.trackers.cage.terms.ALL_TERMS, without importing it).
+_CAGE_TERMS = ("distance", "variance", "coverage", "silhouette", "anchor", "articulation")
 
 #: method name → (module, tracker class, options class, fixed options)
 METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
@@ -52,18 +54,27 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         )
     },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
-    # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1)
+    # the cage tracker and its ablations (cage-manifold-tracking Fig. 5, Table 1); a cage
+    # variant is a term list (CageOptions.terms, trackers/cage/terms.py) plus options
     "cage": (*_CAGE, {}),
     "cage_quads": (*_CAGE, {"space": "quads"}),
-    "cage_noreg": (*_CAGE, {"variance_weight": 0.0}),
+    "cage_noreg": (*_CAGE, {"terms": tuple(t for t in _CAGE_TERMS if t != "variance")}),
     "cage_nolocal": (*_CAGE, {"local_iters": 0}),
     # without each extension beyond the paper (issue 20; CAGE_ABLATIONS)
-    "cage_nosil": (*_CAGE, {"silhouette_weight": 0.0}),
+    "cage_nosil": (*_CAGE, {"terms": tuple(t for t in _CAGE_TERMS if t != "silhouette")}),
     "cage_nowiden": (*_CAGE, {"off_manifold": 0.0}),
     "cage_green": (*_CAGE, {"surface": "green", "joints": "green"}),
+    # exactly the paper's energy (Eq. 4 and 5), its surface (Eq. 1), joints (§6.2) and
+    # cage (on the template, §3), no widening
     "cage_paper": (
         *_CAGE,
-        {"surface": "green", "joints": "green", "silhouette_weight": 0.0, "off_manifold": 0.0},
+        {
+            "terms": ("distance", "variance"),
+            "surface": "green",
+            "joints": "green",
+            "body": "template",
+            "off_manifold": 0.0,
+        },
     ),
 }
 
@@ -121,15 +132,20 @@ def make_tracker(
         raise InputError(f"track: {exc}") from None
     if method not in MANIFOLD_METHODS:
         return getattr(mod, cls)(opts)
+    from meshmocap.trackers.cage.body import cage_body
     from meshmocap.trackers.cage.manifold import PoseManifold, resolve_manifold
 
-    pm = resolve_manifold(manifold, template)
+    # the body the cage is built on (the template, or a body posed on its skeleton) and
+    # its rigging, built once: the manifold is the body's, the driver keeps the rigging
+    rig = cage_body(template, body=opts.body) if template is not None else None
+    body = rig[0] if rig is not None else None
+    pm = resolve_manifold(manifold, body, rig[1] if rig is not None else None)
     tracker = getattr(mod, cls)(pm.gp if isinstance(pm, PoseManifold) else pm, opts)
     if template is not None:
-        tracker.setup(template)  # builds the rigging once; the driver keeps it
+        tracker.setup(template, rig=rig)
         if isinstance(pm, PoseManifold):
             named = isinstance(manifold, str | os.PathLike)
-            pm.check(template, tracker.oqr, source=manifold if named else None)
+            pm.check(body, tracker.oqr, source=manifold if named else None)
     return tracker
 
 
@@ -151,5 +167,5 @@ CAGE_ABLATIONS: dict[str, str] = {
     "cage_nosil": "silhouette coverage (hull coverage instead)",
     "cage_nowiden": "off-manifold widening",
     "cage_green": "skinned surface and quad joints (Green coordinates, §6.2)",
-    "cage_paper": "all three extensions",
+    "cage_paper": "every extension: only the paper's terms, surface, joints and cage",
 }

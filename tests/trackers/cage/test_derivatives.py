@@ -17,6 +17,7 @@ from meshmocap.trackers.cage.energy import HullCoverage, SilhouetteCoverage
 from meshmocap.trackers.cage.oqr import build_oqr, configuration_vector, quads_from_pose
 from meshmocap.trackers.cage.quad_frames import pose_jacobian
 from meshmocap.trackers.cage.surface import GreenSurface, SkinnedSurface
+from meshmocap.trackers.cage.terms import CoverageTerm, DistanceTerm
 from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, orthonormalised
 
 
@@ -85,6 +86,11 @@ def _silhouette(tr):
     return SilhouetteCoverage([Camera(K, R, t, 320, 240)], [mask], 60, 1.0, seed=0)
 
 
+def _activate(tr, field, *extra):
+    """The point terms of the tracker's problems: the data term (Eq. 4), then ``extra``."""
+    tr._active, tr._memo = (DistanceTerm.from_options(field, tr._data_w, tr.opts), *extra), []
+
+
 @pytest.fixture(params=["data", "coverage", "silhouette"])
 def terms(request, tracker):
     """The data term alone, or with a hull coverage term (samples on a sphere around the
@@ -94,6 +100,7 @@ def terms(request, tracker):
     tr, field = tracker
     keep = np.ones(len(tr.sample), dtype=bool)
     P = tr.surface.points(tr.local, tr.pelvis_R, tr.pelvis_c)
+    extra: tuple = ()
     if request.param == "coverage":
         rng = np.random.default_rng(7)
         H = rng.normal(size=(40, 3))
@@ -101,14 +108,15 @@ def terms(request, tracker):
         term = HullCoverage(H, margin=0.05)
         keep[::3] = False
         assert (term.residuals(P)[0] > 0).sum() >= 5
-        tr._coverage = ((term, 0.3),)
+        extra = (CoverageTerm(term, 0.3, name="coverage", local=True),)
     elif request.param == "silhouette":
         term = _silhouette(tr)
         assert (term.residuals(P)[0] > 0).sum() >= 5
-        tr._coverage = ((term, 0.3),)
+        extra = (CoverageTerm(term, 0.3, name="silhouette", local=True),)
     tr._set_keep(keep)
+    _activate(tr, field, *extra)
     yield tr, field
-    tr._coverage = ()
+    tr._active = ()
     tr._set_keep(np.ones(len(tr.sample), dtype=bool))
 
 
@@ -133,6 +141,7 @@ def test_local_adjustment_gradient(terms, anchored):
 
 def test_pose_jacobian_is_the_rigid_motion_of_the_points(tracker):
     tr, field = tracker
+    _activate(tr, field)
     _, g, P = tr._residuals(field, tr.local, tr.pelvis_R, tr.pelvis_c)
     J = pose_jacobian(P, g, tr.pelvis_c)
     rng = np.random.default_rng(5)

@@ -85,18 +85,20 @@ def test_check_refuses_another_template_or_rigging_in_one_line(tiny):
 
 def test_registry_cage_methods_and_their_ablations(tiny, tmp_path):
     t, _, pm = tiny
+    every = ("distance", "variance", "coverage", "silhouette", "anchor", "articulation")
     fixed = {
         "cage": {},
         "cage_quads": {"space": "quads"},
-        "cage_noreg": {"variance_weight": 0.0},
+        "cage_noreg": {"terms": tuple(x for x in every if x != "variance")},
         "cage_nolocal": {"local_iters": 0},
-        "cage_nosil": {"silhouette_weight": 0.0},
+        "cage_nosil": {"terms": tuple(x for x in every if x != "silhouette")},
         "cage_nowiden": {"off_manifold": 0.0},
         "cage_green": {"surface": "green", "joints": "green"},
         "cage_paper": {
+            "terms": ("distance", "variance"),
             "surface": "green",
             "joints": "green",
-            "silhouette_weight": 0.0,
+            "body": "template",
             "off_manifold": 0.0,
         },
     }

@@ -8,17 +8,17 @@ second, opposite term; each choice was measured on synthetic ``humaneva4`` captu
 
 * **Sample by area** (:func:`surface_sample`): vertices drawn with probability ∝ their
   area, so the sum approximates a surface integral whatever the tessellation. The bundled
-  ``neutral_5k`` spends a quarter of its vertices on the head (8 % of its area).
+  ``neutral_5k`` spends a quarter of its vertices on the head, a small part of its area.
 * **Leave out what the cage cannot place** (:func:`placement_errors`): a template vertex
   follows the cage through Green coordinates, which reproduce skinning only where the
   skinned part moves with the quads around it. The head sits in the cage's neck–head tube
   and the fingers in the hand's, so when a retargeted CMU pose turns the neck and head
-  35–50° (and the fingers) the true quads put the head 65 mm and the fingertips 35–50 mm
-  from their skinned places. With a uniform vertex sample those vertices held 87 % of the
-  energy at the true pose, and the fit traded the body's pose for them: every frame's fit
-  had a lower energy than the truth, 105 mm mean joint error on frames 1–39. Vertices
-  whose Green-coordinate position misses their skinned one by more than
-  ``max_model_error`` in the first frame's known pose get no data term (42 mm).
+  (and the fingers) the true quads put them centimetres from their skinned places. With a
+  uniform vertex sample those vertices held most of the energy at the true pose, and the
+  fit traded the body's pose for them (every frame's fit had a lower energy than the
+  truth). Vertices whose Green-coordinate position misses their skinned one by more than
+  ``max_model_error`` in the first frame's known pose get no data term (the figures:
+  ``docs/guide/cage.rst``).
 * **Coverage** (:class:`HullCoverage`): Eq. (4) only asks the model to lie on the hull;
   nothing asks the hull to be explained. A swinging foot that falls behind lands on the
   stance foot's hull at no cost and stays there (on 05_01 a foot was lost for 40 frames
@@ -41,7 +41,7 @@ from meshmocap.trackers.cage.kernels import silhouette_residuals
 #: Pixels between views in :class:`SilhouetteCoverage`'s k-d tree (no image is this wide).
 _VIEW_GAP = 1e12
 
-__all__ = ["HullCoverage", "distance_terms", "placement_errors", "surface_sample"]
+__all__ = ["HullCoverage", "SilhouetteCoverage", "placement_errors", "surface_sample"]
 
 
 def surface_sample(V: np.ndarray, F: np.ndarray, n: int, *, seed: int) -> np.ndarray:
@@ -255,8 +255,9 @@ class SilhouetteCoverage:
 
     A visual hull from few cameras holds phantom volume that no body explains, so asking the
     model to reach the hull's surface everywhere (:class:`HullCoverage`) drags it into the
-    phantoms (from the true pose of CMU 05_01's frames, the local adjustment moved the
-    joints 21.6 mm with it against 6.1 mm without). The silhouettes hold no phantom: each
+    phantoms (from the true pose, the local adjustment moves the joints several times
+    farther with it than without: ``docs/guide/cage.rst``). The silhouettes hold no
+    phantom: each
     contour pixel is seen on the body's occluding contour. ``ρ_m = max(0, d_m − margin)``
     with ``d_m`` the image distance from contour sample ``q_m`` of camera ``c`` to the
     nearest projected model point ``π_c(P_i)``; residuals are ``ρ_m`` scaled to metres at
@@ -394,29 +395,3 @@ class SilhouetteCoverage:
         ).reshape(n, 3)
         r = np.sqrt(rr)
         return r, g / np.where(r > 0, r, np.inf)[:, None]
-
-
-def distance_terms(field, P: np.ndarray, w: np.ndarray, opts, coverage) -> tuple:
-    """Residuals (s n,) of the cage tracker's distance terms at the points ``P`` (n, 3) and
-    their gradients (s n, 3) with respect to the points: the data term √w_i d_DF(P_i)
-    (Eq. 4, ``w`` the points' data weights; points inside the hull weighted by
-    ``opts.inside_weight``, outside ones past ``opts.outside_margin`` and under
-    ``opts.outside_cap``) then each ``(term, weight)`` of ``coverage``'s share of it."""
-    r, g = field.value_and_gradient(P)
-    m, cap = opts.outside_margin, opts.outside_cap
-    if m:  # outside: only beyond the margin
-        r = np.where(r > 0, np.maximum(r - m, 0.0), r)
-    if cap:  # farther outside: the hull lost that part (a carved hole): no pull
-        far = r > cap
-        r, g = np.where(far, 0.0, r), np.where(far[:, None], 0.0, g)
-    w = np.where(r < 0, np.sqrt(opts.inside_weight), 1.0) * w
-    r, g = r * w, g * w[:, None]
-    if not coverage:
-        return r, g
-    rs, gs = [r], [g]
-    for term, weight in coverage:
-        rc, ac = term.residuals(P)
-        s = np.sqrt(weight / len(term))
-        rs.append(s * rc)
-        gs.append(s * ac)
-    return np.concatenate(rs), np.concatenate(gs)

@@ -48,6 +48,7 @@ __all__ = [
     "MANIFOLD_FORMAT",
     "PoseManifold",
     "default_manifold",
+    "default_manifold_note",
     "default_manifold_path",
     "fit_pose_manifold",
     "learn_manifold",
@@ -410,10 +411,25 @@ def default_manifold_path(template: Template) -> Path | None:
     return folder / f"manifold-{template.name}-{h.hexdigest()[:16]}.npz"
 
 
+def default_manifold_note(template: Template) -> str:
+    """One line saying what :func:`default_manifold` will do for ``template`` (read its
+    cached manifold, or learn one: what from, about how long), for front ends to print
+    before a cage tracker is made (the cage's body, :mod:`~meshmocap.trackers.cage.body`,
+    may be another than ``template``; the note names the template given)."""
+    path = default_manifold_path(template)
+    if path is not None and path.is_file():
+        return f"cage: pose manifold of {template.name!r}: the cached default ({path.name})"
+    return (
+        f"cage: no --manifold given: learning a {DEFAULT_COMPONENTS}-D pose manifold from "
+        f"{DEFAULT_POSES} poses of the bundled CMU pose library for the cage's body "
+        f"(about a minute, once: cached)"
+    )
+
+
 def default_manifold(template: Template, oqr: OQR | None = None) -> PoseManifold:
     """The cage tracker's default pose manifold of ``template``: learned at first use from
     :data:`DEFAULT_SOURCES` (:data:`DEFAULT_POSES` poses, q = :data:`DEFAULT_COMPONENTS`,
-    :data:`ON_THE_FLY_MAX_ITER` iterations; ~25 s on 2 cores for ``neutral_5k``) and cached
+    :data:`ON_THE_FLY_MAX_ITER` iterations; tens of seconds) and cached
     (:func:`default_manifold_path`); a cached file that cannot be read is learned again.
     Logged at INFO level on the ``meshmocap.trackers.cage.manifold`` logger."""
     path = default_manifold_path(template)

@@ -12,10 +12,12 @@ import numpy as np
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
 from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers.cage.terms import ALL_TERMS, TermName
 
 Space = Literal["latent", "quads"]
 Joints = Literal["green", "quads"]
 Surface = Literal["skinned", "green"]
+Body = Literal["auto", "template", "reference"]
 
 
 def manifold_digest(gp: GPLVM) -> str:
@@ -48,8 +50,15 @@ def manifold_digest(gp: GPLVM) -> str:
 class CageOptions:
     """Settings of the cage tracker.
 
+    A variant of the tracker is a term list (``terms``) plus these options.
+
     Parameters
     ----------
+    terms : tuple of {"distance", "variance", "coverage", "silhouette", "anchor", "articulation"}
+        The energy's terms (:mod:`~meshmocap.trackers.cage.terms`): the paper's distance
+        field sum (Eq. 4) and variance regulariser (Eq. 5); the hull and silhouette coverage
+        terms, the local adjustment's pull towards the manifold and its soft joints (ours).
+        Each term's weight is the option of the same role below. ``"distance"`` is needed.
     space : {"latent", "quads"}
         Optimise in the learned latent space (the method) or directly on the quads (the
         ablation of Fig. 5a, which collapses without the manifold).
@@ -82,12 +91,17 @@ class CageOptions:
     joints : {"quads", "green"}
         Joints carried rigidly by the quad that follows their rig joint (the quads sit at
         the joints, §3; joints of no quad keep Green coordinates), or from the cage through
-        Green coordinates (§6.2), which misplace them by 11–21 mm at the true quads (CMU
-        05_01, 09_01, 01_01 on ``neutral_5k``).
+        Green coordinates (§6.2), which misplace them by a centimetre or two at the true
+        quads (``docs/guide/cage.rst``).
     surface : {"skinned", "green"}
         The template surface the data term fits (:mod:`~meshmocap.trackers.cage.surface`):
         posed by its own skinning from the quads' joint frames, or deformed by the cage's
-        Green coordinates (the paper's Eq. (1), 16–44 mm from the skinned body).
+        Green coordinates (the paper's Eq. (1), centimetres from the skinned body).
+    body : {"auto", "template", "reference"}
+        The body the cage is built on (:mod:`~meshmocap.trackers.cage.body`): the template
+        (the paper's), the bundled reference body posed on the template's skeleton, or the
+        template where its cage builds without relaxing, else the reference body. The
+        template's own vertices are bound to that cage.
     n_sample : int
         Template vertices in the energy, drawn by area (the output deforms all of them).
     max_model_error : float
@@ -134,6 +148,7 @@ class CageOptions:
         Seeds the choice of the sampled vertices.
     """
 
+    terms: tuple[TermName, ...] = ALL_TERMS
     space: Space = "latent"
     variance_weight: float = 1e-5
     local_iters: int = 3
@@ -149,6 +164,7 @@ class CageOptions:
     outside_cap: float = 0.0
     joints: Joints = "quads"
     surface: Surface = "skinned"
+    body: Body = "auto"
     n_sample: int = 800
     max_model_error: float = 0.03
     coverage_weight: float = 0.3
@@ -167,6 +183,15 @@ class CageOptions:
         check_choice("CageOptions", "space", self.space, get_args(Space))
         check_choice("CageOptions", "joints", self.joints, get_args(Joints))
         check_choice("CageOptions", "surface", self.surface, get_args(Surface))
+        check_choice("CageOptions", "body", self.body, get_args(Body))
+        terms = tuple(self.terms) if isinstance(self.terms, list | tuple) else (self.terms,)
+        for t in terms:
+            check_choice("CageOptions", "terms", t, ALL_TERMS)
+        if "distance" not in terms or len(set(terms)) != len(terms):
+            raise InputError(
+                f"CageOptions: terms must hold 'distance' and no repeat, found {list(terms)}"
+            )
+        object.__setattr__(self, "terms", tuple(t for t in ALL_TERMS if t in terms))
         if self.variance_weight < 0 or self.n_sample < 10:
             raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
         if not 0 < self.inside_weight <= 1 or self.restarts < 0:

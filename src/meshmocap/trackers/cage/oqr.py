@@ -226,6 +226,7 @@ def build_oqr(
     slab: float = 0.02,
     grow_step: float = 0.004,
     max_grow: int = 40,
+    relaxed: bool = True,
 ) -> OQR:
     """Place the 21 quads on a template and build the cage they span (§3, Fig. 1).
 
@@ -242,9 +243,8 @@ def build_oqr(
     with the upper arms boxed (module docstring) and the same steps follow; where that
     fails too (loose clothing: a long dress flaring 25 cm beyond the legs), twice more,
     relaxed: cross-sections 15 % and then 30 % wider, three times the growth iterations,
-    half and then a quarter of the clearance. On the four
-    bundled templates this takes 1–4 rounds and about a second (no shrinking, no sliding,
-    one placement); on the MIT crane's frame 0 (arms hanging against a jacket) 5–15 s.
+    half and then a quarter of the clearance (``relaxed``). A bundled template takes one
+    placement and seconds; a clothed scan more (``docs/guide/cage.rst``).
 
     Parameters
     ----------
@@ -261,6 +261,9 @@ def build_oqr(
         Maximum number of growth iterations (of each of the two passes of
         :func:`~meshmocap.trackers.cage.growth.enclose`, and of
         :func:`~meshmocap.trackers.cage.growth.untangle`).
+    relaxed : bool
+        Also try the two relaxed rounds for loose clothing (False: fail after the first
+        two placements, which a body passes in seconds).
 
     Returns
     -------
@@ -304,7 +307,7 @@ def build_oqr(
         (True, margin, clearance, max_grow),
         (True, min(margin * 1.15, 3.0), clearance / 2, 3 * max_grow),
         (True, min(margin * 1.3, 3.0), clearance / 4, 3 * max_grow),
-    ]
+    ][: 4 if relaxed else 2]
     for box_limbs, margin, clearance, max_grow in rounds:
         placer = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab))
         placer.box_limbs = box_limbs
@@ -336,9 +339,9 @@ def build_oqr(
         if not problems:
             return _assemble(template, rects, F, V)
         why.append("; ".join(problems))
+    relax = f"; relaxed for loose clothing: {why[-1]}" if relaxed else ""
     raise MeshError(
-        f"{func}: template {template.name!r}: {why[0]} (with the upper arms "
-        f"boxed: {why[1]}; relaxed for loose clothing: {why[-1]})"
+        f"{func}: template {template.name!r}: {why[0]} (with the upper arms boxed: {why[1]}{relax})"
     )
 
 

@@ -16,13 +16,12 @@ parent's frame for one), or their parent's rotation when no quad hangs below (fi
 On poses whose quad-less joints do not bend on their own (retargeted CMU clips: hip joints
 and clavicles keep their rest orientation) this reproduces skinning exactly; where Spine1 or
 Neck1 bend on their own in the source, their frames are recovered from the neck, shoulders
-and head only approximately (12 bundled library poses on ``neutral_5k``: up to 16 mm at a
-vertex, 99th percentile 10 mm; exact at vertices skinned to quad joints only).
+and head only approximately (millimetres to a centimetre or two at a vertex; exact at
+vertices skinned to quad joints only; figures in ``docs/guide/cage.rst``).
 
-Why: the cage's Green coordinates place the template's surface 16–44 mm RMS per vertex
-(10th–90th percentile over the sampled vertices, 300 poses of the bundled pose library on
-``neutral_5k``) from where skinning puts it in the same pose, so a tracker fitting that
-surface to a hull trades the joints for the surface (:mod:`meshmocap.trackers.cage.tracker`).
+Why: the cage's Green coordinates place the template's surface centimetres from where
+skinning puts it in the same pose, so a tracker fitting that surface to a hull trades the
+joints for the surface (:mod:`meshmocap.trackers.cage.tracker`).
 
 Frames and units: world frame (Z up), metres.
 """
@@ -100,8 +99,8 @@ class QuadSkinning:
             if bind[j] < 0:
                 bind[j] = bind[parents[j]]
         self.joint_quad = bind
-        self._own = np.flatnonzero(own >= 0)
-        self._own_quad = own[self._own]
+        self._own = own_j = np.flatnonzero(own >= 0)
+        self._own_quad = own_q = own[self._own]
         P0 = sk.rest_positions
         self._P0 = P0
         R0, c0 = oqr.quads.rotations, oqr.quads.centres
@@ -152,6 +151,7 @@ class QuadSkinning:
         self._fit_targets = np.array(targets + [-1], dtype=np.int64)
         self._own_R0T = np.ascontiguousarray(self._R0T)
         self._parents64 = np.asarray(parents, dtype=np.int64)
+        self._own64, self._own_quad64 = (np.asarray(a, dtype=np.int64) for a in (own_j, own_q))
 
     def transforms(self, centres: np.ndarray, rotations: np.ndarray) -> np.ndarray:
         """Skinning transforms ``A_j = [G_j | P_j − G_j P_j⁰]`` (J, 3, 4) of a configuration.
@@ -173,8 +173,8 @@ class QuadSkinning:
             np.ascontiguousarray(rotations, dtype=np.float64),
             self._P0,
             self._parents64,
-            self._own.astype(np.int64),
-            self._own_quad.astype(np.int64),
+            self._own64,
+            self._own_quad64,
             self._own_R0T,
             self._off,
             self._plan,

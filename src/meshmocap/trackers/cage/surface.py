@@ -9,13 +9,11 @@ Two models of the same quads (:mod:`meshmocap.trackers.cage.tracker`, option ``s
   quads are joint frames, and the template's own linear-blend skinning poses it from them
   (:class:`~meshmocap.trackers.cage.oqr_skinning.QuadSkinning`).
 
-Measured on ``neutral_5k`` (truth quads of 300 library poses): Green coordinates put the
-sampled vertices 16–44 mm RMS (10th–90th percentile over vertices) from the skinned body
-they stand for; fitted to the visual hulls of CMU 05_01 from the true pose of each of 10
-frames, the local adjustment moved the joints 12 mm on average (10.9 mm after 3 steps):
-the data term trades joints for surface. Skinning from the quads reproduces the body
-exactly on those poses but for the fingers (no quad follows them: their vertices leave
-the data term, :attr:`SkinnedSurface.fitted`).
+Green coordinates put the sampled vertices centimetres from the skinned body they stand
+for, and fitted to visual hulls from the true pose the local adjustment moves the joints
+to trade them for surface (figures: ``docs/guide/cage.rst``). Skinning from the quads
+reproduces the body exactly on retargeted poses but for the fingers (no quad follows
+them: their vertices leave the data term, :attr:`SkinnedSurface.fitted`).
 
 Both give, for a configuration ``y`` (180,), pelvis rotation ``Rp`` and centre ``cp``:
 ``points`` (n, 3) world positions of the sampled vertices; ``points_batch`` for several
@@ -116,7 +114,7 @@ class SkinnedSurface:
     quad, though that joint also turns towards the quads below it: a Gauss–Newton
     approximation (the energies are evaluated exactly, so Levenberg–Marquardt still only
     accepts steps that lower them). On ``neutral_5k`` the approximated directions are within
-    ~20 % of central differences (tests/trackers/cage/test_derivatives.py).
+    a fifth of central differences (tests/trackers/cage/test_derivatives.py).
 
     Attributes
     ----------

@@ -3,7 +3,8 @@
 The template sits in a cage built from 21 Oriented Quads (:mod:`meshmocap.trackers.cage.oqr`) and
 follows it through 3D Green coordinates (Eq. 1; ``surface="green"``) or, by default, by its
 own skinning from the quads' joint frames (:mod:`~meshmocap.trackers.cage.surface`: Green
-coordinates put the surface 16–44 mm from the body the quads stand for). Plausible quad
+coordinates put the surface centimetres from the body the quads stand for; the
+measurements behind this and the other choices below are in ``docs/guide/cage.rst``). Plausible quad
 configurations lie on a GPLVM manifold learned from motion capture (§4; by default from
 the bundled CMU pose library, :func:`~meshmocap.trackers.cage.manifold.default_manifold`).
 Each frame minimises
@@ -24,7 +25,7 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
   inside the hull are pulled out to its surface too, and Gauss–Newton applies), with a
   weight ``w_i = inside_weight`` (default 0.05) on points inside the hull: a visual hull
   contains the body plus phantom volume (on the synthetic captures the true surface lies
-  5 mm inside it at the median, 2 cm or more for 10 % of it), and pulling every point out
+  millimetres to centimetres inside it), and pulling every point out
   to the hull inflates the fit and drags quads into phantom volume.
 - Eq. (5) as printed subtracts log σ², which would *reward* unlikely poses; we add it,
   penalising latent points where the manifold is uncertain (the paper's stated intent:
@@ -47,8 +48,7 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
   coverage term ``E_c`` makes hull left unexplained cost
   (:mod:`~meshmocap.trackers.cage.energy`, with the measurements behind each) in the pose and
   shape steps and in the choice of the local adjustment's start, not in the adjustment
-  itself: quads free of the manifold follow it into the hull's phantom volumes (procedural
-  walk: 20.2 mm instead of 11.7).
+  itself: quads free of the manifold follow it into the hull's phantom volumes.
 - The local adjustment (Eq. 12) tracks: it starts from whichever fits the frame best
   (data and coverage terms) of the manifold's configuration and the previous frame's
   adjusted quads, still and moved on at their last velocity (each with its own pelvis
@@ -56,10 +56,9 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
   between consecutive quads (``articulation``) replace the manifold's hold. A manifold
   learned on another subject (CMU 35 for 05's walk or 09's run) sits 0.1 m and more from
   the true quads; held to it, the adjustment restarted from it every frame never got
-  there (86.8 mm on 05_01), and a run's feet move 0.1 m a frame. Each limb of the
+  there, and a run's feet move 0.1 m a frame. Each limb of the
   manifold's configuration is then tried on that start, hung from its trunk quad, and
-  kept if it fits better: an arm lost into the trunk's hull comes back (09_01: 34.8 →
-  28.8 mm).
+  kept if it fits better: an arm lost into the trunk's hull comes back.
 - If the first frame's cage folds over itself (Green coordinates taken in it do not give
   the joints back), the joints' coordinates are taken in the rest cage instead.
 
@@ -84,15 +83,15 @@ from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.estimate.observe import frame_hull
 from meshmocap.geometry.green import GreenDeformer
-from meshmocap.geometry.rotations import skew, so3_exp, so3_log
+from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
+from meshmocap.trackers.cage.body import cage_body
 from meshmocap.trackers.cage.energy import (
     Articulation,
     HullCoverage,
     SilhouetteCoverage,
-    distance_terms,
     placement_errors,
     surface_sample,
 )
@@ -100,8 +99,7 @@ from meshmocap.trackers.cage.field import HullDistanceField
 from meshmocap.trackers.cage.manifold import learn_manifold
 from meshmocap.trackers.cage.options import CageOptions, Joints, Space, manifold_digest
 from meshmocap.trackers.cage.oqr import (
-    N_QUADS,
-    build_oqr,
+    OQR,
     cage_vertices,
     configuration_from_vector,
     configuration_vector,
@@ -118,6 +116,13 @@ from meshmocap.trackers.cage.quad_frames import (
     rig,
 )
 from meshmocap.trackers.cage.surface import GreenSurface, SkinnedSurface
+from meshmocap.trackers.cage.terms import (
+    AnchorTerm,
+    ArticulationTerm,
+    CoverageTerm,
+    DistanceTerm,
+    VarianceTerm,
+)
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
 #: Stages of :attr:`CageTracker.stage_seconds`.
@@ -172,23 +177,32 @@ class CageTracker:
             "manifold": manifold_digest(self.gp),
         }
 
-    def setup(self, template: Template) -> None:
-        """Build the rig and the Green coordinates of the template (all and sampled)."""
+    def setup(self, template: Template, *, rig: tuple[Template, OQR] | None = None) -> None:
+        """Build the rig (on the body of :func:`~meshmocap.trackers.cage.body.cage_body`,
+        or ``rig`` when given: that body and its OQR) and bind the template to it."""
         o = self.opts
         self.template = template
-        self.oqr = build_oqr(template)
+        self.body, self.oqr = cage_body(template, body=o.body) if rig is None else rig
         self.sample = surface_sample(template.V, template.F, o.n_sample, seed=o.seed)
         surface = SkinnedSurface if o.surface == "skinned" else GreenSurface
         self.surface = surface(self.oqr, template, self.sample)
         self._set_keep(self.surface.fitted)
-        self._coverage: tuple = ()  # this step's coverage terms and weights
+        self._active: tuple = ()  # the point terms of this stage (DistanceTerm first)
         self._memo: list = []  # _distance's last results
-        q, sk = self.oqr.quads, template.skeleton
+        q, sk = self.oqr.quads, self.body.skeleton
         self._articulation = Articulation(
             q.centres, q.rotations, q.joint_indices, sk.rest_positions, sk.parents
         )
         c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
         self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
+        # the configuration terms of this variant (CageOptions.terms), None where left out
+        on = set(o.terms)
+        noise = self.gp.Y_scale_**2 / self.gp.beta_  # the manifold's noise variance
+        self._variance = VarianceTerm(o.variance_weight, noise) if "variance" in on else None
+        self._anchor = AnchorTerm(o.local_damping) if "anchor" in on else None
+        self._joints_term = (
+            ArticulationTerm(self._articulation, o.articulation) if "articulation" in on else None
+        )
         self.joint_deformer: GreenDeformer | None = None
         # joints="quads": the quad following each evaluation joint's rig joint, and the
         # joint in that quad's frame (constant: quads follow their joints rigidly)
@@ -236,7 +250,7 @@ class CageTracker:
     def _place(self, R: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Quads, pelvis and latent point of a pose, no velocity; returns the quads'
         centres (21, 3) and rotations (21, 3, 3)."""
-        c, Q = quads_from_pose(self.oqr, self.template, R, root)
+        c, Q = quads_from_pose(self.oqr, self.body, R, root)
         self.pelvis_R, self.pelvis_c = Q[0].copy(), c[0].copy()
         y = configuration_vector(c, Q)
         self.x = self.gp.transform(y[None])[0]
@@ -318,22 +332,22 @@ class CageTracker:
         (:meth:`~meshmocap.trackers.cage.energy.HullCoverage.residuals`). ``sub``: the
         sampled vertices ``P`` holds, when not all (comparing candidates). The last few
         results are kept: the stages hand over the same points (to rounding)."""
-        key = (tuple(id(t) for t, _ in self._coverage), str(sub))  # emptied each frame
+        key = (tuple(id(t) for t in self._active), str(sub))  # emptied each frame
         for k, Q, out in self._memo:
             if k == key and abs(Q[0, 0] - P[0, 0]) < _SAME and np.abs(Q - P).max() < _SAME:
                 return out
-        w = self._data_w[sub]
-        out = distance_terms(field, P, w, self.opts, self._coverage)
+        parts = [t.residuals(P, sub) for t in self._active]
+        out = parts[0] if len(parts) == 1 else tuple(map(np.concatenate, zip(*parts, strict=True)))
         self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
         return out
 
-    def _coverage_terms(self, frame, field) -> list:
-        """This frame's coverage terms, ``[(term, weight, in the local step)]``: the
-        silhouettes' (:class:`SilhouetteCoverage`, every step) where the frame has cameras
-        and masks, else the hull's (:class:`HullCoverage`, pose and shape steps); samples
-        seeded by the frame (the same on a resumed run)."""
-        o, out = self.opts, []
-        if o.silhouette_weight > 0:
+    def _coverage_terms(self, frame, field) -> list[CoverageTerm]:
+        """This frame's coverage terms (:class:`~meshmocap.trackers.cage.terms.CoverageTerm`):
+        the silhouettes' (in every step) where the frame has cameras and masks and the
+        variant has a ``"silhouette"`` term, else the hull's (``"coverage"``: pose and shape
+        steps only); samples seeded by the frame (the same on a resumed run)."""
+        o, out, on = self.opts, [], set(self.opts.terms)
+        if o.silhouette_weight > 0 and "silhouette" in on:
             try:
                 cams, masks = frame.cameras, frame.silhouettes
             except (MeshmocapFileNotFoundError, FormatError):
@@ -349,13 +363,16 @@ class CageTracker:
                     min_component=o.silhouette_clean,
                 )
                 if len(sil):
-                    out.append((sil, o.silhouette_weight, True))
-        if o.coverage_weight > 0 and not out:  # hull surface samples (no silhouettes)
+                    out.append(
+                        CoverageTerm(sil, o.silhouette_weight, name="silhouette", local=True)
+                    )
+        if o.coverage_weight > 0 and "coverage" in on and not out:  # hull surface samples
             B = field.boundary
             pick = np.random.default_rng([o.seed, frame.index]).choice(
                 len(B), min(o.n_coverage, len(B)), replace=False
             )
-            out.append((HullCoverage(B[pick], o.coverage_margin), o.coverage_weight, False))
+            hull = HullCoverage(B[pick], o.coverage_margin)
+            out.append(CoverageTerm(hull, o.coverage_weight, name="coverage", local=False))
         return out
 
     # -------------------------------------------------------------- optimisation
@@ -415,24 +432,29 @@ class CageTracker:
 
     def _shape_problem(self, field):
         """Eq. (5)–(6): the latent point ``x`` (quads at its mean pose), pelvis fixed."""
-        lam = self.opts.variance_weight
-        noise = self.gp.Y_scale_**2 / self.gp.beta_  # the manifold's noise variance
+        vt = self._variance
 
         def evaluate(x):
             mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
             r, g, _ = self._residuals(field, mean, self.pelvis_R, self.pelvis_c)
-            # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the noise
-            # variance: Eq. (9) alone vanishes at training points, where its log is a
-            # singular well of rounding noise (K is near singular) that traps the latent point
-            var = max(var, 0.0) + noise
-            return 0.5 * r @ r + lam * np.log(var), (r, g, mean, dmean, var, dvar)
+            E = 0.5 * r @ r
+            if vt is not None:
+                # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the
+                # noise variance: Eq. (9) alone vanishes at training points, where its log
+                # is a singular well of rounding noise (K near singular) trapping the point
+                E = E + vt.value(var)
+                var = vt.variance(var)
+            return E, (r, g, mean, dmean, var, dvar)
 
         def linearise(x, cache):
             r, g, mean, dmean, var, dvar = cache
             dx = self.surface.directions(mean, self.pelvis_R, self.pelvis_c, dmean)  # Eq. (6)
             J = np.einsum("kpa,spa->ksp", dx, g.reshape(-1, *dx.shape[1:])).reshape(len(dx), -1)
-            grad = J @ r + lam * dvar / var  # Eq. (10) in d log σ² = dσ² / σ²
-            return grad, J @ J.T + lam * np.outer(dvar, dvar) / var**2
+            grad, H = J @ r, J @ J.T
+            if vt is not None:  # Eq. (10) in d log σ² = dσ² / σ²
+                gv, Hv = vt.rows(var, dvar)
+                grad, H = grad + gv, H + Hv
+            return grad, H
 
         return evaluate, linearise, lambda x, d: x + d
 
@@ -443,9 +465,10 @@ class CageTracker:
         together by soft joints (``articulation``,
         :class:`~meshmocap.trackers.cage.energy.Articulation`); ``anchor`` None: free, the
         quads ablation."""
-        w = self.opts.local_damping if anchor is not None and pull else 0.0
-        wa = self.opts.articulation if anchor is not None else 0.0
-        nq = N_QUADS - 1
+        at = self._anchor if anchor is not None and pull and self._anchor is not None else None
+        jt = self._joints_term if anchor is not None else None
+        at = at if at is not None and at.weight else None
+        jt = jt if jt is not None and jt.weight else None
         I0 = np.eye(3)[None]
 
         def evaluate(s):
@@ -453,21 +476,19 @@ class CageTracker:
             Y = y.reshape(-1, 3, 3)
             R = gram_schmidt(Y[:, 1], Y[:, 2])  # pelvis-relative quad rotations
             r, g, P = self._residuals(field, y, Rp, cp)
-            e = y - anchor if w else 0.0
-            E = 0.5 * (r @ r + w * np.sum(e * e))
+            E = 0.5 * r @ r + (at.value(y, anchor) if at is not None else 0.0)
             quads = None
-            if wa:  # pelvis-relative quads, the pelvis's included
+            if jt is not None:  # pelvis-relative quads, the pelvis's included
                 quads = (
                     np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]]),
                     np.concatenate([I0, R]),
                 )
-                a = self._articulation.residuals(*quads)
-                E += 0.5 * wa * a @ a
-            return E, (r, g, P, e, quads)
+                E += jt.value(*quads)
+            return E, (r, g, P, quads)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, e, quads = cache
+            r, g, P, quads = cache
             G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
             J = np.concatenate(
                 [
@@ -476,23 +497,10 @@ class CageTracker:
                 ]
             )
             grad, H = J @ r, J @ J.T
-            if w:  # anchor residual e = ỹ − anchor, dỹ/d(dc, ω) = [I; −[u]×; −[v]×] per quad
-                Y, E = y.reshape(-1, 3, 3), e.reshape(-1, 3, 3)
-                Hq = np.zeros((nq, 6, 6))
-                Hq[:, :3, :3] = np.eye(3)
-                Hq[:, 3:, 3:] = sum(
-                    skew(Y[:, i]).transpose(0, 2, 1) @ skew(Y[:, i]) for i in (1, 2)
-                )
-                gq = np.concatenate(
-                    [E[:, 0], sum(np.cross(Y[:, i], E[:, i]) for i in (1, 2))], axis=1
-                )
-                idx = np.arange(6 * nq).reshape(nq, 6)
-                H[idx[:, :, None], idx[:, None, :]] += w * Hq
-                grad[: 6 * nq] += w * gq.ravel()
-            if quads is not None:  # soft joints: residuals a, Jacobian Ja along the quads
-                a, Ja = self._articulation.residuals(*quads, jacobian=True)
-                H[: 6 * nq, : 6 * nq] += wa * Ja.T @ Ja
-                grad[: 6 * nq] += wa * Ja.T @ a
+            if at is not None:  # the pull towards the manifold's configuration
+                at.add_rows(grad, H, y, anchor)
+            if quads is not None:  # soft joints along the quads
+                jt.add_rows(grad, H, *quads)
             return grad, H
 
         def update(s, d):
@@ -521,8 +529,9 @@ class CageTracker:
         it, anchor, off, self._memo = 0, None, False, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
         self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
-        terms = self._coverage_terms(frame, field)  # [(term, weight, in the local step)]
-        self._coverage = tuple(t[:2] for t in terms)
+        data = DistanceTerm.from_options(field, self._data_w, o)
+        terms = self._coverage_terms(frame, field)
+        self._active = (data, *terms)  # pose and shape steps, the starts: every point term
         pelvis = (self.pelvis_R, self.pelvis_c)
         previous = (orthonormalised(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
@@ -574,7 +583,7 @@ class CageTracker:
                     state, best = (y, *state[1:]), r @ r
         if off:
             n_local *= 2
-        self._coverage = tuple(t[:2] for t in terms if t[2])  # local: silhouettes only
+        self._active = (data, *(t for t in terms if t.local))  # local: silhouettes only
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
             state, n_local, *self._local_problem(field, anchor, pull=not off)
         )
@@ -590,9 +599,8 @@ class CageTracker:
         r = cache[0][: len(P)]
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
         energies = {"distance": float(r @ r), "variance": var, "off_manifold": float(off)}
-        for t, _, _ in terms:  # mean ρ² (m²) of the final fit
-            name = "silhouette" if isinstance(t, SilhouetteCoverage) else "coverage"
-            energies[name] = float(np.sum(t.residuals(P)[0] ** 2)) / len(t)
+        for t in terms:  # mean ρ² (m²) of the final fit
+            energies[t.name] = t.mean_squared(P)
         clock.lap("local")
         out = self._result(frame.index, energies, it)
         clock.lap("output")
@@ -615,5 +623,6 @@ class CageTracker:
         P = self.surface.points_batch(Y, self.pelvis_R, self.pelvis_c)
         r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
         noise = gp.Y_scale_**2 / gp.beta_
-        E = 0.5 * np.array([v @ v for v in r]) + self.opts.variance_weight * np.log(var + noise)
+        lam = self._variance.weight if self._variance is not None else 0.0
+        E = 0.5 * np.array([v @ v for v in r]) + lam * np.log(var + noise)
         return X[np.argmin(E)].copy()
