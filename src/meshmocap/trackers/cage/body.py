@@ -119,9 +119,9 @@ def cage_body(template: Template, *, body: Body = "auto") -> tuple[Template, OQR
                     "the reference body (body='reference') or track with --method patch"
                 ) from None
             why = str(exc)
-    try:
+    try:  # a body: its cage builds without the relaxed rounds, or not at all (fast)
         posed = posed_reference(template)
-        return posed, build_oqr(posed)
+        return posed, build_oqr(posed, relaxed=False)
     except (MeshError, SkeletonError) as exc:
         first = f"on the template: {why}; " if why else ""
         raise MeshError(
