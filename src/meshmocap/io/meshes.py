@@ -550,6 +550,8 @@ def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
 
 
 def is_frame_file(name: str) -> bool:
+    """Whether the file ``name`` is a frame of a mesh or point folder (a known extension,
+    not hidden)."""
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
 
