@@ -24,11 +24,18 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.estimate.observe import frame_points
-from meshmocap.geometry.camera import in_view
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
+from meshmocap.trackers.patch.energy import (
+    Correspondences,
+    FrameData,
+    Iterate,
+    assemble,
+    energy_terms,
+    total_energy,
+)
 from meshmocap.trackers.patch.kernels import assign_kernel
 from meshmocap.trackers.patch.model import (
     PatchModel,
@@ -40,28 +47,12 @@ from meshmocap.trackers.patch.model import (
 from meshmocap.trackers.patch.options import PatchOptions
 from meshmocap.trackers.patch.solver import (
     System,
-    add_bone,
-    add_bone_lengths,
-    add_plane_terms,
-    add_point_terms,
-    add_rigidity,
     group_basis,
     length_residuals,
     normal_pattern,
     rigidity_moments,
 )
-from meshmocap.trackers.patch.terms import add_joint_prior, add_silhouette, silhouette_rays
 
-#: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
-PLANE_POINT_MIX = 0.1
-
-#: Scale of the rigidity and bone terms relative to the data term after each is normalised
-#: by its total weight (mean squared residuals). Neighbouring patches' predictions and the
-#: bone points stay within millimetres, the data within centimetres: without this factor the
-#: paper's λr = λb = 1 against λd = 10 lets patches drift apart (tuned on synthetic walks;
-#: see benchmarks/bench_patch.py).
-RIGIDITY_SCALE = 10.0
-BONE_SCALE = 100.0
 #: Divergence guards (metres): no joint moves this far in one frame (10 m/s at 60 fps) ...
 MAX_JOINT_JUMP = 0.5
 #: ... and the patch centres' mean stays this close to the observed points' mean.
@@ -144,6 +135,7 @@ class PatchTracker:
         """Cut ``template`` into patches and precompute the solver's constant parts."""
         o = self.opts
         self.template = template
+        self.terms = energy_terms(o)
         self.model = build_patch_model(
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
@@ -311,6 +303,28 @@ class PatchTracker:
             labels[part.kind != ON_BONE] = -1  # near-joint points: any patch
         return V[keep], N[keep], labels[keep]
 
+    def frame_data(
+        self, Y: np.ndarray, NY: np.ndarray, frame: CaptureFrame | None, X_hat: np.ndarray
+    ) -> FrameData:
+        """What the energy's terms read over one frame: the kept points ``Y`` (m, 3) and
+        their normals ``NY`` (m, 3), the ``frame`` (its cameras and silhouettes; None: no
+        cameras) and the joints' prediction ``X_hat`` (K, 3), metres."""
+        return FrameData(
+            model=self.model,
+            moments=self.moments,
+            Y=Y,
+            NY=NY,
+            cameras=list(getattr(frame, "cameras", [])),
+            frame=frame,
+            X_hat=X_hat,
+            pairs=self.pairs,
+            lengths=self.lengths,
+            reverse_sample=self.reverse_sample,
+            cover_sample=self.cover_sample,
+            cover_radius=self.cover_radius,
+            normal_cos=self.opts.normal_cos,
+        )
+
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
         o, m = self.opts, self.model
@@ -345,68 +359,26 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
-        X_hat = self.X.copy()  # the temporal prior's prediction (lambda_temporal)
-        rays = None
-        cameras = getattr(frame, "cameras", [])
-        if o.lambda_silhouette > 0 and cameras:
-            masks = _masks(frame)
-            rays = silhouette_rays(cameras, masks) if masks else None
+        X_hat = self.X.copy()  # the temporal prior's prediction (TemporalTerm)
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
         self._lap("classify")
         if len(Y) < 10:
             raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
-        tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
+        fd = self.frame_data(Y, NY, frame, X_hat)
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
-        energies: dict[str, float] = {}
+        values: dict[str, float] = {}
         n_iter = 0
         while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
-            coarse = n_iter <= o.coarse_iter
-            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
+            corr = self.correspondences(Y, NY, ycls, Vc, Nc)
             self._lap("assign")
             sys = System.empty(self.pattern)
-            q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
-            r = q + self.c[patch] - y
-            wd = max(float(w.sum()), 1e-12)
-            if o.residual == "point_to_plane":  # slide along the surface, with a little pull
-                s_n = np.sum(ny * r, axis=1)
-                e_data = add_plane_terms(sys, patch, q, ny, s_n, w, o.lambda_data / wd)
-                add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * o.lambda_data / wd)
-            else:  # Eq. (7) as printed
-                e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
-            e_rev = 0.0
-            if tree_y is not None:
-                e_rev = self._add_reverse(sys, tree_y, Y, NY, Vc, Nc, cameras)
-            w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
-            e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
-            w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
-            e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
-            e_len = 0.0
-            if o.lambda_length > 0:
-                e_len = add_bone_lengths(
-                    sys, self.X, self.pairs, self.lengths, o.lambda_length / len(self.pairs)
-                )
-            e_sil = e_tmp = 0.0
-            if rays is not None:
-                s = self.cover_sample
-                qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
-                e_sil, _ = add_silhouette(
-                    sys,
-                    rays,
-                    Vc[s],
-                    m.labels[s],
-                    qs,
-                    radius=self.cover_radius,
-                    scale=o.silhouette_scale,
-                    weight=o.lambda_silhouette,
-                )
-            if o.lambda_temporal > 0:
-                K = len(self.X)
-                e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
+            it = Iterate(fd, self.R, self.c, self.X, Vc, Nc, corr)
+            values = assemble(self.terms, sys, it)
             self._lap("system")
-            if coarse:  # body parts as rigid groups first (coarse_iter)
+            if n_iter <= o.coarse_iter:  # body parts as rigid groups first (coarse_iter)
                 S = group_basis(m.bone_of_patch, self.c, len(self.X))
                 delta = sys.solve_grouped(o.damping, S)
             else:
@@ -416,32 +388,14 @@ class PatchTracker:
                 raise FloatingPointError("singular normal equations")
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
-            self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
-            energies = {
-                "data": e_data / wd,
-                "rigidity": e_rig / m.rig_w.sum(),
-                "bone": e_bone / m.bone_w.sum(),
-                "sigma": self.sigma,
-                "length": e_len / max(len(self.pairs), 1),
-                "reverse": e_rev,
-                "silhouette": e_sil,
-                "temporal": e_tmp,
-            }
+            self.sigma = float(np.clip(np.sqrt(values["data"] / 3), o.sigma_min, o.sigma_max))
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
             if move < o.tol and n_iter > o.coarse_iter:
                 break
-        energies["total"] = (
-            o.lambda_data * energies["data"]
-            + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
-            + o.lambda_bone * BONE_SCALE * energies["bone"]
-            + o.lambda_length * energies["length"]
-            + o.lambda_reverse * energies["reverse"]
-            + o.lambda_silhouette * energies["silhouette"]
-            + o.lambda_temporal * energies["temporal"]
-        )
+        energies = {**values, "sigma": self.sigma, "total": total_energy(self.terms, values)}
         # the last E-step and the kept points, for diagnostics (benchmarks/diag_patch.py)
-        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": (patch, v, w, y)}
+        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": corr, "frame": fd}
         self._check_divergence(Y, last[2])
         result = self._result(frame.index, energies, n_iter)
         self._lap("output")
@@ -482,11 +436,21 @@ class PatchTracker:
                 f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)"
             )
 
-    def _assign(self, Y, NY, ycls, Vc, Nc):
+    def correspondences(
+        self,
+        Y: np.ndarray,
+        NY: np.ndarray,
+        ycls: np.ndarray | None,
+        Vc: np.ndarray,
+        Nc: np.ndarray,
+    ) -> Correspondences:
         """E-step: soft assignments of observed points to patches (+ an outlier class).
 
-        Returns, per (point, patch) correspondence, the patch, the chosen vertex, the
-        posterior weight and the observed point.
+        Parameters
+        ----------
+        Y : (m, 3) kept observed points, metres; NY : (m, 3) their unit normals
+        ycls : (m,) int body part of each point (−1: any), or None (no classes)
+        Vc : (n, 3) each vertex as its own patch predicts it; Nc : (n, 3) its normal
         """
         o, m = self.opts, self.model
         K = min(o.k_neighbours, len(Vc))
@@ -509,10 +473,10 @@ class PatchTracker:
             self.sigma**2,
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
         )
-        return patch, v, w, Y[i], NY[i]
+        return Correspondences(patch, v, w, Y[i], NY[i])
 
-    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx):
-        """:meth:`_assign` with ``interior_scale``: each metre a point lies deeper than
+    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx) -> Correspondences:
+        """:meth:`correspondences` with ``interior_scale``: each metre a point lies deeper than
         :data:`INTERIOR_MARGIN` behind its candidate vertex adds ``σ / interior_scale`` to
         their distance (in quadrature), so points deep inside the model fall to the outlier
         class."""
@@ -530,29 +494,7 @@ class PatchTracker:
         d2 = d2 + (np.maximum(depth, 0.0) / o.interior_scale * self.sigma) ** 2
         p = np.exp(-0.5 * d2 / self.sigma**2)
         denom = np.bincount(i, p, minlength=len(Y)) + np.exp(-0.5 * o.outlier_sigmas**2)
-        return patch, vx, p / denom[i], Y[i], NY[i]
-
-    def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
-        """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
-        its own patch predicts it) to its nearest observed point, with a Cauchy weight
-        (``reverse_scale``), where their normals agree, they lie within ``reverse_cap``, and
-        every camera of ``cameras`` sees the vertex (carving removes what a camera does not
-        see: feet outside an image have no hull to be pulled onto). Returns the weighted
-        mean squared distance (metres²)."""
-        o, m = self.opts, self.model
-        v = self.reverse_sample
-        d, j = tree_y.query(Vc[v], k=1)
-        j = j.astype(np.int64)
-        ok = (np.einsum("ij,ij->i", Nc[v], NY[j]) > o.normal_cos) & (d < o.reverse_cap)
-        ok &= in_view(Vc[v], cameras)
-        v, y = v[ok], Y[j[ok]]
-        if len(v) == 0:
-            return 0.0
-        patch = m.labels[v]
-        q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
-        w = 1.0 / (1.0 + (d[ok] / o.reverse_scale) ** 2)  # Cauchy IRLS weights
-        e = add_point_terms(sys, patch, q, q + self.c[patch] - y, w, o.lambda_reverse / len(v))
-        return e / len(v)
+        return Correspondences(patch, vx, p / denom[i], Y[i], NY[i])
 
     def _apply(self, delta: np.ndarray) -> None:
         P = self.model.P
@@ -563,15 +505,6 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
-
-
-def _masks(frame: CaptureFrame) -> list[np.ndarray]:
-    """The frame's silhouettes, one per camera, or [] where the capture has none."""
-    try:
-        masks = frame.silhouettes
-    except (OSError, AttributeError, ValueError):
-        return []
-    return masks if len(masks) == len(frame.cameras) else []
 
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
