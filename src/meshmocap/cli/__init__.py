@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from meshmocap import __version__
+from meshmocap._threads import blas_threads
 from meshmocap.cli import (
     batch,
     capture,
@@ -63,7 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a parse error already printed
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        with warnings.catch_warnings():  # the library's warnings: one line each, on stderr
+        # one BLAS thread while the command runs (MESHMOCAP_THREADS), and warnings in one line
+        with blas_threads(), warnings.catch_warnings():
             warnings.simplefilter("default", MeshmocapWarning)
             warnings.showwarning = _show_warning
             return int(args.func(args))

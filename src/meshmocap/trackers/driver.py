@@ -1,12 +1,14 @@
 """The sequence driver shared by every tracker: streams frames, writes results frame by
 frame, shows progress, resumes interrupted runs and never emits NaN.
 
-A frame whose fit raises a numerical error or returns non-finite values is flagged
-``failed`` (``healthy = False``, with the reason), the tracker is reset to the last good
-state, and tracking continues with the next frame; the flagged frame repeats the last good
-result. A frame without observation (the capture records it as dropped, or its hull or mesh
-file is absent or unreadable) is flagged ``missing`` with the reason, and the tracker
-coasts across it the same way: the next real frame is fitted from the last good state.
+One function tracks a frame, here and in live mode (:func:`track_frame`). A frame whose fit
+raises :class:`~meshmocap.errors.FitError` (or a numerical error) or returns non-finite
+values is flagged ``failed`` (``healthy = False``, with the reason), the tracker is reset
+to the last good state, and tracking continues with the next frame; the flagged frame
+repeats the last good result. A frame without observation (the capture records it as
+dropped, or its hull or mesh file is absent or unreadable) is flagged ``missing`` with the
+reason, and the tracker coasts across it the same way: the next real frame is fitted from
+the last good state.
 
 Only one process writes into a track folder at a time: a second one is refused in one line
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
@@ -25,9 +27,10 @@ a run (CMU 09_01, patch, 55 frames: 13.5 → 35.8 mm mean; ``benchmarks/bench_re
 
 from __future__ import annotations
 
+import functools
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Literal, get_args
@@ -36,9 +39,16 @@ import numpy as np
 
 from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
+from meshmocap._threads import blas_threads
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
-from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
+from meshmocap.errors import (
+    FitError,
+    FormatError,
+    InputError,
+    MeshError,
+    MeshmocapFileNotFoundError,
+)
 from meshmocap.estimate.init import initial_pose
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
@@ -59,8 +69,10 @@ from meshmocap.trackers.base import Tracker
 #: How the first frame's pose is found: from the capture alone, or from its ground truth.
 Init = Literal["auto", "truth"]
 
-#: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake.
-NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
+#: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake:
+#: a tracker's :class:`~meshmocap.errors.FitError`, and the numerical errors of numpy
+#: (a singular solve; floating-point traps under ``np.errstate``).
+NUMERICAL_ERRORS = (FitError, np.linalg.LinAlgError, ArithmeticError)
 
 
 def is_finite_result(r: FrameResult) -> bool:
@@ -140,7 +152,8 @@ def track_sequence(
         **(template_info or {}),
     }
     Path(out).mkdir(parents=True, exist_ok=True)
-    with folder_lock(out, "track"):  # a second run into the same folder is refused
+    # one BLAS thread while tracking; a second run into the same folder is refused
+    with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
             initialise_tracker(tracker, template, capture, out, positions, init)
@@ -151,37 +164,87 @@ def track_sequence(
                 (i for i in indices if i in done and i < capture.indices[todo[0]]),
                 default=indices[0],
             )
-            if getattr(tracker, "template", None) is not template:  # resuming: not initialised
-                tracker.setup(template)
-            tracker.set_state(read_state(out, last))
+            resume_tracker(tracker, template, out, last)
             recovery = None
             if recover:
                 pose = _last_pose(out, [i for i in indices if i in done and i <= last])
                 recovery = Recovery(template, *pose)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
-                index, reason = int(capture.indices[k]), None
-                t0 = time.perf_counter()
-                try:
-                    frame = capture[k]  # a mesh sequence reads the file here
-                    reason = missing_reason(frame)
-                    if reason is None:
-                        frame = observed(frame)  # points, normals, occupancy: made once
-                        r = tracker.step(frame)
-                        if not is_finite_result(r):
-                            raise FloatingPointError("non-finite joints or vertices")
-                        if recovery is not None:
-                            r = recovered(tracker, recovery, frame, r, reseat=reseat)
-                        r = replace(r, index=index, seconds=time.perf_counter() - t0)
-                        good = index
-                except NUMERICAL_ERRORS as exc:
-                    r = coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
-                except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
-                    reason = failure_reason(exc)
-                if reason is not None:
-                    r = coast_frame(tracker, out, good, index, t0, "missing", reason)
+                index = int(capture.indices[k])
+                r = track_frame(
+                    tracker,
+                    functools.partial(capture.__getitem__, k),  # a mesh sequence reads here
+                    index,
+                    out,
+                    good,
+                    recovery=recovery,
+                    reseat=reseat,
+                )
+                good = index if r.healthy else good
                 write_frame(out, r)
     return read_track(out, vertices=vertices)
+
+
+def resume_tracker(tracker: Tracker, template: Template, out, last: int) -> None:
+    """Set ``tracker`` up for ``template`` (a resumed run has not initialised it) and
+    restore the state saved with frame ``last`` of the track folder ``out``."""
+    if tracker.template is not template:
+        tracker.setup(template)
+    tracker.set_state(read_state(out, last))
+
+
+def track_frame(
+    tracker: Tracker,
+    read: Callable[[], object],
+    index: int,
+    out: str | os.PathLike,
+    good: int,
+    *,
+    recovery: Recovery | None = None,
+    reseat: bool = False,
+    retry: Callable[[], bool] | None = None,
+) -> FrameResult | None:
+    """Track one frame: the per-frame step of the driver and of live mode
+    (:mod:`meshmocap.trackers.follow`).
+
+    Parameters
+    ----------
+    tracker : Tracker, in the state of the frame before
+    read : callable returning the frame (a mesh sequence reads its file here)
+    index : int, its frame number
+    out : path, the track folder; ``good`` : int, its last well-fitted frame
+    recovery, reseat : score the frame and flag lost limbs (:func:`recovered`)
+    retry : callable, optional
+        Asked when the frame cannot be read: True means "not yet" (live mode: a file still
+        being written), and None is returned for the caller to try again later.
+
+    Returns
+    -------
+    FrameResult
+        The fit, or (flagged ``failed``, with the reason, after a :class:`FitError` or
+        another numerical error) or (flagged ``missing``, when the frame has no
+        observation) a copy of frame ``good``'s result, the tracker reset to its state.
+    """
+    t0 = time.perf_counter()
+    try:
+        frame = read()
+        reason = missing_reason(frame)
+        if reason is None:
+            frame = observed(frame)  # points, normals, occupancy: made once
+            r = tracker.step(frame)
+            if not is_finite_result(r):
+                raise FitError("non-finite joints or vertices")
+            if recovery is not None:
+                r = recovered(tracker, recovery, frame, r, reseat=reseat)
+            return replace(r, index=index, seconds=time.perf_counter() - t0)
+    except NUMERICAL_ERRORS as exc:
+        return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
+    except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
+        if retry is not None and retry():
+            return None
+        reason = failure_reason(exc)
+    return coast_frame(tracker, out, good, index, t0, "missing", reason)
 
 
 #: Errors reading one frame's observation (an absent, empty or corrupt hull or mesh file):
