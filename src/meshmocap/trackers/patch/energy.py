@@ -188,10 +188,10 @@ class DataTerm(_Weighted):
     residual: str = "point_to_point"
 
     def add(self, sys: System, it: Iterate) -> float:
-        m, k = it.frame.model, it.corr
+        k = it.corr
         patch, v, w, y = k.patch, k.vertex, k.weight, k.point
-        q = np.einsum("nij,nj->ni", it.R[patch], m.V0[v] - m.centres0[patch])
-        r = q + it.c[patch] - y
+        q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k): v is a vertex of its patch k
+        r = it.V[v] - y
         wd = max(float(w.sum()), 1e-12)
         if self.residual == "point_to_plane":  # slide along the surface, with a little pull
             s_n = np.sum(k.normal * r, axis=1)
@@ -254,9 +254,9 @@ class ReverseTerm(_Weighted):
         if len(v) == 0:
             return 0.0
         patch = m.labels[v]
-        q = np.einsum("nij,nj->ni", it.R[patch], m.V0[v] - m.centres0[patch])
+        q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k)
         w = 1.0 / (1.0 + (d[ok] / self.cauchy_scale) ** 2)  # Cauchy IRLS weights
-        e = add_point_terms(sys, patch, q, q + it.c[patch] - y, w, self.coefficient / len(v))
+        e = add_point_terms(sys, patch, q, it.V[v] - y, w, self.coefficient / len(v))
         return e / len(v)
 
 
@@ -292,7 +292,7 @@ class SilhouetteTerm(_Weighted):
             return 0.0
         s = fd.cover_sample
         lab = m.labels[s]
-        qs = np.einsum("nij,nj->ni", it.R[lab], m.V0[s] - m.centres0[lab])
+        qs = it.V[s] - it.c[lab]  # R_k (v0 − c0_k)
         value, _ = add_silhouette(
             sys,
             fd.rays,

@@ -46,6 +46,7 @@ from meshmocap.trackers.patch.model import (
     rebind_bones,
     skeleton_floor,
 )
+from meshmocap.trackers.patch.nearest import NearestVertices, k_nearest
 from meshmocap.trackers.patch.options import PatchOptions
 from meshmocap.trackers.patch.solver import (
     System,
@@ -85,6 +86,9 @@ REACQUIRE_OFFSET = 0.15
 SURFACE_JOINT_ERROR = 0.01
 #: Every k-th training pose enters the skeleton's floor (skeleton_floor).
 FLOOR_POSE_STEP = 4
+#: Candidate vertices kept per observed point beyond ``k_neighbours``, re-ranked in later
+#: iterations of a frame instead of a new k-d query (:mod:`~meshmocap.trackers.patch.nearest`).
+NEAREST_SPARE = 8
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
 #: Depth (metres) inside the model below which a hull point is not yet suspect
@@ -140,6 +144,11 @@ class PatchTracker:
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
         self.moments = rigidity_moments(self.model)
+        m = self.model  # each patch's radius: its vertices' largest distance from its centre
+        self.patch_radius = np.zeros(m.P)
+        np.maximum.at(
+            self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
+        )
         self.pairs = _held_pairs(template.eval_skeleton)
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
@@ -248,15 +257,15 @@ class PatchTracker:
         return V, np.einsum("nij,nj->ni", Rl, m.N0)
 
     def vertices(self) -> np.ndarray:
-        """The output mesh: patch predictions blended over neighbouring patches (n, 3)."""
+        """The output mesh: patch predictions blended over neighbouring patches (n, 3).
+
+        ``Σ_k α_k (R_k (v0 − c0_k) + c_k) = (Σ_k α_k R_k) v0 + Σ_k α_k (c_k − R_k c0_k)``:
+        two sparse products with the (n, P) weights instead of one prediction per weight.
+        """
         m = self.model
-        B = m.blend.tocoo()
-        pred = (
-            np.einsum("nij,nj->ni", self.R[B.col], m.V0[B.row] - m.centres0[B.col]) + self.c[B.col]
-        )
-        return np.stack(
-            [np.bincount(B.row, B.data * pred[:, a], minlength=len(m.V0)) for a in range(3)], 1
-        )
+        M = (m.blend @ self.R.reshape(-1, 9)).reshape(-1, 3, 3)
+        t = m.blend @ (self.c - np.einsum("kij,kj->ki", self.R, m.centres0))
+        return np.einsum("nij,nj->ni", M, m.V0) + t
 
     # ------------------------------------------------------------------ tracking
     def observations(
@@ -366,13 +375,14 @@ class PatchTracker:
         if len(Y) < 10:
             raise FitError(f"only {len(Y)} observed points kept by the classifier")
         fd = self.frame_data(Y, NY, frame, X_hat)
+        nearest = self.nearest_vertices(Y, spare=NEAREST_SPARE)
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
         values: dict[str, float] = {}
         n_iter = 0
         while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
-            corr = self.correspondences(Y, NY, ycls, Vc, Nc)
+            corr = self.correspondences(Y, NY, ycls, Vc, Nc, nearest=nearest)
             self._lap("assign")
             sys = System.empty(self.pattern)
             it = Iterate(fd, self.R, self.c, self.X, Vc, Nc, corr)
@@ -434,6 +444,11 @@ class PatchTracker:
         if jump > MAX_JOINT_JUMP or offset > MAX_CENTRE_OFFSET:
             raise FitError(f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)")
 
+    def nearest_vertices(self, Y: np.ndarray, *, spare: int) -> NearestVertices:
+        """The nearest vertices of observed points ``Y`` (m, 3) over a frame's iterations,
+        ``spare`` candidates kept beyond ``k_neighbours``."""
+        return NearestVertices(Y, self.patch_radius, k=self.opts.k_neighbours, spare=spare)
+
     def correspondences(
         self,
         Y: np.ndarray,
@@ -441,6 +456,8 @@ class PatchTracker:
         ycls: np.ndarray | None,
         Vc: np.ndarray,
         Nc: np.ndarray,
+        *,
+        nearest: NearestVertices | None = None,
     ) -> Correspondences:
         """E-step: soft assignments of observed points to patches (+ an outlier class).
 
@@ -449,11 +466,15 @@ class PatchTracker:
         Y : (m, 3) kept observed points, metres; NY : (m, 3) their unit normals
         ycls : (m,) int body part of each point (−1: any), or None (no classes)
         Vc : (n, 3) each vertex as its own patch predicts it; Nc : (n, 3) its normal
+        nearest : NearestVertices of ``Y``, optional
+            The frame's candidate vertices, re-used across its iterations where they
+            provably are the nearest (default: a new k-d query).
         """
         o, m = self.opts, self.model
-        K = min(o.k_neighbours, len(Vc))
-        d, idx = KDTree(Vc).query(Y, k=K)
-        d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
+        if nearest is None:
+            d, idx = k_nearest(Vc, Y, min(o.k_neighbours, len(Vc)))
+        else:
+            d, idx = nearest.query(Vc, self.R, self.c)
         if o.interior_scale > 0:  # the E-step with depth penalties, in numpy
             return self._assign_interior(Y, NY, ycls, Vc, Nc, d, idx)
         # per point, the nearest vertex per patch among those whose normals agree and, with
