@@ -52,8 +52,8 @@ from meshmocap.trackers.registry import make_tracker
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
 #: cage tracker's pose manifold is learned on the spot from the procedural walk and jog.
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
-#: The demo capture's performer: a bundled body that the trackers are not told about.
-DEMO_PERFORMER = "heavy_male"
+#: The demo capture's subject (performer): a bundled body the trackers are not told about.
+DEMO_SUBJECT = "heavy_male"
 #: Formats the demo's first track is exported to (``meshmocap export``).
 DEMO_EXPORTS = ("bvh", "c3d", "trc", "glb", "csv")
 #: Why the demo's comparison has no silhouette error (rendering every frame in every camera
@@ -85,9 +85,9 @@ def run_demo(
     out: str | os.PathLike,
     *,
     seconds: float = 4.0,
-    track_frames: int = 120,
+    frames: slice | None = slice(0, 120),
     clip: str | None = None,
-    performer: str = DEMO_PERFORMER,
+    subject: str = DEMO_SUBJECT,
     template: str = "auto",
     show_progress: bool | None = None,
 ) -> DemoResult:
@@ -97,21 +97,21 @@ def run_demo(
     ----------
     seconds : float
         Length of the procedural walk written as BVH and retargeted.
-    track_frames : int
-        Frames (60 fps) of the synthetic walk capture that the trackers follow; 0 skips
-        tracking.
+    frames : slice or None
+        Frame numbers (60 fps) of the synthetic walk capture that the trackers follow
+        (``START:STOP:STEP``, as ``--frames``); None skips the capture and tracking.
     clip : str, optional
         A BVH/AMC file to retarget and render as well.
-    performer : str
-        Bundled body that performs in the synthetic capture.
+    subject : str
+        Bundled body that performs in the synthetic capture (``synth --subject``).
     template : str
         Tracking template: ``"auto"`` estimates the performer's body from the hulls (what a
         user without a body scan has); a bundled name or ``.npz`` file tracks with that body
         (``neutral_5k`` is the fastest).
     """
-    if performer not in bundled_templates():
+    if subject not in bundled_templates():
         raise InputError(
-            f"demo: performer must be one of {sorted(bundled_templates())}, found {performer!r}"
+            f"demo: --subject must be one of {sorted(bundled_templates())}, found {subject!r}"
         )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -148,19 +148,21 @@ def run_demo(
         files.append((f"{name} on neutral", res.sheet))
     scores: list[TrackerScore] = []
     players, sections, evaluations, tracks, notes = [], [], [], [], []
-    if track_frames > 0:
+    if frames is not None:
         spec = SynthSpec(
             motion="walk",
             template="neutral_5k",
-            subject=performer,
+            subject=subject,
             rig="humaneva4",
-            stop=track_frames,
+            start=frames.start,
+            stop=frames.stop,
+            step=frames.step,
         )
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {performer})", cap.path))
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
         folders = [out / f"track_{method}" for method in DEMO_METHODS]
         choice = tracking_template(cap, template, folders[0])
-        notes.append(f"performer {performer!r}, not told to the trackers; {choice.note}")
+        notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
         for method, folder in zip(DEMO_METHODS, folders, strict=True):
             if "template_file" in choice.info and folder != folders[0]:
                 folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template

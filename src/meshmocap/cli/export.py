@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from meshmocap.cli._args import frame_range, number
+from meshmocap.cli._args import add_frames, number
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=["bvh", "c3d", "trc", "gltf", "glb", "csv"],
         help="format (default: from the extension of --out)",
     )
-    x.add_argument("--frames", type=frame_range, help="capture frames START:STOP[:STEP]")
+    add_frames(x)
     x.add_argument("--joints", help="evaluation joints to keep, comma-separated (c3d, trc, csv)")
     x.add_argument(
         "--markers",

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from meshmocap.cli._args import flag, frame_range, number
+from meshmocap.cli._args import add_frames, add_restart, flag, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
 TRACK_OPTIONS = (
@@ -63,6 +63,7 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
@@ -81,16 +82,17 @@ def _cmd_track(args: argparse.Namespace) -> int:
         )
     frames = None
     if args.frames:
-        frames = range(len(capture))[args.frames]
+        numbers = [int(i) for i in capture.indices]
+        frames = frame_positions(numbers, args.frames)  # frame numbers, not positions
         if not frames:
             raise InputError(
-                f"track: --frames {_text(args.frames)} selects none of the "
-                f"{len(capture)} frames of {args.capture[0]}"
+                f"track: --frames {_text(args.frames)} selects none of the {len(numbers)} "
+                f"frames (numbers {numbers[0]}..{numbers[-1]}) of {args.capture[0]}"
             )
-        if args.frames.stop is not None and args.frames.stop > len(capture):
+        if args.frames.stop is not None and args.frames.stop > numbers[-1] + 1:
             print(
                 f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
-                f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                f"{args.frames.stop - 1}; the capture ends at frame {numbers[-1]}: tracking "
                 f"{len(frames)}",
                 file=sys.stderr,
             )
@@ -357,7 +359,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "an estimate is cached as subject.npz in --out)",
     )
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
-    k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    add_frames(k)
     k.add_argument(
         "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
     )
@@ -426,7 +428,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not score frames, flag lost limbs or re-initialise them",
     )
-    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(k, "track again instead of resuming")
     k.add_argument(
         "--follow",
         action="store_true",
@@ -494,5 +496,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument(
         "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
     )
-    x.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(x, "transfer again instead of resuming")
     x.set_defaults(func=_cmd_transfer)
