@@ -123,6 +123,7 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
 def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
     from meshmocap.analysis.evaluate import evaluate
     from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.body.light import tracking_body
     from meshmocap.estimate.axes import open_oriented
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.capture import Capture
@@ -133,7 +134,7 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     capture, _ = open_oriented(item.capture)  # mesh files: up axis and units as track reads
     choice = tracking_template(capture, item.template or None, folder / "track")
     template = choice.template
-    tracker = make_tracker(item.method, template=template)
+    tracker = make_tracker(item.method, template=tracking_body(template).light)  # as tracked
     frames = None
     if item.frames:
         sl = frame_slice(item.frames, what="batch: frames")  # frame numbers, as track reads them

@@ -37,6 +37,7 @@ from meshmocap.apps.report import (
     gait_section,
     write_report,
 )
+from meshmocap.body.light import tracking_body
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
@@ -167,7 +168,8 @@ def run_demo(
             if "template_file" in choice.info and folder != folders[0]:
                 folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
                 shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
-            tracker = make_tracker(method, template=choice.template)
+            # the light body the driver tracks (meshmocap.body.light)
+            tracker = make_tracker(method, template=tracking_body(choice.template).light)
             track = track_sequence(
                 tracker,
                 choice.template,

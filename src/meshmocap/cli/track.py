@@ -65,6 +65,7 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
@@ -104,7 +105,11 @@ def _cmd_track(args: argparse.Namespace) -> int:
             f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
             f"procedural walk and jog on {template.name!r}"
         )
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    # tracked on a light copy of the template, unless a manifold learned for the template
+    # itself is given (meshmocap.body.light)
+    light = None if args.manifold else LIGHT_VERTICES
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(
@@ -119,6 +124,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         recover=not args.no_recover,
         reseat=args.reseat,
         template_info=choice.info,
+        light=light,
     )
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
@@ -159,6 +165,7 @@ def _lost(track) -> str:
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
     """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.trackers.follow import follow_sequence
     from meshmocap.trackers.registry import make_tracker
@@ -170,7 +177,9 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     choice = _follow_template(args)
     template = choice.template
     print(choice.note)
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    light = None if args.manifold else LIGHT_VERTICES  # as in _cmd_track
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     seen: list[float] = []
 
     def report(f) -> None:
@@ -194,6 +203,7 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
             resume=not args.restart,
             report=report,
             template_info=choice.info,
+            light=light,
         )
     except KeyboardInterrupt:
         how = "Ctrl-C"

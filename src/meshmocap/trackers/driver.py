@@ -41,6 +41,7 @@ from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
 from meshmocap._threads import blas_threads
 from meshmocap._validate import check_choice
+from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import (
     FitError,
@@ -93,6 +94,7 @@ def track_sequence(
     recover: bool = True,
     reseat: bool = False,
     template_info: dict | None = None,
+    light: int | None = LIGHT_VERTICES,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -126,6 +128,10 @@ def track_sequence(
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
+    light : int or None
+        Track a light copy of the template with about this many vertices and read the full
+        template's vertices out of it every frame (:mod:`meshmocap.body.light`; a template
+        that is light already is tracked as it is); None tracks the template itself.
 
     Returns
     -------
@@ -150,12 +156,14 @@ def track_sequence(
         "reseat": bool(recover and reseat),
         **(template_info or {}),
     }
+    body = tracking_body(template, n_vertices=light)
+    meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
     # one BLAS thread while tracking; a second run into the same folder is refused
     with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
-            initialise_tracker(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, body, capture, out, positions, init)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -163,11 +171,11 @@ def track_sequence(
                 (i for i in indices if i in done and i < capture.indices[todo[0]]),
                 default=indices[0],
             )
-            resume_tracker(tracker, template, out, last)
+            resume_tracker(tracker, body.light, out, last)
             recovery = None
             if recover:
                 pose = _last_pose(out, [i for i in indices if i in done and i <= last])
-                recovery = Recovery(template, *pose)
+                recovery = Recovery(body.light, *pose)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
                 index = int(capture.indices[k])
@@ -177,6 +185,7 @@ def track_sequence(
                     index,
                     out,
                     good,
+                    body=body,
                     recovery=recovery,
                     reseat=reseat,
                 )
@@ -200,6 +209,7 @@ def track_frame(
     out: str | os.PathLike,
     good: int,
     *,
+    body: TrackingBody | None = None,
     recovery: Recovery | None = None,
     reseat: bool = False,
     retry: Callable[[], bool] | None = None,
@@ -213,6 +223,8 @@ def track_frame(
     read : callable returning the frame (a mesh sequence reads its file here)
     index : int, its frame number
     out : path, the track folder; ``good`` : int, its last well-fitted frame
+    body : TrackingBody, optional
+        The tracker tracks ``body.light``; the result holds the full body's vertices.
     recovery, reseat : score the frame and flag lost limbs (:func:`recovered`)
     retry : callable, optional
         Asked when the frame cannot be read: True means "not yet" (live mode: a file still
@@ -236,6 +248,8 @@ def track_frame(
                 raise FitError("non-finite joints or vertices")
             if recovery is not None:
                 r = recovered(tracker, recovery, frame, r, reseat=reseat)
+            if body is not None:  # the full surface, read out of the tracked light one
+                r = replace(r, vertices=body.full_vertices(r.vertices))
             return replace(r, index=index, seconds=time.perf_counter() - t0)
     except NUMERICAL_ERRORS as exc:
         return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
@@ -280,11 +294,16 @@ def coast_frame(
 
 
 def initialise_tracker(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+    tracker: Tracker,
+    body: TrackingBody,
+    capture,
+    out,
+    positions: list[int],
+    init: Init = "auto",
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds (its message says how). Frames before it are written as copies of it, flagged
-    ``missing``."""
+    finds for the full body (its message says how), the tracker on ``body.light``. Frames
+    before it are written as copies of it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -296,8 +315,9 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(template, frame, init, capture=capture)
-                r = tracker.init(template, frame, R, root)
+                R, root, how = first_pose(body.template, frame, init, capture=capture)
+                r = tracker.init(body.light, frame, R, root)
+                r = replace(r, vertices=body.full_vertices(r.vertices))
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:
