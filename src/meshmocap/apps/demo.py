@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open
+from meshmocap._progress import phase
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.export import export_track
@@ -189,13 +190,22 @@ def run_demo(
             sections.append(evaluation_section(ev, images=plots, track=track))
             drop_resume_state(folder)
         notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
-        notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
+        with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
+            notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         players.append(player_from_tracks(cap, tracks, title=title))
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
-    report = write_report(
+    with phase("writing the report"):
+        report = _report(out, players, evaluations, sections, sheets, notes)
+    files.append(("report (tables, plots, 3D player; open in a browser)", report))
+    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
+
+
+def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:
+    """Write the demo's ``report.html``."""
+    return write_report(
         out / "report.html",
         title="meshmocap demo",
         players=players,
@@ -206,8 +216,6 @@ def run_demo(
         if notes
         else "procedural motions and retargeting",
     )
-    files.append(("report (tables, plots, 3D player; open in a browser)", report))
-    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
 
 
 def _first_pose(track) -> str:

@@ -9,22 +9,24 @@ from meshmocap.cli._args import add_frames, number
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    from meshmocap._progress import phase
     from meshmocap.apps.export import export_track
 
     joints = [j for j in args.joints.split(",") if j] if args.joints else None
-    res = export_track(
-        args.track,
-        args.out,
-        format=args.format,
-        frames=args.frames,
-        joints=joints,
-        markers=args.markers,
-        long=args.long,
-        fps=args.fps,
-        template=args.template,
-        bvh_unit=args.bvh_unit,
-        joint_weight=args.joint_weight,
-    )
+    with phase(f"exporting {args.out}"):
+        res = export_track(
+            args.track,
+            args.out,
+            format=args.format,
+            frames=args.frames,
+            joints=joints,
+            markers=args.markers,
+            long=args.long,
+            fps=args.fps,
+            template=args.template,
+            bvh_unit=args.bvh_unit,
+            joint_weight=args.joint_weight,
+        )
     fit = ""
     if not math.isnan(res.vertex_error_mm):
         fit = (

@@ -50,6 +50,7 @@ from meshmocap.errors import (
     MeshError,
     MeshmocapFileNotFoundError,
 )
+from meshmocap.estimate.capture_cache import cached_first_pose
 from meshmocap.estimate.init import initial_pose
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
@@ -365,17 +366,13 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
     )
 
 
-#: Automatic first poses found in this process: (template, capture, frame) → result, so
-#: several trackers started on one capture (the demo, a benchmark) search once.
-_FOUND: dict[tuple, tuple[np.ndarray, np.ndarray, str]] = {}
-
-
 def first_pose(
     template: Template, frame, init: Init, *, capture=None
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
-    found (the frame's message in the track). An automatic search is remembered for
-    ``capture``'s frame for the rest of the process."""
+    found (the frame's message in the track). An automatic search is made once per
+    capture, frame and template, and cached with the capture
+    (:func:`~meshmocap.estimate.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)
         if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
@@ -388,11 +385,15 @@ def first_pose(
                 "(a synthetic capture); this one has none: use --init auto"
             )
         return truth.rotations, truth.root, "init truth: the first pose from ground truth"
-    key = None
-    if capture is not None:
-        key = (template.name, template.n_vertices, str(Path(capture.path).resolve()), frame.index)
-        if key in _FOUND:
-            return _FOUND[key]
+    if capture is None:
+        return _search_first_pose(template, frame)
+    return cached_first_pose(
+        capture, template, frame.index, functools.partial(_search_first_pose, template, frame)
+    )
+
+
+def _search_first_pose(template: Template, frame) -> tuple[np.ndarray, np.ndarray, str]:
+    """The automatic first pose of ``frame`` (:func:`first_pose`)."""
     obs = observed(frame)
     P, N = obs.points
     if len(P) < 50:
@@ -402,10 +403,7 @@ def first_pose(
         )
     masks = obs.silhouettes if obs.cameras else None
     res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
-    found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
-    if key is not None:
-        _FOUND[key] = found
-    return found
+    return res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
 
 
 def _is_rest(template: Template, truth) -> bool:
