@@ -9,6 +9,7 @@ import pytest
 
 from meshmocap.body.light import tracking_body
 from meshmocap.body.template import load_template
+from meshmocap.io.results import LIGHT_FILE, read_frame_arrays
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -38,6 +39,13 @@ def test_the_full_template_is_read_out_of_the_tracked_light_one(walk, tmp_path):
     meta = json.loads((tmp_path / "light" / "track.json").read_text())
     assert meta["tracked_vertices"] == tracking_body(t).light.n_vertices < 5100
     assert light.vertices.shape == full.vertices.shape == (N, t.n_vertices, 3)
+    # the frames hold the light body (less than half the bytes), read_track reads out
+    assert read_frame_arrays(tmp_path / "light", 1)["vertices"].shape == (
+        meta["tracked_vertices"],
+        3,
+    )
+    assert (tmp_path / "light" / LIGHT_FILE).is_file()
+    assert not (tmp_path / "full" / LIGHT_FILE).exists()
     truth_V = np.stack([f.truth.vertices for f in walk])
     truth_J = np.stack([f.truth.joints for f in walk])
     for track in (light, full):

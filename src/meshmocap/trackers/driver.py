@@ -65,6 +65,7 @@ from meshmocap.io.results import (
     read_track,
     start_track,
     write_frame,
+    write_light_binding,
 )
 from meshmocap.trackers.base import Tracker
 
@@ -163,6 +164,8 @@ def track_sequence(
     # one BLAS thread while tracking; a second run into the same folder is refused
     with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         if indices[0] not in done:
             initialise_tracker(tracker, body, capture, out, positions, init)
             done = set(done_frames(out))
@@ -186,7 +189,6 @@ def track_sequence(
                     index,
                     out,
                     good,
-                    body=body,
                     recovery=recovery,
                     reseat=reseat,
                 )
@@ -210,7 +212,6 @@ def track_frame(
     out: str | os.PathLike,
     good: int,
     *,
-    body: TrackingBody | None = None,
     recovery: Recovery | None = None,
     reseat: bool = False,
     retry: Callable[[], bool] | None = None,
@@ -224,8 +225,6 @@ def track_frame(
     read : callable returning the frame (a mesh sequence reads its file here)
     index : int, its frame number
     out : path, the track folder; ``good`` : int, its last well-fitted frame
-    body : TrackingBody, optional
-        The tracker tracks ``body.light``; the result holds the full body's vertices.
     recovery, reseat : score the frame and flag lost limbs (:func:`recovered`)
     retry : callable, optional
         Asked when the frame cannot be read: True means "not yet" (live mode: a file still
@@ -249,8 +248,6 @@ def track_frame(
                 raise FitError("non-finite joints or vertices")
             if recovery is not None:
                 r = recovered(tracker, recovery, frame, r, reseat=reseat)
-            if body is not None:  # the full surface, read out of the tracked light one
-                r = replace(r, vertices=body.full_vertices(r.vertices))
             return replace(r, index=index, seconds=time.perf_counter() - t0)
     except NUMERICAL_ERRORS as exc:
         return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
@@ -318,7 +315,6 @@ def initialise_tracker(
             try:
                 R, root, how = first_pose(body.template, frame, init, capture=capture)
                 r = tracker.init(body.light, frame, R, root)
-                r = replace(r, vertices=body.full_vertices(r.vertices))
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:

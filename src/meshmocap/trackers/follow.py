@@ -31,7 +31,7 @@ from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.io.live import FrameFile, FrameFolder, young
-from meshmocap.io.results import done_frames, start_track, write_frame
+from meshmocap.io.results import done_frames, start_track, write_frame, write_light_binding
 from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.driver import (
     initialise_tracker,
@@ -145,6 +145,8 @@ def follow_sequence(
     tracked: list[int] = []
     with blas_threads(), folder_lock(out, "track"):
         done = start_track(out, meta, template.F, resume=resume)
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         last = good = done[-1] if done else -1
         if done:  # resuming: continue from the state saved with the last frame
             resume_tracker(tracker, body.light, out, last)
@@ -164,7 +166,6 @@ def follow_sequence(
                     f.index,
                     out,
                     good,
-                    body=body,
                     retry=functools.partial(young, f),
                 )
                 if r is None:  # still being written in place: try again at the next poll
