@@ -56,6 +56,9 @@ from meshmocap.trackers.registry import make_tracker
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
 #: The demo capture's subject (performer): a bundled body the trackers are not told about.
 DEMO_SUBJECT = "heavy_male"
+#: Budget of the player's per-frame data in the demo's report, MB (the plots and the
+#: meshes come on top).
+PLAYER_MB = 5.0
 #: Formats the demo's first track is exported to (``meshmocap export``).
 DEMO_EXPORTS = ("bvh", "c3d", "trc", "glb", "csv")
 #: Why the demo's comparison has no silhouette error (rendering every frame in every camera
@@ -194,7 +197,8 @@ def run_demo(
             notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
-        players.append(player_from_tracks(cap, tracks, title=title))
+        # the report holds the player's frames: a budget that keeps it under 10 MB
+        players.append(player_from_tracks(cap, tracks, title=title, max_megabytes=PLAYER_MB))
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     with phase("writing the report"):
