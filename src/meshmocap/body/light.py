@@ -17,8 +17,10 @@ and rigged with the template's own skeleton and blended weights,
   motion of the light surface moves the full one rigidly; vectorised, a few milliseconds
   for 12k vertices.
 
-Exports, per-vertex scores and the player read the full surface, in the template's own
-topology; the trackers never see it. Metres, world frame Z up.
+A track stores the light body's vertices and the binding
+(:func:`~meshmocap.io.results.read_track` reads the full surface out), so exports,
+per-vertex scores and the player read the full surface, in the template's own topology;
+the trackers never see it. Metres, world frame Z up.
 """
 
 from __future__ import annotations

@@ -131,9 +131,10 @@ def track_sequence(
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
     light : int or None
-        Track a light copy of the template with about this many vertices and read the full
-        template's vertices out of it every frame (:mod:`meshmocap.body.light`; a template
-        that is light already is tracked as it is); None tracks the template itself.
+        Track a light copy of the template with about this many vertices
+        (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
+        is): the frames hold its vertices, and :func:`~meshmocap.io.results.read_track`
+        reads the template's out of them. None tracks the template itself.
 
     Returns
     -------
