@@ -3,9 +3,17 @@ skeleton through linear-blend skinning, posed on a fixed subset of model points,
 exact derivatives of every point with respect to a root translation and a rotation
 increment per joint.
 
-Shared by the articulated ICP baseline (:mod:`meshmocap.trackers.articulated_icp`, the
-skeleton-based baseline of patch-skeleton-tracking.txt §IV-B) and automatic rigging
-(:mod:`meshmocap.body.autorig`). Everything is in metres and radians, world frame Z up.
+**One Gauss–Newton step for every articulated fit**: the articulated ICP baseline
+(:mod:`meshmocap.trackers.articulated_icp`, the skeleton-based baseline of
+patch-skeleton-tracking.txt §IV-B), the first-pose search (:mod:`meshmocap.estimate.fit`),
+automatic rigging (:mod:`meshmocap.body.autorig`) and the shape fit
+(:mod:`meshmocap.estimate.shape_fit`) assemble their normal equations from the pieces here
+(closest pairs both ways, :func:`closest_pairs`; their point-to-plane plus point-to-point
+system, :func:`closest_point_system`; the pull towards a reference pose,
+:func:`add_pose_pull`) and take :func:`articulated_step`: one Levenberg–Marquardt damping
+(:func:`damped_solve`, :data:`DAMPING`, :data:`RIDGE`) and one step limit
+(:func:`limit_step`, :data:`MAX_STEP_ANGLE`). Everything is in metres and radians, world
+frame Z up.
 
 **Parametrisation** (documented choice): ω_j is a *world-frame* rotation increment
 left-multiplying joint j's global rotation and rotating its whole subtree about the joint's

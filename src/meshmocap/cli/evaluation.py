@@ -26,6 +26,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from meshmocap._progress import phase
     from meshmocap.apps.batch_report import build_batch_report, is_batch_folder
     from meshmocap.apps.report import build_report
     from meshmocap.errors import InputError
@@ -36,15 +37,16 @@ def _cmd_report(args: argparse.Namespace) -> int:
             raise InputError(f"report: {args.capture} is a batch folder; give no track folders")
         path = build_batch_report(args.out, args.capture)
     else:
-        path = build_report(
-            args.out,
-            args.capture,
-            args.tracks,
-            eval_dirs=args.eval_dir,
-            max_frames=args.max_frames,
-            silhouettes=not args.no_silhouettes,
-            surface_frames=args.surface_frames,
-        )
+        with phase("scoring the tracks and writing the report"):
+            path = build_report(
+                args.out,
+                args.capture,
+                args.tracks,
+                eval_dirs=args.eval_dir,
+                max_frames=args.max_frames,
+                silhouettes=not args.no_silhouettes,
+                surface_frames=args.surface_frames,
+            )
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
     return 0

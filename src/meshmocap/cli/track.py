@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from meshmocap.cli._args import flag, frame_range, number
+from meshmocap.cli._args import add_frames, add_restart, flag, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
 TRACK_OPTIONS = (
@@ -63,7 +63,9 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
@@ -81,16 +83,17 @@ def _cmd_track(args: argparse.Namespace) -> int:
         )
     frames = None
     if args.frames:
-        frames = range(len(capture))[args.frames]
+        numbers = [int(i) for i in capture.indices]
+        frames = frame_positions(numbers, args.frames)  # frame numbers, not positions
         if not frames:
             raise InputError(
-                f"track: --frames {_text(args.frames)} selects none of the "
-                f"{len(capture)} frames of {args.capture[0]}"
+                f"track: --frames {_text(args.frames)} selects none of the {len(numbers)} "
+                f"frames (numbers {numbers[0]}..{numbers[-1]}) of {args.capture[0]}"
             )
-        if args.frames.stop is not None and args.frames.stop > len(capture):
+        if args.frames.stop is not None and args.frames.stop > numbers[-1] + 1:
             print(
                 f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
-                f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                f"{args.frames.stop - 1}; the capture ends at frame {numbers[-1]}: tracking "
                 f"{len(frames)}",
                 file=sys.stderr,
             )
@@ -102,7 +105,11 @@ def _cmd_track(args: argparse.Namespace) -> int:
             f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
             f"procedural walk and jog on {template.name!r}"
         )
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    # tracked on a light copy of the template, unless a manifold learned for the template
+    # itself is given (meshmocap.body.light)
+    light = None if args.manifold else LIGHT_VERTICES
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     before = set() if args.restart else set(done_frames(args.out))
     t0 = time.perf_counter()
     track = track_sequence(
@@ -117,6 +124,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         recover=not args.no_recover,
         reseat=args.reseat,
         template_info=choice.info,
+        light=light,
     )
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))
@@ -157,6 +165,7 @@ def _lost(track) -> str:
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
     """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.trackers.follow import follow_sequence
     from meshmocap.trackers.registry import make_tracker
@@ -168,7 +177,9 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     choice = _follow_template(args)
     template = choice.template
     print(choice.note)
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    light = None if args.manifold else LIGHT_VERTICES  # as in _cmd_track
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     seen: list[float] = []
 
     def report(f) -> None:
@@ -192,6 +203,7 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
             resume=not args.restart,
             report=report,
             template_info=choice.info,
+            light=light,
         )
     except KeyboardInterrupt:
         how = "Ctrl-C"
@@ -357,7 +369,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "an estimate is cached as subject.npz in --out)",
     )
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
-    k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    add_frames(k)
     k.add_argument(
         "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
     )
@@ -426,7 +438,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not score frames, flag lost limbs or re-initialise them",
     )
-    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(k, "track again instead of resuming")
     k.add_argument(
         "--follow",
         action="store_true",
@@ -494,5 +506,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument(
         "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
     )
-    x.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(x, "transfer again instead of resuming")
     x.set_defaults(func=_cmd_transfer)

@@ -41,6 +41,7 @@ from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
 from meshmocap._threads import blas_threads
 from meshmocap._validate import check_choice
+from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import (
     FitError,
@@ -49,6 +50,7 @@ from meshmocap.errors import (
     MeshError,
     MeshmocapFileNotFoundError,
 )
+from meshmocap.estimate.capture_cache import cached_first_pose
 from meshmocap.estimate.init import initial_pose
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
@@ -63,6 +65,7 @@ from meshmocap.io.results import (
     read_track,
     start_track,
     write_frame,
+    write_light_binding,
 )
 from meshmocap.trackers.base import Tracker
 
@@ -94,6 +97,7 @@ def track_sequence(
     recover: bool = True,
     reseat: bool = False,
     template_info: dict | None = None,
+    light: int | None = LIGHT_VERTICES,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -127,6 +131,11 @@ def track_sequence(
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
+    light : int or None
+        Track a light copy of the template with about this many vertices
+        (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
+        is): the frames hold its vertices, and :func:`~meshmocap.io.results.read_track`
+        reads the template's out of them. None tracks the template itself.
 
     Returns
     -------
@@ -151,12 +160,16 @@ def track_sequence(
         "reseat": bool(recover and reseat),
         **(template_info or {}),
     }
+    body = tracking_body(template, n_vertices=light)
+    meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
     # one BLAS thread while tracking; a second run into the same folder is refused
     with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         if indices[0] not in done:
-            initialise_tracker(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, body, capture, out, positions, init)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -164,11 +177,11 @@ def track_sequence(
                 (i for i in indices if i in done and i < capture.indices[todo[0]]),
                 default=indices[0],
             )
-            resume_tracker(tracker, template, out, last)
+            resume_tracker(tracker, body.light, out, last)
             recovery = None
             if recover:
                 pose = _last_pose(out, [i for i in indices if i in done and i <= last])
-                recovery = Recovery(template, *pose)
+                recovery = Recovery(body.light, *pose)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
                 index = int(capture.indices[k])
@@ -282,11 +295,16 @@ def coast_frame(
 
 
 def initialise_tracker(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+    tracker: Tracker,
+    body: TrackingBody,
+    capture,
+    out,
+    positions: list[int],
+    init: Init = "auto",
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds (its message says how). Frames before it are written as copies of it, flagged
-    ``missing``."""
+    finds for the full body (its message says how), the tracker on ``body.light``. Frames
+    before it are written as copies of it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -298,8 +316,8 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(template, frame, init, capture=capture)
-                r = tracker.init(template, frame, R, root)
+                R, root, how = first_pose(body.template, frame, init, capture=capture)
+                r = tracker.init(body.light, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:
@@ -347,17 +365,13 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
     )
 
 
-#: Automatic first poses found in this process: (template, capture, frame) → result, so
-#: several trackers started on one capture (the demo, a benchmark) search once.
-_FOUND: dict[tuple, tuple[np.ndarray, np.ndarray, str]] = {}
-
-
 def first_pose(
     template: Template, frame, init: Init, *, capture=None
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
-    found (the frame's message in the track). An automatic search is remembered for
-    ``capture``'s frame for the rest of the process."""
+    found (the frame's message in the track). An automatic search is made once per
+    capture, frame and template, and cached with the capture
+    (:func:`~meshmocap.estimate.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)
         if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
@@ -370,11 +384,15 @@ def first_pose(
                 "(a synthetic capture); this one has none: use --init auto"
             )
         return truth.rotations, truth.root, "init truth: the first pose from ground truth"
-    key = None
-    if capture is not None:
-        key = (template.name, template.n_vertices, str(Path(capture.path).resolve()), frame.index)
-        if key in _FOUND:
-            return _FOUND[key]
+    if capture is None:
+        return _search_first_pose(template, frame)
+    return cached_first_pose(
+        capture, template, frame.index, functools.partial(_search_first_pose, template, frame)
+    )
+
+
+def _search_first_pose(template: Template, frame) -> tuple[np.ndarray, np.ndarray, str]:
+    """The automatic first pose of ``frame`` (:func:`first_pose`)."""
     obs = observed(frame)
     P, N = obs.points
     if len(P) < 50:
@@ -384,10 +402,7 @@ def first_pose(
         )
     masks = obs.silhouettes if obs.cameras else None
     res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
-    found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
-    if key is not None:
-        _FOUND[key] = found
-    return found
+    return res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
 
 
 def _is_rest(template: Template, truth) -> bool:

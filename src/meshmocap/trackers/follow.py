@@ -27,10 +27,11 @@ from pathlib import Path
 
 from meshmocap._atomic import folder_lock
 from meshmocap._threads import blas_threads
+from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.io.live import FrameFile, FrameFolder, young
-from meshmocap.io.results import done_frames, start_track, write_frame
+from meshmocap.io.results import done_frames, start_track, write_frame, write_light_binding
 from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.driver import (
     initialise_tracker,
@@ -90,6 +91,7 @@ def follow_sequence(
     stop: Callable[[], bool] | None = None,
     report: Callable[[FollowedFrame], None] | None = None,
     template_info: dict | None = None,
+    light: int | None = LIGHT_VERTICES,
 ) -> list[int]:
     """Track the frames written into the folder ``source`` as they arrive.
 
@@ -116,6 +118,8 @@ def follow_sequence(
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (as for
         :func:`~meshmocap.trackers.driver.track_sequence`).
+    light : int or None
+        The light body tracked (as for :func:`~meshmocap.trackers.driver.track_sequence`).
 
     Returns
     -------
@@ -135,19 +139,23 @@ def follow_sequence(
         "options": tracker.options(),
         **(template_info or {}),
     }
+    body = tracking_body(template, n_vertices=light)
+    meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
     tracked: list[int] = []
     with blas_threads(), folder_lock(out, "track"):
         done = start_track(out, meta, template.F, resume=resume)
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         last = good = done[-1] if done else -1
         if done:  # resuming: continue from the state saved with the last frame
-            resume_tracker(tracker, template, out, last)
+            resume_tracker(tracker, body.light, out, last)
         waited = time.monotonic()
         while not (stop is not None and stop()):
             files = folder.poll(after=last)
             new = []
             if files and not done:  # the first frame with an observation starts the track
-                new = _start(tracker, template, folder, files, out)
+                new = _start(tracker, body, folder, files, out)
                 done = done_frames(out)
             for f in files if done and not new else ():
                 if stop is not None and stop():
@@ -182,11 +190,11 @@ def follow_sequence(
     return tracked
 
 
-def _start(tracker, template, folder, files: list[FrameFile], out) -> list:
+def _start(tracker, body, folder, files: list[FrameFile], out) -> list:
     """Initialise on the first of ``files`` with an observation (the driver's way); the
     frames written, with their results, or none when no file has an observation yet."""
     try:
-        initialise_tracker(tracker, template, _Pending(folder, files), out, list(range(len(files))))
+        initialise_tracker(tracker, body, _Pending(folder, files), out, list(range(len(files))))
     except InputError:  # no observation in any of them: wait for more frames
         return []
     written = set(done_frames(out))
