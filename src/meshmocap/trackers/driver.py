@@ -39,7 +39,7 @@ from meshmocap._progress import progress
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
-from meshmocap.estimate.init import initial_pose
+from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
 from meshmocap.io.capture import Capture
@@ -81,6 +81,7 @@ def track_sequence(
     recover: bool = True,
     reseat: bool = False,
     template_info: dict | None = None,
+    init_options: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -102,7 +103,7 @@ def track_sequence(
         :func:`~meshmocap.io.results.read_track`).
     init : {"auto", "truth"}
         The first frame's pose: found from the frame alone (a global search over heading,
-        place and a few seed poses, :func:`~meshmocap.estimate.init.initial_pose`), or
+        place and the bundled pose library, :func:`~meshmocap.estimate.init.initial_pose`), or
         copied from its ground truth (the papers' protocol; the capture must have it).
         ``track.json`` records which, the first frame's message the search's winner.
     recover : bool
@@ -114,6 +115,9 @@ def track_sequence(
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
+    init_options : dict, optional
+        Options of the automatic first pose's search
+        (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
 
     Returns
     -------
@@ -142,7 +146,7 @@ def track_sequence(
     with folder_lock(out, "track"):  # a second run into the same folder is refused
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
-            initialise_tracker(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, template, capture, out, positions, init, init_options)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -217,7 +221,13 @@ def coast_frame(
 
 
 def initialise_tracker(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+    tracker: Tracker,
+    template: Template,
+    capture,
+    out,
+    positions: list[int],
+    init: Init = "auto",
+    init_options: dict | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds (its message says how). Frames before it are written as copies of it, flagged
@@ -233,7 +243,9 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(template, frame, init, capture=capture)
+                R, root, how = first_pose(
+                    template, frame, init, capture=capture, options=init_options
+                )
                 r = tracker.init(template, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
@@ -241,9 +253,8 @@ def initialise_tracker(
             skipped.append((index, reason))
             continue
         state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
-        write_frame(
-            out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
-        )
+        r = replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
+        write_frame(out, replace(r, flags=(*r.flags, *start_flags(how))))
         for index, why in skipped:
             write_frame(
                 out,
@@ -288,7 +299,7 @@ _FOUND: dict[tuple, tuple[np.ndarray, np.ndarray, str]] = {}
 
 
 def first_pose(
-    template: Template, frame, init: Init, *, capture=None
+    template: Template, frame, init: Init, *, capture=None, options: dict | None = None
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
     found (the frame's message in the track). An automatic search is remembered for
@@ -307,19 +318,24 @@ def first_pose(
         return truth.rotations, truth.root, "init truth: the first pose from ground truth"
     key = None
     if capture is not None:
-        key = (template.name, template.n_vertices, str(Path(capture.path).resolve()), frame.index)
+        key = (
+            template.name,
+            template.n_vertices,
+            str(Path(capture.path).resolve()),
+            frame.index,
+            repr(sorted((options or {}).items())),
+        )
         if key in _FOUND:
             return _FOUND[key]
     obs = observed(frame)
-    P, N = obs.points
+    P = obs.points[0]
     if len(P) < 50:
         raise InputError(
             f"track: frame {frame.index} has {len(P)} observed points; "
             "--init auto needs a body to start from"
         )
-    masks = obs.silhouettes if obs.cameras else None
-    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
-    found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
+    res = initial_pose_of_frame(template, obs, **(options or {}))
+    found = res.R, res.root, start_message(res)
     if key is not None:
         _FOUND[key] = found
     return found
