@@ -62,6 +62,7 @@ SUBJECT_CODE = (
 #: Modules whose source keys the first-pose search.
 FIRST_POSE_CODE = (
     "meshmocap.estimate.init",
+    "meshmocap.estimate.pose_search",
     "meshmocap.estimate.fit",
     "meshmocap.estimate.observe",
     "meshmocap.estimate.quality",
@@ -216,14 +217,17 @@ def cached_first_pose(
     template: Template,
     index: int,
     find: Callable[[], tuple[np.ndarray, np.ndarray, str]],
+    *,
+    options: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, str]:
-    """The first pose ``(R, root, how)`` of frame ``index`` of ``capture`` for ``template``:
-    ``find()`` once, then read from the capture's cache."""
+    """The first pose ``(R, root, how)`` of frame ``index`` of ``capture`` for ``template``
+    (searched with ``options``): ``find()`` once, then read from the capture's cache."""
     key = _key(
         "first_pose",
         capture_digest(capture),
         int(index),
         template_key(template),
+        options or {},
         code_digest(FIRST_POSE_CODE),
     )
     path = cache_folder(capture) / f"first_pose-{key}.npz"

@@ -51,7 +51,7 @@ from meshmocap.errors import (
     MeshmocapFileNotFoundError,
 )
 from meshmocap.estimate.capture_cache import cached_first_pose
-from meshmocap.estimate.init import initial_pose
+from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
 from meshmocap.io.capture import Capture
@@ -98,6 +98,7 @@ def track_sequence(
     reseat: bool = False,
     template_info: dict | None = None,
     light: int | None = LIGHT_VERTICES,
+    init_options: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -119,7 +120,7 @@ def track_sequence(
         :func:`~meshmocap.io.results.read_track`).
     init : {"auto", "truth"}
         The first frame's pose: found from the frame alone (a global search over heading,
-        place and a few seed poses, :func:`~meshmocap.estimate.init.initial_pose`), or
+        place and the bundled pose library, :func:`~meshmocap.estimate.init.initial_pose`), or
         copied from its ground truth (the papers' protocol; the capture must have it).
         ``track.json`` records which, the first frame's message the search's winner.
     recover : bool
@@ -136,6 +137,9 @@ def track_sequence(
         (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
         is): the frames hold its vertices, and :func:`~meshmocap.io.results.read_track`
         reads the template's out of them. None tracks the template itself.
+    init_options : dict, optional
+        Options of the automatic first pose's search
+        (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
 
     Returns
     -------
@@ -169,7 +173,7 @@ def track_sequence(
         if body.binding is not None:  # frames hold the light body; read_track reads out
             write_light_binding(out, body.binding)
         if indices[0] not in done:
-            initialise_tracker(tracker, body, capture, out, positions, init)
+            initialise_tracker(tracker, body, capture, out, positions, init, init_options)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -301,6 +305,7 @@ def initialise_tracker(
     out,
     positions: list[int],
     init: Init = "auto",
+    init_options: dict | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds for the full body (its message says how), the tracker on ``body.light``. Frames
@@ -316,7 +321,9 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(body.template, frame, init, capture=capture)
+                R, root, how = first_pose(
+                    body.template, frame, init, capture=capture, options=init_options
+                )
                 r = tracker.init(body.light, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
@@ -324,9 +331,8 @@ def initialise_tracker(
             skipped.append((index, reason))
             continue
         state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
-        write_frame(
-            out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
-        )
+        r = replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
+        write_frame(out, replace(r, flags=(*r.flags, *start_flags(how))))
         for index, why in skipped:
             write_frame(
                 out,
@@ -366,7 +372,7 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
 
 
 def first_pose(
-    template: Template, frame, init: Init, *, capture=None
+    template: Template, frame, init: Init, *, capture=None, options: dict | None = None
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
     found (the frame's message in the track). An automatic search is made once per
@@ -385,24 +391,29 @@ def first_pose(
             )
         return truth.rotations, truth.root, "init truth: the first pose from ground truth"
     if capture is None:
-        return _search_first_pose(template, frame)
+        return _search_first_pose(template, frame, options)
     return cached_first_pose(
-        capture, template, frame.index, functools.partial(_search_first_pose, template, frame)
+        capture,
+        template,
+        frame.index,
+        functools.partial(_search_first_pose, template, frame, options),
+        options=options,
     )
 
 
-def _search_first_pose(template: Template, frame) -> tuple[np.ndarray, np.ndarray, str]:
+def _search_first_pose(
+    template: Template, frame, options: dict | None = None
+) -> tuple[np.ndarray, np.ndarray, str]:
     """The automatic first pose of ``frame`` (:func:`first_pose`)."""
     obs = observed(frame)
-    P, N = obs.points
+    P = obs.points[0]
     if len(P) < 50:
         raise InputError(
             f"track: frame {frame.index} has {len(P)} observed points; "
             "--init auto needs a body to start from"
         )
-    masks = obs.silhouettes if obs.cameras else None
-    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
-    return res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
+    res = initial_pose_of_frame(template, obs, **(options or {}))
+    return res.R, res.root, start_message(res)
 
 
 def _is_rest(template: Template, truth) -> bool:
