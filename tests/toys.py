@@ -162,3 +162,12 @@ def toy_template() -> Template:
     src = [0, 13, 16, 18, 19, 20, 25, 26, 27, 2, 3, 4, 7, 8, 9]
     ev = EvalSkeleton(EVAL_NAMES, EVAL_PARENTS, sk.rest_positions[src], np.eye(31)[src])
     return Template("toy", V, np.concatenate(Fs), sk, W, labels, ev)
+
+
+def small_walk_capture(out, frames: int):
+    """A synthetic capture of ``frames`` frames written to ``out`` (the neutral_5k walk at
+    30 fps, hulls carved at 2 cm): the smallest capture a CLI test can track."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=frames, voxel_size=0.02)
+    return synthesize(out, spec, show_progress=False)
