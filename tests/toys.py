@@ -261,3 +261,12 @@ root 1 2 3 0 0 90
 # a comment between bone lines
 spine 0 0 0
 """
+
+
+def small_walk_capture(out, frames: int):
+    """A synthetic capture of ``frames`` frames written to ``out`` (the neutral_5k walk at
+    30 fps, hulls carved at 2 cm): the smallest capture a CLI test can track."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=frames, voxel_size=0.02)
+    return synthesize(out, spec, show_progress=False)

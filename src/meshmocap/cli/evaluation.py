@@ -11,10 +11,12 @@ from meshmocap.cli._args import number
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap.analysis.evaluate import evaluate, summary
     from meshmocap.apps.evaluation_files import write_evaluation
-    from meshmocap.io.capture import open_capture
-    from meshmocap.io.results import read_track
+    from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
-    track, capture = read_track(args.track), open_capture(args.capture)
+    track = read_track(args.track)
+    capture = open_tracked_capture(track.meta, args.capture)
+    if "input" in track.meta:
+        print(f"{args.capture}: read as tracked ({input_frame(track.meta).describe()})\n")
     ev = evaluate(
         track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
     )
@@ -101,8 +103,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the parsers of this module's commands to ``sub``."""
-    e = sub.add_parser("eval", help="score a track against its capture's ground truth")
-    e.add_argument("capture", help="capture folder")
+    e = sub.add_parser(
+        "eval",
+        help="score a track against its capture's ground truth (or, for a mesh sequence of "
+        "fixed connectivity, against its files: the per-vertex error)",
+    )
+    e.add_argument(
+        "capture",
+        help="capture folder, or the mesh files tracked (read in the up axis, "
+        "units and frame rate track.json records)",
+    )
     e.add_argument("track", help="track folder written by 'meshmocap track'")
     e.add_argument("--out", help="folder for CSV tables and PNG plots")
     e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")

@@ -40,17 +40,20 @@ def _tracker_options(args: argparse.Namespace) -> dict:
     return given
 
 
-def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
+def _capture_source(
+    sources: list[str], up: str = "auto", units: str = "auto", fps: float | None = None
+):
     """One capture folder, or several mesh files/folders (the shell expands an unquoted
     glob into many arguments), in metres and Z up (mesh files: ``up`` and ``units`` read
-    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`).
+    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`;
+    ``fps`` their frame rate).
     Returns the capture and the axes read (None for a capture folder)."""
     from meshmocap.errors import InputError
     from meshmocap.estimate.axes import open_oriented
     from meshmocap.io.meshes import frame_files
 
     if len(sources) == 1:
-        return open_oriented(sources[0], up=up, units=units)
+        return open_oriented(sources[0], up=up, units=units, fps=fps)
     capture_dirs = [
         s for s in sources if (Path(s) / "capture.json").is_file() or (Path(s) / "hulls").is_dir()
     ]
@@ -59,7 +62,7 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
             f"track: give one capture folder, or several mesh files and folders; "
             f"{capture_dirs[0]} is a capture folder"
         )
-    return open_oriented(frame_files(sources), up=up, units=units)
+    return open_oriented(frame_files(sources), up=up, units=units, fps=fps)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
@@ -68,19 +71,27 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.estimate.tracking_template import tracking_template
-    from meshmocap.io.results import done_frames
+    from meshmocap.io.results import done_frames, input_meta
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
     options = _tracker_options(args)
     if args.follow or args.idle is not None:
         return _follow(args, options)
-    capture, axes = _capture_source(args.capture, args.up, args.units)
-    if axes is not None and (args.up == "auto" or args.units == "auto"):
+    capture, axes = _capture_source(args.capture, args.up, args.units, args.fps)
+    if axes is not None:
+        rate = f"{capture.fps:g} fps" + ("" if args.fps else " (assumed; --fps to set)")
         print(
             f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
-            f"{axes.span:.2f} m long (--up, --units to set)"
+            f"{axes.span:.2f} m long (--up, --units to set); {rate}"
         )
+        gaps = getattr(capture, "gaps", [])
+        if gaps:
+            print(
+                f"meshmocap: warning: {len(gaps)} frame numbers have no file (first "
+                f"{gaps[0]}): tracked as missing frames, coasted across",
+                file=sys.stderr,
+            )
     frames = None
     if args.frames:
         numbers = [int(i) for i in capture.indices]
@@ -123,7 +134,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         init=args.init,
         recover=not args.no_recover,
         reseat=args.reseat,
-        template_info=choice.info,
+        template_info={**choice.info, **input_meta(capture)},
         light=light,
     )
     dt = time.perf_counter() - t0
@@ -437,6 +448,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--no-recover",
         action="store_true",
         help="do not score frames, flag lost limbs or re-initialise them",
+    )
+    k.add_argument(
+        "--fps",
+        type=number(0, 1e5, "frames per second", open_lo=True),
+        help="mesh/point-cloud files: their frame rate (default: 30, recorded as unknown)",
     )
     add_restart(k, "track again instead of resuming")
     k.add_argument(
