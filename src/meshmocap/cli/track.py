@@ -20,6 +20,10 @@ TRACK_OPTIONS = (
     "joint_readout",
 )
 
+#: Fewest patches ``--n-patches`` takes: about one per bone of the evaluation skeleton (the
+#: paper uses 150–250). With one patch the rigidity energy has no pair and is NaN.
+MIN_PATCHES = 16
+
 
 def _tracker_options(args: argparse.Namespace) -> dict:
     from meshmocap.errors import InputError
@@ -65,6 +69,7 @@ def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
+    from meshmocap.estimate.plausibility import check_observations
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames
     from meshmocap.trackers.driver import track_sequence
@@ -94,6 +99,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
                 f"{len(frames)}",
                 file=sys.stderr,
             )
+    for line in check_observations(capture, frames):  # one person? dense? partial hulls?
+        print(f"meshmocap: warning: {line}", file=sys.stderr)
     choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
     template = choice.template
     print(choice.note)
@@ -359,7 +366,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
     k.add_argument(
-        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+        "--n-patches",
+        type=number(MIN_PATCHES, 10_000, integer=True),
+        help=f"patch tracker: number of patches (at least {MIN_PATCHES}: fewer cannot follow "
+        "the limbs, and one has no neighbour to be rigid with)",
     )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
     k.add_argument(
