@@ -63,3 +63,16 @@ class MissingFrameWarning(MeshmocapWarning):
 def where(path: object, line: int | None = None) -> str:
     """Return ``"path"`` or ``"path:line"`` for error messages."""
     return f"{path}:{line}" if line is not None else f"{path}"
+
+
+class OutputPathError(MeshmocapError, OSError):
+    """An output path cannot be written: a read-only place, a file standing where a folder
+    should be, a folder where a file is expected."""
+
+
+class ProtectedPathError(MeshmocapError, PermissionError):
+    """A command other than ``track`` was asked to write a track folder's own files."""
+
+
+class CaptureMismatchError(MeshmocapError, ValueError):
+    """A track is scored against a capture it was not made from."""

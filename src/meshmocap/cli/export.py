@@ -10,7 +10,7 @@ from meshmocap.cli._args import add_frames, number
 
 def _cmd_export(args: argparse.Namespace) -> int:
     from meshmocap._progress import phase
-    from meshmocap.apps.export import export_track
+    from meshmocap.apps.export import export_track, frame_ranges
 
     joints = [j for j in args.joints.split(",") if j] if args.joints else None
     with phase(f"exporting {args.out}"):
@@ -39,6 +39,16 @@ def _cmd_export(args: argparse.Namespace) -> int:
         f"wrote {res.path} ({res.format}, {res.n_frames} frames at {res.fps:g} fps from "
         f"{res.fps_source}{points}, {size:.2f} MB, {res.seconds:.1f} s){fit}"
     )
+    if res.gaps:
+        how = (
+            "held at the last tracked pose (the format has no gaps)"
+            if res.format in ("bvh", "gltf", "glb")
+            else "written as gaps"
+        )
+        print(
+            f"{len(res.gaps)} frames without a fit of their own (coasted or never tracked) "
+            f"{how}: {frame_ranges(res.gaps)}"
+        )
     return 0
 
 

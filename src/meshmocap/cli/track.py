@@ -20,6 +20,10 @@ TRACK_OPTIONS = (
     "joint_readout",
 )
 
+#: Fewest patches ``--n-patches`` takes: about one per bone of the evaluation skeleton (the
+#: paper uses 150–250). With one patch the rigidity energy has no pair and is NaN.
+MIN_PATCHES = 16
+
 
 def _tracker_options(args: argparse.Namespace) -> dict:
     from meshmocap.errors import InputError
@@ -70,6 +74,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
+    from meshmocap.estimate.plausibility import check_observations
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.results import done_frames, input_meta
     from meshmocap.trackers.driver import track_sequence
@@ -108,6 +113,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
                 f"{len(frames)}",
                 file=sys.stderr,
             )
+    for line in check_observations(capture, frames):  # one person? dense? partial hulls?
+        print(f"meshmocap: warning: {line}", file=sys.stderr)
     choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
     template = choice.template
     print(choice.note)
@@ -382,7 +389,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
     add_frames(k)
     k.add_argument(
-        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+        "--n-patches",
+        type=number(MIN_PATCHES, 10_000, integer=True),
+        help=f"patch tracker: number of patches (at least {MIN_PATCHES}: fewer cannot follow "
+        "the limbs, and one has no neighbour to be rigid with)",
     )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
     k.add_argument(
