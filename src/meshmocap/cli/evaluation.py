@@ -9,16 +9,17 @@ from meshmocap.cli._args import number
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from meshmocap.analysis.evaluate import evaluate, summary
+    from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.io.capture import open_capture
-    from meshmocap.io.results import read_track
 
-    track, capture = read_track(args.track), open_capture(args.capture)
-    ev = evaluate(
-        track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
+    ev = api.evaluate(
+        open_capture(args.capture),
+        args.track,
+        silhouettes=not args.no_silhouettes,
+        surface_frames=args.surface_frames,
     )
-    print(summary(ev))
+    print(api.summary(ev))
     if args.out:
         files = write_evaluation(ev, args.out)
         print(f"\nwrote {len(files)} files to {args.out}")

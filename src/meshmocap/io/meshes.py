@@ -550,6 +550,7 @@ def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
 
 
 def is_frame_file(name: str) -> bool:
+    """Whether ``name`` is a mesh or point-cloud file a sequence reads (not hidden)."""
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
 

@@ -64,6 +64,7 @@ NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
 
 
 def is_finite_result(r: FrameResult) -> bool:
+    """Whether every joint and vertex of ``r`` is finite."""
     return bool(np.all(np.isfinite(r.joints)) and np.all(np.isfinite(r.vertices)))
 
 
@@ -195,6 +196,7 @@ def missing_reason(frame: object) -> str | None:
 
 
 def failure_reason(exc: BaseException) -> str:
+    """One line (at most 200 characters) naming ``exc``'s type and message."""
     return f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
 
 
