@@ -33,8 +33,16 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.axes import Axes, open_oriented
 from meshmocap.estimate.tracking_template import tracking_template
-from meshmocap.io.capture import Capture, SequenceCapture
-from meshmocap.io.meshes import frame_files
+from meshmocap.io.capture import (
+    Capture,
+    SequenceCapture,
+    Truth,
+    frame_name,
+    write_meta,
+    write_truth,
+    write_truth_faces,
+)
+from meshmocap.io.meshes import frame_files, write_mesh
 from meshmocap.io.results import Track, read_track, tracked_template
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
@@ -43,6 +51,7 @@ __all__ = [
     "TrackResult",
     "capture_and_axes",
     "evaluate",
+    "example_capture",
     "open_capture",
     "open_track",
     "summary",
@@ -311,3 +320,59 @@ def evaluate(
     elif not isinstance(track, Track):
         track = read_track(track)
     return evaluate_track(track, capture, silhouettes=silhouettes, surface_frames=surface_frames)
+
+
+#: Metres per unit of :func:`example_capture`'s mesh files.
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def example_capture(
+    out: str | os.PathLike,
+    *,
+    motion: str = "walk",
+    n_frames: int = 60,
+    fps: float = 30.0,
+    performer: str = "neutral_5k",
+    up: str = "y",
+    units: str = "cm",
+) -> Path:
+    """Write a small 4D capture as studios export them, to try the tools on.
+
+    ``out/meshes/frame_000.obj``, ...: the body ``performer`` doing ``motion`` (a procedural
+    motion: walk, jog, squat, ...), one OBJ file per frame in ``units`` with ``up`` up (a
+    studio's meshes come in its own axes and units; ``meshmocap track`` detects them), and
+    ``out/reference/``: its ground truth as a capture folder (``capture.json`` with the
+    rate, ``truth/NNNNN.npz``: the surface in metres with Z up and the 15 evaluation joints),
+    which ``meshmocap eval`` scores a track of the meshes against.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
+    from meshmocap.body.procedural import procedural_motion
+    from meshmocap.body.template import load_template
+
+    if units not in UNITS or up not in ("y", "z"):
+        raise InputError(
+            f"example_capture: units must be one of {list(UNITS)} and up 'y' or 'z', "
+            f"found {units!r}, {up!r}"
+        )
+    if not (isinstance(n_frames, int) and 1 <= n_frames <= 10_000 and fps > 0):
+        raise InputError(
+            f"example_capture: expected 1 to 10000 frames at a positive rate, found "
+            f"{n_frames!r} at {fps!r}"
+        )
+    body = load_template(performer)
+    m = procedural_motion(motion, body, duration=n_frames / fps, fps=fps)
+    posed = body.pose(m.rotations[:n_frames], m.root_positions[:n_frames])
+    root = Path(out)
+    (root / "meshes").mkdir(parents=True, exist_ok=True)
+    (root / "reference" / "truth").mkdir(parents=True, exist_ok=True)
+    write_meta(root / "reference" / "capture.json", {"fps": float(fps), "source": performer})
+    write_truth_faces(root / "reference", body.F)
+    for k in range(len(posed.V)):
+        write_mesh(root / "meshes" / f"frame_{k:03d}.obj", posed.V[k] / UNITS[units], body.F, up=up)
+        truth = Truth(posed.V[k], posed.eval_joints[k])
+        write_truth(root / "reference" / "truth" / f"{frame_name(k)}.npz", truth)
+    return root

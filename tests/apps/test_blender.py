@@ -16,6 +16,7 @@ import pytest
 from external import SCRIPTS, included_script, require_module, walk_track
 from meshmocap.apps.export import export_track
 from meshmocap.body.template import load_template
+from meshmocap.io.capture import Capture
 from meshmocap.io.results import read_track
 
 SCRIPT = SCRIPTS / "blender_import.py"
@@ -108,3 +109,30 @@ def test_a_gltf_at_24_fps_scene_loses_frames(track_dir, tmp_path):
     res = export_track(track_dir, tmp_path / "walk.glb")
     report, _ = run_script(res.path, tmp_path, "--fps", "24")
     assert report["frame_end"] - report["frame_start"] + 1 == 32
+
+
+def test_own_mesh_folder_to_blender(tmp_path):
+    """The newcomer's path (docs/guide/own_4d.rst): a folder of meshes in centimetres with
+    Y up, tracked by ``meshmocap track`` with nothing else given, exported as GLB, opened
+    in Blender by the docs' script: every frame at the rate, the body where the truth is."""
+    require_module("bpy", "blender")
+    from meshmocap.api import example_capture
+    from meshmocap.cli import main
+
+    n = 12
+    example_capture(tmp_path / "studio", n_frames=n)
+    track = tmp_path / "my-track"
+    assert main(["track", str(tmp_path / "studio" / "meshes"), "--out", str(track)]) == 0
+    glb = tmp_path / "my-track.glb"
+    assert main(["export", str(track), "--out", str(glb)]) == 0
+    report, out = run_script(glb, tmp_path, "--render", str(tmp_path / "frame.png"))
+    assert f"{n} frames at 30 fps" in out
+    assert report["frame_end"] - report["frame_start"] + 1 == n and report["fps"] == 30.0
+    body = load_template(str(track / "subject.npz"))  # the body track estimated
+    truth = Capture(tmp_path / "studio" / "reference")
+    J = np.stack([f.truth.joints for f in truth])
+    err = np.linalg.norm(eval_joints(report, body) - J, axis=2)
+    assert err.mean() < 0.04, err.mean()  # tracking error, through export and Blender
+    heights = np.ptp(np.stack([f.truth.vertices for f in truth])[..., 2], axis=1)
+    np.testing.assert_allclose(report["mesh_heights"], heights, atol=0.03)
+    assert (tmp_path / "frame.png").stat().st_size > 1000

@@ -188,7 +188,8 @@ def run_demo(
         notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
-        players.append(player_from_tracks(cap, tracks, title=title))
+        templates = [choice.template] * len(tracks)
+        players.append(player_from_tracks(cap, tracks, title=title, templates=templates))
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     report = write_report(

@@ -39,10 +39,12 @@ from meshmocap.apps.player import (
     player_from_tracks,
     player_js,
     player_payload,
+    track_templates,
 )
 from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.io.capture import Capture, SequenceCapture, open_capture
+from meshmocap.estimate.axes import open_oriented
+from meshmocap.io.capture import Capture, SequenceCapture
 from meshmocap.io.results import Track, read_track
 
 ImageSource = str | os.PathLike | bytes
@@ -423,7 +425,7 @@ def build_report(
     tracks: Sequence[str | os.PathLike | Track],
     *,
     eval_dirs: Sequence[str | os.PathLike] | None = None,
-    max_frames: int = 120,
+    max_frames: int | None = None,
     silhouettes: bool = True,
     surface_frames: int = 8,
     title: str | None = None,
@@ -439,10 +441,12 @@ def build_report(
         Where each evaluation's CSV tables and PNG plots are written
         (:func:`~meshmocap.analysis.evaluate.write_evaluation`); default: a temporary
         folder, removed once the plots are embedded.
-    max_frames : int, frames of the player (a regular stride over long tracks)
+    max_frames : int, optional, at most this many frames in the player (default: every
+        frame the size budget allows, :func:`~meshmocap.apps.player.player_from_tracks`)
     silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
     """
-    cap = capture if isinstance(capture, Capture | SequenceCapture) else open_capture(capture)
+    # a mesh folder in metres and Z up, as `meshmocap track` read it (axes from its first frame)
+    cap = capture if isinstance(capture, Capture | SequenceCapture) else open_oriented(capture)[0]
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]
     if not trs:
         raise InputError("report: expected at least one track, found none")
@@ -476,6 +480,7 @@ def build_report(
         names=names,
         max_frames=max_frames,
         title=f"{', '.join(names)} on {Path(cap.path).name}",
+        templates=[None if isinstance(p, Track) else track_templates([p])[0] for p in tracks],
     )
     return write_report(
         out,

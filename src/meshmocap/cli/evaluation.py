@@ -11,10 +11,9 @@ from meshmocap.cli._args import number
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
-    from meshmocap.io.capture import open_capture
 
     ev = api.evaluate(
-        open_capture(args.capture),
+        args.capture,  # a mesh folder in metres and Z up, as `meshmocap track` read it
         args.track,
         silhouettes=not args.no_silhouettes,
         surface_frames=args.surface_frames,
@@ -124,8 +123,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument(
         "--max-frames",
         type=number(1, 100_000, integer=True),
-        default=120,
-        help="frames in the 3D player",
+        help="at most N frames in the 3D player (default: every frame the size budget allows)",
     )
     o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
     o.add_argument(
