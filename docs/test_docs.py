@@ -8,6 +8,12 @@ from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS))
+# docs/conftest.py by its path: "conftest" on the import path is the tests' (pyproject's
+# pythonpath puts tests/ there)
+_spec = importlib.util.spec_from_file_location("docs_conftest", DOCS / "conftest.py")
+docs_conftest = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(docs_conftest)
+check_output, sessions = docs_conftest.check_output, docs_conftest.sessions
 
 from api_modules import index_rst, public_modules  # noqa: E402
 

@@ -8,3 +8,19 @@ the commands and the tracking driver, :mod:`meshmocap._threads`).
 from __future__ import annotations
 
 __version__ = "0.1.0"
+
+#: The Python API (:mod:`meshmocap.api`), loaded on first use so that ``import meshmocap``
+#: stays light: ``meshmocap.open_capture``, ``meshmocap.track``, ``meshmocap.evaluate``...
+API = ("open_capture", "track", "evaluate", "summary", "open_track", "TrackResult")
+
+
+def __getattr__(name: str):
+    if name in API:
+        from meshmocap import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'meshmocap' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *API])

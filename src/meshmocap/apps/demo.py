@@ -198,7 +198,12 @@ def run_demo(
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
         # the report holds the player's frames: a budget that keeps it under 10 MB
-        players.append(player_from_tracks(cap, tracks, title=title, max_megabytes=PLAYER_MB))
+        templates = [choice.template] * len(tracks)
+        players.append(
+            player_from_tracks(
+                cap, tracks, title=title, templates=templates, max_megabytes=PLAYER_MB
+            )
+        )
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     with phase("writing the report"):

@@ -10,24 +10,26 @@ from meshmocap.cli._args import number
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from meshmocap.analysis.evaluate import evaluate, summary
+    from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.estimate.plausibility import partial_hulls
-    from meshmocap.io.guards import check_track_capture
     from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
     track = read_track(args.track)
     capture = open_tracked_capture(track.meta, args.capture)
-    check_track_capture(args.track, track.meta, capture, force=args.force, command="eval")
     if "input" in track.meta:
         print(f"{args.capture}: read as tracked ({input_frame(track.meta).describe()})\n")
     note = partial_hulls(capture, track.frames.tolist(), command="eval")
     if note:  # scored on hulls from fewer cameras: say so
         print(f"meshmocap: warning: {note}", file=sys.stderr)
-    ev = evaluate(
-        track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
+    ev = api.evaluate(
+        capture,
+        args.track,
+        silhouettes=not args.no_silhouettes,
+        surface_frames=args.surface_frames,
+        force=args.force,
     )
-    print(summary(ev))
+    print(api.summary(ev))
     if args.out:
         files = write_evaluation(ev, args.out)
         print(f"\nwrote {len(files)} files to {args.out}")
@@ -168,8 +170,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument(
         "--max-frames",
         type=number(1, 100_000, integer=True),
-        default=120,
-        help="frames in the 3D player",
+        help="at most N frames in the 3D player (default: every frame the size budget allows)",
     )
     o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
     o.add_argument("--force", action="store_true", help=_FORCE)

@@ -48,37 +48,21 @@ def _capture_source(
     sources: list[str], up: str = "auto", units: str = "auto", fps: float | None = None
 ):
     """One capture folder, or several mesh files/folders (the shell expands an unquoted
-    glob into many arguments), in metres and Z up (mesh files: ``up`` and ``units`` read
-    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`;
-    ``fps`` their frame rate).
-    Returns the capture and the axes read (None for a capture folder)."""
-    from meshmocap.errors import InputError
-    from meshmocap.estimate.axes import open_oriented
-    from meshmocap.io.meshes import frame_files
+    glob into many arguments), in metres and Z up: :func:`meshmocap.api.capture_and_axes`
+    (``fps``: the rate of mesh files). Returns the capture and the axes read (None for a
+    capture folder)."""
+    from meshmocap.api import capture_and_axes
 
-    if len(sources) == 1:
-        return open_oriented(sources[0], up=up, units=units, fps=fps)
-    capture_dirs = [
-        s for s in sources if (Path(s) / "capture.json").is_file() or (Path(s) / "hulls").is_dir()
-    ]
-    if capture_dirs:
-        raise InputError(
-            f"track: give one capture folder, or several mesh files and folders; "
-            f"{capture_dirs[0]} is a capture folder"
-        )
-    return open_oriented(frame_files(sources), up=up, units=units, fps=fps)
+    return capture_and_axes(sources, up=up, units=units, fps=fps)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap import api
     from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
-    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.estimate.plausibility import check_observations
-    from meshmocap.estimate.tracking_template import tracking_template
-    from meshmocap.io.results import done_frames, input_meta
-    from meshmocap.trackers.driver import track_sequence
-    from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
+    from meshmocap.io.results import done_frames
 
     options = _tracker_options(args)
     if args.follow or args.idle is not None:
@@ -115,36 +99,23 @@ def _cmd_track(args: argparse.Namespace) -> int:
             )
     for line in check_observations(capture, frames):  # one person? dense? partial hulls?
         print(f"meshmocap: warning: {line}", file=sys.stderr)
-    choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
-    template = choice.template
-    print(choice.note)
-    if args.method in MANIFOLD_METHODS and args.manifold is None:
-        print(
-            f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
-            f"procedural walk and jog on {template.name!r}"
-        )
-    # tracked on a light copy of the template, unless a manifold learned for the template
-    # itself is given (meshmocap.body.light)
-    light = None if args.manifold else LIGHT_VERTICES
-    tracked = tracking_body(template, n_vertices=light).light
-    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     before = set() if args.restart else set(done_frames(args.out))
-    t0 = time.perf_counter()
-    track = track_sequence(
-        tracker,
-        template,
+    result = api.track(
         capture,
-        args.out,
+        method=args.method,
+        out=args.out,
+        template=args.template,
         frames=frames,
-        resume=not args.restart,
-        vertices=False,
         init=args.init,
+        resume=not args.restart,
         recover=not args.no_recover,
         reseat=args.reseat,
-        template_info={**choice.info, **input_meta(capture)},
-        light=light,
+        manifold=args.manifold,
+        vertices=False,
+        log=print,
+        **options,
     )
-    dt = time.perf_counter() - t0
+    track, dt = result.data, result.seconds
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
     bad = int((~track.healthy).sum())
