@@ -36,7 +36,7 @@ from meshmocap.trackers.patch.energy import (
     energy_terms,
     total_energy,
 )
-from meshmocap.trackers.patch.kernels import assign_kernel
+from meshmocap.trackers.patch.kernels import assign_kernel, patch_points
 from meshmocap.trackers.patch.model import (
     PatchModel,
     build_patch_model,
@@ -62,7 +62,7 @@ MAX_CENTRE_OFFSET = 0.3
 MAX_PREDICTION = 0.06
 MAX_PREDICTION_ANGLE = 0.3
 #: Largest predicted displacement (metres) of a joint when patches follow their bones
-#: (a running foot moves ~13 cm per frame at 60 fps).
+#: (above a running foot's step per frame at 60 fps).
 MAX_BONE_PREDICTION = 0.15
 #: ``accel_gate``: a joint's velocity change beyond this multiple of its last speed (and
 #: beyond ``accel_gate``) stops its extrapolation.
@@ -81,8 +81,8 @@ RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
 REACQUIRE_OFFSET = 0.15
 #: Typical error (metres) of joints read off a tracked surface by the joint regressor
-#: (surface read-out over all joints of CMU 05_01, 09_01, 01_01: 13–14 mm); sets how much of each
-#: joint ``joint_readout="blend"`` takes from the surface (see PatchOptions).
+#: (measured: ``docs/patch.rst``); sets how much of each joint ``joint_readout="blend"``
+#: takes from the surface (see PatchOptions).
 SURFACE_JOINT_ERROR = 0.01
 #: Every k-th training pose enters the skeleton's floor (skeleton_floor).
 FLOOR_POSE_STEP = 4
@@ -144,7 +144,10 @@ class PatchTracker:
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
         self.moments = rigidity_moments(self.model)
-        m = self.model  # each patch's radius: its vertices' largest distance from its centre
+        m = self.model
+        self.vertex_patch = m.labels.astype(np.int64)
+        self.rest_offsets = np.ascontiguousarray(m.V0 - m.centres0[m.labels])  # v0 − c0_k
+        # each patch's radius: its vertices' largest distance from its centre
         self.patch_radius = np.zeros(m.P)
         np.maximum.at(
             self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
@@ -242,8 +245,8 @@ class PatchTracker:
         if self.regressor is None:
             return self.X.copy()
         w = self.surface_weight[:, None]
-        # unheld, the read-out lets the spine chord wobble (pelvis→thorax length std 13 mm
-        # on CMU 01_01, 5 mm in truth); holding the lengths also lowers the joint error
+        # unheld, the read-out lets the spine chord wobble more than it does in truth;
+        # holding the lengths also lowers the joint error (docs/patch.rst)
         return _held_lengths(
             (1.0 - w) * self.X + w * (self.regressor @ V), self.pairs, self.lengths
         )
@@ -252,9 +255,7 @@ class PatchTracker:
     def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
         """Each vertex as predicted by its own patch, and its normal: (n, 3), (n, 3)."""
         m = self.model
-        Rl = self.R[m.labels]
-        V = np.einsum("nij,nj->ni", Rl, m.V0 - m.centres0[m.labels]) + self.c[m.labels]
-        return V, np.einsum("nij,nj->ni", Rl, m.N0)
+        return patch_points(self.R, self.c, self.vertex_patch, self.rest_offsets, m.N0)
 
     def vertices(self) -> np.ndarray:
         """The output mesh: patch predictions blended over neighbouring patches (n, 3).
@@ -530,8 +531,8 @@ class PatchTracker:
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
     """(m, 2) joint pairs whose distance the length prior holds: every bone (child, parent)
-    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: on
-    CMU 05_01 a right hip flipped to the left side, 19 cm off, for 20 frames)."""
+    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: a
+    hip can flip to the other side for many frames)."""
     b = np.flatnonzero(ev.parents >= 0)
     extra = [
         (ev.names.index(a), ev.names.index(c))
