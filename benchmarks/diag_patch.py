@@ -37,6 +37,7 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.apps.bench_captures import DEGRADED
 from meshmocap.body.template import load_template
+from meshmocap.errors import FitError
 from meshmocap.geometry.proximity import point_to_surface
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
@@ -147,7 +148,7 @@ def main() -> None:
         Y0, _, _ = tr.observations(fr)
         try:
             res = tr.step(fr)
-        except FloatingPointError as exc:
+        except FitError as exc:
             print(f"frame {fr.index}: {exc}")
             continue
         truth = fr.truth

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from meshmocap.errors import FitError
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.patch.kernels import point_moments, rotated_moments
 from meshmocap.trackers.patch.model import PatchModel
@@ -258,7 +259,7 @@ class System:
                 H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
             )
         except RuntimeError as exc:  # "Factor is exactly singular": the driver flags the frame
-            raise FloatingPointError(f"singular normal equations ({exc})") from None
+            raise FitError(f"singular normal equations ({exc})") from None
         delta = np.empty(self.n)
         delta[pt.order] = lu.solve(-self.g[pt.order])
         return delta
@@ -276,7 +277,7 @@ class System:
         try:
             dr = np.linalg.solve(Hr, -gr)
         except np.linalg.LinAlgError as exc:
-            raise FloatingPointError(f"singular grouped normal equations ({exc})") from None
+            raise FitError(f"singular grouped normal equations ({exc})") from None
         return S @ dr
 
 

@@ -21,8 +21,10 @@ from dataclasses import replace
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap.body.articulated import MAX_STEP_ANGLE
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
+from meshmocap.errors import FitError
 from meshmocap.estimate.observe import frame_points
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
@@ -69,8 +71,6 @@ MAX_BONE_PREDICTION = 0.15
 GATE_RATIO = 0.5
 #: Frame rate assumed where a capture states none (``accel_gate``).
 DEFAULT_FPS = 60.0
-#: Largest rotation (radians) of a patch in one Gauss–Newton step.
-MAX_STEP_ANGLE = 0.3
 #: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
 #: classification (training and prediction), E-steps, building the normal equations,
 #: solving them, and the output mesh with the frame's result.
@@ -341,7 +341,7 @@ class PatchTracker:
         self._t = time.perf_counter()
         Y, NY, rng = self.observations(frame)
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points")
+            raise FitError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
         # A fast frame gets more EM iterations: nearest-point correspondences close a gap
         # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
@@ -374,7 +374,7 @@ class PatchTracker:
         Y, NY, ycls = self.classify(Y, NY, rng)
         self._lap("classify")
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
+            raise FitError(f"only {len(Y)} observed points kept by the classifier")
         fd = self.frame_data(Y, NY, frame, X_hat)
         nearest = self.nearest_vertices(Y, spare=NEAREST_SPARE)
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
@@ -396,7 +396,7 @@ class PatchTracker:
                 delta = sys.solve(o.damping)
             self._lap("solve")
             if not np.all(np.isfinite(delta)):
-                raise FloatingPointError("singular normal equations")
+                raise FitError("singular normal equations")
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
             self.sigma = float(np.clip(np.sqrt(values["data"] / 3), o.sigma_min, o.sigma_max))
@@ -443,9 +443,7 @@ class PatchTracker:
         jump = float(np.linalg.norm(self.X - X_last, axis=1).max())
         offset = float(np.linalg.norm(self.c.mean(axis=0) - Y.mean(axis=0)))
         if jump > MAX_JOINT_JUMP or offset > MAX_CENTRE_OFFSET:
-            raise FloatingPointError(
-                f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)"
-            )
+            raise FitError(f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)")
 
     def nearest_vertices(self, Y: np.ndarray, *, spare: int) -> NearestVertices:
         """The nearest vertices of observed points ``Y`` (m, 3) over a frame's iterations,
