@@ -348,27 +348,7 @@ class PatchTracker:
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
         budget += o.coarse_iter
-        if o.prediction == "bones":
-            self._predict_by_bones(
-                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
-            )
-        elif o.prediction == "patches":
-            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
-            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
-            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
-            Rp, cp, Xp = self.prev
-            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
-            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
-            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
-            self.R = so3_exp(w) @ self.R
-        self.X_prev2 = self.prev[2].copy()
-        self.prev = last
-        # Re-acquisition after a lost frame: if the model stands far from the data (the
-        # driver restored an old state), move it horizontally onto the observations' centre.
-        shift = Y.mean(axis=0) - self.c.mean(axis=0)
-        shift[2] = 0.0
-        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
-            self.c, self.X = self.c + shift, self.X + shift
+        self._warm_start(frame, Y, last)
         X_hat = self.X.copy()  # the temporal prior's prediction (TemporalTerm)
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
@@ -412,6 +392,33 @@ class PatchTracker:
         self._lap("output")
         self.n_steps += 1
         return result
+
+    def _warm_start(self, frame: CaptureFrame, Y: np.ndarray, last: tuple) -> None:
+        """Start the frame from the last one (``prediction``), re-centred on the observed
+        points ``Y`` (m, 3) where the model stands far from them; ``last`` (R, c, X) of
+        the last frame becomes the velocity's reference."""
+        o = self.opts
+        if o.prediction == "bones":
+            self._predict_by_bones(
+                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
+            )
+        elif o.prediction == "patches":
+            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
+            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
+            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
+            Rp, cp, Xp = self.prev
+            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
+            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
+            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
+            self.R = so3_exp(w) @ self.R
+        self.X_prev2 = self.prev[2].copy()
+        self.prev = last
+        # Re-acquisition after a lost frame: if the model stands far from the data (the
+        # driver restored an old state), move it horizontally onto the observations' centre.
+        shift = Y.mean(axis=0) - self.c.mean(axis=0)
+        shift[2] = 0.0
+        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
+            self.c, self.X = self.c + shift, self.X + shift
 
     def _predict_by_bones(self, fps: float = DEFAULT_FPS) -> None:
         """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
