@@ -7,7 +7,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.template import load_template
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.trackers.patch.model import build_patch_model
-from meshmocap.trackers.patch.nearest import NearestVertices
+from meshmocap.trackers.patch.nearest import NearestPoints, NearestVertices
 
 
 @pytest.mark.parametrize("scale", [0.0005, 0.005, 0.03])
@@ -47,3 +47,22 @@ def test_without_spare_candidates_every_call_queries():
         _, idx = nearest.query(V, R, c)
     assert nearest.n_queried == 150
     assert np.array_equal(idx, KDTree(V).query(Y, k=4)[1].astype(np.int64))
+
+
+def test_nearest_points_of_moving_queries_equal_a_new_query():
+    """Query points that move by random steps (some far, most little) get the k-d query's
+    nearest fixed point every call, re-using candidates for the points that moved little."""
+    rng = np.random.default_rng(4)
+    Y = rng.uniform(-1, 1, size=(3000, 3))
+    X = rng.uniform(-1, 1, size=(500, 3))
+    nearest = NearestPoints(Y, spare=3)
+    tree = KDTree(Y)
+    for _ in range(6):
+        d, j = nearest.query(X)
+        d_ref, j_ref = tree.query(X, k=1)
+        assert np.array_equal(j, j_ref.astype(np.int64))
+        assert np.allclose(d, d_ref, rtol=1e-12, atol=1e-15)
+        step = rng.normal(scale=0.002, size=X.shape)
+        step[rng.random(len(X)) < 0.1] *= 30  # a tenth jumps 6 cm
+        X = X + step
+    assert len(X) < nearest.n_queried < 3 * len(X)

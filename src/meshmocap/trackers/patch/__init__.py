@@ -14,6 +14,6 @@ One method, one folder, read like its paper:
 """
 
 from meshmocap.trackers.patch.options import PatchOptions
-from meshmocap.trackers.patch.tracker import PatchTracker
+from meshmocap.trackers.patch.tracker import STAGES, PatchTracker
 
-__all__ = ["PatchOptions", "PatchTracker"]
+__all__ = ["STAGES", "PatchOptions", "PatchTracker"]

@@ -26,11 +26,11 @@ from functools import cached_property
 from typing import ClassVar, Protocol
 
 import numpy as np
-from pykdtree.kdtree import KDTree
 
 from meshmocap.geometry.camera import Camera, in_view
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.trackers.patch.model import PatchModel
+from meshmocap.trackers.patch.nearest import NearestPoints
 from meshmocap.trackers.patch.options import PatchOptions
 from meshmocap.trackers.patch.solver import (
     RigidityMoments,
@@ -55,6 +55,9 @@ from meshmocap.trackers.patch.terms import (
 #: see benchmarks/bench_patch.py).
 RIGIDITY_SCALE = 10.0
 BONE_SCALE = 100.0
+#: Candidate observed points kept per reverse-term vertex across a frame's iterations
+#: (:class:`~meshmocap.trackers.patch.nearest.NearestPoints`).
+REVERSE_SPARE = 3
 #: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
 PLANE_POINT_MIX = 0.1
 
@@ -109,9 +112,10 @@ class FrameData:
     normal_cos: float
 
     @cached_property
-    def tree(self) -> KDTree:
-        """k-d tree of the kept observed points (built at first use, once a frame)."""
-        return KDTree(self.Y)
+    def nearest_points(self) -> NearestPoints:
+        """Nearest kept observed points of moving query points (the reverse term's
+        vertices), built at first use, once a frame."""
+        return NearestPoints(self.Y, spare=REVERSE_SPARE)
 
     @cached_property
     def rays(self) -> SilhouetteRays | None:
@@ -246,10 +250,10 @@ class ReverseTerm(_Weighted):
     def add(self, sys: System, it: Iterate) -> float:
         fd, m = it.frame, it.frame.model
         v = fd.reverse_sample
-        d, j = fd.tree.query(it.V[v], k=1)
-        j = j.astype(np.int64)
+        d, j = fd.nearest_points.query(it.V[v])
         ok = (np.einsum("ij,ij->i", it.N[v], fd.NY[j]) > fd.normal_cos) & (d < self.cap)
-        ok &= in_view(it.V[v], fd.cameras)
+        near = np.flatnonzero(ok)
+        ok[near] = in_view(it.V[v[near]], fd.cameras)
         v, y = v[ok], fd.Y[j[ok]]
         if len(v) == 0:
             return 0.0

@@ -1,11 +1,15 @@
-"""Compiled loop (numba) behind the patch tracker's E-step (:meth:`PatchTracker._assign`).
+"""Compiled loops (numba) of the patch tracker's inner work.
 
-After the k-d query, the E-step keeps for every observed point its nearest compatible
-vertex per patch and weighs those by their Gaussian posterior against an outlier class. As
-numpy array expressions (a gather of the candidates' normals, a sort of point × patch keys
-to keep the first per patch, a bincount) the E-step took 10.9 ms a call for 5,538 points
-(8 ms of it the k-d query), with one pass over the candidates 9.1 ms: the same pairs in
-the same order, weights to rounding (``tests/trackers/patch/test_assign.py``).
+* :func:`assign_kernel`: the E-step
+  (:meth:`~meshmocap.trackers.patch.tracker.PatchTracker.correspondences`). After the k-d
+  query it keeps for every observed point its nearest compatible vertex per patch and
+  weighs those by their Gaussian posterior against an outlier class, in one pass over the
+  candidates: the pairs and order of the numpy expressions it replaced (a gather of the
+  candidates' normals, a sort of point × patch keys, a bincount), weights to rounding
+  (``tests/trackers/patch/test_assign.py``).
+* :func:`point_moments`: the per-patch sums of the point terms, one pass.
+* :func:`nearest_among`, :func:`stale_rows`: the candidate vertices re-used across a
+  frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
 """
 
 from __future__ import annotations
@@ -158,3 +162,46 @@ def stale_rows(Y, kth, far, epoch, moved, centres, radius):
                     out[t] = True
                     break
     return out
+
+
+@njit(cache=True, nogil=True)
+def patch_points(R, c, labels, D, N0):
+    """Each vertex as its own patch places it, and its normal: ``R_k d + c_k`` and
+    ``R_k n0`` with ``k = labels[i]``, for rest offsets ``D`` (n, 3) from the patch centres
+    and rest normals ``N0`` (n, 3); patch rotations ``R`` (P, 3, 3), centres ``c`` (P, 3).
+    Returns (n, 3), (n, 3) float64."""
+    n = labels.shape[0]
+    V = np.empty((n, 3))
+    N = np.empty((n, 3))
+    for i in range(n):
+        k = labels[i]
+        for a in range(3):
+            V[i, a] = (R[k, a, 0] * D[i, 0] + R[k, a, 1] * D[i, 1]) + R[k, a, 2] * D[i, 2] + c[k, a]
+            N[i, a] = (R[k, a, 0] * N0[i, 0] + R[k, a, 1] * N0[i, 1]) + R[k, a, 2] * N0[i, 2]
+    return V, N
+
+
+@njit(cache=True, nogil=True)
+def rotated_moments(R, k, l, M):
+    """``Q_ab = R_a M_ab R_bᵀ`` (E, 2, 2, 3, 3) for every neighbouring pair ``(k[e], l[e])``
+    (``R_0 = R[k[e]]``, ``R_1 = R[l[e]]``) and rest moments ``M`` (E, 2, 2, 3, 3)
+    (:func:`~meshmocap.trackers.patch.solver.add_rigidity`)."""
+    E = k.shape[0]
+    Q = np.empty((E, 2, 2, 3, 3))
+    T = np.empty((3, 3))
+    for e in range(E):
+        for a in range(2):
+            Ra = R[k[e]] if a == 0 else R[l[e]]
+            for b in range(2):
+                Rb = R[k[e]] if b == 0 else R[l[e]]
+                for i in range(3):  # T = R_a M_ab
+                    for j in range(3):
+                        T[i, j] = (Ra[i, 0] * M[e, a, b, 0, j] + Ra[i, 1] * M[e, a, b, 1, j]) + Ra[
+                            i, 2
+                        ] * M[e, a, b, 2, j]
+                for i in range(3):  # Q = T R_bᵀ
+                    for j in range(3):
+                        Q[e, a, b, i, j] = (T[i, 0] * Rb[j, 0] + T[i, 1] * Rb[j, 1]) + T[i, 2] * Rb[
+                            j, 2
+                        ]
+    return Q

@@ -180,7 +180,7 @@ def _nearest_bone(
     The paper binds a patch to "the attached joints j(k)" (§III-C). A skinned template's
     part boundaries do not follow the joints: the lower chest carries the ``thorax`` label
     yet lies below the thorax joint, on the spine (pelvis → thorax). Binding it to a
-    thorax → shoulder bone, 25 cm above, would make the thorax follow the belly.
+    thorax → shoulder bone, far above, would make the thorax follow the belly.
     """
     start = np.full(len(label), -1)
     end = np.full(len(label), -1)

@@ -26,7 +26,12 @@ from meshmocap.trackers.patch.kernels import nearest_among, stale_rows
 def k_nearest(V: np.ndarray, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest points of ``V`` (n, 3) to each point of ``Y`` (m, 3) by a k-d
     query, by increasing distance: distances (m, k) float64 and indices (m, k) int64."""
-    d, i = KDTree(V).query(Y, k=k)
+    return k_nearest_on(KDTree(V), Y, k)
+
+
+def k_nearest_on(tree: KDTree, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`k_nearest` on a built k-d ``tree``."""
+    d, i = tree.query(Y, k=k)
     return d.reshape(len(Y), k).astype(np.float64), i.reshape(len(Y), k).astype(np.int64)
 
 
@@ -102,3 +107,46 @@ def _patch_moves(
     tr = np.einsum("pij,pij->p", R, R0)
     turn = np.sqrt(np.maximum(3.0 - tr, 0.0))
     return np.linalg.norm(c - c0, axis=1) + radius * turn + 1e-9
+
+
+class NearestPoints:
+    """Nearest of fixed points ``Y`` (m, 3) to query points that move (the reverse term's
+    template vertices over a frame's iterations): each query point keeps ``1 + spare``
+    candidates, and is queried again only where it moved more than the gap between its
+    nearest candidate now and its last candidate at the query (every other point was at
+    least that far, and the query point moved by a known amount).
+
+    Parameters
+    ----------
+    Y : (m, 3) float64, the fixed points, metres; spare : int, extra candidates per query
+    """
+
+    def __init__(self, Y: np.ndarray, *, spare: int):
+        self.Y = np.ascontiguousarray(Y, dtype=np.float64)
+        self.tree = KDTree(self.Y)
+        self.K = min(1 + spare, len(self.Y))
+        self.cand: np.ndarray | None = None
+        self.ref = np.zeros((0, 3))  # each query point where it was last queried
+        self.far = np.zeros(0)
+        self.n_queried = 0
+
+    def query(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nearest point of ``Y`` to each of ``X`` (r, 3) (the same ``r`` points every
+        call): distances (r,) float64, metres, and indices (r,) int64."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if self.cand is None:
+            self.cand = np.empty((len(X), self.K), dtype=np.int64)
+            self.ref, self.far = X.copy(), np.zeros(len(X))
+            d, j = np.empty((len(X), 1)), np.empty((len(X), 1), dtype=np.int64)
+            rows = np.arange(len(X))
+        else:
+            d, j = nearest_among(X, self.Y, self.cand, 1)
+            moved = np.sqrt(np.einsum("ij,ij->i", X - self.ref, X - self.ref))
+            rows = np.flatnonzero(~(d[:, 0] < self.far - moved))
+        if len(rows):
+            dq, jq = k_nearest_on(self.tree, X[rows], self.K)
+            self.cand[rows], self.ref[rows] = jq, X[rows]
+            self.far[rows] = dq[:, -1] if len(self.Y) > self.K else np.inf
+            d[rows], j[rows] = dq[:, :1], jq[:, :1]
+            self.n_queried += len(rows)
+        return d[:, 0], j[:, 0]

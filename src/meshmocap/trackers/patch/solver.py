@@ -27,7 +27,7 @@ import scipy.sparse.linalg as spla
 
 from meshmocap.errors import FitError
 from meshmocap.geometry.rotations import skew
-from meshmocap.trackers.patch.kernels import point_moments
+from meshmocap.trackers.patch.kernels import point_moments, rotated_moments
 from meshmocap.trackers.patch.model import PatchModel
 
 
@@ -252,8 +252,8 @@ class System:
         H = sp.csc_matrix((self._damped(damping), pt.indices, pt.indptr), shape=(self.n, self.n))
         # H is symmetric positive definite and sparse (each patch couples with its ~6
         # neighbours and its bone's joints): SuperLU in symmetric mode with diagonal pivots,
-        # on the pattern's minimum-degree order, is a sparse Cholesky in all but name —
-        # 2-3x faster here than the block-Jacobi conjugate gradients it replaced, and exact.
+        # on the pattern's minimum-degree order, is a sparse Cholesky in all but name:
+        # exact, and faster here than block-Jacobi conjugate gradients (docs/patch.rst).
         try:
             lu = spla.splu(
                 H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
@@ -348,7 +348,7 @@ def add_rigidity(
     k, l = model.pairs[:, 0], model.pairs[:, 1]
     Rs = np.stack([R[k], R[l]], 1)  # (E, 2, 3, 3)
     s = np.einsum("eaij,eaj->eai", Rs, mom.m)  # s_a = R_a m_a
-    Q = Rs[:, :, None] @ mom.M @ np.swapaxes(Rs, -1, -2)[:, None]  # R_a M_ab R_bᵀ
+    Q = rotated_moments(R, k, l, mom.M)  # R_a M_ab R_bᵀ
     W = mom.W
     dc = c[k] - c[l]
     # energy: Σ w |q_k − q_l + Δc|²

@@ -38,7 +38,7 @@ from meshmocap.trackers.patch.energy import (
     energy_terms,
     total_energy,
 )
-from meshmocap.trackers.patch.kernels import assign_kernel
+from meshmocap.trackers.patch.kernels import assign_kernel, patch_points
 from meshmocap.trackers.patch.model import (
     PatchModel,
     build_patch_model,
@@ -64,7 +64,7 @@ MAX_CENTRE_OFFSET = 0.3
 MAX_PREDICTION = 0.06
 MAX_PREDICTION_ANGLE = 0.3
 #: Largest predicted displacement (metres) of a joint when patches follow their bones
-#: (a running foot moves ~13 cm per frame at 60 fps).
+#: (above a running foot's step per frame at 60 fps).
 MAX_BONE_PREDICTION = 0.15
 #: ``accel_gate``: a joint's velocity change beyond this multiple of its last speed (and
 #: beyond ``accel_gate``) stops its extrapolation.
@@ -81,8 +81,8 @@ RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
 #: Horizontal offset (metres) between model and data beyond which a frame starts re-centred.
 REACQUIRE_OFFSET = 0.15
 #: Typical error (metres) of joints read off a tracked surface by the joint regressor
-#: (surface read-out over all joints of CMU 05_01, 09_01, 01_01: 13–14 mm); sets how much of each
-#: joint ``joint_readout="blend"`` takes from the surface (see PatchOptions).
+#: (measured: ``docs/patch.rst``); sets how much of each joint ``joint_readout="blend"``
+#: takes from the surface (see PatchOptions).
 SURFACE_JOINT_ERROR = 0.01
 #: Every k-th training pose enters the skeleton's floor (skeleton_floor).
 FLOOR_POSE_STEP = 4
@@ -144,7 +144,10 @@ class PatchTracker:
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
         self.moments = rigidity_moments(self.model)
-        m = self.model  # each patch's radius: its vertices' largest distance from its centre
+        m = self.model
+        self.vertex_patch = m.labels.astype(np.int64)
+        self.rest_offsets = np.ascontiguousarray(m.V0 - m.centres0[m.labels])  # v0 − c0_k
+        # each patch's radius: its vertices' largest distance from its centre
         self.patch_radius = np.zeros(m.P)
         np.maximum.at(
             self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
@@ -242,8 +245,8 @@ class PatchTracker:
         if self.regressor is None:
             return self.X.copy()
         w = self.surface_weight[:, None]
-        # unheld, the read-out lets the spine chord wobble (pelvis→thorax length std 13 mm
-        # on CMU 01_01, 5 mm in truth); holding the lengths also lowers the joint error
+        # unheld, the read-out lets the spine chord wobble more than it does in truth;
+        # holding the lengths also lowers the joint error (docs/patch.rst)
         return _held_lengths(
             (1.0 - w) * self.X + w * (self.regressor @ V), self.pairs, self.lengths
         )
@@ -252,9 +255,7 @@ class PatchTracker:
     def own_vertices(self) -> tuple[np.ndarray, np.ndarray]:
         """Each vertex as predicted by its own patch, and its normal: (n, 3), (n, 3)."""
         m = self.model
-        Rl = self.R[m.labels]
-        V = np.einsum("nij,nj->ni", Rl, m.V0 - m.centres0[m.labels]) + self.c[m.labels]
-        return V, np.einsum("nij,nj->ni", Rl, m.N0)
+        return patch_points(self.R, self.c, self.vertex_patch, self.rest_offsets, m.N0)
 
     def vertices(self) -> np.ndarray:
         """The output mesh: patch predictions blended over neighbouring patches (n, 3).
@@ -347,27 +348,7 @@ class PatchTracker:
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
         budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
         budget += o.coarse_iter
-        if o.prediction == "bones":
-            self._predict_by_bones(
-                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
-            )
-        elif o.prediction == "patches":
-            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
-            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
-            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
-            Rp, cp, Xp = self.prev
-            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
-            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
-            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
-            self.R = so3_exp(w) @ self.R
-        self.X_prev2 = self.prev[2].copy()
-        self.prev = last
-        # Re-acquisition after a lost frame: if the model stands far from the data (the
-        # driver restored an old state), move it horizontally onto the observations' centre.
-        shift = Y.mean(axis=0) - self.c.mean(axis=0)
-        shift[2] = 0.0
-        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
-            self.c, self.X = self.c + shift, self.X + shift
+        self._warm_start(frame, Y, last)
         X_hat = self.X.copy()  # the temporal prior's prediction (TemporalTerm)
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
@@ -411,6 +392,33 @@ class PatchTracker:
         self._lap("output")
         self.n_steps += 1
         return result
+
+    def _warm_start(self, frame: CaptureFrame, Y: np.ndarray, last: tuple) -> None:
+        """Start the frame from the last one (``prediction``), re-centred on the observed
+        points ``Y`` (m, 3) where the model stands far from them; ``last`` (R, c, X) of
+        the last frame becomes the velocity's reference."""
+        o = self.opts
+        if o.prediction == "bones":
+            self._predict_by_bones(
+                float(getattr(getattr(frame, "capture", None), "fps", DEFAULT_FPS))
+            )
+        elif o.prediction == "patches":
+            # Constant velocity per patch and joint, each step clipped to MAX_PREDICTION
+            # metres and MAX_PREDICTION_ANGLE radians: plain extrapolation doubles a local
+            # slip (a patch that slipped 10 cm last frame would jump 20 cm).
+            Rp, cp, Xp = self.prev
+            self.c = self.c + _clip_rows(self.c - cp, MAX_PREDICTION)
+            self.X = self.X + _clip_rows(self.X - Xp, MAX_PREDICTION)
+            w = _clip_rows(so3_log(self.R @ np.swapaxes(Rp, 1, 2)), MAX_PREDICTION_ANGLE)
+            self.R = so3_exp(w) @ self.R
+        self.X_prev2 = self.prev[2].copy()
+        self.prev = last
+        # Re-acquisition after a lost frame: if the model stands far from the data (the
+        # driver restored an old state), move it horizontally onto the observations' centre.
+        shift = Y.mean(axis=0) - self.c.mean(axis=0)
+        shift[2] = 0.0
+        if np.linalg.norm(shift) > REACQUIRE_OFFSET:
+            self.c, self.X = self.c + shift, self.X + shift
 
     def _predict_by_bones(self, fps: float = DEFAULT_FPS) -> None:
         """Constant-velocity joints (each step clipped to :data:`MAX_BONE_PREDICTION`), and
@@ -528,8 +536,8 @@ class PatchTracker:
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
     """(m, 2) joint pairs whose distance the length prior holds: every bone (child, parent)
-    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: on
-    CMU 05_01 a right hip flipped to the left side, 19 cm off, for 20 frames)."""
+    and :data:`RIGID_PAIRS` (without them a pelvis→hip bone can swing round the pelvis: a
+    hip can flip to the other side for many frames)."""
     b = np.flatnonzero(ev.parents >= 0)
     extra = [
         (ev.names.index(a), ev.names.index(c))
