@@ -37,6 +37,17 @@ class FolderBusyError(MeshmocapError, BlockingIOError):
     """Another process is writing into the folder (its lock is held)."""
 
 
+class FitError(MeshmocapError, RuntimeError):
+    """A frame (or a fit) could not be fitted: too few observed points, no correspondence,
+    singular normal equations, a non-finite result. The tracking driver flags the frame
+    ``failed`` and coasts across it.
+
+    A RuntimeError rather than an ArithmeticError: most causes are not arithmetic (an empty
+    or tiny observation, no compatible pair); the computation simply has no answer for this
+    input at run time, and code catching ``ValueError`` for user mistakes must not catch it.
+    """
+
+
 class MeshmocapWarning(UserWarning):
     """Base class of the warnings meshmocap emits."""
 

@@ -391,7 +391,7 @@ INPUTS: list[Case] = [
     ),
     (
         "track_patches_icp",
-        _args("track", C, "--method", "articulated_icp", "--n-patches", "40", "--out", "TMP/t"),
+        _args("track", C, "--method", "articulated_icp", "--n-patches", "50", "--out", "TMP/t"),
         "track: --n-patches is not an option of --method articulated_icp (it is of patch, "
         "patch_svc, patch_noclf, ",
     ),

@@ -34,7 +34,7 @@ from typing import Any
 
 from meshmocap._atomic import write_text_atomic
 from meshmocap._progress import progress
-from meshmocap._validate import frame_slice
+from meshmocap._validate import frame_positions, frame_slice
 from meshmocap.apps.batch_items import BatchItem
 from meshmocap.apps.batch_summary import (
     CaptureSummary,
@@ -158,6 +158,7 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
 def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
     from meshmocap.analysis.evaluate import evaluate
     from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.body.light import tracking_body
     from meshmocap.estimate.axes import open_oriented
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.capture import Capture
@@ -168,10 +169,11 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     capture, _ = open_oriented(item.capture)  # mesh files: up axis and units as track reads
     choice = tracking_template(capture, item.template or None, folder / "track")
     template = choice.template
-    tracker = make_tracker(item.method, template=template)
+    tracker = make_tracker(item.method, template=tracking_body(template).light)  # as tracked
     frames = None
     if item.frames:
-        frames = range(len(capture))[frame_slice(item.frames, what="batch: frames")]
+        sl = frame_slice(item.frames, what="batch: frames")  # frame numbers, as track reads them
+        frames = frame_positions([int(i) for i in capture.indices], sl)
     track = track_sequence(
         tracker,
         template,
@@ -217,8 +219,10 @@ def _frame_total(item: BatchItem) -> int:
     try:
         from meshmocap.io.capture import open_capture
 
-        n = len(open_capture(item.capture))
-        return len(range(n)[frame_slice(item.frames, what="frames")]) if item.frames else n
+        cap = open_capture(item.capture)
+        if not item.frames:
+            return len(cap)
+        return len(frame_positions([int(i) for i in cap.indices], frame_slice(item.frames)))
     except MeshmocapError:
         return 0
 

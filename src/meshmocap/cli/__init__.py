@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from meshmocap import __version__
+from meshmocap._threads import blas_threads
 from meshmocap.cli import (
     batch,
     capture,
@@ -90,7 +91,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else 2
     try:
         _check_out(args)
-        with warnings.catch_warnings():  # the library's warnings: one line each, on stderr
+        # one BLAS thread while the command runs (MESHMOCAP_THREADS), and the library's
+        # warnings in one line each, on stderr
+        with blas_threads(), warnings.catch_warnings():
             warnings.simplefilter("default", MeshmocapWarning)
             warnings.showwarning = _show_warning
             return int(args.func(args))

@@ -10,22 +10,26 @@ from meshmocap.cli._args import number
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from meshmocap.analysis.evaluate import evaluate, summary
+    from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.estimate.plausibility import partial_hulls
-    from meshmocap.io.capture import open_capture
-    from meshmocap.io.guards import check_track_capture
-    from meshmocap.io.results import read_track
+    from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
-    track, capture = read_track(args.track), open_capture(args.capture)
-    check_track_capture(args.track, track.meta, capture, force=args.force, command="eval")
+    track = read_track(args.track)
+    capture = open_tracked_capture(track.meta, args.capture)
+    if "input" in track.meta:
+        print(f"{args.capture}: read as tracked ({input_frame(track.meta).describe()})\n")
     note = partial_hulls(capture, track.frames.tolist(), command="eval")
     if note:  # scored on hulls from fewer cameras: say so
         print(f"meshmocap: warning: {note}", file=sys.stderr)
-    ev = evaluate(
-        track, capture, silhouettes=not args.no_silhouettes, surface_frames=args.surface_frames
+    ev = api.evaluate(
+        capture,
+        args.track,
+        silhouettes=not args.no_silhouettes,
+        surface_frames=args.surface_frames,
+        force=args.force,
     )
-    print(summary(ev))
+    print(api.summary(ev))
     if args.out:
         files = write_evaluation(ev, args.out)
         print(f"\nwrote {len(files)} files to {args.out}")
@@ -33,6 +37,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from meshmocap._progress import phase
     from meshmocap.apps.batch_report import build_batch_report, is_batch_folder
     from meshmocap.apps.report import build_report
     from meshmocap.errors import InputError
@@ -44,15 +49,16 @@ def _cmd_report(args: argparse.Namespace) -> int:
         path = build_batch_report(args.out, args.capture)
     else:
         _check_report_tracks(args)
-        path = build_report(
-            args.out,
-            args.capture,
-            args.tracks,
-            eval_dirs=args.eval_dir,
-            max_frames=args.max_frames,
-            silhouettes=not args.no_silhouettes,
-            surface_frames=args.surface_frames,
-        )
+        with phase("scoring the tracks and writing the report"):
+            path = build_report(
+                args.out,
+                args.capture,
+                args.tracks,
+                eval_dirs=args.eval_dir,
+                max_frames=args.max_frames,
+                silhouettes=not args.no_silhouettes,
+                surface_frames=args.surface_frames,
+            )
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
     return 0
@@ -63,17 +69,17 @@ def _check_report_tracks(args: argparse.Namespace) -> None:
     import json
     from pathlib import Path
 
-    from meshmocap.io.capture import open_capture
     from meshmocap.io.guards import check_track_capture
+    from meshmocap.io.results import open_tracked_capture
 
-    capture = open_capture(args.capture)
     for t in args.tracks:
         meta_path = Path(t) / "track.json"
         try:
             meta = json.loads(meta_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue  # the report itself says what is wrong with the folder
-        if isinstance(meta, dict):
+        if isinstance(meta, dict):  # the capture read as this track read it
+            capture = open_tracked_capture(meta, args.capture)
             check_track_capture(t, meta, capture, force=args.force, command="report")
 
 
@@ -131,8 +137,16 @@ _FORCE = (
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the parsers of this module's commands to ``sub``."""
-    e = sub.add_parser("eval", help="score a track against its capture's ground truth")
-    e.add_argument("capture", help="capture folder")
+    e = sub.add_parser(
+        "eval",
+        help="score a track against its capture's ground truth (or, for a mesh sequence of "
+        "fixed connectivity, against its files: the per-vertex error)",
+    )
+    e.add_argument(
+        "capture",
+        help="capture folder, or the mesh files tracked (read in the up axis, "
+        "units and frame rate track.json records)",
+    )
     e.add_argument("track", help="track folder written by 'meshmocap track'")
     e.add_argument("--out", help="folder for CSV tables and PNG plots")
     e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
@@ -156,8 +170,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument(
         "--max-frames",
         type=number(1, 100_000, integer=True),
-        default=120,
-        help="frames in the 3D player",
+        help="at most N frames in the 3D player (default: every frame the size budget allows)",
     )
     o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
     o.add_argument("--force", action="store_true", help=_FORCE)
