@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -55,8 +54,9 @@ def rss_mb() -> float:
     return float("nan")
 
 
-def in_place_walk(out: Path) -> Capture:
-    """The walk on the spot, one pass of the clip (made once, then reused)."""
+def in_place_walk(out: Path, n: int | None = None) -> Capture:
+    """The walk on the spot, one pass of the clip or its first ``n`` frames (made once, then
+    reused)."""
     if (out / "capture.json").is_file():
         return Capture(out)
     subject = load_template("neutral_5k")
@@ -69,30 +69,40 @@ def in_place_walk(out: Path) -> Capture:
     write_truth_faces(out, subject.F)
     root = motion.root_positions.copy()
     root[:, :2] = 0.0  # in place
-    for f in range(motion.n_frames):
+    n = motion.n_frames if n is None else min(n, motion.n_frames)
+    for f in range(n):
         synth_frame(out, subject, motion.rotations[f], root[f], cams, f, spec)
     write_meta(
         out / "capture.json",
-        {"fps": 30.0, "frames": list(range(motion.n_frames)), "spec": {"in_place": "walk"}},
+        {"fps": 30.0, "frames": list(range(n)), "spec": {"in_place": "walk"}},
     )
     return Capture(out)
+
+
+class OutOfTime(BaseException):
+    """``--seconds`` reached: raised when the driver asks for the next frame, so the tracker
+    stops after its last whole frame (a BaseException: no per-frame handler of the driver
+    takes it for a failed frame)."""
 
 
 class LoopCapture:
     """``n`` frames of ``base`` played in a loop; each time a frame is read, the resident
     memory is appended to the file ``log`` (frame, MB, seconds since start, process id)."""
 
-    def __init__(self, base: Capture, n: int, log: Path) -> None:
+    def __init__(self, base: Capture, n: int, log: Path, *, seconds: float | None = None):
         self.base, self.path, self.cameras = base, base.path, base.cameras
         self.indices = list(range(n))
         self.truth_faces, self.fps, self.meta = base.truth_faces, base.fps, {}
         self.log = log
         self.t0 = time.perf_counter()
+        self.deadline = None if seconds is None else self.t0 + seconds
 
     def __len__(self) -> int:
         return len(self.indices)
 
     def __getitem__(self, k: int) -> CaptureFrame:
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise OutOfTime  # between two frames: every finished frame is on disk
         with self.log.open("a") as f:  # line by line: a killed run keeps its samples
             f.write(f"{k}\t{rss_mb():.1f}\t{time.perf_counter() - self.t0:.3f}\t{os.getpid()}\n")
         return _LoopFrame(k, self.base, k % len(self.base))
@@ -114,18 +124,14 @@ class _LoopFrame(CaptureFrame):
     def truth(self):
         return CaptureFrame(self._source, self.capture).truth
 
+    @property
+    def silhouettes(self) -> list[np.ndarray]:
+        """The base frame's masks (the stream's frame numbers run past the clip's)."""
+        return CaptureFrame(self._source, self.capture).silhouettes
+
 
 def du(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
-
-
-class OutOfTime(BaseException):
-    """``--seconds`` reached: the tracker stops after its last whole frame (a BaseException,
-    so no per-frame handler of the driver takes it for a failed frame)."""
-
-
-def _out_of_time(signum, frame):
-    raise OutOfTime
 
 
 def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool) -> None:
@@ -136,10 +142,7 @@ def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool
         shutil.rmtree(out, ignore_errors=True)
         log.unlink(missing_ok=True)
     template = load_template("neutral_5k")
-    stream = LoopCapture(base, n, log)
-    if seconds:
-        signal.signal(signal.SIGALRM, _out_of_time)
-        signal.alarm(seconds)
+    stream = LoopCapture(base, n, log, seconds=seconds)
     t0 = time.perf_counter()
     try:
         track_sequence(
@@ -154,8 +157,6 @@ def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool
         how = "done"
     except (OutOfTime, KeyboardInterrupt):
         how = "stopped (rerun to resume)"
-    finally:
-        signal.alarm(0)
     print(f"{name}: {how} after {time.perf_counter() - t0:.0f} s in process {os.getpid()}")
 
 
@@ -168,12 +169,14 @@ def summary(name: str, n: int, work: Path) -> tuple | None:
     if not len(rows):
         return None
     done = len(list((out / "frames").glob("*.npz")))
+    if not done:
+        return None
     # the last sample of each frame (a resumed frame may have been read twice)
     frame, mb, sec, pid = rows.T
     keep = np.unique(frame[::-1], return_index=True)[1]
     keep = len(frame) - 1 - keep
     frame, mb, sec, pid = frame[keep], mb[keep], sec[keep], pid[keep]
-    w = min(1000, max(1, n // 10))
+    w = min(1000, max(1, len(frame) // 10))  # 1,000 frames, or a tenth of those done
     first, last = mb[:w], mb[-w:]
     steps = np.diff(sec)[np.diff(pid) == 0]  # seconds between frames of one process
     spf = float(np.median(steps)) if len(steps) else float("nan")
@@ -188,7 +191,7 @@ def summary(name: str, n: int, work: Path) -> tuple | None:
         first.max(),
         last.mean(),
         last.max(),
-        w,
+        f"{int(frame[0])}–{int(frame[w - 1])} / {int(frame[-w])}–{int(frame[-1])}",
         procs,
         du(out) / max(done, 1),
         bad,
@@ -204,6 +207,9 @@ def main() -> int:
     ap.add_argument("--seconds", type=int, help="stop each tracker after this long (resumable)")
     ap.add_argument("--parallel", action="store_true", help="one process per tracker, at once")
     ap.add_argument("--restart", action="store_true", help="start the tracks over")
+    ap.add_argument(
+        "--clip-frames", type=int, help="loop only the clip's first N frames (quick checks)"
+    )
     ap.add_argument("--one", help=argparse.SUPPRESS)  # a --parallel child: this tracker alone
     args = ap.parse_args()
     limits = {k: int(v) for k, v in (item.split("=") for item in args.limit)}
@@ -218,7 +224,7 @@ def main() -> int:
         )
         return 0
     t0 = time.perf_counter()
-    base = in_place_walk(work / "capture")
+    base = in_place_walk(work / "capture", args.clip_frames)
     cap_bytes = du(work / "capture") / len(base)
     hull_bytes = du(work / "capture" / "hulls") / len(base)
     print(
@@ -252,19 +258,19 @@ def main() -> int:
             )
     print(
         "\n| tracker | frames done / asked | s/frame (median) | RSS first window mean / max "
-        "(MB) | RSS last window mean / max (MB) | window | processes | track disk per frame "
-        "| unhealthy |"
+        "(MB) | RSS last window mean / max (MB) | windows (frames) | processes | track disk "
+        "per frame | unhealthy |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name in args.trackers:
         row = summary(name, limits.get(name, args.frames), work)
         if row is None:
-            print(f"| {name} | 0 | | | | | | | |")
+            print(f"| {name} | 0 / {limits.get(name, args.frames)} | | | | | | | |")
             continue
-        name, done, n, spf, m0, x0, m1, x1, w, procs, disk, bad = row
+        name, done, n, spf, m0, x0, m1, x1, windows, procs, disk, bad = row
         print(
             f"| {name} | {done} / {n} | {spf:.3f} | {m0:.0f} / {x0:.0f} | {m1:.0f} / {x1:.0f} "
-            f"| {w} | {procs} | {disk / 1e3:.1f} kB | {bad} |"
+            f"| {windows} | {procs} | {disk / 1e3:.1f} kB | {bad} |"
         )
     print(
         f"\ncapture disk per frame: {cap_bytes / 1e3:.0f} kB (hull {hull_bytes / 1e3:.0f} kB); "
