@@ -5,12 +5,21 @@ height kept), one pass of the clip at 30 fps (121 frames) rendered in the 4-came
 and carved at 1 cm; the stream plays those frames in a loop (frame k shows hull k mod 121,
 read from disk every time, as a live capture would be) for ``--frames`` frames. Each tracker
 starts from the first frame's true pose and writes its track folder frame by frame through
-the usual driver. Resident memory (``VmRSS``) is sampled at every frame; the table gives its
-mean and maximum over the first and the last 1,000 frames (or tenth, for shorter runs) and
-the track's and the capture's disk use per frame. Timings depend on the machine's load.
+the usual driver. Resident memory (``VmRSS``) is sampled at every frame and appended to
+``WORK/rss_<tracker>.tsv`` (frame, MB, seconds, process id) as it goes; the table gives its
+mean and maximum over the first and the last 1,000 frames (or tenth, for shorter runs),
+the seconds per frame and the track's and the capture's disk use per frame.
+
+Resumable and chunked, for slow or shared machines: a run stopped at any point (Ctrl-C,
+``kill -9``, ``--seconds`` reached) keeps every finished frame, and the same command
+resumes each track where it stopped (``--restart`` starts over). ``--seconds S`` stops
+each tracker after S seconds of this process. On a bigger machine ``--parallel`` runs the
+trackers at once, one process each (one thread each). The table says which processes ran
+which frames, so a chunked run's "last 1,000" are read as such. Timings depend on the load.
 
 Usage: ``python benchmarks/bench_long_run.py [--frames 10000] [--trackers patch cage
-articulated_icp] [--limit patch=2000 ...] [--work DIR]``
+articulated_icp] [--limit patch=2000 ...] [--seconds 600] [--parallel] [--restart]
+[--work DIR]``
 """
 
 from __future__ import annotations
@@ -18,6 +27,8 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -27,6 +38,7 @@ from meshmocap.body.template import load_template
 from meshmocap.io.cameras import write_cameras
 from meshmocap.io.capture import Capture, CaptureFrame, write_meta, write_truth_faces
 from meshmocap.io.clips import clip_on
+from meshmocap.io.results import read_track
 from meshmocap.studio.rigs import camera_rig
 from meshmocap.studio.synth import SynthSpec, synth_frame
 from meshmocap.trackers.driver import track_sequence
@@ -42,8 +54,9 @@ def rss_mb() -> float:
     return float("nan")
 
 
-def in_place_walk(out: Path) -> Capture:
-    """The walk on the spot, one pass of the clip (made once, then reused)."""
+def in_place_walk(out: Path, n: int | None = None) -> Capture:
+    """The walk on the spot, one pass of the clip or its first ``n`` frames (made once, then
+    reused)."""
     if (out / "capture.json").is_file():
         return Capture(out)
     subject = load_template("neutral_5k")
@@ -56,30 +69,42 @@ def in_place_walk(out: Path) -> Capture:
     write_truth_faces(out, subject.F)
     root = motion.root_positions.copy()
     root[:, :2] = 0.0  # in place
-    for f in range(motion.n_frames):
+    n = motion.n_frames if n is None else min(n, motion.n_frames)
+    for f in range(n):
         synth_frame(out, subject, motion.rotations[f], root[f], cams, f, spec)
     write_meta(
         out / "capture.json",
-        {"fps": 30.0, "frames": list(range(motion.n_frames)), "spec": {"in_place": "walk"}},
+        {"fps": 30.0, "frames": list(range(n)), "spec": {"in_place": "walk"}},
     )
     return Capture(out)
 
 
-class LoopCapture:
-    """``n`` frames of ``base`` played in a loop; samples memory each time a frame is read."""
+class OutOfTime(BaseException):
+    """``--seconds`` reached: raised when the driver asks for the next frame, so the tracker
+    stops after its last whole frame (a BaseException: no per-frame handler of the driver
+    takes it for a failed frame)."""
 
-    def __init__(self, base: Capture, n: int) -> None:
+
+class LoopCapture:
+    """``n`` frames of ``base`` played in a loop; each time a frame is read, the resident
+    memory is appended to the file ``log`` (frame, MB, seconds since start, process id)."""
+
+    def __init__(self, base: Capture, n: int, log: Path, *, seconds: float | None = None):
         self.base, self.path, self.cameras = base, base.path, base.cameras
         self.indices = list(range(n))
         self.truth_faces, self.fps, self.meta = base.truth_faces, base.fps, {}
-        self.rss: list[tuple[int, float, float]] = []  # (frame, MB, seconds since start)
+        self.log = log
         self.t0 = time.perf_counter()
+        self.deadline = None if seconds is None else self.t0 + seconds
 
     def __len__(self) -> int:
         return len(self.indices)
 
     def __getitem__(self, k: int) -> CaptureFrame:
-        self.rss.append((k, rss_mb(), time.perf_counter() - self.t0))
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise OutOfTime  # between two frames: every finished frame is on disk
+        with self.log.open("a") as f:  # line by line: a killed run keeps its samples
+            f.write(f"{k}\t{rss_mb():.1f}\t{time.perf_counter() - self.t0:.3f}\t{os.getpid()}\n")
         return _LoopFrame(k, self.base, k % len(self.base))
 
 
@@ -99,9 +124,78 @@ class _LoopFrame(CaptureFrame):
     def truth(self):
         return CaptureFrame(self._source, self.capture).truth
 
+    @property
+    def silhouettes(self) -> list[np.ndarray]:
+        """The base frame's masks (the stream's frame numbers run past the clip's)."""
+        return CaptureFrame(self._source, self.capture).silhouettes
+
 
 def du(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool) -> None:
+    """Track (or resume) ``n`` frames of the stream with ``name`` into ``work/track_NAME``."""
+    base = in_place_walk(work / "capture")
+    out, log = work / f"track_{name}", work / f"rss_{name}.tsv"
+    if restart:
+        shutil.rmtree(out, ignore_errors=True)
+        log.unlink(missing_ok=True)
+    template = load_template("neutral_5k")
+    stream = LoopCapture(base, n, log, seconds=seconds)
+    t0 = time.perf_counter()
+    try:
+        track_sequence(
+            make_tracker(name, template=template),
+            template,
+            stream,
+            out,
+            show_progress=None,
+            vertices=False,
+            init="truth",
+        )
+        how = "done"
+    except (OutOfTime, KeyboardInterrupt):
+        how = "stopped (rerun to resume)"
+    print(f"{name}: {how} after {time.perf_counter() - t0:.0f} s in process {os.getpid()}")
+
+
+def summary(name: str, n: int, work: Path) -> tuple | None:
+    """The row of ``name``: frames done, s/frame, RSS over the first and last windows."""
+    log, out = work / f"rss_{name}.tsv", work / f"track_{name}"
+    if not log.is_file():
+        return None
+    rows = np.loadtxt(log, ndmin=2)
+    if not len(rows):
+        return None
+    done = len(list((out / "frames").glob("*.npz")))
+    if not done:
+        return None
+    # the last sample of each frame (a resumed frame may have been read twice)
+    frame, mb, sec, pid = rows.T
+    keep = np.unique(frame[::-1], return_index=True)[1]
+    keep = len(frame) - 1 - keep
+    frame, mb, sec, pid = frame[keep], mb[keep], sec[keep], pid[keep]
+    w = min(1000, max(1, len(frame) // 10))  # 1,000 frames, or a tenth of those done
+    first, last = mb[:w], mb[-w:]
+    steps = np.diff(sec)[np.diff(pid) == 0]  # seconds between frames of one process
+    spf = float(np.median(steps)) if len(steps) else float("nan")
+    procs = len(np.unique(pid))
+    bad = int((~read_track(out, vertices=False).healthy).sum())
+    return (
+        name,
+        done,
+        n,
+        spf,
+        first.mean(),
+        first.max(),
+        last.mean(),
+        last.max(),
+        f"{int(frame[0])}–{int(frame[w - 1])} / {int(frame[-w])}–{int(frame[-1])}",
+        procs,
+        du(out) / max(done, 1),
+        bad,
+    )
 
 
 def main() -> int:
@@ -110,11 +204,27 @@ def main() -> int:
     ap.add_argument("--trackers", nargs="+", default=["cage", "articulated_icp", "patch"])
     ap.add_argument("--limit", nargs="*", default=[], help="TRACKER=N: fewer frames for one")
     ap.add_argument("--work", default="long-run-work", help="capture and tracks (reused)")
+    ap.add_argument("--seconds", type=int, help="stop each tracker after this long (resumable)")
+    ap.add_argument("--parallel", action="store_true", help="one process per tracker, at once")
+    ap.add_argument("--restart", action="store_true", help="start the tracks over")
+    ap.add_argument(
+        "--clip-frames", type=int, help="loop only the clip's first N frames (quick checks)"
+    )
+    ap.add_argument("--one", help=argparse.SUPPRESS)  # a --parallel child: this tracker alone
     args = ap.parse_args()
     limits = {k: int(v) for k, v in (item.split("=") for item in args.limit)}
     work = Path(args.work)
+    if args.one:
+        run_one(
+            args.one,
+            limits.get(args.one, args.frames),
+            work,
+            seconds=args.seconds,
+            restart=args.restart,
+        )
+        return 0
     t0 = time.perf_counter()
-    base = in_place_walk(work / "capture")
+    base = in_place_walk(work / "capture", args.clip_frames)
     cap_bytes = du(work / "capture") / len(base)
     hull_bytes = du(work / "capture" / "hulls") / len(base)
     print(
@@ -122,57 +232,49 @@ def main() -> int:
         f"({hull_bytes / 1e3:.0f} kB of it the hull), {time.perf_counter() - t0:.0f} s",
         flush=True,
     )
-    template = load_template("neutral_5k")
-    rows = []
-    for name in args.trackers:
-        n = limits.get(name, args.frames)
-        stream = LoopCapture(base, n)
-        out = work / f"track_{name}"
-        shutil.rmtree(out, ignore_errors=True)
-        tracker = make_tracker(name, template=template)
-        rss_start = rss_mb()
-        t0 = time.perf_counter()
-        track = track_sequence(tracker, template, stream, out, show_progress=None, vertices=False)
-        dt = time.perf_counter() - t0
-        r = np.array([m for _, m, _ in stream.rss])
-        w = min(1000, max(1, n // 10))
-        disk = du(out) / n
-        rows.append(
-            (
+    if args.parallel:
+        env = {
+            **os.environ,
+            "OMP_NUM_THREADS": "1",
+            "OPENBLAS_NUM_THREADS": "1",
+            "NUMBA_NUM_THREADS": "1",
+            "MKL_NUM_THREADS": "1",
+        }
+        rest = [a for a in sys.argv[1:] if a != "--parallel"]
+        procs = [
+            subprocess.Popen([sys.executable, __file__, *rest, "--one", name], env=env)
+            for name in args.trackers
+        ]
+        for pr in procs:
+            pr.wait()
+    else:
+        for name in args.trackers:
+            run_one(
                 name,
-                n,
-                dt / n,
-                r[:w].mean(),
-                r[:w].max(),
-                r[-w:].mean(),
-                r[-w:].max(),
-                w,
-                disk,
-                int((~track.healthy).sum()),
-                rss_start,
+                limits.get(name, args.frames),
+                work,
+                seconds=args.seconds,
+                restart=args.restart,
             )
-        )
-        print(
-            f"{name}: {n} frames in {dt:.0f} s ({dt / n:.3f} s/frame); RSS first {w}: "
-            f"mean {r[:w].mean():.0f} MB max {r[:w].max():.0f}; last {w}: mean "
-            f"{r[-w:].mean():.0f} MB max {r[-w:].max():.0f}; {disk / 1e3:.0f} kB/frame; "
-            f"{rows[-1][9]} unhealthy",
-            flush=True,
-        )
-        del track
     print(
-        "\n| tracker | frames | s/frame | RSS first window mean / max (MB) | RSS last window "
-        "mean / max (MB) | window | track disk per frame | unhealthy |"
+        "\n| tracker | frames done / asked | s/frame (median) | RSS first window mean / max "
+        "(MB) | RSS last window mean / max (MB) | windows (frames) | processes | track disk "
+        "per frame | unhealthy |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for name, n, spf, m0, x0, m1, x1, w, disk, bad, _ in rows:
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for name in args.trackers:
+        row = summary(name, limits.get(name, args.frames), work)
+        if row is None:
+            print(f"| {name} | 0 / {limits.get(name, args.frames)} | | | | | | | |")
+            continue
+        name, done, n, spf, m0, x0, m1, x1, windows, procs, disk, bad = row
         print(
-            f"| {name} | {n} | {spf:.3f} | {m0:.0f} / {x0:.0f} | {m1:.0f} / {x1:.0f} | {w} | "
-            f"{disk / 1e3:.1f} kB | {bad} |"
+            f"| {name} | {done} / {n} | {spf:.3f} | {m0:.0f} / {x0:.0f} | {m1:.0f} / {x1:.0f} "
+            f"| {windows} | {procs} | {disk / 1e3:.1f} kB | {bad} |"
         )
     print(
         f"\ncapture disk per frame: {cap_bytes / 1e3:.0f} kB (hull {hull_bytes / 1e3:.0f} kB); "
-        f"load average {os.getloadavg()[0]:.1f}"
+        f"load average {os.getloadavg()[0]:.1f}; {os.cpu_count()} cores"
     )
     return 0
 

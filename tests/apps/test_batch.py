@@ -118,15 +118,15 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, c
     )
     thread.start()
     frames = out / "squat" / "track"
-    deadline = time.monotonic() + 120
-    while (not frame_path(frames, 2).is_file()) and time.monotonic() < deadline:
+    # wait for frame 2's file however long a loaded machine takes (no deadline to miss)
+    while not frame_path(frames, 2).is_file() and thread.is_alive():
         time.sleep(0.05)
     assert len(done_frames(frames)) < MOTIONS["squat"], "tracked too fast to kill mid-run"
     busy = [w for w, keys in cluster.processing().items() if keys]
     assert len(busy) == 1
     pid = cluster.run(os.getpid, workers=busy)[busy[0]]
     os.kill(pid, signal.SIGKILL)
-    thread.join(timeout=180)
+    thread.join()
     res = done["res"]
     (s,) = res.summaries
     assert s.status == "ok" and s.attempts == 2

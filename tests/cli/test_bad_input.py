@@ -15,6 +15,15 @@ import pytest
 
 from meshmocap.cli import main
 
+
+@pytest.fixture(autouse=True)
+def _quiet_progress(monkeypatch):
+    """No progress or phase lines on stderr, however slow a loaded machine runs: the
+    messages checked here are exact."""
+    monkeypatch.setenv("MESHMOCAP_PROGRESS_SECONDS", "3600")
+    monkeypatch.setattr("meshmocap._progress.PHASE_SECONDS", 3600.0)
+
+
 # ----------------------------------------------------------------------------- fixtures
 
 

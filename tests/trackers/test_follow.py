@@ -135,13 +135,17 @@ def test_a_mesh_folder_and_a_stop_callback(walk, tmp_path):
     t = load_template("neutral_5k")
     meshes = [walk[i].hull_mesh for i in range(3)]
     seen = []
+    reported = [threading.Event(), threading.Event()]  # frame k reported: write the next
+
+    def report(f):
+        seen.append(f)
+        reported[min(len(seen), 2) - 1].set()
 
     def studio():
         for k, name in enumerate(["m_2.ply", "m_10.ply"]):
             write_mesh(live / f".{name}", *meshes[k])
             os.replace(live / f".{name}", live / name)
-            while len(seen) < k + 1:
-                time.sleep(0.02)
+            reported[k].wait()
         write_mesh(live / ".m_1.ply", *meshes[2])  # sorts before m_2: would renumber
         os.replace(live / ".m_1.ply", live / "m_1.ply")
 
@@ -152,7 +156,7 @@ def test_a_mesh_folder_and_a_stop_callback(walk, tmp_path):
         t,
         live,
         out,
-        report=seen.append,
+        report=report,
         stop=lambda: len(seen) >= 2 and not th.is_alive(),
     )
     th.join()

@@ -133,17 +133,21 @@ def check_observations(
 
     ``capture``: a :class:`~meshmocap.io.capture.Capture` or ``SequenceCapture``.
     """
-    from meshmocap.errors import InputError
+    from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 
     pos = list(range(len(capture))) if positions is None else list(positions)
     out: list[str] = []
     first_missing = None
     for k in pos:
-        frame = capture[k]
-        if getattr(frame, "missing", None):
-            first_missing = first_missing or (capture.indices[k], frame.missing)
+        try:
+            frame = capture[k]  # a mesh sequence reads the file here
+            why = getattr(frame, "missing", None)
+            V = None if why else frame.hull_mesh[0]
+        except (MeshmocapFileNotFoundError, FormatError, MeshError) as exc:
+            why = f"{type(exc).__name__}: {exc}"  # unreadable: the driver flags it missing
+        if why:
+            first_missing = first_missing or (capture.indices[k], why)
             continue
-        V = frame.hull_mesh[0]
         why = observation_problem(V)
         if why is not None:
             raise InputError(
@@ -161,9 +165,9 @@ def check_observations(
     else:
         if first_missing is not None:
             i, why = first_missing
-            raise InputError(
-                f"{command}: {capture.path}: none of the {len(pos)} frames has an observation "
-                f"(first {i}: {why})"
+            raise InputError(  # the driver's words, before the template is estimated
+                f"{command}: no frame of {capture.path} has an observation to start from "
+                f"(frame {i}: {why})"
             )
     note = partial_hulls(capture, [int(capture.indices[k]) for k in pos], command=command)
     return [*out, note] if note else out
