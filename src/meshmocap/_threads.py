@@ -1,7 +1,8 @@
 """One BLAS thread while meshmocap works, applied by the commands and the tracking driver.
 
 On small shared machines small dense algebra is fastest single-threaded (``DESIGN.md``,
-Threads); meshmocap parallelises over frames or captures instead. Users who want more
+Threads; OpenMP pools, such as pykdtree's, oversubscribe a loaded machine badly);
+meshmocap parallelises over frames or captures instead. Users who want more
 threads set ``MESHMOCAP_THREADS``. Importing meshmocap changes nothing: the limit holds
 inside :func:`blas_threads` (the commands and :func:`~meshmocap.trackers.driver.track_sequence`
 enter it) and is lifted when it ends, so a notebook or a host application keeps its own
@@ -33,12 +34,26 @@ def thread_count() -> int:
 
 @contextmanager
 def blas_threads() -> Iterator[None]:
-    """Cap the BLAS pools at :func:`thread_count` threads inside the ``with`` block
-    (threadpoolctl), restoring the previous limits when it ends."""
+    """One thread (:func:`thread_count`) for the BLAS and OpenMP pools inside the ``with``
+    block: the pools already loaded are capped through threadpoolctl, and those loaded
+    inside the block (a command imports its modules lazily: scipy's BLAS, pykdtree's
+    OpenMP) read the threading variables, set for the block where the user has not. The
+    limits and the variables are restored when it ends."""
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(thread_count(), user_api="blas"):
-        yield
+    n = thread_count()
+    saved = {var: os.environ.get(var) for var in _VARS}
+    for var in _VARS:
+        os.environ.setdefault(var, str(n))
+    try:
+        with threadpool_limits(n):
+            yield
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
 
 
 def limit_blas_threads() -> None:

@@ -60,3 +60,26 @@ def test_meshmocap_threads_is_read_and_checked(monkeypatch):
     monkeypatch.setenv("MESHMOCAP_THREADS", "many")
     with pytest.raises(InputError, match="MESHMOCAP_THREADS must be an integer ≥ 1, found 'many'"):
         thread_count()
+
+
+def test_pools_loaded_inside_the_block_start_with_one_thread():
+    """A command imports its modules lazily: scipy's BLAS and pykdtree's OpenMP, loaded
+    inside the block, start single-threaded (the variables are set for the block), and the
+    variables are restored after it."""
+    code = (
+        "import os, numpy\n"
+        "from threadpoolctl import threadpool_info\n"
+        "from meshmocap._threads import blas_threads\n"
+        "with blas_threads():\n"
+        "    import scipy.linalg, pykdtree.kdtree\n"
+        "    pykdtree.kdtree.KDTree(numpy.random.rand(100, 3)).query(numpy.random.rand(9, 3))\n"
+        "    inside = {p['internal_api']: p['num_threads'] for p in threadpool_info()}\n"
+        "assert 'OMP_NUM_THREADS' not in os.environ, os.environ.get('OMP_NUM_THREADS')\n"
+        "print(sorted(set(inside.values())))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    env.update(PYTHONPATH=SRC)
+    env.pop("MESHMOCAP_THREADS", None)
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[1]"
