@@ -108,6 +108,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
     choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
     template = choice.template
     print(choice.note)
+    start = choice.start  # a template made from a frame starts in that frame's pose
+    if start is not None and frames is not None and capture.indices[frames[0]] != start[0]:
+        start = None
     if args.method in MANIFOLD_METHODS and args.manifold is None:
         print(
             f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
@@ -128,6 +131,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         recover=not args.no_recover,
         reseat=args.reseat,
         template_info={**choice.info, **input_meta(capture)},
+        start=start,
     )
     dt = time.perf_counter() - t0
     resumed = len(before & set(track.frames.tolist()))

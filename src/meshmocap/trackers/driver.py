@@ -81,6 +81,7 @@ def track_sequence(
     recover: bool = True,
     reseat: bool = False,
     template_info: dict | None = None,
+    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -114,6 +115,9 @@ def track_sequence(
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
+    start : (frame number, R (J, 3, 3), root (3,), message), optional
+        The pose of that frame when it is already known (a template made from that very
+        frame): with ``init="auto"``, the track starts there without a search.
 
     Returns
     -------
@@ -142,7 +146,7 @@ def track_sequence(
     with folder_lock(out, "track"):  # a second run into the same folder is refused
         done = set(start_track(out, meta, template.F, resume=resume))
         if indices[0] not in done:
-            initialise_tracker(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, template, capture, out, positions, init, start=start)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -217,10 +221,18 @@ def coast_frame(
 
 
 def initialise_tracker(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+    tracker: Tracker,
+    template: Template,
+    capture,
+    out,
+    positions: list[int],
+    init: Init = "auto",
+    *,
+    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds (its message says how). Frames before it are written as copies of it, flagged
+    finds (its message says how), or at ``start``'s pose where that is this frame (see
+    :func:`track_sequence`). Frames before it are written as copies of it, flagged
     ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
@@ -233,7 +245,10 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(template, frame, init, capture=capture)
+                if start is not None and init == "auto" and start[0] == index:
+                    R, root, how = start[1], start[2], start[3]
+                else:
+                    R, root, how = first_pose(template, frame, init, capture=capture)
                 r = tracker.init(template, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
