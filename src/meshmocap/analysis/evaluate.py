@@ -142,7 +142,9 @@ def evaluate(
     sil = None
     if silhouettes and capture.cameras:
         meshes = ((V, track.faces) for V in track.vertices)
-        sil = mesh_silhouette_errors(meshes, (f.silhouettes for f in frames), capture.cameras)
+        sil = mesh_silhouette_errors(
+            meshes, (f.silhouettes for f in frames), capture.cameras, skip=hidden
+        )
     surf = None
     F_true = capture.truth_faces
     against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"

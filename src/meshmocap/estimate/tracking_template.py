@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ import numpy as np
 from meshmocap._atomic import atomic_open
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
+from meshmocap.estimate.capture_cache import cached_subject
 from meshmocap.estimate.point_subject import fit_body_to_points
 from meshmocap.estimate.subject import estimate_subject, subject_kind
 from meshmocap.geometry.mesh import mesh_problems
@@ -118,6 +118,12 @@ def frames_kind(capture) -> str:
     return "mesh"
 
 
+def _points_body(capture, *, kind: str):
+    """:func:`~meshmocap.estimate.point_subject.fit_body_to_points` in the signature of
+    :func:`~meshmocap.estimate.capture_cache.cached_subject`'s estimators."""
+    return fit_body_to_points(capture)
+
+
 def _save_start(path: Path, start) -> None:
     index, R, root, message = start
     with atomic_open(path) as f:
@@ -191,9 +197,12 @@ def tracking_template(
         return TemplateChoice(t, info, note, start)
     check_choice("tracking_template", "kind", kind, FRAME_KINDS)
     chosen = frames_kind(capture) if kind == "auto" else kind
-    # hull and mesh: estimate_subject's own choice ("auto") is the same as frames_kind's
-    fit = fit_body_to_points if chosen == "points" else partial(estimate_subject, kind=kind)
-    est = fit(capture)
+    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache);
+    # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
+    if chosen == "points":
+        est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
+    else:
+        est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
     start = None

@@ -600,6 +600,8 @@ def frame_numbers(names: Sequence[str]) -> list[int]:
 
 
 def is_frame_file(name: str) -> bool:
+    """Whether the file ``name`` is a frame of a mesh or point folder (a known extension,
+    not hidden)."""
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
 

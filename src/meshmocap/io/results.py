@@ -7,6 +7,9 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
                         terms, iterations, seconds, health flag, flags and message
+      light.npz         only for a track of a light body (meshmocap.body.light): the frames
+                        hold the light body's vertices, and this binding reads the
+                        template's out of them (read_track does)
 
 A frame file is written atomically once the frame is done: the folder always holds whole
 frames, and :func:`done_frames` tells a resumed run where to continue.
@@ -23,6 +26,7 @@ import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap._npz import read_npz
+from meshmocap.body.light import SurfaceBinding, bound_vertices
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 
@@ -330,6 +334,10 @@ def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
     if not vertices:
         for r in rows:
             r["vertices"] = r["vertices"][:0]
+    binding = read_light_binding(path) if vertices else None
+    if binding is not None:  # tracked on a light body: the template's vertices read out
+        for r in rows:
+            r["vertices"] = bound_vertices(binding, r["vertices"].astype(np.float64))
     keys = sorted({k for r in rows for k in r if k.startswith("energy_")})
     faces = _read_faces(path / "faces.npy")
     shapes = {(r["joints"].shape, r["vertices"].shape) for r in rows}
@@ -355,6 +363,39 @@ def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
         flags=tuple(frame_flags(r) for r in rows),
         messages=tuple(str(r["message"]) for r in rows),
     )
+
+
+#: The binding of a track made on a light body (module docstring).
+LIGHT_FILE = "light.npz"
+
+
+def write_light_binding(path: str | os.PathLike, binding: SurfaceBinding) -> None:
+    """Write ``binding`` (:mod:`meshmocap.body.light`) into the track folder ``path``."""
+    with atomic_open(Path(path) / LIGHT_FILE) as f:
+        np.savez_compressed(
+            f,
+            F=binding.F.astype(np.int32),
+            tri=binding.tri.astype(np.int32),
+            bary=binding.bary,
+            offset=binding.offset,
+        )
+
+
+def read_light_binding(path: str | os.PathLike) -> SurfaceBinding | None:
+    """The binding of a track folder made on a light body, or None."""
+    file = Path(path) / LIGHT_FILE
+    if not file.is_file():
+        return None
+    z = read_npz(file, "light body binding")
+    try:
+        return SurfaceBinding(
+            z["F"].astype(np.int64),
+            z["tri"].astype(np.int64),
+            z["bary"].astype(np.float64),
+            z["offset"].astype(np.float64),
+        )
+    except KeyError as exc:
+        raise FormatError(f"{file}: not a light body binding (no {exc})") from None
 
 
 _SCALARS = {"n_iter": int, "seconds": float, "healthy": bool}
