@@ -13,10 +13,10 @@ mean body:
    enclose and its signed distance); a closed surface of that solid (Gaussian-smoothed
    occupancy cut by marching cubes) serves the heading search.
 2. **First pose.** The mean body is fitted with its size to the first frame's surface from
-   8 headings (:func:`~meshmocap.estimate.subject.initial_body_pose`); that pose, limbs
-   re-seeded and refined with model points held inside the observed solid, competes with
-   the automatic initialisation's global search
-   (:func:`~meshmocap.estimate.init.initial_pose`): the better score wins.
+   8 headings (:func:`~meshmocap.estimate.subject.initial_body_pose`), then refined as
+   the automatic initialisation refines its candidates, model points held inside the
+   observed solid (:class:`~meshmocap.estimate.fit.PoseFitter` with its signed distance);
+   the other frames start from that pose, moved to their points.
 3. **Size.** In each frame, the size that gives the posed body the height of the points
    (a hull is as tall as the body: phantom volumes widen it, never heighten it), the pose
    refitted at each size. A pose fitted into a hull's spare room comes out bent more than
@@ -37,7 +37,7 @@ from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.fit import PoseFit, PoseFitter
-from meshmocap.estimate.init import LIMBS, initial_pose, refine_limbs, subsample_points
+from meshmocap.estimate.init import subsample_points
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.subject import SubjectEstimate, initial_body_pose
 
@@ -62,35 +62,18 @@ def closed_surface(frame) -> tuple[np.ndarray, np.ndarray]:
     return hull.origin + (V.astype(np.float64) - 2) * hull.voxel_size, F[:, ::-1].astype(np.int64)
 
 
-def _pose_fit(
-    template: Template, obs, R, root, *, seed: int, settle: bool = True, limbs: bool = False
-) -> PoseFit:
+def _pose_fit(template: Template, obs, R, root, *, seed: int, settle: bool = True) -> PoseFit:
     """The pose of ``template`` on an observed frame from ``(R, root)``: the refinement of
-    the automatic initialisation (:func:`~meshmocap.estimate.init.initial_pose`, step 3:
-    with ``limbs``, each limb re-seeded where that fits better first), model points held
-    inside the observed solid (its signed distance)."""
-    fit = PoseFit(R, root, np.inf)
-    if limbs:
-        P, N = subsample_points(*obs.points, 2000, seed)
-        coarse = PoseFitter(template, P, N, n_model_points=500, field=obs.field, seed=seed)
-        fit = refine_limbs(coarse, fit, limbs=tuple(LIMBS))
+    the automatic initialisation (:func:`~meshmocap.estimate.init.initial_pose`, step 3),
+    model points held inside the observed solid (its signed distance)."""
     P, N = subsample_points(*obs.points, 5000, seed)
     fitter = PoseFitter(template, P, N, n_model_points=1500, field=obs.field, seed=seed)
-    fit = fitter.fit(fit.R, fit.root, iterations=30, max_distance=(0.15, 0.03), lambda_pose=1e-4)
+    fit = fitter.fit(R, root, iterations=30, max_distance=(0.15, 0.03), lambda_pose=1e-4)
     if settle:  # then settle on the near surface, barely held
         fit = fitter.fit(
             fit.R, fit.root, iterations=15, max_distance=(0.04, 0.01), lambda_pose=1e-6
         )
     return fit
-
-
-def _best_start(template: Template, obs, R, root, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Of ``(R, root)`` refined (:func:`_pose_fit`) and the automatic initialisation's global
-    search (:func:`~meshmocap.estimate.init.initial_pose`), the pose that scores better."""
-    mine = _pose_fit(template, obs, R, root, seed=seed, limbs=True)
-    found = initial_pose(template, *obs.points, field=obs.field, seed=seed)
-    best = mine if mine.score <= found.score else found
-    return best.R, best.root
 
 
 def _posed_height(template: Template, R, root) -> float:
@@ -160,11 +143,9 @@ def fit_body_to_points(
     for k, obs in enumerate(observed_frames):
         R, root = first.R, first.root + centres[k] - centres[0]
         s_k = scale
-        if k == 0:  # the surface fit's pose, or the global search's where it scores better
-            R, root = _best_start(space.template(_scaled_mean(space, s_k)), obs, R, root, seed)
-        for r in range(size_rounds):
+        for _ in range(size_rounds):
             body = space.template(_scaled_mean(space, s_k))
-            fit = _pose_fit(body, obs, R, root, seed=seed, settle=False, limbs=r == 0)
+            fit = _pose_fit(body, obs, R, root, seed=seed, settle=False)
             R, root = fit.R, fit.root
             s_k *= float(np.ptp(obs.points[0][:, 2])) / _posed_height(body, R, root)
         poses.append((R, root, s_k))
