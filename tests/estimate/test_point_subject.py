@@ -85,3 +85,12 @@ def test_bad_options_are_refused_in_one_line(cap, tmp_path):
         fit_body_to_points(seq, n_frames=0)
     with pytest.raises(InputError, match="size_rounds must be a positive integer"):
         fit_body_to_points(seq, size_rounds=0)
+
+
+def test_an_unreadable_frame_is_passed_over(cap, tmp_path):
+    from meshmocap.estimate.point_subject import readable_frame
+
+    seq = _write(cap, tmp_path / "clean", "clean")
+    (tmp_path / "clean" / "00000.ply").write_bytes(b"ply\nformat ascii 1.0\nend_header\n")
+    assert readable_frame(seq, 0) is None and readable_frame(seq, 1).index == 1
+    assert frames_kind(seq) == "mesh"  # read from frames 1 and 2, the driver's missing 0

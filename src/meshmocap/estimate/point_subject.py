@@ -35,13 +35,13 @@ from scipy import ndimage
 
 from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError
+from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.estimate.fit import PoseFit, PoseFitter
 from meshmocap.estimate.init import subsample_points
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.subject import SubjectEstimate, initial_body_pose
 
-__all__ = ["closed_surface", "fit_body_to_points"]
+__all__ = ["closed_surface", "fit_body_to_points", "readable_frame"]
 
 
 def closed_surface(frame) -> tuple[np.ndarray, np.ndarray]:
@@ -78,6 +78,35 @@ def _pose_fit(template: Template, obs, R, root, *, seed: int, settle: bool = Tru
 
 def _posed_height(template: Template, R, root) -> float:
     return float(np.ptp(template.pose(R, root).V[:, 2]))
+
+
+def readable_frame(capture, k: int):
+    """Capture frame position ``k`` with its points read, or None where it has none (a
+    missing frame, an unreadable or empty file: the driver's ``missing`` frames)."""
+    try:
+        frame = capture[k]
+        if getattr(frame, "missing", None) or len(frame.hull_mesh[0]) < 10:
+            return None
+    except (MeshmocapFileNotFoundError, FormatError, MeshError):
+        return None
+    return frame
+
+
+def _spread_frames(capture, n: int) -> list:
+    """Up to ``n`` readable frames: the first, and others evenly spread after it (a frame
+    that cannot be read is replaced by the next one that can)."""
+    first = next((k for k in range(len(capture)) if readable_frame(capture, k)), None)
+    if first is None:
+        return []
+    out, taken = [], set()
+    for k in np.unique(np.linspace(first, len(capture) - 1, n).round().astype(int)):
+        for j in range(int(k), len(capture)):
+            frame = None if j in taken else readable_frame(capture, j)
+            if frame is not None:
+                out.append(frame)
+                taken.add(j)
+                break
+    return out
 
 
 def _scaled_mean(space: BodyShapeSpace, scale: float) -> np.ndarray:
@@ -126,11 +155,9 @@ def fit_body_to_points(
             raise InputError(f"{func}: {what} must be a positive integer, found {value!r}")
     t0 = time.perf_counter()
     space = load_shape_space() if space is None else space
-    usable = [k for k in range(len(capture)) if not getattr(capture[k], "missing", None)]
-    if not usable:
+    frames = _spread_frames(capture, n_frames)
+    if not frames:
         raise InputError(f"{func}: no frame of {capture.path} has points to fit a body to")
-    pick = np.unique(np.linspace(0, len(usable) - 1, min(n_frames, len(usable))).round())
-    frames = [capture[usable[int(p)]] for p in pick]
     observed_frames = [observed(f) for f in frames]
     centres = [obs.points[0].mean(axis=0) for obs in observed_frames]
     mean = space.template(np.zeros(space.n_components))

@@ -40,7 +40,7 @@ from meshmocap._atomic import atomic_open
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.estimate.capture_cache import cached_subject
-from meshmocap.estimate.point_subject import fit_body_to_points
+from meshmocap.estimate.point_subject import fit_body_to_points, readable_frame
 from meshmocap.estimate.subject import estimate_subject, subject_kind
 from meshmocap.geometry.mesh import mesh_problems
 
@@ -96,23 +96,17 @@ def frames_kind(capture) -> str:
     ``"points"``."""
     if subject_kind(capture) == "hull":
         return "hull"
-    first = next((f for f in capture if not getattr(f, "missing", None)), None)
-    if first is None:
+    pos = next((k for k in range(len(capture)) if readable_frame(capture, k)), None)
+    if pos is None:
         return "points"
-    try:
-        V, F = first.hull_mesh
-    except (OSError, ValueError):
-        return "points"
+    V, F = capture[pos].hull_mesh
     if F is None or mesh_problems(V, F):
         return "points"
-    for k in sorted({min(1, len(capture) - 1), len(capture) - 1} - {0}):
-        other = capture[k]
-        if getattr(other, "missing", None):
+    for k in sorted({min(pos + 1, len(capture) - 1), len(capture) - 1} - {pos}):
+        other = readable_frame(capture, k)  # an unreadable frame is the driver's missing one
+        if other is None:
             continue
-        try:
-            V2, F2 = other.hull_mesh
-        except (OSError, ValueError):
-            continue
+        V2, F2 = other.hull_mesh
         if F2 is None or len(V2) != len(V) or not np.array_equal(F2, F):
             return "points"
     return "mesh"
