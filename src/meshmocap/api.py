@@ -257,6 +257,9 @@ def track(
     choice = tracking_template(capture, template, folder, refresh=not resume)
     say = log or (lambda line: None)
     say(choice.note)
+    start = choice.start  # a template made from a frame starts in that frame's pose
+    if start is not None and frames is not None and capture.indices[frames[0]] != start[0]:
+        start = None
     if method in MANIFOLD_METHODS and manifold is None:
         say(
             f"{method}: no --manifold given: the default pose manifold of the tracked body "
@@ -281,6 +284,7 @@ def track(
         vertices=vertices,
         template_info={**choice.info, **input_meta(capture)},
         light=light,
+        start=start,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 

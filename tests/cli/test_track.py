@@ -86,14 +86,16 @@ def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
     assert ev.surface is not None and ev.surface.mean.max() < 60.0
 
 
-def test_track_without_fps_records_none_and_gait_asks_for_it(cap, tmp_path):
+def test_track_without_fps_records_none_and_files_of_every_other_frame_miss_none(cap, tmp_path):
     seq = tmp_path / "seq"
-    _truth_files(cap, seq, (0, 1), up="z", mm=False)
+    _truth_files(cap, seq, (0, 2), up="z", mm=False)
     out = tmp_path / "t"
     assert main(["track", str(seq), *ICP, "--out", str(out)]) == 0
     meta = json.loads((out / "track.json").read_text())
     assert "fps" not in meta and input_frame(meta).fps is None
     assert meta["input"]["up"] == "z" and meta["input"]["units"] == "m"
+    t = read_track(out)
+    assert t.frames.tolist() == [0, 2] and not any(t.flags)
 
 
 @pytest.mark.parametrize(
@@ -115,3 +117,43 @@ def test_a_name_that_is_not_a_frame_number_is_refused_in_one_line(
     assert main(["track", str(seq), *ICP, "--out", str(tmp_path / "t")]) == 2
     err = capsys.readouterr().err.strip()
     assert bad in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_a_point_cloud_folder_needs_no_template(cap, tmp_path, capsys):
+    import trimesh
+
+    seq = tmp_path / "clouds"
+    seq.mkdir()
+    c = Capture(cap)
+    for f in c:  # the hulls' vertices: no faces, no normals
+        cloud = trimesh.PointCloud(f.hull_mesh[0]).export(file_type="ply")
+        (seq / f"{f.index:05d}.ply").write_bytes(cloud)
+    out = tmp_path / "t"
+    argv = ["track", str(seq), "--max-iter", "3", "--n-patches", "60", "--out", str(out)]
+    assert main(argv) == 0
+    said = capsys.readouterr().out
+    assert "hulls or points" in said and "the shape space fitted to the points" in said
+    t = read_track(out)
+    assert t.meta["template_source"] == "estimated" and (out / "subject_pose.npz").is_file()
+    assert t.messages[0].startswith("init template: the template was made from frame 0")
+    err = np.linalg.norm(t.joints[0] - c[0].truth.joints, axis=1)
+    trunk_and_legs = [0, 1, 2, 9, 10, 11, 12, 13, 14]  # an arm held by the body is
+    assert err[trunk_and_legs].mean() < 0.03  # ambiguous in 4-camera hulls of 2 cm: metres
+
+
+@pytest.mark.slow
+def test_a_clean_4d_capture_starts_in_its_first_frames_pose(cap, tmp_path, capsys):
+    seq = tmp_path / "seq"
+    truth = _truth_files(cap, seq, (0, 1, 2, 3), up="z", mm=False)
+    out = tmp_path / "t"
+    argv = ["track", str(seq), "--method", "articulated_icp", "--max-iter", "3"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert "closed meshes of one connectivity" in capsys.readouterr().out
+    t = read_track(out)
+    assert t.messages[0].startswith("init template") and "in its rest pose" in t.messages[0]
+    # the template is frame 0 rigged as it stands: vertex i is the file's vertex i
+    ev = evaluate(t, open_tracked_capture(t.meta, seq), silhouettes=False, surface_frames=0)
+    per = ev.correspondence.per_frame
+    assert per[0] < 2.0 and np.all(per < 40.0)  # mm: frame 0 starts where it is
+    assert np.abs(t.vertices[0] - truth[0]).max() < 0.01

@@ -51,6 +51,7 @@ CACHE_FOLDER = ".meshmocap"
 #: Modules whose source keys the body estimate.
 SUBJECT_CODE = (
     "meshmocap.estimate.subject",
+    "meshmocap.estimate.point_subject",
     "meshmocap.estimate.shape_fit",
     "meshmocap.body.autorig",
     "meshmocap.body.articulated",

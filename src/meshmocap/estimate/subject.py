@@ -39,6 +39,7 @@ __all__ = [
     "SubjectEstimate",
     "choose_frames",
     "estimate_subject",
+    "initial_body_pose",
     "subject_kind",
     "whole_in_view",
 ]
@@ -152,7 +153,7 @@ def _hull_surface(frame) -> tuple[np.ndarray, np.ndarray]:
     return hull.origin + (V.astype(np.float64) - 2) * hull.voxel_size, F[:, ::-1].astype(np.int64)
 
 
-def _initial_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed: int):
+def initial_body_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed: int):
     """A simple first guess of the pose and size of ``template`` in a hull mesh: fitted from
     8 headings (about Z, through the centroid), the two best refined, the best kept. (Only
     a start for the silhouette fit; the first-pose search of automatic initialisation is
@@ -278,7 +279,7 @@ def estimate_subject(
         )
     frames = [capture[k] for k in positions]
     mean = space.template(np.zeros(space.n_components))
-    inits = [_initial_pose(mean, *_hull_surface(fr), seed=seed) for fr in frames]
+    inits = [initial_body_pose(mean, *_hull_surface(fr), seed=seed) for fr in frames]
     scale = float(np.median([f.scale for f in inits]))
     z0 = space.model.transform(scale * space.model.mean_[None])[0]
     views = []

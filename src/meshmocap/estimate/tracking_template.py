@@ -11,8 +11,21 @@ In order:
    or a deliberate mismatch), and tracking it with another body silently would change the
    experiment;
 4. otherwise (a real capture, a mesh folder) the performer's body is estimated from the
-   capture (:func:`~meshmocap.estimate.subject.estimate_subject`) and cached as
-   ``subject.npz`` in the track folder: a resumed run reuses it.
+   capture and cached as ``subject.npz`` in the track folder: a resumed run reuses it. How
+   depends on what the frames are (:func:`frames_kind`):
+
+   * ``"hull"``: a studio capture (cameras and silhouettes): the shape space fitted to
+     the silhouettes (:func:`~meshmocap.estimate.subject.estimate_subject`);
+   * ``"mesh"``: closed 2-manifold meshes of one connectivity in every frame (a clean 4D
+     capture): the first frame rigged as it stands;
+   * ``"points"``: anything else without cameras (visual hulls, never quite manifold,
+     holed meshes, meshes whose connectivity changes, point clouds): the shape space
+     fitted to the points (:func:`~meshmocap.estimate.point_subject.fit_body_to_points`).
+
+   A template made from a frame knows that frame's pose (the rest pose of a rigged first
+   frame, the fitted pose of the points' body): :attr:`TemplateChoice.start` holds it
+   (kept beside the template as ``subject_pose.npz``), and tracking starts there
+   instead of searching.
 """
 
 from __future__ import annotations
@@ -21,14 +34,39 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from meshmocap._atomic import atomic_open
+from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.estimate.capture_cache import cached_subject
-from meshmocap.estimate.subject import estimate_subject
+from meshmocap.estimate.point_subject import fit_body_to_points, readable_frame
+from meshmocap.estimate.subject import estimate_subject, subject_kind
+from meshmocap.geometry.mesh import mesh_problems
 
-__all__ = ["SUBJECT_FILE", "TemplateChoice", "tracking_template"]
+__all__ = [
+    "FRAME_KINDS",
+    "POSE_FILE",
+    "SUBJECT_FILE",
+    "TemplateChoice",
+    "frames_kind",
+    "tracking_template",
+]
 
 #: The estimated subject's file in a track folder.
 SUBJECT_FILE = "subject.npz"
+#: The pose of the frame the subject was estimated from, beside it.
+POSE_FILE = "subject_pose.npz"
+#: How a subject may be estimated (:func:`frames_kind`), and ``"auto"``.
+FRAME_KINDS = ("auto", "hull", "mesh", "points")
+#: What each kind of estimate does, for the user.
+_HOW = {
+    "hull": "the shape space fitted to the silhouettes",
+    "mesh": "closed meshes of one connectivity (a clean 4D capture): the first frame rigged "
+    "as it stands",
+    "points": "hulls or points (not closed meshes of one connectivity): the shape space "
+    "fitted to the points",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,11 +79,64 @@ class TemplateChoice:
     info : dict, for ``track.json`` (``template_source``: ``"given"``, ``"capture"`` or
         ``"estimated"``; ``template_file`` for an estimated one)
     note : str, one line for the user
+    start : (frame number, R (J, 3, 3), root (3,), message) or None: the pose of the frame
+        an estimated template was made from (module docstring)
     """
 
     template: Template
     info: dict
     note: str
+    start: tuple[int, np.ndarray, np.ndarray, str] | None = None
+
+
+def frames_kind(capture) -> str:
+    """How the performer's body is estimated from ``capture`` (module docstring, 4):
+    ``"hull"`` with cameras and silhouettes, else ``"mesh"`` where the first frame is a
+    closed 2-manifold mesh and the second and last frames have its connectivity, else
+    ``"points"``."""
+    if subject_kind(capture) == "hull":
+        return "hull"
+    pos = next((k for k in range(len(capture)) if readable_frame(capture, k)), None)
+    if pos is None:
+        return "points"
+    V, F = capture[pos].hull_mesh
+    if F is None or mesh_problems(V, F):
+        return "points"
+    for k in sorted({min(pos + 1, len(capture) - 1), len(capture) - 1} - {pos}):
+        other = readable_frame(capture, k)  # an unreadable frame is the driver's missing one
+        if other is None:
+            continue
+        V2, F2 = other.hull_mesh
+        if F2 is None or len(V2) != len(V) or not np.array_equal(F2, F):
+            return "points"
+    return "mesh"
+
+
+def _points_body(capture, *, kind: str):
+    """:func:`~meshmocap.estimate.point_subject.fit_body_to_points` in the signature of
+    :func:`~meshmocap.estimate.capture_cache.cached_subject`'s estimators."""
+    return fit_body_to_points(capture)
+
+
+def _save_start(path: Path, start) -> None:
+    index, R, root, message = start
+    with atomic_open(path) as f:
+        np.savez(f, index=np.int64(index), R=R, root=root, message=np.str_(message))
+
+
+def _load_start(path: Path) -> tuple[int, np.ndarray, np.ndarray, str] | None:
+    """The start kept beside a cached subject, or None (absent or unreadable: search)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            R, root = z["R"].astype(np.float64), z["root"].astype(np.float64)
+            return int(z["index"]), R, root, str(z["message"])
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+
+
+def _start_message(kind: str, index: int) -> str:
+    what = "its rest pose" if kind == "mesh" else "the pose fitted with the body"
+    return f"init template: the template was made from frame {index}, in {what}"
 
 
 def _named_by(capture) -> str | None:
@@ -73,8 +164,8 @@ def tracking_template(
         The track folder (where an estimated subject is cached).
     refresh : bool
         Estimate again even when the track folder holds one (a restarted track).
-    kind : {"auto", "hull", "mesh"}
-        How to estimate (:func:`~meshmocap.estimate.subject.estimate_subject`).
+    kind : {"auto", "hull", "mesh", "points"}
+        How to estimate (module docstring; ``"auto"``: :func:`frames_kind`).
     """
     named = _named_by(capture)
     if template is not None and os.fspath(template) != "auto":
@@ -91,20 +182,39 @@ def tracking_template(
         )
         return TemplateChoice(t, {"template_source": "capture"}, note)
     path = Path(out) / SUBJECT_FILE
+    pose_path = Path(out) / POSE_FILE
     info = {"template_source": "estimated", "template_file": SUBJECT_FILE}
     if path.is_file() and not refresh:
         t = load_template(path)
-        return TemplateChoice(t, info, f"template estimated from the capture, reused from {path}")
-    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache)
-    est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
+        start = _load_start(pose_path)
+        note = f"template estimated from the capture, reused from {path}"
+        return TemplateChoice(t, info, note, start)
+    check_choice("tracking_template", "kind", kind, FRAME_KINDS)
+    chosen = frames_kind(capture) if kind == "auto" else kind
+    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache);
+    # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
+    if chosen == "points":
+        est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
+    else:
+        est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
+    start = None
+    if est.kind in ("mesh", "points"):  # the first fitted frame's own pose
+        R, root = est.R[0], est.root[0]
+        if est.kind == "mesh":  # rigged as it stands: rest rotations at the rest root
+            R = np.tile(np.eye(3), (est.template.skeleton.n_joints, 1, 1))
+            root = est.template.skeleton.rest_positions[0]
+        start = (int(est.frames[0]), R, root, _start_message(est.kind, int(est.frames[0])))
+        _save_start(pose_path, start)
+    else:
+        pose_path.unlink(missing_ok=True)
     # tracked as read back from the file, as a resumed run will read it: the same template
     # to the bit, so the resumed run's settings (a cage manifold's digest) are the same
     t = load_template(path)
     note = (
-        f"template estimated from the capture ({est.kind} kind, frames "
+        f"template estimated from the capture: {_HOW.get(est.kind, est.kind)} (frames "
         f"{', '.join(map(str, est.frames))}; height {est.height:.3f} m; "
         f"{est.seconds:.0f} s): {path}"
     )
-    return TemplateChoice(t, info, note)
+    return TemplateChoice(t, info, note, start)

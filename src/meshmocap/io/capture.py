@@ -522,9 +522,10 @@ class SequenceCapture:
     """Any folder, glob or archive of meshes or point clouds, read as a capture, frame by frame.
 
     Frames are numbered by their file names (:func:`~meshmocap.io.meshes.frame_numbers`:
-    ``00005.ply`` is frame 5). A number missing between the first and the last file is a
-    frame without observation (``missing`` says so): trackers coast across it and keep it
-    in the numbering.
+    ``00005.ply`` is frame 5). A number missing between the first and the last file, at
+    the files' stride (the greatest common divisor of the steps between their numbers: 1,
+    or 2 for files of every other frame), is a frame without observation (``missing`` says
+    so): trackers coast across it and keep it in the numbering.
 
     Parameters
     ----------
@@ -571,8 +572,10 @@ class SequenceCapture:
         self.silhouette_dir = Path(silhouettes) if silhouettes else None
         numbers = [int(n) for n in self.seq.numbers]
         self._position = {n: k for k, n in enumerate(numbers)}
-        if frames is None:  # every number from the first file's to the last's
-            self.indices = list(range(min(numbers), max(numbers) + 1))
+        if frames is None:  # every number from the first file's to the last's, at the
+            # files' own stride (files of every other frame: no odd frame is missing)
+            step = int(np.gcd.reduce(np.diff(sorted(numbers)))) if len(numbers) > 1 else 1
+            self.indices = list(range(min(numbers), max(numbers) + 1, max(step, 1)))
         else:
             self.indices = sorted(numbers)
         #: Frame numbers without a file (gaps in the numbering).

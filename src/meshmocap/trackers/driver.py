@@ -99,6 +99,7 @@ def track_sequence(
     template_info: dict | None = None,
     light: int | None = LIGHT_VERTICES,
     init_options: dict | None = None,
+    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -140,6 +141,9 @@ def track_sequence(
     init_options : dict, optional
         Options of the automatic first pose's search
         (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
+    start : (frame number, R (J, 3, 3), root (3,), message), optional
+        The pose of that frame when it is already known (a template made from that very
+        frame): with ``init="auto"``, the track starts there without a search.
 
     Returns
     -------
@@ -173,7 +177,9 @@ def track_sequence(
         if body.binding is not None:  # frames hold the light body; read_track reads out
             write_light_binding(out, body.binding)
         if indices[0] not in done:
-            initialise_tracker(tracker, body, capture, out, positions, init, init_options)
+            initialise_tracker(
+                tracker, body, capture, out, positions, init, init_options, start=start
+            )
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -306,10 +312,13 @@ def initialise_tracker(
     positions: list[int],
     init: Init = "auto",
     init_options: dict | None = None,
+    *,
+    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds for the full body (its message says how), the tracker on ``body.light``. Frames
-    before it are written as copies of it, flagged ``missing``."""
+    finds for the full body (its message says how), or at ``start``'s where that is this
+    frame (:func:`track_sequence`), the tracker on ``body.light``. Frames before it are
+    written as copies of it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -321,9 +330,12 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(
-                    body.template, frame, init, capture=capture, options=init_options
-                )
+                if start is not None and init == "auto" and start[0] == index:
+                    R, root, how = start[1], start[2], start[3]
+                else:
+                    R, root, how = first_pose(
+                        body.template, frame, init, capture=capture, options=init_options
+                    )
                 r = tracker.init(body.light, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
