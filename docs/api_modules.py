@@ -23,6 +23,7 @@ LAYERS = (
     ("The studio", ("studio",), "synthetic captures with truth; hulls from silhouettes"),
     ("Analysis", ("analysis",), "metrics, evaluation, gait"),
     ("Applications", ("apps",), "reports, plots, bench, demo, exports, batch"),
+    ("Python API", ("api",), "open, track, evaluate, export in a few calls"),
     ("Command line", ("cli",), "the meshmocap command"),
 )
 

@@ -1,5 +1,6 @@
 """meshmocap export: each format read back by a library this project did not write (bvhio,
-Blender, ezc3d, pygltflib, trimesh, the Khronos validator, OpenSim, the csv module)."""
+ezc3d, pygltflib, trimesh, the Khronos validator, the csv module; Blender and OpenSim in
+test_blender.py and test_opensim.py)."""
 
 import csv
 import json
@@ -83,10 +84,12 @@ def test_bvh_reskins_to_the_track(bvh, track, template):
     m = read_bvh(path)
     assert m.skeleton.names == template.skeleton.names and m.fps == 60.0
     posed = template.pose(m.rotations, m.root_positions)
-    v_err = np.linalg.norm(posed.V - track.vertices, axis=2).mean()
-    j_err = np.linalg.norm(posed.eval_joints - track.joints, axis=2).mean()
+    ok = np.arange(T) != 3  # the failed frame holds frame 2's pose (BVH has no gaps)
+    v_err = np.linalg.norm(posed.V[ok] - track.vertices[ok], axis=2).mean()
+    j_err = np.linalg.norm(posed.eval_joints[ok] - track.joints[ok], axis=2).mean()
     assert v_err < 0.005 and j_err < 0.005  # the acceptance: 5 mm mean
-    assert res.vertex_error_mm == pytest.approx(v_err * 1e3, abs=0.01)
+    assert res.vertex_error_mm == pytest.approx(v_err * 1e3, abs=0.01) and res.gaps == (13,)
+    np.testing.assert_allclose(m.rotations[3], m.rotations[2], atol=1e-3)  # 0.06°, refitted
 
 
 def test_bvh_reads_back_with_bvhio(bvh, track):
@@ -246,14 +249,6 @@ def test_trc_header_and_rows(track_dir, track, tmp_path):
     np.testing.assert_allclose(ankle, np.c_[-truth[:, 1], truth[:, 2], -truth[:, 0]], atol=1e-6)
 
 
-def test_trc_reads_in_opensim(track_dir, tmp_path):
-    osim = pytest.importorskip("opensim", reason="the optional opensim package is absent")
-    export_track(track_dir, tmp_path / "walk.trc")
-    table = osim.TimeSeriesTableVec3(str(tmp_path / "walk.trc"))
-    assert table.getNumRows() == T and table.getNumColumns() == 15
-    assert tuple(table.getColumnLabels())[:2] == ("pelvis", "thorax")
-
-
 def test_csv_wide_and_long(track_dir, track, tmp_path):
     export_track(track_dir, tmp_path / "wide.csv")
     export_track(track_dir, tmp_path / "long.csv", long=True, joints=["head"])
@@ -261,13 +256,19 @@ def test_csv_wide_and_long(track_dir, track, tmp_path):
     assert len(wide) == T and wide[3]["healthy"] == "0" and wide[3]["failed"] == "1"
     assert wide[3]["message"] == "solver diverged" and wide[0]["lost"] == "0"
     assert float(wide[2]["time_s"]) == pytest.approx(12 / 60.0, abs=1e-6)
-    got = np.array([[float(r[f"{n}_{a}"]) for n in EVAL_NAMES for a in "xyz"] for r in wide])
-    np.testing.assert_allclose(got.reshape(T, 15, 3), track.joints, atol=1e-6)
+    got = np.array(
+        [[float(r[f"{n}_{a}"] or "nan") for n in EVAL_NAMES for a in "xyz"] for r in wide]
+    ).reshape(T, 15, 3)
+    ok = np.arange(T) != 3
+    np.testing.assert_allclose(got[ok], track.joints[ok], atol=1e-6)
     long = list(csv.DictReader((tmp_path / "long.csv").read_text().splitlines()))
     assert len(long) == T and {r["joint"] for r in long} == {"head"}
-    for r in (*wide, *long):  # numbers everywhere, never NaN
+    for r in (*wide, *long):  # numbers everywhere, never NaN; the failed frame a gap
+        gap = r["failed"] == "1"
         for key, value in r.items():
-            if key not in ("message", "joint"):
+            if key in ("x", "y", "z") or key[-2:] in ("_x", "_y", "_z"):
+                assert value == "" if gap else np.isfinite(float(value)), (key, value)
+            elif key not in ("message", "joint"):
                 assert np.isfinite(float(value)), (key, value)
 
 
@@ -308,38 +309,6 @@ def test_lower_body_markers_sit_where_expected(template):
         assert s * P[side + "KNE"][0] > 0.1  # lateral
     for n in ("ASI", "KNE", "ANK", "TOE"):  # the template is near-symmetric: so are they
         assert np.linalg.norm(P["L" + n] * [-1, 1, 1] - P["R" + n]) < 0.03
-
-
-def _blender() -> str | None:
-    return shutil.which("blender")
-
-
-@pytest.mark.parametrize("ext", ["bvh", "glb"])
-def test_blender_imports_the_export(ext, bvh, glb, track, tmp_path):
-    blender = _blender()
-    if blender is None:
-        pytest.skip("blender is not installed (Debian: apt-get install blender)")
-    path = (bvh if ext == "bvh" else glb)[0]
-    out = tmp_path / "blender.json"
-    cmd = [
-        blender,
-        "-b",
-        "--factory-startup",
-        "--python",
-        str(SCRIPTS / "blender_import.py"),
-        "--",
-        str(path),
-        "60",
-        "LeftFoot",
-        str(out),
-    ]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert out.is_file(), res.stdout[-2000:] + res.stderr[-2000:]
-    got = json.loads(out.read_text())
-    assert got["end"] - got["start"] + 1 == T and len(got["bones"]) == 31
-    heads = np.array(got["heads"])  # Blender's world: Z up, metres, like the library's
-    ankle = track.joints[:, EVAL_NAMES.index("left_ankle")]
-    assert np.linalg.norm(heads - ankle, axis=1).mean() < 0.005
 
 
 def test_a_track_of_an_estimated_subject_exports_with_its_own_template(track_dir, tmp_path):

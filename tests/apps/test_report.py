@@ -192,7 +192,7 @@ def test_frame_cap_and_size_budget(capture, tracked):
     assert player_from_tracks(capture, [tr], max_frames=2).frames.tolist() == [0, 2]
     p = player_from_tracks(capture, [tr], max_frames=2, hull_points=0, truth=False)
     assert p.fps == capture.fps / 2 and p.hull is None and p.truth is None
-    tiny = player_from_tracks(capture, [tr], max_megabytes=0.02)  # room for one frame
+    tiny = player_from_tracks(capture, [tr], max_megabytes=0.002)  # room for one frame
     assert tiny.frames.tolist() == [0]
     assert len(json.dumps(player_payload(tiny))) < 0.6e6  # the GLB and one frame
 

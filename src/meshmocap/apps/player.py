@@ -17,15 +17,18 @@ opens the players at their frame N (counted from 0). The page records its errors
 Everything is Y up (glTF's frame: the library's (x, y, z) → (x, z, −y)), metres.
 Data size: joints and hull points are quantised to int16 around a shared origin (step =
 largest half-extent / 32000, e.g. 0.03 mm for a 2 m scene) and base64-encoded; each
-track's GLB is a few hundred kB whatever the number of frames (31 int16 quaternions per
-frame). A player keeps at most ``max_frames`` frames (a regular stride over long tracks)
-and at most ``max_megabytes`` of encoded data (the stride grows to fit).
+track's GLB is its template (a few hundred kB) plus 31 int16 quaternions per frame. A
+player shows **every frame of the tracks** and thins the hull points of each frame to fit
+``max_megabytes`` of per-frame data; only where the tracks alone (joints, animation, and
+at least :data:`MIN_HULL_POINTS` hull points a frame) cannot fit does it keep a regular
+stride of frames, and it says so (:attr:`Player.note`, shown beside the frame slider).
 """
 
 from __future__ import annotations
 
 import base64
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -38,12 +41,17 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, frame_name, read_hull
 from meshmocap.io.gltf import Z_UP_TO_Y_UP, gltf_bytes, morph_gltf
-from meshmocap.io.results import Track
+from meshmocap.io.results import Track, tracked_template
 
 #: Colours of the player's tracks (RGB), in order: blue, crimson, amber, purple, dark cyan.
 PALETTE = ((50, 100, 220), (210, 50, 110), (225, 150, 20), (130, 70, 200), (0, 140, 170))
 #: Colour of the ground-truth joints and of the hull points.
 TRUTH_COLOR, HULL_COLOR = (20, 160, 60), (120, 120, 120)
+#: Hull points a frame keeps at least before the player drops frames to fit its budget.
+MIN_HULL_POINTS = 300
+#: Encoded bytes a frame of a rigged track's animation takes in its GLB (31 int16
+#: quaternions and a float32 root position, base64).
+ANIMATION_BYTES = 4 * (31 * 8 + 12) // 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,6 +93,8 @@ class Player:
     truth : (T, K, 3) float32 or None, ground-truth evaluation joints, metres, Y up
     truth_parents : tuple of int or None
     hull : tuple of T arrays (P_t, 3) float32, or None, observed hull points, metres, Y up
+    n_tracked : int, frames the tracks have together (T when every one is shown)
+    note : str, what the player shows, for its viewer (every frame, or which)
     """
 
     title: str
@@ -95,6 +105,8 @@ class Player:
     truth: np.ndarray | None = None
     truth_parents: tuple[int, ...] | None = None
     hull: tuple[np.ndarray, ...] | None = None
+    n_tracked: int = 0
+    note: str = ""
 
 
 def surface_voxels(occupancy: np.ndarray) -> np.ndarray:
@@ -139,6 +151,19 @@ def _rig(track: Track, template) -> Template | None:
         return None
 
 
+def track_templates(folders: Sequence[str | os.PathLike]) -> list[Template | None]:
+    """The template each track folder deformed (an estimated body from its file, see
+    :func:`~meshmocap.io.results.tracked_template`), None where it cannot be had: what
+    :func:`player_from_tracks` takes as ``templates``."""
+    found: list[Template | None] = []
+    for folder in folders:
+        try:
+            found.append(tracked_template(folder))
+        except (MeshmocapFileNotFoundError, InputError, OSError, ValueError):
+            found.append(None)
+    return found
+
+
 def _y_up(X: np.ndarray) -> np.ndarray:
     return (np.asarray(X, dtype=np.float64) @ Z_UP_TO_Y_UP.T).astype(np.float32)
 
@@ -149,7 +174,7 @@ def player_from_tracks(
     *,
     names: Sequence[str] | None = None,
     title: str = "",
-    max_frames: int = 120,
+    max_frames: int | None = None,
     max_megabytes: float = 8.0,
     hull_points: int = 1500,
     truth: bool = True,
@@ -162,19 +187,22 @@ def player_from_tracks(
     capture : Capture or SequenceCapture, the capture the tracks followed
     tracks : sequence of Track, one or more, over frames of ``capture``
     names : sequence of str, optional, one per track (default: each track's method)
-    max_frames : int
-        Frames kept: a regular stride over the union of the tracks' frames.
+    max_frames : int, optional
+        At most this many frames (a regular stride over the union of the tracks' frames).
+        Default: every frame, as far as ``max_megabytes`` allows.
     max_megabytes : float
-        Budget of the per-frame data (joints, hull points; base64); the stride grows
-        until it fits (one frame is always kept).
+        Budget of the per-frame data (joints, animations, hull points; base64). Hull points
+        are thinned to fit, down to :data:`MIN_HULL_POINTS` a frame; past that a regular
+        stride of frames is kept (one frame is always kept).
     hull_points : int
-        Hull points kept per frame (0: no hull layer).
+        Hull points kept per frame at most (0: no hull layer).
     truth : bool
         Include the ground-truth joints when every shown frame has them.
     templates : sequence, optional
-        Each track's template when it is not the bundled one named in its ``track.json``.
-        A track whose template cannot be had is shown as its tracked meshes (morph
-        targets, 12 bytes per vertex and frame, counted in ``max_megabytes``).
+        Each track's template when it is not the bundled one named in its ``track.json``
+        (:func:`track_templates` reads an estimated body from the track's folder). A track
+        whose template cannot be had is shown as its tracked meshes (morph targets, 12
+        bytes per vertex and frame, counted in ``max_megabytes``).
 
     Raises
     ------
@@ -182,7 +210,7 @@ def player_from_tracks(
     """
     if not tracks:
         raise InputError("player_from_tracks: expected at least one track, found none")
-    if max_frames < 1:
+    if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames: expected a positive count, found {max_frames}")
     if names is None:
         names = [str(t.meta.get("method", f"track {k}")) for k, t in enumerate(tracks)]
@@ -196,13 +224,18 @@ def player_from_tracks(
             raise InputError(f"track {name!r}: frames {missing[:5]} are not in the capture")
     every = np.unique(np.concatenate([t.frames for t in tracks]))
     rigs = [_rig(t, tpl) for t, tpl in zip(tracks, templates, strict=True)]
-    per_frame = 8 * (sum(t.joints.shape[1] for t in tracks) + hull_points + 15) + 8
-    per_frame += sum(
-        16 * t.vertices.shape[1] for t, r in zip(tracks, rigs, strict=True) if r is None
+    # bytes a frame takes without the hull: joints (int16 x 3, base64), truth, animations
+    essential = 8 * (sum(t.joints.shape[1] for t in tracks) + 15) + 8
+    essential += sum(
+        16 * t.vertices.shape[1] if r is None else ANIMATION_BYTES
+        for t, r in zip(tracks, rigs, strict=True)
     )
-    fit = max(1, int(max_megabytes * 1e6 // per_frame))
-    stride = math.ceil(len(every) / min(max_frames, fit))
+    budget = max_megabytes * 1e6
+    least = essential + 8 * min(hull_points, MIN_HULL_POINTS)
+    fit = max(1, int(budget // least))
+    stride = math.ceil(len(every) / min(max_frames or len(every), fit))
     frames = every[::stride]
+    hull_points = int(min(hull_points, max(0.0, (budget / len(frames) - essential) / 8)))
     fps = float(getattr(capture, "fps", 0.0) or track_fps(tracks[0])[0])
     ptracks = []
     for k, (name, t) in enumerate(zip(names, tracks, strict=True)):
@@ -243,9 +276,32 @@ def player_from_tracks(
         hull = tuple(_y_up(_hull_points(capture, position[int(i)], hull_points)) for i in frames)
         if not any(len(h) for h in hull):
             hull = None
+    n = len(every)
+    if stride == 1:
+        note = f"all {n} tracked frames"
+    else:
+        why = "--max-frames" if max_frames is not None and max_frames < fit else "size budget"
+        note = f"every {_ordinal(stride)} of {n} tracked frames ({why}; exports hold them all)"
+    if hull is not None:
+        note += f"; hull: up to {hull_points} points a frame"
     return Player(
-        title, frames.astype(np.int64), fps / stride, fps, tuple(ptracks), true_J, parents, hull
+        title,
+        frames.astype(np.int64),
+        fps / stride,
+        fps,
+        tuple(ptracks),
+        true_J,
+        parents,
+        hull,
+        n,
+        note,
     )
+
+
+def _ordinal(k: int) -> str:
+    """2nd, 3rd, 4th, 11th, 21st..."""
+    end = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"{k}{end}"
 
 
 def encode_array(a: np.ndarray, *, origin: np.ndarray | None = None, step: float = 0.0) -> dict:
@@ -309,6 +365,8 @@ def player_payload(player: Player) -> dict:
         )
     out = {
         "title": player.title,
+        "note": player.note,
+        "n_tracked": player.n_tracked,
         "frames": [int(i) for i in player.frames],
         "fps": player.fps,
         "capture_fps": player.capture_fps,

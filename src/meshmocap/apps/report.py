@@ -39,11 +39,12 @@ from meshmocap.apps.player import (
     player_from_tracks,
     player_js,
     player_payload,
+    track_templates,
 )
 from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.io.capture import Capture, SequenceCapture, open_capture
-from meshmocap.io.results import Track, read_track
+from meshmocap.io.capture import Capture, SequenceCapture
+from meshmocap.io.results import Track, open_tracked_capture, read_track
 
 ImageSource = str | os.PathLike | bytes
 
@@ -423,7 +424,7 @@ def build_report(
     tracks: Sequence[str | os.PathLike | Track],
     *,
     eval_dirs: Sequence[str | os.PathLike] | None = None,
-    max_frames: int = 120,
+    max_frames: int | None = None,
     silhouettes: bool = True,
     surface_frames: int = 8,
     title: str | None = None,
@@ -439,13 +440,16 @@ def build_report(
         Where each evaluation's CSV tables and PNG plots are written
         (:func:`~meshmocap.analysis.evaluate.write_evaluation`); default: a temporary
         folder, removed once the plots are embedded.
-    max_frames : int, frames of the player (a regular stride over long tracks)
+    max_frames : int, optional, at most this many frames in the player (default: every
+        frame the size budget allows, :func:`~meshmocap.apps.player.player_from_tracks`)
     silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
     """
-    cap = capture if isinstance(capture, Capture | SequenceCapture) else open_capture(capture)
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]
     if not trs:
         raise InputError("report: expected at least one track, found none")
+    cap = capture
+    if not isinstance(capture, Capture | SequenceCapture):  # read as the track read it
+        cap = open_tracked_capture(trs[0].meta, capture)
     if eval_dirs is not None and len(eval_dirs) != len(trs):
         raise InputError(
             f"eval_dirs: expected {len(trs)} folders (one per track), found {len(eval_dirs)}"
@@ -476,6 +480,7 @@ def build_report(
         names=names,
         max_frames=max_frames,
         title=f"{', '.join(names)} on {Path(cap.path).name}",
+        templates=[None if isinstance(p, Track) else track_templates([p])[0] for p in tracks],
     )
     return write_report(
         out,

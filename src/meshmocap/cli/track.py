@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from meshmocap.cli._args import flag, frame_range, number
+from meshmocap.cli._args import add_frames, add_restart, flag, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
 TRACK_OPTIONS = (
@@ -19,6 +19,10 @@ TRACK_OPTIONS = (
     "fast_iter_scale",
     "joint_readout",
 )
+
+#: Fewest patches ``--n-patches`` takes: about one per bone of the evaluation skeleton (the
+#: paper uses 150–250). With one patch the rigidity energy has no pair and is NaN.
+MIN_PATCHES = 16
 
 
 def _tracker_options(args: argparse.Namespace) -> dict:
@@ -40,85 +44,78 @@ def _tracker_options(args: argparse.Namespace) -> dict:
     return given
 
 
-def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
+def _capture_source(
+    sources: list[str], up: str = "auto", units: str = "auto", fps: float | None = None
+):
     """One capture folder, or several mesh files/folders (the shell expands an unquoted
-    glob into many arguments), in metres and Z up (mesh files: ``up`` and ``units`` read
-    from the first frame where not given, :func:`~meshmocap.estimate.axes.open_oriented`).
-    Returns the capture and the axes read (None for a capture folder)."""
-    from meshmocap.errors import InputError
-    from meshmocap.estimate.axes import open_oriented
-    from meshmocap.io.meshes import frame_files
+    glob into many arguments), in metres and Z up: :func:`meshmocap.api.capture_and_axes`
+    (``fps``: the rate of mesh files). Returns the capture and the axes read (None for a
+    capture folder)."""
+    from meshmocap.api import capture_and_axes
 
-    if len(sources) == 1:
-        return open_oriented(sources[0], up=up, units=units)
-    capture_dirs = [
-        s for s in sources if (Path(s) / "capture.json").is_file() or (Path(s) / "hulls").is_dir()
-    ]
-    if capture_dirs:
-        raise InputError(
-            f"track: give one capture folder, or several mesh files and folders; "
-            f"{capture_dirs[0]} is a capture folder"
-        )
-    return open_oriented(frame_files(sources), up=up, units=units)
+    return capture_and_axes(sources, up=up, units=units, fps=fps)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    from meshmocap import api
+    from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
-    from meshmocap.estimate.tracking_template import tracking_template
+    from meshmocap.estimate.plausibility import check_observations
     from meshmocap.io.results import done_frames
-    from meshmocap.trackers.driver import track_sequence
-    from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
     options = _tracker_options(args)
     if args.follow or args.idle is not None:
         return _follow(args, options)
-    capture, axes = _capture_source(args.capture, args.up, args.units)
-    if axes is not None and (args.up == "auto" or args.units == "auto"):
+    capture, axes = _capture_source(args.capture, args.up, args.units, args.fps)
+    if axes is not None:
+        rate = f"{capture.fps:g} fps" + ("" if args.fps else " (assumed; --fps to set)")
         print(
             f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
-            f"{axes.span:.2f} m long (--up, --units to set)"
+            f"{axes.span:.2f} m long (--up, --units to set); {rate}"
         )
+        gaps = getattr(capture, "gaps", [])
+        if gaps:
+            print(
+                f"meshmocap: warning: {len(gaps)} frame numbers have no file (first "
+                f"{gaps[0]}): tracked as missing frames, coasted across",
+                file=sys.stderr,
+            )
     frames = None
     if args.frames:
-        frames = range(len(capture))[args.frames]
+        numbers = [int(i) for i in capture.indices]
+        frames = frame_positions(numbers, args.frames)  # frame numbers, not positions
         if not frames:
             raise InputError(
-                f"track: --frames {_text(args.frames)} selects none of the "
-                f"{len(capture)} frames of {args.capture[0]}"
+                f"track: --frames {_text(args.frames)} selects none of the {len(numbers)} "
+                f"frames (numbers {numbers[0]}..{numbers[-1]}) of {args.capture[0]}"
             )
-        if args.frames.stop is not None and args.frames.stop > len(capture):
+        if args.frames.stop is not None and args.frames.stop > numbers[-1] + 1:
             print(
                 f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
-                f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                f"{args.frames.stop - 1}; the capture ends at frame {numbers[-1]}: tracking "
                 f"{len(frames)}",
                 file=sys.stderr,
             )
-    choice = tracking_template(capture, args.template, args.out, refresh=args.restart)
-    template = choice.template
-    print(choice.note)
-    if args.method in MANIFOLD_METHODS and args.manifold is None:
-        print(
-            f"{args.method}: no --manifold given: learning a 2-D pose manifold from the "
-            f"procedural walk and jog on {template.name!r}"
-        )
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    for line in check_observations(capture, frames):  # one person? dense? partial hulls?
+        print(f"meshmocap: warning: {line}", file=sys.stderr)
     before = set() if args.restart else set(done_frames(args.out))
-    t0 = time.perf_counter()
-    track = track_sequence(
-        tracker,
-        template,
+    result = api.track(
         capture,
-        args.out,
+        method=args.method,
+        out=args.out,
+        template=args.template,
         frames=frames,
-        resume=not args.restart,
-        vertices=False,
         init=args.init,
+        resume=not args.restart,
         recover=not args.no_recover,
         reseat=args.reseat,
-        template_info=choice.info,
+        manifold=args.manifold,
+        vertices=False,
+        log=print,
+        **options,
     )
-    dt = time.perf_counter() - t0
+    track, dt = result.data, result.seconds
     resumed = len(before & set(track.frames.tolist()))
     new = len(track.frames) - resumed
     bad = int((~track.healthy).sum())
@@ -157,6 +154,7 @@ def _lost(track) -> str:
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
     """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.trackers.follow import follow_sequence
     from meshmocap.trackers.registry import make_tracker
@@ -168,7 +166,9 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     choice = _follow_template(args)
     template = choice.template
     print(choice.note)
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    light = None if args.manifold else LIGHT_VERTICES  # as in _cmd_track
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     seen: list[float] = []
 
     def report(f) -> None:
@@ -192,6 +192,7 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
             resume=not args.restart,
             report=report,
             template_info=choice.info,
+            light=light,
         )
     except KeyboardInterrupt:
         how = "Ctrl-C"
@@ -357,9 +358,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "an estimate is cached as subject.npz in --out)",
     )
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
-    k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    add_frames(k)
     k.add_argument(
-        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+        "--n-patches",
+        type=number(MIN_PATCHES, 10_000, integer=True),
+        help=f"patch tracker: number of patches (at least {MIN_PATCHES}: fewer cannot follow "
+        "the limbs, and one has no neighbour to be rigid with)",
     )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
     k.add_argument(
@@ -426,7 +430,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not score frames, flag lost limbs or re-initialise them",
     )
-    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    k.add_argument(
+        "--fps",
+        type=number(0, 1e5, "frames per second", open_lo=True),
+        help="mesh/point-cloud files: their frame rate (default: 30, recorded as unknown)",
+    )
+    add_restart(k, "track again instead of resuming")
     k.add_argument(
         "--follow",
         action="store_true",
@@ -494,5 +503,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument(
         "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
     )
-    x.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(x, "transfer again instead of resuming")
     x.set_defaults(func=_cmd_transfer)

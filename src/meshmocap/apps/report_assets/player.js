@@ -261,7 +261,7 @@
       this.controls.update();
     }
     this.el_("mm-slider").value = String(i);
-    this.el_("mm-label").textContent = "frame " + f + " (" + (i + 1) + "/" + this.nFrames + ")";
+    this.el_("mm-label").textContent = "frame " + f + " (" + (i + 1) + "/" + this.nFrames + "; " + (d.note || "") + ")";
     this.render();
   };
 
