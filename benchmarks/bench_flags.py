@@ -39,6 +39,27 @@ from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.capture import open_capture
 
 
+def sample(t, labels, V, fr, err, kind: str, seed: int) -> dict:
+    """One sample: the check of the vertices ``V`` on the frame ``fr`` and each limb's
+    worst joint error (``err`` (K,) mm)."""
+    q = fit_quality(
+        V,
+        labels,
+        fr.points[0],
+        fr.field,
+        F=t.F,
+        cameras=fr.cameras,
+        masks=fr.silhouettes,
+        seed=seed,
+    )
+    names = t.eval_skeleton.names
+    worst = {limb: 0.0 for limb in LIMB_PARTS}
+    for n, e in zip(names, err, strict=True):
+        limb = next(k for k, v in LIMB_PARTS.items() if n in v)
+        worst[limb] = max(worst[limb], float(e))
+    return dict(kind=kind, worst=worst, lost=set(q.lost), q=q)
+
+
 def samples(cap_dir: Path, args, rng) -> list[dict]:
     """The clean and off samples of one capture (module docstring)."""
     cap = open_capture(cap_dir)
@@ -46,8 +67,6 @@ def samples(cap_dir: Path, args, rng) -> list[dict]:
     t = load_template(spec.get("subject") or spec["template"])
     sk = t.skeleton
     labels = limb_labels(t)
-    names = t.eval_skeleton.names
-    limb_of = {n: next(k for k, v in LIMB_PARTS.items() if n in v) for n in names}
     out = []
     for k in range(0, len(cap), args.step):
         fr = observed(cap[k])
@@ -69,20 +88,7 @@ def samples(cap_dir: Path, args, rng) -> list[dict]:
                 R[j] = so3_exp(a / np.linalg.norm(a) * ang) @ R[j]
             posed = t.pose(R, tr.root)
             err = np.linalg.norm(posed.eval_joints - tr.joints, axis=1) * 1000
-            q = fit_quality(
-                posed.V,
-                labels,
-                fr.points[0],
-                fr.field,
-                F=t.F,
-                cameras=fr.cameras,
-                masks=fr.silhouettes,
-                seed=int(k),
-            )
-            worst = {limb: 0.0 for limb in LIMB_PARTS}
-            for n, e in zip(names, err, strict=True):
-                worst[limb_of[n]] = max(worst[limb_of[n]], float(e))
-            out.append(dict(kind=kind, worst=worst, lost=set(q.lost), q=q))
+            out.append(sample(t, labels, posed.V, fr, err, kind, int(k)))
     return out
 
 
@@ -171,6 +177,28 @@ def calibrate(rows: list[dict], *, recall: float = 0.92) -> str:
     )
 
 
+def track_rows(track_dir: Path, cap_dir: Path) -> list[dict]:
+    """One row per frame of a track folder (with vertices) on its capture: each limb's
+    worst joint error and the limbs :func:`fit_quality` names lost (``kind``: clean when
+    every joint is within 100 mm)."""
+    from meshmocap.io.results import read_track, tracked_template
+
+    track = read_track(track_dir)
+    cap = open_capture(cap_dir)
+    try:
+        t = tracked_template(track_dir, track.meta)
+    except FileNotFoundError:  # bench_limbs keeps the estimated body beside, in subjects/
+        t = load_template(track_dir.parents[2] / "subjects" / track_dir.parent.name / "subject.npz")
+    labels = limb_labels(t)
+    rows = []
+    for k, index in enumerate(track.frames):
+        fr = observed(cap[cap.indices.index(int(index))])
+        err = np.linalg.norm(track.joints[k] - fr.truth.joints, axis=1) * 1000
+        kind = "clean" if err.max() < 100 else "off"
+        rows.append(sample(t, labels, track.vertices[k], fr, err, kind, int(index)))
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--captures", nargs="+", default=["/tmp/limbs/init/captures"])
@@ -178,7 +206,20 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=4, help="per frame: 1 clean, the rest off")
     ap.add_argument("--noise", type=float, default=1.5, help="degrees, every joint")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--tracks",
+        nargs="+",
+        default=None,
+        help="instead: score these tracks' own frames (bench_limbs work folder tracks/NAME/X,"
+        " the capture in captures/NAME)",
+    )
     args = ap.parse_args()
+    if args.tracks:
+        rows = []
+        for tr in map(Path, args.tracks):
+            rows += track_rows(tr, tr.parents[2] / "captures" / tr.parent.name)
+        print(f"Lost flags on {len(args.tracks)} tracks, {len(rows)} frames\n\n{report(rows)}")
+        return
     rng = np.random.default_rng(args.seed)
     dirs = sorted(
         d for c in args.captures for d in Path(c).iterdir() if (d / "capture.json").is_file()

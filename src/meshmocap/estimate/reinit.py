@@ -15,8 +15,9 @@ initialisation (:mod:`meshmocap.estimate.init`):
    the limb stands from where its recent motion puts it (:meth:`Recovery.motion_cost`: a
    fast limb moving on as it moved is kept), and a hypothesis replaces the limb only when
    it ranks better by more than :data:`MIN_GAIN`;
-3. when the body itself is outside the observations (the torso lost), the whole global
-   search (:func:`~meshmocap.estimate.init.initial_pose`), kept if it scores better;
+3. when the body itself is outside the observations (the torso more than
+   :data:`TORSO_OUT` outside: the performer leaving the cameras' view, a truncated hull),
+   nothing (a whole-body search re-seated there ran 1.2 m off on a run leaving the view);
 4. a short fit of the whole body from the result, accepted only if it leaves fewer limbs
    lost (or as many, with less unexplained).
 
@@ -38,7 +39,6 @@ from meshmocap.body.template import Template
 from meshmocap.estimate.fit import PoseFit, PoseFitter, pose_of_vertices
 from meshmocap.estimate.init import (
     LIMBS,
-    initial_pose,
     library_limb_candidates,
     library_poses,
     limb_joint_indices,
@@ -65,6 +65,8 @@ __all__ = ["COOLDOWN", "JUMP", "MIN_GAIN", "Recovery", "Reinit"]
 #: Least decrease of the ranking key (metres of fit score, with the motion cost) that
 #: makes a re-seeded limb win: nothing is re-seated on weak evidence.
 MIN_GAIN = 0.003
+#: Fraction of the torso outside the observations beyond which nothing is re-seated.
+TORSO_OUT = 0.25
 #: Library hypotheses fitted per lost limb.
 LIMB_HYPOTHESES = 4
 #: Metres of ranking key per metre (RMS over the limb's joints) that a re-seeded limb
@@ -240,48 +242,38 @@ class Recovery:
         key = ranking_key(t, cameras, masks)
         best = PoseFit(R, root, fitter.score(R, root))
         k_best, changed = key(best), []
-        if quality.outside.get("torso", 0.0) > 0.25:  # the body itself is lost: search anew
-            res = initial_pose(
-                t,
-                *obs.points,
-                cameras=cameras,
-                masks=masks,
-                field=field,
-                hull=obs.hull,
-                seed=int(frame.index),
+        if quality.outside.get("torso", 0.0) > TORSO_OUT:
+            # the body itself stands outside the observations (leaving the cameras' view,
+            # a truncated hull): a whole-body search there re-seated runs far off, so
+            # nothing is re-seated on such evidence
+            self.cooldown = COOLDOWN
+            return None
+        P = obs.points[0]
+        h = obs.hull
+        scorer = FrameScorer(h.occupancy, h.origin, h.voxel_size, P, cameras=cameras, masks=masks)
+        poses = library_poses(t, exclude_trials=self.exclude_trials)
+        for limb in [n for n in LIMBS if n in _evidence(quality)]:
+            idx = limb_joint_indices(t, limb)
+            starts = library_limb_candidates(
+                t, poses, scorer, best.R, best.root, limb, n_best=LIMB_HYPOTHESES
             )
-            cand = PoseFit(res.R, res.root, res.score)
-            if key(cand) < k_best:
-                best, k_best, changed = cand, key(cand), ["body"]
-        else:
-            P = obs.points[0]
-            h = obs.hull
-            scorer = FrameScorer(
-                h.occupancy, h.origin, h.voxel_size, P, cameras=cameras, masks=masks
-            )
-            poses = library_poses(t, exclude_trials=self.exclude_trials)
-            for limb in [n for n in LIMBS if n in _evidence(quality)]:
-                idx = limb_joint_indices(t, limb)
-                starts = library_limb_candidates(
-                    t, poses, scorer, best.R, best.root, limb, n_best=LIMB_HYPOTHESES
+            fits = [
+                fitter.fit(
+                    c.R,
+                    best.root,
+                    iterations=8,
+                    max_distance=(0.2, 0.05),
+                    joints=idx,
+                    move_root=False,
+                    lambda_pose=0.0,
                 )
-                fits = [
-                    fitter.fit(
-                        c.R,
-                        best.root,
-                        iterations=8,
-                        max_distance=(0.2, 0.05),
-                        joints=idx,
-                        move_root=False,
-                        lambda_pose=0.0,
-                    )
-                    for c in [best, *starts]  # the limb as tracked, fitted alike: fair
-                ]
-                cost = [key(f) + self.motion_cost(f.R, f.root, limb) for f in fits]
-                i = int(np.argmin(cost))
-                if i > 0 and cost[0] - cost[i] > MIN_GAIN:
-                    best, k_best = fits[i], key(fits[i])
-                    changed.append(limb)
+                for c in [best, *starts]  # the limb as tracked, fitted alike: fair
+            ]
+            cost = [key(f) + self.motion_cost(f.R, f.root, limb) for f in fits]
+            i = int(np.argmin(cost))
+            if i > 0 and cost[0] - cost[i] > MIN_GAIN:
+                best, k_best = fits[i], key(fits[i])
+                changed.append(limb)
         if not changed:
             self.cooldown = COOLDOWN
             return None
