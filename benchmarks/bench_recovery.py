@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench_init import DATA
 from meshmocap.body.template import load_template
 from meshmocap.estimate.quality import LIMB_PARTS
 from meshmocap.studio.degrade import Degradation
@@ -46,7 +47,6 @@ from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TEMPLATE = "neutral_5k"
 #: capture → (motion file under DATA/mocap/cmu, first frame, missed limb joint, gap frames)
 CAPTURES: dict[str, tuple[str, int, str | None, tuple[int, int] | None]] = {

@@ -72,9 +72,9 @@ def test_the_first_pose_is_searched_once_for_every_tracker(walk, tmp_path, monke
     found = []
     search = driver._search_first_pose
 
-    def counting(template, frame):
+    def counting(template, frame, options=None):
         found.append(frame.index)
-        return search(template, frame)
+        return search(template, frame, options)
 
     monkeypatch.setattr(driver, "_search_first_pose", counting)
     t = load_template("neutral_5k")

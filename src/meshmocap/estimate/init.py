@@ -47,6 +47,7 @@ from meshmocap.estimate.pose_search import (
     posed_samples,
     turned_about_z,
 )
+from meshmocap.estimate.quality import fit_quality, limb_labels
 from meshmocap.geometry.carving import VoxelHull
 from meshmocap.geometry.distance_field import DistanceGrid
 from meshmocap.geometry.rotations import rotation_between, so3_exp
@@ -185,6 +186,9 @@ class InitResult:
     runner_up_key : float, its ranking key (inf without one)
     mismatch : float, the winner's silhouette mismatch
         (:func:`~meshmocap.estimate.fit.silhouette_mismatch`; nan without silhouettes)
+    lost : tuple of str, the winner's limbs that the fit-quality check
+        (:func:`~meshmocap.estimate.quality.fit_quality`) finds lost (empty without a
+        signed distance of the observed solid)
     """
 
     R: np.ndarray
@@ -196,6 +200,7 @@ class InitResult:
     runner_up: PoseFit | None = None
     runner_up_key: float = float("inf")
     mismatch: float = float("nan")
+    lost: tuple[str, ...] = ()
 
     @property
     def margin(self) -> float:
@@ -485,6 +490,12 @@ def initial_pose(
             runner, runner_key = f, (rank(f) if k is None else k)
             break
     mismatch = (rk[0] - best.score) / SILHOUETTE_WEIGHT if cameras and masks else float("nan")
+    lost: tuple[str, ...] = ()
+    if field is not None:
+        V = template.pose(best.R, best.root).V
+        labels = limb_labels(template)
+        q = fit_quality(V, labels, P, field, F=template.F, cameras=cameras, masks=masks, seed=seed)
+        lost = q.lost
     return InitResult(
         best.R,
         best.root,
@@ -495,11 +506,10 @@ def initial_pose(
         runner,
         runner_key,
         mismatch,
+        lost,
     )
 
 
-#: Ranking key (metres) above which a start is uncertain.
-START_KEY = 0.06
 #: Least margin (metres of ranking key) between the start and a distinct runner-up for a
 #: confident start.
 START_MARGIN = 0.002
@@ -509,14 +519,12 @@ UNCERTAIN_START = "uncertain start"
 
 def start_message(res: InitResult) -> str:
     """One line saying how the first pose was found: the winner, its score and ranking
-    key, the runner-up and its margin, and whether the start is uncertain (its key above
-    :data:`START_KEY`, or a distinct runner-up within :data:`START_MARGIN`)."""
+    key, the runner-up and its margin, and whether the start is uncertain (a limb the
+    fit-quality check finds lost, or a distinct runner-up within :data:`START_MARGIN`)."""
     msg = f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm, key {1000 * res.key:.1f}"
     if res.runner_up is not None:
         msg += f"; runner-up {res.runner_up.label} (+{1000 * res.margin:.1f} mm)"
-    why = []
-    if res.key > START_KEY:
-        why.append(f"key above {1000 * START_KEY:.0f} mm")
+    why = [f"{limb} lost" for limb in res.lost]
     if res.margin < START_MARGIN:
         why.append(f"runner-up within {1000 * START_MARGIN:.0f} mm")
     if why:

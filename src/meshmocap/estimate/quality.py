@@ -66,7 +66,7 @@ LIMB_PARTS: dict[str, tuple[str, ...]] = {
 #: voxels' rounding, a performer slimmer than the template).
 OUTSIDE_MARGIN = 0.03
 #: Fraction of a limb's vertices outside beyond which the limb is lost.
-OUTSIDE_LOST = 0.25
+OUTSIDE_LOST = 0.4
 #: Metres inside the observed solid beyond which a vertex counts as buried.
 BURIED_DEPTH = 0.04
 #: Fraction of a limb's vertices buried beyond which the limb is lost.
@@ -83,7 +83,7 @@ UNEXPLAINED_DISTANCE = 0.08
 SILHOUETTE_DISTANCE = 0.03
 #: Fraction of all observed points, unexplained and nearest to one limb, beyond which that
 #: limb is lost.
-UNEXPLAINED_LOST = 0.02
+UNEXPLAINED_LOST = 0.1
 
 
 def limb_labels(template: Template) -> np.ndarray:

@@ -7,11 +7,17 @@ initialisation (:mod:`meshmocap.estimate.init`):
 
 1. the tracked mesh's pose in the articulated model (:func:`~meshmocap.estimate.fit.
    pose_of_vertices`, warm-started from the last frame's);
-2. each limb re-seeded over the sphere, straight and bent, and fitted with only that limb
-   free (:func:`~meshmocap.estimate.init.limb_candidates`); a limb is replaced when that
-   lowers the fit score plus the silhouette mismatch by more than :data:`MIN_GAIN`;
-3. when the body itself is outside the observations (the torso lost), the whole global
-   search (:func:`~meshmocap.estimate.init.initial_pose`), kept if it scores better;
+2. each limb lost for what the observations show (outside them, buried, or leaving
+   observations unexplained) re-fitted from the pose library's hypotheses for that limb
+   (:func:`~meshmocap.estimate.init.library_limb_candidates`: what people do with it,
+   scored on this frame), each fitted with only that limb free, and the limb as tracked
+   fitted alike; each is ranked by the fit score plus the silhouette mismatch plus how far
+   the limb stands from where its recent motion puts it (:meth:`Recovery.motion_cost`: a
+   fast limb moving on as it moved is kept), and a hypothesis replaces the limb only when
+   it ranks better by more than :data:`MIN_GAIN`;
+3. when the body itself is outside the observations (the torso more than
+   :data:`TORSO_OUT` outside: the performer leaving the cameras' view, a truncated hull),
+   nothing (a whole-body search re-seated there ran 1.2 m off on a run leaving the view);
 4. a short fit of the whole body from the result, accepted only if it leaves fewer limbs
    lost (or as many, with less unexplained).
 
@@ -28,16 +34,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.estimate.fit import PoseFit, PoseFitter, pose_of_vertices
 from meshmocap.estimate.init import (
     LIMBS,
-    initial_pose,
-    limb_candidates,
+    library_limb_candidates,
+    library_poses,
+    limb_joint_indices,
     ranking_key,
     subsample_points,
 )
 from meshmocap.estimate.observe import observed
+from meshmocap.estimate.pose_search import FrameScorer
 from meshmocap.estimate.quality import (
     BURIED_LOST,
     LIMB_PARTS,
@@ -53,8 +62,18 @@ from meshmocap.estimate.quality import (
 
 __all__ = ["COOLDOWN", "JUMP", "MIN_GAIN", "Recovery", "Reinit"]
 
-#: Least decrease of the ranking key (metres of fit score) that makes a re-seeded limb win.
-MIN_GAIN = 0.001
+#: Least decrease of the ranking key (metres of fit score, with the motion cost) that
+#: makes a re-seeded limb win: nothing is re-seated on weak evidence.
+MIN_GAIN = 0.003
+#: Fraction of the torso outside the observations beyond which nothing is re-seated.
+TORSO_OUT = 0.25
+#: Library hypotheses fitted per lost limb.
+LIMB_HYPOTHESES = 4
+#: Metres of ranking key per metre (RMS over the limb's joints) that a re-seeded limb
+#: stands from where its recent motion (constant velocity over the last two frames) puts
+#: it, counted up to :data:`MOTION_REACH`: a fast limb that moves on as it moved is kept.
+MOTION_WEIGHT = 0.05
+MOTION_REACH = 0.3
 #: Frames only flagged after a search that found no better pose.
 COOLDOWN = 3
 #: Metres a tracked limb must stand from where it was last seen (mean over its vertices)
@@ -90,10 +109,23 @@ class Recovery:
         The tracking template.
     R, root : (J, 3, 3) and (3,) float64
         The first frame's pose (the warm start of the pose estimates).
+    exclude_trials : tuple of str
+        Pose-library trials the limb hypotheses leave out
+        (:func:`~meshmocap.estimate.init.library_poses`).
     """
 
-    def __init__(self, template: Template, R: np.ndarray, root: np.ndarray):
+    def __init__(
+        self,
+        template: Template,
+        R: np.ndarray,
+        root: np.ndarray,
+        *,
+        exclude_trials: tuple[str, ...] = (),
+    ):
         self.template = template
+        self.exclude_trials = tuple(exclude_trials)
+        #: joint positions (J, 3) of the poses of the last frames assessed, oldest first
+        self.history: list[np.ndarray] = []
         self.labels = limb_labels(template)
         self.R, self.root = np.array(R, dtype=np.float64), np.array(root, dtype=np.float64)
         self.cooldown = 0
@@ -151,6 +183,7 @@ class Recovery:
             elif v < UNSEEN_LOST / 2 or moved[n] < JUMP / 2:
                 self.missing.discard(n)
         lost = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
+        self.history = [*self.history[-2:], forward_kinematics(self.template.skeleton, R, root)[1]]
         for n, idx in self.limb_joints.items():
             if n not in lost:
                 self.held[idx] = R[idx]
@@ -176,6 +209,18 @@ class Recovery:
         )
         return {name: float(mean[k]) for k, name in enumerate(LIMB_PARTS)}
 
+    def motion_cost(self, R: np.ndarray, root: np.ndarray, limb: str) -> float:
+        """Ranking-key metres for ``limb`` of the pose ``(R, root)`` standing away from
+        where its recent motion puts it (:data:`MOTION_WEIGHT`; 0 without two earlier
+        frames)."""
+        if len(self.history) < 3:
+            return 0.0
+        idx = self.limb_joints[limb]
+        a, b = self.history[-3][idx], self.history[-2][idx]
+        P = forward_kinematics(self.template.skeleton, R, root)[1][idx]
+        rms = float(np.sqrt(np.mean(np.sum((P - (2 * b - a)) ** 2, axis=1))))
+        return MOTION_WEIGHT * min(rms, MOTION_REACH)
+
     def track_pose(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The articulated pose of the tracked vertices ``V``, warm-started from the last."""
         self.R, self.root = pose_of_vertices(self.template, V, self.R, self.root)
@@ -197,39 +242,38 @@ class Recovery:
         key = ranking_key(t, cameras, masks)
         best = PoseFit(R, root, fitter.score(R, root))
         k_best, changed = key(best), []
-        if quality.outside.get("torso", 0.0) > 0.25:  # the body itself is lost: search anew
-            res = initial_pose(
-                t,
-                *obs.points,
-                cameras=cameras,
-                masks=masks,
-                field=field,
-                hull=obs.hull,
-                seed=int(frame.index),
+        if quality.outside.get("torso", 0.0) > TORSO_OUT:
+            # the body itself stands outside the observations (leaving the cameras' view,
+            # a truncated hull): a whole-body search there re-seated runs far off, so
+            # nothing is re-seated on such evidence
+            self.cooldown = COOLDOWN
+            return None
+        P = obs.points[0]
+        h = obs.hull
+        scorer = FrameScorer(h.occupancy, h.origin, h.voxel_size, P, cameras=cameras, masks=masks)
+        poses = library_poses(t, exclude_trials=self.exclude_trials)
+        for limb in [n for n in LIMBS if n in _evidence(quality)]:
+            idx = limb_joint_indices(t, limb)
+            starts = library_limb_candidates(
+                t, poses, scorer, best.R, best.root, limb, n_best=LIMB_HYPOTHESES
             )
-            cand = PoseFit(res.R, res.root, res.score)
-            if key(cand) < k_best:
-                best, k_best, changed = cand, key(cand), ["body"]
-        else:
-            gains = []
-            for limb in LIMBS:
-                cands = limb_candidates(
-                    fitter, best.R, best.root, limb, directions=8, iterations=8
-                )[:4]
-                if cands:
-                    c = min(cands, key=key)
-                    gains.append((k_best - key(c), limb, c))
-            for gain, limb, c in sorted(gains, key=lambda g: -g[0]):
-                if gain <= MIN_GAIN:
-                    break
-                if changed:  # re-fit this limb on the pose the first change left
-                    cands = limb_candidates(
-                        fitter, best.R, best.root, limb, directions=8, iterations=8
-                    )[:4]
-                    c = min(cands, key=key)
-                if k_best - key(c) > MIN_GAIN:
-                    best, k_best = c, key(c)
-                    changed.append(limb)
+            fits = [
+                fitter.fit(
+                    c.R,
+                    best.root,
+                    iterations=8,
+                    max_distance=(0.2, 0.05),
+                    joints=idx,
+                    move_root=False,
+                    lambda_pose=0.0,
+                )
+                for c in [best, *starts]  # the limb as tracked, fitted alike: fair
+            ]
+            cost = [key(f) + self.motion_cost(f.R, f.root, limb) for f in fits]
+            i = int(np.argmin(cost))
+            if i > 0 and cost[0] - cost[i] > MIN_GAIN:
+                best, k_best = fits[i], key(fits[i])
+                changed.append(limb)
         if not changed:
             self.cooldown = COOLDOWN
             return None

@@ -191,7 +191,8 @@ def track_sequence(
             recovery = None
             if recover:
                 pose = _last_pose(out, [i for i in indices if i in done and i <= last])
-                recovery = Recovery(body.light, *pose)
+                excl = (init_options or {}).get("exclude_trials", ())
+                recovery = Recovery(body.light, *pose, exclude_trials=excl)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
                 index = int(capture.indices[k])
