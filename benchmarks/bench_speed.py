@@ -22,9 +22,17 @@ the crane's true vertices (mm), over frames 2–40, and over the frames nricp re
 ratio is nricp's median seconds per frame over the method's (driver's time: read + step).
 trimesh's closest-point queries need ``rtree`` (``pip install rtree``; skipped without).
 
+**Part 3, light body** (``--light``): the driver's path (``track_sequence``) on a
+``--frames``-frame walk of a 12k-vertex body (``--light-template``, default ``neutral``:
+the bundled topology, as an estimated body has), first pose from the truth, each method
+tracking the template itself (``light=None``) and its 5,000-vertex light copy
+(:mod:`meshmocap.body.light`, the default), alternating, ``--repeats`` times: median
+seconds per frame of the driver (frames 1…), mean joint and vertex error (mm, the full
+template's vertices against the truth's), and the ratios.
+
 Wall times on a shared machine are noisy: the load average is printed with every table.
 Run: ``python benchmarks/bench_speed.py [--frames 30] [--repeats 3] [--templates ...]
-[--methods ...] [--no-crane] [--nricp-every 1] [--work /tmp/meshmocap-speed]``.
+[--methods ...] [--no-crane] [--nricp-every 1] [--light] [--work /tmp/meshmocap-speed]``.
 """
 
 from __future__ import annotations
@@ -163,6 +171,54 @@ def crane_table(args, work: Path) -> None:
         )
 
 
+def light_table(args, work: Path) -> None:
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
+
+    name = args.light_template
+    template = load_template(name)
+    capture = make_capture(
+        parse_capture("walk", frames=args.frames), work, template=name, show_progress=False
+    )
+    truth_J = np.stack([f.truth.joints for f in capture])
+    truth_V = np.stack([f.truth.vertices for f in capture])
+    print(
+        f"\n### light body: {name} ({template.n_vertices} v) tracked as it is and on "
+        f"{tracking_body(template).light.n_vertices} v; {args.frames}-frame walk, humaneva4, "
+        f"init truth; {args.repeats} runs each, alternating; {_load()}"
+    )
+    print(
+        "| method | s/frame full | s/frame light | ratio | joints mm full → light "
+        "| vertices mm full → light |\n|---|---:|---:|---:|---:|---:|"
+    )
+    for method in args.methods:
+        res: dict = {None: [], LIGHT_VERTICES: []}
+        for _ in range(args.repeats):
+            for light in (None, LIGHT_VERTICES):
+                body = tracking_body(template, n_vertices=light)
+                out = work / "tracks" / f"light-{method}-{light}"
+                track = track_sequence(
+                    make_tracker(method, template=body.light),
+                    template,
+                    capture,
+                    out,
+                    resume=False,
+                    show_progress=False,
+                    init="truth",
+                    recover=False,
+                    light=light,
+                )
+                ej = 1000 * np.linalg.norm(track.joints - truth_J, axis=2).mean()
+                ev = 1000 * np.linalg.norm(track.vertices - truth_V, axis=2).mean()
+                res[light].append((float(np.median(track.seconds[1:])), ej, ev))
+        (sf, jf, vf), (sl, jl, vl) = (np.median(np.array(res[k]), axis=0) for k in res)
+        print(
+            f"| {method} | {sf:.3f} | {sl:.3f} | {sl / sf:.2f} | {jf:.1f} → {jl:.1f} "
+            f"| {vf:.1f} → {vl:.1f} |",
+            flush=True,
+        )
+    print(f"(after: {_load()})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=30)
@@ -171,10 +227,15 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--no-stages", action="store_true", help="only the crane table")
     ap.add_argument("--no-crane", action="store_true", help="only the stage tables")
+    ap.add_argument("--light", action="store_true", help="only the light-body table")
+    ap.add_argument("--light-template", default="neutral", help="the light table's body")
     ap.add_argument("--nricp-every", type=int, default=1, help="nricp on every k-th frame")
     ap.add_argument("--work", default="/tmp/meshmocap-speed")
     args = ap.parse_args()
     work = Path(args.work)
+    if args.light:
+        light_table(args, work)
+        return
     if not args.no_stages:
         stages_table(args, work)
     if args.no_crane:

@@ -37,11 +37,13 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.apps.bench_captures import DEGRADED
 from meshmocap.body.template import load_template
+from meshmocap.errors import FitError
 from meshmocap.geometry.proximity import point_to_surface
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.patch.solver import System, add_bone, add_point_terms, add_rigidity
-from meshmocap.trackers.patch.tracker import BONE_SCALE, RIGIDITY_SCALE, PatchOptions, PatchTracker
+from meshmocap.trackers.patch.energy import Iterate
+from meshmocap.trackers.patch.solver import System
+from meshmocap.trackers.patch.tracker import PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -71,33 +73,18 @@ def capture_of(args):
 
 
 def forces(tr: PatchTracker, frame, part_patches: np.ndarray, lag: np.ndarray) -> dict:
-    """Each term's pull on the patches ``part_patches`` along the unit vector ``lag``."""
-    o, m = tr.opts, tr.model
-    fit = tr.last_fit
-    patch, v, w, y = fit["assign"]
-    out = {}
-
-    def pull(sys: System) -> float:
+    """Each term's pull on the patches ``part_patches`` along the unit vector ``lag``
+    (mm of the data term's stiffness), at the last iteration's correspondences."""
+    m, fit = tr.model, tr.last_fit
+    it = Iterate(fit["frame"], tr.R, tr.c, tr.X, *tr.own_vertices(), fit["assign"])
+    out, stiff = {}, 1e-12
+    for term in tr.terms:
+        sys = System.empty(tr.pattern)
+        term.add(sys, it)
         g = sys.g[: 6 * m.P].reshape(m.P, 6)[part_patches, 3:].sum(axis=0)
-        return float(-g @ lag)
-
-    sys = System.empty(tr.pattern)
-    q = np.einsum("nij,nj->ni", tr.R[patch], m.V0[v] - m.centres0[patch])
-    add_point_terms(sys, patch, q, q + tr.c[patch] - y, w, o.lambda_data / max(w.sum(), 1e-12))
-    # stiffness of the data term on these patches: Σ of the translation diagonal
-    stiff = max(float(np.trace(sys.D[part_patches, 3:, 3:].sum(axis=0)) / 3), 1e-12)
-    out["data"] = pull(sys)
-    sys = System.empty(tr.pattern)
-    if o.lambda_reverse > 0:
-        Vc, Nc = tr.own_vertices()
-        tr._add_reverse(sys, KDTree(fit["Y"]), fit["Y"], fit["NY"], Vc, Nc, frame.cameras)
-    out["reverse"] = pull(sys)
-    sys = System.empty(tr.pattern)
-    add_rigidity(sys, m, tr.moments, tr.R, tr.c, o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum())
-    out["rigidity"] = pull(sys)
-    sys = System.empty(tr.pattern)
-    add_bone(sys, m, tr.R, tr.c, tr.X, o.lambda_bone * BONE_SCALE / m.bone_w.sum())
-    out["bone"] = pull(sys)
+        out[term.name] = float(-g @ lag)
+        if term.name == "data":  # stiffness: Σ of the translation diagonal on these patches
+            stiff = max(float(np.trace(sys.D[part_patches, 3:, 3:].sum(axis=0)) / 3), 1e-12)
     return {k: 1000 * v / stiff for k, v in out.items()}
 
 
@@ -161,7 +148,7 @@ def main() -> None:
         Y0, _, _ = tr.observations(fr)
         try:
             res = tr.step(fr)
-        except FloatingPointError as exc:
+        except FitError as exc:
             print(f"frame {fr.index}: {exc}")
             continue
         truth = fr.truth
@@ -177,7 +164,8 @@ def main() -> None:
         kept = part.keep if part is not None else np.ones(len(Y0), bool)
         lab_ok = part.labels == cls_all if part is not None else np.zeros(len(Y0), bool)
         # E-step against the truth
-        patch, _, w, y = tr.last_fit["assign"]
+        k = tr.last_fit["assign"]
+        patch, w, y = k.patch, k.weight, k.point
         dy, _ = point_to_surface(y, Vt, t.F)
         _, ny = KDTree(Vt).query(y, k=1)
         ycls_true = m.vertex_class[ny.astype(np.int64)]
@@ -204,17 +192,8 @@ def main() -> None:
             "w_wrong_part": float(w[wrong].sum() / wsum),
             "surface_mm": 1000 * float(np.mean(np.linalg.norm(V_out - Vt, axis=1))),
         }
-        o = tr.opts
-        en = res.energies
-        row.update(
-            {
-                "E_data": o.lambda_data * en["data"],
-                "E_rev": o.lambda_reverse * en["reverse"],
-                "E_rig": o.lambda_rigid * RIGIDITY_SCALE * en["rigidity"],
-                "E_bone": o.lambda_bone * BONE_SCALE * en["bone"],
-                "E_len": o.lambda_length * en["length"],
-            }
-        )
+        # each term's share of the total: coefficient × value, over the tracker's terms
+        row.update({f"E_{t.name}": t.coefficient * res.energies[t.name] for t in tr.terms})
         if len(cands):
             part_patches = cands
             pv = np.isin(m.labels, part_patches)

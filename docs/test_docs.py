@@ -17,6 +17,14 @@ check_output, sessions = docs_conftest.check_output, docs_conftest.sessions
 
 from api_modules import index_rst, public_modules  # noqa: E402
 
+# docs/conftest.py by its path: ``conftest`` on sys.path is the test suite's (tests/ is on
+# pytest's pythonpath for the shared helpers)
+_spec = importlib.util.spec_from_file_location("docs_conftest", DOCS / "conftest.py")
+_docs_conftest = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_docs_conftest)
+check_output = _docs_conftest.check_output
+sessions = _docs_conftest.sessions
+
 
 def test_api_index_lists_every_public_module():
     text = (DOCS / "api" / "index.rst").read_text()

@@ -246,13 +246,14 @@ def _tar(members: dict[str, bytes], gz: bool) -> bytes:
 
 
 def _tiny_bvh() -> bytes:
-    from test_bvh import TINY
+    from toys import TINY_BVH as TINY
 
     return TINY.encode()
 
 
 def _tiny_asf_amc() -> tuple[bytes, bytes]:
-    from test_asf_amc import AMC, ASF
+    from toys import TINY_AMC as AMC
+    from toys import TINY_ASF as ASF
 
     return ASF.encode(), AMC.encode()
 

@@ -162,3 +162,111 @@ def toy_template() -> Template:
     src = [0, 13, 16, 18, 19, 20, 25, 26, 27, 2, 3, 4, 7, 8, 9]
     ev = EvalSkeleton(EVAL_NAMES, EVAL_PARENTS, sk.rest_positions[src], np.eye(31)[src])
     return Template("toy", V, np.concatenate(Fs), sk, W, labels, ev)
+
+
+#: A tiny BVH file (two joints, three frames), shared by the BVH tests and the fuzzer.
+TINY_BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 1 2 3
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+  JOINT Leg
+  {
+    OFFSET 5 -10 0
+    CHANNELS 3 Xrotation Yrotation Zrotation
+    End Site
+    {
+      OFFSET 0 -40 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.04
+0 0 0 0 0 0 0 0 0 0 0 0
+1 2 3 90 0 0 0 0 0 0 0 45
+"""
+
+
+#: A tiny ASF skeleton and AMC motion, shared by the ASF/AMC tests and the fuzzer.
+TINY_ASF = """# a tiny skeleton
+:version 1.10
+:name tiny
+:units
+  mass 1.0
+  length 1.0
+  angle deg
+:documentation
+  made up for the tests
+:root
+   order TX TY TZ RX RY RZ
+   axis XYZ
+   position 0 0 0
+   orientation 0 0 0
+:bonedata
+  begin
+     id 1
+     name spine
+     direction 0 1 0
+     length 10
+     axis 0 0 0 XYZ
+    dof rx ry rz
+    limits (-10 10)
+           (-10 10)
+           (-10 10)
+  end
+  begin
+     id 2
+     name arm
+     direction 1 0 0
+     length 5
+     axis 0 0 90 XYZ
+    dof rx
+    limits (-180 180)
+  end
+  begin
+     id 3
+     name hip
+     direction 0 -1 0
+     length 4
+     axis 0 0 0 XYZ
+  end
+:hierarchy
+  begin
+    root spine hip
+    spine arm
+  end
+"""
+
+TINY_AMC = """#!OML:ASF tiny.asf
+# a second comment line, as in CMU 01_01.amc
+:FULLY-SPECIFIED
+:DEGREES
+1
+root 1 2 3 0 0 0
+spine 0 0 0
+arm 0
+2
+arm 90
+root 1 2 3 0 0 90
+# a comment between bone lines
+spine 0 0 0
+"""
+
+
+def small_walk_capture(out, frames: int):
+    """A synthetic capture of ``frames`` frames written to ``out`` (the neutral_5k walk at
+    30 fps, hulls carved at 2 cm): the smallest capture a CLI test can track."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=frames, voxel_size=0.02)
+    return synthesize(out, spec, show_progress=False)

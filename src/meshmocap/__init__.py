@@ -1,15 +1,13 @@
 """meshmocap: markerless human performance capture from 3D mesh sequences.
 
 Units are metres, seconds and radians; the world frame is right-handed with Z up.
+Importing the package changes no process-wide setting (the BLAS thread limit is applied by
+the commands and the tracking driver, :mod:`meshmocap._threads`).
 """
 
 from __future__ import annotations
 
-from meshmocap._threads import limit_blas_threads
-
 __version__ = "0.1.0"
-
-limit_blas_threads()
 
 #: The Python API (:mod:`meshmocap.api`), loaded on first use so that ``import meshmocap``
 #: stays light: ``meshmocap.open_capture``, ``meshmocap.track``, ``meshmocap.evaluate``...

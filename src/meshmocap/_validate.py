@@ -44,3 +44,17 @@ def frame_slice(text: str, *, what: str = "frames") -> slice:
     if values[0] is not None and values[1] is not None and values[1] <= values[0]:
         raise InputError(f"{what}: expected START < STOP, found {text!r} (an empty range)")
     return slice(*values)
+
+
+def frame_positions(indices: Sequence[int], frames: slice) -> list[int]:
+    """Positions in a capture (``indices``: its frame numbers, in order) of the frames whose
+    NUMBERS the range ``frames`` (:func:`frame_slice`) selects: ``3:9`` is frames 3 to 8
+    wherever the capture starts, and a frame number the capture lacks is skipped.
+    Every command reads ``--frames`` this way."""
+    start = 0 if frames.start is None else frames.start
+    step = 1 if frames.step is None else frames.step
+    return [
+        k
+        for k, n in enumerate(indices)
+        if n >= start and (frames.stop is None or n < frames.stop) and (n - start) % step == 0
+    ]

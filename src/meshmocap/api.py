@@ -30,6 +30,7 @@ from meshmocap.analysis.evaluate import Evaluation, summary
 from meshmocap.analysis.evaluate import evaluate as evaluate_track
 from meshmocap.analysis.gait import Gait, track_gait
 from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
+from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.axes import Axes, open_oriented
@@ -43,8 +44,15 @@ from meshmocap.io.capture import (
     write_truth,
     write_truth_faces,
 )
+from meshmocap.io.guards import check_track_capture
 from meshmocap.io.meshes import frame_files, write_mesh
-from meshmocap.io.results import Track, read_track, tracked_template
+from meshmocap.io.results import (
+    Track,
+    input_meta,
+    open_tracked_capture,
+    read_track,
+    tracked_template,
+)
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
@@ -69,6 +77,7 @@ def capture_and_axes(
     *,
     up: Literal["auto", "z", "y"] = "auto",
     units: Literal["auto", "m", "cm", "mm"] = "auto",
+    fps: float | None = None,
 ) -> tuple[Capture | SequenceCapture, Axes | None]:
     """:func:`open_capture`, and the up axis and units it read from a mesh sequence's first
     frame (None for a capture folder, which is metres and Z up by its format)."""
@@ -76,7 +85,7 @@ def capture_and_axes(
     if not sources:
         raise InputError("open_capture: expected a capture folder or mesh files, found none")
     if len(sources) == 1:
-        return open_oriented(sources[0], up=up, units=units)
+        return open_oriented(sources[0], up=up, units=units, fps=fps)
     folders = [
         s for s in sources if (Path(s) / "capture.json").is_file() or (Path(s) / "hulls").is_dir()
     ]
@@ -85,7 +94,7 @@ def capture_and_axes(
             f"track: give one capture folder, or several mesh files and folders; "
             f"{folders[0]} is a capture folder"
         )
-    return open_oriented(frame_files(sources), up=up, units=units)
+    return open_oriented(frame_files(sources), up=up, units=units, fps=fps)
 
 
 def open_capture(
@@ -93,6 +102,7 @@ def open_capture(
     *,
     up: Literal["auto", "z", "y"] = "auto",
     units: Literal["auto", "m", "cm", "mm"] = "auto",
+    fps: float | None = None,
 ) -> Capture | SequenceCapture:
     """Open what ``meshmocap track`` tracks, in metres with Z up.
 
@@ -106,13 +116,15 @@ def open_capture(
         Mesh files: their up axis (default: detected from the first frame).
     units : {"auto", "m", "cm", "mm"}
         Mesh files: their length unit (default: detected from the body's size).
+    fps : float, optional
+        Mesh files: their frame rate (default: 30, recorded as assumed).
 
     Returns
     -------
     Capture or SequenceCapture
         ``len(capture)`` frames; ``capture[k]`` reads frame ``k`` when asked.
     """
-    return capture_and_axes(source, up=up, units=units)[0]
+    return capture_and_axes(source, up=up, units=units, fps=fps)[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,10 +277,14 @@ def track(
     say(choice.note)
     if method in MANIFOLD_METHODS and manifold is None:
         say(
-            f"{method}: no --manifold given: learning a 2-D pose manifold from the "
-            f"procedural walk and jog on {choice.template.name!r}"
+            f"{method}: no --manifold given: the default pose manifold of the tracked body "
+            "(learned from the bundled CMU pose library at first use, then cached)"
         )
-    tracker = make_tracker(method, manifold=manifold, template=choice.template, **options)
+    # tracked on a light copy of the template, unless a manifold learned for the template
+    # itself is given (meshmocap.body.light)
+    light = None if manifold is not None else LIGHT_VERTICES
+    tracked = tracking_body(choice.template, n_vertices=light).light
+    tracker = make_tracker(method, manifold=manifold, template=tracked, **options)
     t0 = time.perf_counter()
     data = track_sequence(
         tracker,
@@ -282,7 +298,8 @@ def track(
         reseat=reseat,
         vertices=vertices,
         show_progress=show_progress,
-        template_info=choice.info,
+        template_info={**choice.info, **input_meta(capture)},
+        light=light,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 
@@ -310,32 +327,41 @@ def evaluate(
     *,
     silhouettes: bool = True,
     surface_frames: int = 8,
+    force: bool = False,
 ) -> Evaluation:
     """Score ``track`` against ``capture``'s ground truth, as ``meshmocap eval`` does.
 
     Parameters
     ----------
-    capture : Capture, or a capture folder
+    capture : Capture, or a capture folder or the mesh files tracked
+        Mesh files are read in the up axis, units and frame rate the track records
+        (:func:`~meshmocap.io.results.open_tracked_capture`).
     track : TrackResult, Track, or a track folder
     silhouettes : bool
         Also re-project the tracked mesh into every camera (Table II of the patch paper).
     surface_frames : int
         Frames on which surface distances are sampled (0: none).
+    force : bool
+        Score against a capture other than the one the track names (refused otherwise,
+        :class:`~meshmocap.errors.CaptureMismatchError`).
 
     Returns
     -------
     Evaluation
         Joint errors in millimetres (``.joints.overall.mean``...), bone lengths, silhouette
-        and surface errors; ``str()`` of it is the table ``meshmocap eval`` prints. Absent
-        parts (no truth, no cameras) are None; :func:`summary` gives the table ``meshmocap
-        eval`` prints.
+        and surface errors, per-vertex errors for a mesh sequence of fixed connectivity.
+        Absent parts (no truth, no cameras) are None; :func:`summary` gives the table
+        ``meshmocap eval`` prints.
     """
-    if not isinstance(capture, Capture | SequenceCapture):
-        capture = open_capture(capture)
     if isinstance(track, TrackResult):
-        track = track.data
-    elif not isinstance(track, Track):
-        track = read_track(track)
+        label, track = str(track.path), track.data
+    elif isinstance(track, Track):
+        label = "the track"
+    else:
+        label, track = str(track), read_track(track)
+    if not isinstance(capture, Capture | SequenceCapture):
+        capture = open_tracked_capture(track.meta, capture)
+    check_track_capture(label, track.meta, capture, force=force, command="eval")
     return evaluate_track(track, capture, silhouettes=silhouettes, surface_frames=surface_frames)
 
 

@@ -37,6 +37,17 @@ class FolderBusyError(MeshmocapError, BlockingIOError):
     """Another process is writing into the folder (its lock is held)."""
 
 
+class FitError(MeshmocapError, RuntimeError):
+    """A frame (or a fit) could not be fitted: too few observed points, no correspondence,
+    singular normal equations, a non-finite result. The tracking driver flags the frame
+    ``failed`` and coasts across it.
+
+    A RuntimeError rather than an ArithmeticError: most causes are not arithmetic (an empty
+    or tiny observation, no compatible pair); the computation simply has no answer for this
+    input at run time, and code catching ``ValueError`` for user mistakes must not catch it.
+    """
+
+
 class MeshmocapWarning(UserWarning):
     """Base class of the warnings meshmocap emits."""
 
@@ -52,3 +63,16 @@ class MissingFrameWarning(MeshmocapWarning):
 def where(path: object, line: int | None = None) -> str:
     """Return ``"path"`` or ``"path:line"`` for error messages."""
     return f"{path}:{line}" if line is not None else f"{path}"
+
+
+class OutputPathError(MeshmocapError, OSError):
+    """An output path cannot be written: a read-only place, a file standing where a folder
+    should be, a folder where a file is expected."""
+
+
+class ProtectedPathError(MeshmocapError, PermissionError):
+    """A command other than ``track`` was asked to write a track folder's own files."""
+
+
+class CaptureMismatchError(MeshmocapError, ValueError):
+    """A track is scored against a capture it was not made from."""

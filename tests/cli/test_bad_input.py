@@ -18,15 +18,18 @@ from meshmocap.cli import main
 # ----------------------------------------------------------------------------- fixtures
 
 
-@pytest.fixture(scope="module")
-def cap(tmp_path_factory) -> Path:
-    """A 3-frame synthetic capture (neutral_5k walk, 2 cm voxels)."""
+def _synth(root: Path, motion: str) -> Path:
+    """A 3-frame synthetic capture of ``motion`` (neutral_5k, 30 fps, 2 cm voxels)."""
     from meshmocap.studio.synth import SynthSpec, synthesize
 
-    out = tmp_path_factory.mktemp("badcli") / "cap"
-    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=3, voxel_size=0.02)
-    synthesize(out, spec, show_progress=False)
-    return out
+    spec = SynthSpec(motion=motion, template="neutral_5k", fps=30.0, stop=3, voxel_size=0.02)
+    return synthesize(root / motion, spec, show_progress=False).path
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory) -> Path:
+    """A 3-frame synthetic walk."""
+    return _synth(tmp_path_factory.mktemp("badcli"), "walk")
 
 
 def _bytes(path: Path, data: bytes) -> str:
@@ -258,7 +261,11 @@ RANGES: list[tuple[list[str], str]] = [
     ),
     (
         ["track", C, "--out", "TMP/t", "--n-patches", "0"],
-        "argument --n-patches: expected an integer from 1",
+        "argument --n-patches: expected an integer from 16",
+    ),
+    (
+        ["track", C, "--out", "TMP/t", "--n-patches", "1"],
+        "argument --n-patches: expected an integer from 16 to 10000, found '1'",
     ),
     (
         ["track", C, "--out", "TMP/t", "--keep-fraction", "0"],
@@ -376,7 +383,7 @@ INPUTS: list[Case] = [
     ),
     (
         "track_patches_icp",
-        _args("track", C, "--method", "articulated_icp", "--n-patches", "5", "--out", "TMP/t"),
+        _args("track", C, "--method", "articulated_icp", "--n-patches", "50", "--out", "TMP/t"),
         "track: --n-patches is not an option of --method articulated_icp (it is of patch, "
         "patch_svc, patch_noclf, ",
     ),
@@ -679,6 +686,17 @@ INPUTS: list[Case] = [
         "batch: --workers must be an integer ≥ 1, found 0",
     ),
     (
+        "batch_manifest_extra_cells",
+        lambda tmp, cap: [
+            "batch",
+            _bytes(tmp / "m.csv", f"capture,method\n{cap},patch,oops\n".encode()),
+            "--out",
+            str(tmp / "b"),
+            "--serial",
+        ],
+        "batch: TMP/m.csv:2: expected 2 cells (capture, method), found 3",
+    ),
+    (
         "transfer_no_track",
         _args("transfer", "TMP/none", "heavy_male", "--out", "TMP/x"),
         "has no track.json",
@@ -714,3 +732,201 @@ def _one_error_line(capsys, message: str, tmp: Path) -> None:
     assert err.count("\n") == 1 and err.startswith("meshmocap: error: "), err
     assert "Traceback" not in err
     assert message.replace("TMP", str(tmp)) in err, err
+
+
+# ------------------------------------------------- output places, track folders, captures
+
+
+@pytest.fixture(scope="module")
+def trk(cap, tmp_path_factory) -> Path:
+    """A 2-frame track of ``cap`` (articulated ICP, one iteration)."""
+    out = tmp_path_factory.mktemp("badcli_track") / "t"
+    argv = ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1"]
+    assert main([*argv, "--frames", "0:2", "--template", "neutral_5k", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def jog(tmp_path_factory) -> Path:
+    """Another take: a 3-frame jog on the same rig."""
+    return _synth(tmp_path_factory.mktemp("badcli_jog"), "jog")
+
+
+T = "TRK"  # replaced by the track folder
+
+#: Every writing command with an ``--out`` it cannot write: a read-only place (/proc takes
+#: no new file, even for root), a file standing where a folder of the path should be, a
+#: folder where a file is expected or a file where a folder is.
+_WRITERS: list[tuple[str, list[str], str]] = [
+    ("track", ["track", C, "--method", "articulated_icp", "--out", "OUT"], "folder"),
+    ("synth", ["synth", "OUT", "--template", "neutral_5k"], "folder"),
+    ("eval", ["eval", C, T, "--no-silhouettes", "--out", "OUT"], "folder"),
+    ("report", ["report", C, T, "--out", "OUT"], "file"),
+    *[
+        (f"export_{f}", ["export", T, "--format", f, "--out", "OUT"], "file")
+        for f in ("bvh", "c3d", "trc", "gltf", "glb", "csv")
+    ],
+]
+
+_PLACES = {
+    "read_only": ("/proc/meshmocap-out", "cannot write in /proc ("),
+    "file_as_parent": ("TMP/plain.txt/out", "TMP/plain.txt is a file, not a folder"),
+    "wrong_kind": (None, None),  # a folder for a file, a file for a folder
+}
+
+
+def _fill(argv: list[str], tmp: Path, cap: Path, trk: Path, out: str = "") -> list[str]:
+    """``argv`` with CAP, TRK (also inside a path), TMP and OUT filled in."""
+    return [
+        str(cap)
+        if a == C
+        else out
+        if a == "OUT"
+        else a.replace("TMP", str(tmp)).replace(T, str(trk))
+        for a in argv
+    ]
+
+
+@pytest.mark.parametrize("place", list(_PLACES))
+@pytest.mark.parametrize(("name", "argv", "kind"), _WRITERS, ids=[w[0] for w in _WRITERS])
+@pytest.mark.skipif(
+    not Path("/proc/self").is_dir(), reason="needs Linux /proc as a read-only place"
+)
+def test_an_out_that_cannot_be_written_is_refused_before_any_work(
+    tmp_path, cap, trk, capsys, name, argv, kind, place
+):
+    (tmp_path / "plain.txt").write_text("a file")
+    out, message = _PLACES[place]
+    flag = "OUT" if argv[0] == "synth" else "--out"
+    if place == "wrong_kind":
+        out = str(tmp_path) if kind == "file" else str(tmp_path / "plain.txt")
+        message = (
+            f"{flag} {out}: is a folder; expected a file name to write"
+            if kind == "file"
+            else f"{flag} {out}: is a file; expected a folder"
+        )
+    else:
+        out = out.replace("TMP", str(tmp_path))
+    capsys.readouterr()
+    assert main(_fill(argv, tmp_path, cap, trk, out)) == 2
+    _one_error_line(capsys, f"{argv[0]}: {flag} {out}: " + message.split(f"{out}: ")[-1], tmp_path)
+    assert (tmp_path / "plain.txt").read_text() == "a file"
+
+
+#: Writes into a track folder's own files, refused: (id, argv, expected message)
+PROTECTED: list[tuple[str, list[str], str]] = [
+    (
+        "export_over_track_json",
+        ["export", T, "--out", "TRK/track.json", "--format", "csv"],
+        "export: --out TRK/track.json: is a file of TRK, which only 'meshmocap track' writes",
+    ),
+    (
+        "export_into_frames",
+        ["export", T, "--out", "TRK/frames/00000.npz", "--format", "csv"],
+        "is a file of TRK, which only 'meshmocap track' writes",
+    ),
+    (
+        "export_over_faces",
+        ["export", T, "--out", "TRK/faces.npy", "--format", "csv"],
+        "is a file of TRK",
+    ),
+    ("synth_into_track", ["synth", "TRK", "--template", "neutral_5k"], "OUT TRK: is the track"),
+    ("eval_into_track", ["eval", C, T, "--out", "TRK"], "eval: --out TRK: is the track folder TRK"),
+    ("report_over_track", ["report", C, T, "--out", "TRK/track.json"], "is a file of TRK"),
+    ("subject_over_subject", ["subject", C, "--out", "TRK/subject.npz"], "is a file of TRK"),
+    (
+        "track_into_another_track",
+        ["track", C, "--out", "TRK/frames", "--method", "articulated_icp"],
+        "track: --out TRK/frames: is a file of TRK",
+    ),
+    (
+        "transfer_into_track",
+        ["transfer", T, "heavy_male", "--out", "TRK"],
+        "transfer: --out TRK: is the track folder TRK",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "argv", "message"), PROTECTED, ids=[p[0] for p in PROTECTED])
+def test_no_command_but_track_writes_a_track_folders_own_files(
+    tmp_path, cap, trk, capsys, name, argv, message
+):
+    before = {p: p.read_bytes() for p in sorted(trk.rglob("*")) if p.is_file()}
+    capsys.readouterr()
+    assert main(_fill(argv, tmp_path, cap, trk)) == 2
+    _one_error_line(capsys, message.replace("TRK", str(trk)), tmp_path)
+    assert {p: p.read_bytes() for p in sorted(trk.rglob("*")) if p.is_file()} == before
+
+
+def test_a_new_file_beside_a_tracks_own_files_is_written(tmp_path, trk, capsys):
+    out = trk / "walk.csv"
+    try:
+        assert main(["export", str(trk), "--out", str(out)]) == 0
+        assert main(["export", str(trk), "--out", str(out)]) == 0  # and overwritten
+        assert len(out.read_text().splitlines()) == 3
+    finally:
+        out.unlink(missing_ok=True)
+
+
+@pytest.mark.parametrize("command", ["eval", "report"])
+def test_a_capture_that_is_not_the_tracks_is_refused_unless_forced(
+    tmp_path, cap, trk, jog, capsys, command
+):
+    argv = [command, str(jog), str(trk), "--no-silhouettes", "--surface-frames", "0"]
+    if command == "report":
+        argv += ["--out", str(tmp_path / "r.html")]
+    capsys.readouterr()
+    assert main(argv) == 2
+    _one_error_line(
+        capsys,
+        f"{command}: track {trk} was made from capture {cap}, expected it or a copy, found "
+        f"{jog} (its frames differ from those of {cap}); pass --force to score it anyway",
+        tmp_path,
+    )
+    assert main([*argv, "--force"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f"meshmocap: warning: {command}: track {trk} was made from capture")
+    assert "scored anyway (--force)" in err and "Traceback" not in err
+
+
+def test_a_copy_of_the_tracks_capture_is_accepted_and_a_moved_one_needs_force(
+    tmp_path, cap, trk, capsys
+):
+    import json
+
+    copy = tmp_path / "copy"
+    shutil.copytree(cap, copy)
+    assert main(["eval", str(copy), str(trk), "--no-silhouettes", "--surface-frames", "0"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    moved = tmp_path / "t"
+    shutil.copytree(trk, moved)
+    meta = json.loads((moved / "track.json").read_text())
+    meta["capture"] = str(tmp_path / "gone")  # the capture folder was moved since
+    (moved / "track.json").write_text(json.dumps(meta))
+    assert main(["eval", str(copy), str(moved), "--no-silhouettes"]) == 2
+    _one_error_line(capsys, "TMP/gone no longer exists, so the two cannot be compared", tmp_path)
+
+
+def test_os_and_memory_errors_while_working_end_in_one_line(tmp_path, trk, capsys, monkeypatch):
+    import errno
+
+    import meshmocap.apps.export as export
+
+    def full(path, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(export, "write_trc", full)
+    assert main(["export", str(trk), "--out", str(tmp_path / "x.trc")]) == 1
+    _one_error_line(capsys, "export: TMP/x.trc: No space left on device", tmp_path)
+
+    def big(*args, **kwargs):
+        raise MemoryError("Unable to allocate 4.9 GiB for an array with shape (2600000, 250)")
+
+    monkeypatch.setattr(export, "write_joints_csv", big)
+    assert main(["export", str(trk), "--out", str(tmp_path / "x.csv")]) == 1
+    _one_error_line(
+        capsys,
+        f"export: out of memory on {trk} (Unable to allocate 4.9 GiB for an array with shape "
+        "(2600000, 250)); try a smaller input or a machine with more memory",
+        tmp_path,
+    )

@@ -127,3 +127,23 @@ def test_a_closed_pipe_ends_quietly(monkeypatch, tmp_path):
         assert main(["templates"]) == 0  # BrokenPipeError would propagate otherwise
     finally:
         os.close(sink)
+
+
+def test_frames_are_frame_numbers_and_restart_is_one_flag_everywhere(tmp_path, capsys):
+    """A capture of frames 4..9: ``--frames 6:8`` is frames 6 and 7 for ``hull`` and
+    ``track`` alike (not positions 6 and 7, which do not exist); ``--restart`` redoes the
+    hulls (``--overwrite``, the old spelling, still works)."""
+    cap, out = tmp_path / "cap", tmp_path / "track"
+    assert main(["synth", str(cap), "--template", "neutral_5k", "--frames", "4:10"]) == 0
+    assert main(["hull", str(cap), "--frames", "6:8", "--restart"]) == 0
+    assert "(2 carved by this run" in capsys.readouterr().out
+    assert main(["hull", str(cap), "--frames", "5", "--overwrite"]) == 0
+    assert "(1 carved by this run" in capsys.readouterr().out
+    assert main(["hull", str(cap), "--frames", "20:30"]) == 2
+    assert "selects none of the 6 frames (numbers 4..9)" in capsys.readouterr().err
+    args = ["track", str(cap), "--method", "articulated_icp", "--out", str(out)]
+    assert main([*args, "--init", "truth", "--frames", "6:8", "--max-iter", "2"]) == 0
+    meta = json.loads((out / "track.json").read_text())
+    assert meta["frames"] == [6, 7]
+    assert main([*args, "--init", "truth", "--frames", "0:4"]) == 2
+    assert "selects none of the 6 frames (numbers 4..9)" in capsys.readouterr().err

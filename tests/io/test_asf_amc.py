@@ -19,72 +19,10 @@ from meshmocap.io.asf_amc import (
     read_asf,
 )
 from meshmocap.io.bvh import read_bvh, write_bvh
+from toys import TINY_AMC as AMC
+from toys import TINY_ASF as ASF
 
 INCH = 0.0254
-
-ASF = """# a tiny skeleton
-:version 1.10
-:name tiny
-:units
-  mass 1.0
-  length 1.0
-  angle deg
-:documentation
-  made up for the tests
-:root
-   order TX TY TZ RX RY RZ
-   axis XYZ
-   position 0 0 0
-   orientation 0 0 0
-:bonedata
-  begin
-     id 1
-     name spine
-     direction 0 1 0
-     length 10
-     axis 0 0 0 XYZ
-    dof rx ry rz
-    limits (-10 10)
-           (-10 10)
-           (-10 10)
-  end
-  begin
-     id 2
-     name arm
-     direction 1 0 0
-     length 5
-     axis 0 0 90 XYZ
-    dof rx
-    limits (-180 180)
-  end
-  begin
-     id 3
-     name hip
-     direction 0 -1 0
-     length 4
-     axis 0 0 0 XYZ
-  end
-:hierarchy
-  begin
-    root spine hip
-    spine arm
-  end
-"""
-
-AMC = """#!OML:ASF tiny.asf
-# a second comment line, as in CMU 01_01.amc
-:FULLY-SPECIFIED
-:DEGREES
-1
-root 1 2 3 0 0 0
-spine 0 0 0
-arm 0
-2
-arm 90
-root 1 2 3 0 0 90
-# a comment between bone lines
-spine 0 0 0
-"""
 
 
 def write(tmp_path: Path, name: str, text: str, newline: str = "\n") -> Path:

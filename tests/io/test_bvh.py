@@ -12,37 +12,7 @@ from meshmocap.body.skeleton import Skeleton
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.rotations import euler_matrix, so3_exp
 from meshmocap.io.bvh import UNIT_METRES, read_bvh, write_bvh
-
-TINY = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 1 2 3
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Spine
-  {
-    OFFSET 0 10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 5 0
-    }
-  }
-  JOINT Leg
-  {
-    OFFSET 5 -10 0
-    CHANNELS 3 Xrotation Yrotation Zrotation
-    End Site
-    {
-      OFFSET 0 -40 0
-    }
-  }
-}
-MOTION
-Frames: 2
-Frame Time: 0.04
-0 0 0 0 0 0 0 0 0 0 0 0
-1 2 3 90 0 0 0 0 0 0 0 45
-"""
+from toys import TINY_BVH as TINY
 
 
 def write(tmp_path: Path, text: str, name: str = "clip.bvh", newline: str = "\n") -> Path:

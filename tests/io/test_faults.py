@@ -11,6 +11,7 @@ import shutil
 import signal
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -383,9 +384,12 @@ def test_eval_of_a_capture_partly_out_of_view_scores_surfaces_on_frames_in_view(
             c / "truth" / f"{i:05d}.npz",
             Truth(tr.vertices + [50.0, 0, 0], tr.joints, tr.rotations, tr.root),
         )
-    ev = evaluate(read_track(tmp_path / "t"), Capture(c), silhouettes=False, surface_frames=8)
+    ev = evaluate(read_track(tmp_path / "t"), Capture(c), silhouettes=True, surface_frames=8)
     assert ev.out_of_view.tolist() == [0, 1]
     assert ev.surface.frames.tolist() == [2, 3, 4] and np.isfinite(ev.surface.mean).all()
+    # nor the silhouettes: frames 0 and 1 are not scored in any camera, the others are
+    assert np.isnan(ev.silhouettes.errors[:2]).all() and (ev.silhouettes.true_pixels[:2] == 0).all()
+    assert np.isfinite(ev.silhouettes.errors[2:]).all() and ev.silhouettes.overall < 0.2
 
 
 def test_a_camera_that_does_not_see_the_subject_is_not_scored():
@@ -401,3 +405,199 @@ def test_a_camera_that_does_not_see_the_subject_is_not_scored():
     assert np.isnan(se.errors[1, 1]) and se.errors[0, 0] == 0.25
     assert se.per_camera.tolist() == [0.125, 0.0] and se.overall == pytest.approx(0.25 / 3)
     assert "nan" not in table(se).split("pooled")[0].lower()
+
+
+@pytest.fixture(scope="module")
+def killed(tmp_path_factory) -> Path:
+    """A track of 12 planned frames killed after 4: frames 0..3 written, frame 2 coasted
+    across (flagged missing: it repeats frame 1's values), 4..11 never tracked."""
+    from meshmocap.body.procedural import procedural_motion
+    from meshmocap.body.template import load_template
+    from meshmocap.io.results import FrameResult, start_track, write_frame
+
+    tpl = load_template("neutral_5k")
+    root = tmp_path_factory.mktemp("killed")
+    (root / "cap").mkdir()
+    (root / "cap" / "capture.json").write_text('{"fps": 30.0}')
+    m = procedural_motion("walk", tpl, duration=4 / 30.0, fps=30.0)
+    posed = tpl.pose(m.rotations[:4], m.root_positions[:4])
+    meta = {
+        "method": "synthetic",
+        "template": "neutral_5k",
+        "capture": str(root / "cap"),
+        "frames": list(range(12)),
+        "eval_names": list(tpl.eval_skeleton.names),
+        "eval_parents": tpl.eval_skeleton.parents.tolist(),
+    }
+    out = root / "t"
+    start_track(out, meta, tpl.F, resume=False)
+    for k in range(4):
+        j = 1 if k == 2 else k  # frame 2: coasted, the last good frame's values
+        flags, msg = (("missing",), "only 1 of 4 cameras see the subject") if k == 2 else ((), "")
+        r = FrameResult(k, posed.eval_joints[j], posed.V[j], healthy=k != 2, flags=flags)
+        write_frame(out, replace(r, message=msg))
+    return out
+
+
+def test_exports_mark_coasted_frames_as_gaps_and_name_frames_never_tracked(killed, tmp_path):
+    import csv
+
+    import ezc3d
+
+    from meshmocap.apps.export import export_track
+    from meshmocap.errors import MissingFrameWarning
+    from meshmocap.io.trc import read_trc
+
+    track = read_track(killed)
+    never = "8 of the 12 frames track.json planned were never tracked (4–11)"
+    got = {}
+    for fmt in ("csv", "trc", "c3d", "bvh", "gltf", "glb"):
+        with pytest.warns(MissingFrameWarning, match=never.replace("(", r"\(").replace(")", r"\)")):
+            got[fmt] = export_track(killed, tmp_path / f"x.{fmt}")
+        assert got[fmt].gaps == (2,) and got[fmt].untracked == tuple(range(4, 12))
+        assert got[fmt].n_frames == 4 and got[fmt].planned == 12
+    ok = np.array([True, True, False, True])
+    rows = list(csv.DictReader((tmp_path / "x.csv").read_text().splitlines()))
+    assert [r["frame"] for r in rows] == ["0", "1", "2", "3"]
+    assert rows[2]["healthy"] == "0" and rows[2]["missing"] == "1"
+    assert rows[2]["pelvis_x"] == "" and rows[2]["message"] == "only 1 of 4 cameras see the subject"
+    assert float(rows[3]["pelvis_x"]) == pytest.approx(track.joints[3, 0, 0], abs=1e-6)
+    trc = read_trc(tmp_path / "x.trc")
+    assert np.isnan(trc.points[2]).all() and np.isfinite(trc.points[ok]).all()
+    np.testing.assert_allclose(trc.points[ok], track.joints[ok], atol=1e-6)
+    c = ezc3d.c3d(str(tmp_path / "x.c3d"))
+    assert (c["data"]["meta_points"]["residuals"][0, :, 2] == -1).all()
+    assert (c["data"]["meta_points"]["residuals"][0, :, ok] == 0).all()
+    pts = c["data"]["points"][:3].transpose(2, 1, 0)
+    assert np.isnan(pts[2]).all()  # ezc3d reads the gap as no value
+    np.testing.assert_allclose(pts[ok] / 1000, track.joints[ok], atol=1e-6)
+
+
+def test_a_hole_in_a_track_is_a_gap_and_bvh_holds_the_pose_there(killed, tmp_path, capsys):
+    from meshmocap.io.bvh import read_bvh
+
+    t = tmp_path / "t"
+    shutil.copytree(killed, t)
+    (t / "frames" / "00001.npz").unlink()  # never tracked, between tracked frames
+    assert main(["export", str(t), "--out", str(tmp_path / "x.bvh")]) == 0
+    out, err = capsys.readouterr()
+    assert (
+        "2 frames without a fit of their own (coasted or never tracked) held at the last "
+        "tracked pose (the format has no gaps): 1–2" in out
+    )
+    assert err == (
+        f"meshmocap: warning: export: {t}: 9 of the 12 frames track.json planned were never "
+        "tracked (1, 4–11); 'meshmocap track' with the same arguments resumes them\n"
+    )
+    m = read_bvh(tmp_path / "x.bvh")
+    assert m.rotations.shape[0] == 4  # frames 0..3 at the capture's rate, 1 and 2 held
+    np.testing.assert_allclose(m.rotations[1], m.rotations[0], atol=1e-3)  # 0.06°, refitted
+    np.testing.assert_allclose(m.rotations[2], m.rotations[0], atol=1e-3)
+    assert not np.allclose(m.rotations[3], m.rotations[0])
+    assert main(["export", str(t), "--out", str(tmp_path / "x.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "written as gaps: 1–2" in out
+    lines = (tmp_path / "x.csv").read_text().splitlines()
+    assert lines[2].startswith("1,0.033333,0,0,0,0,0,never tracked,,,")
+
+
+def test_a_corrupt_camera_file_fails_its_capture_not_the_batch(cap, tmp_path, capsys):
+    bad = tmp_path / "bad"
+    shutil.copytree(cap, bad)
+    (bad / "cameras.json").write_text('{"cameras": [')  # cut short while copying
+    argv = ["batch", str(cap), str(bad), "--frames", "0:2", "--out", str(tmp_path / "b")]
+    assert main([*argv, "--method", "articulated_icp", "--template", "neutral_5k", "--serial"]) == 1
+    out = capsys.readouterr().out
+    assert "batch: 1 of 2 captures tracked" in out
+    rows = (tmp_path / "b" / "summary.csv").read_text().splitlines()
+    assert rows[1].startswith("cap,") and ",ok," in rows[1]
+    assert rows[2].startswith("bad,") and ",failed," in rows[2] and "cameras.json" in rows[2]
+    assert len(rows) == 3
+
+
+def _invert(real: Path, cameras: tuple[str, ...]) -> None:
+    from meshmocap.io.silhouettes import read_mask
+
+    for cam in cameras:
+        for p in (real / "silhouettes" / cam).glob("*.png"):
+            write_mask(p, ~read_mask(p))  # the subject black on white
+
+
+def test_inverted_silhouettes_are_left_out_of_the_hull_and_track_refuses(cap, tmp_path, capsys):
+    real = _real(cap, tmp_path)
+    _invert(real, ("C2",))  # one camera's masks drawn the other way round
+    assert main(["hull", str(real), "--voxel-size", "0.02"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("meshmocap: warning: 5 frames carved from fewer cameras, first 00000: ")
+    assert "carved from 3 of 4 cameras (C2: 9" in err and "% foreground, the others " in err
+    assert err.endswith(": inverted?)\n") and err.count("\n") == 1
+    V = Capture(real)[0].hull_mesh[0]
+    assert (V.max(0) - V.min(0)).max() < 2.0  # the subject, not the studio
+    _invert(real, ("C1", "C3", "C4"))  # now every camera: no frame can be carved
+    assert main(["hull", str(real), "--voxel-size", "0.02", "--overwrite"]) == 0
+    assert "5 frames without hull" in capsys.readouterr().err
+    assert main(["track", str(real), *ICP, "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"meshmocap: error: track: {real}: none of the 5 frames has an observation (first 0: "
+        "only 0 of 4 cameras see the subject (C1: 9"
+    )
+    assert err.count("\n") == 1 and not (tmp_path / "t").exists()
+
+
+def test_a_hull_of_the_whole_studio_is_refused_by_track(cap, tmp_path, capsys):
+    from meshmocap.geometry.carving import VoxelHull
+    from meshmocap.io.capture import write_hull
+
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    box = np.ones((200, 150, 120), bool)  # 4 × 3 × 2.4 m: what inverted masks carve
+    write_hull(c / "hulls" / "00000.npz", VoxelHull(box, np.array([-2.0, -1.5, 0.0]), 0.02))
+    assert main(["track", str(c), *ICP, "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"meshmocap: error: track: {c}: frame 0: the observed surface spans 4.0 × 3.0 × 2.4 m, "
+        "more than one person (3 m at most): inverted silhouettes (white background) or the "
+        "whole scene?"
+    )
+    assert err.count("\n") == 1
+
+
+def test_frames_carved_from_fewer_cameras_are_named_by_track_and_eval(cap, tmp_path, capsys):
+    real = _real(cap, tmp_path)
+    empty = np.zeros((480, 640), bool)
+    for cam in ("C3", "C4"):  # frame 2 seen by 2 cameras of 4
+        write_mask(real / "silhouettes" / cam / "00002.png", empty)
+    assert main(["hull", str(real), "--voxel-size", "0.02"]) == 0
+    capsys.readouterr()
+    assert main(["track", str(real), *ICP, "--frames", "1:4", "--out", str(tmp_path / "t")]) == 0
+    note = (
+        "1 of 3 frames were carved from fewer than the 4 cameras (first 2: carved from 2 of 4 "
+        "cameras (C3: empty mask, C4: empty mask)); their hulls are coarser, and their "
+        "silhouettes are scored only in the cameras that saw the subject"
+    )
+    assert f"meshmocap: warning: track: {note}\n" in capsys.readouterr().err
+    assert main(["eval", str(real), str(tmp_path / "t"), "--surface-frames", "0"]) == 0
+    assert capsys.readouterr().err == f"meshmocap: warning: eval: {note}\n"
+
+
+def test_subject_says_a_sphere_is_not_a_performer(tmp_path, capsys):
+    import trimesh
+
+    from meshmocap.body.template import load_template
+    from meshmocap.estimate.plausibility import body_problem
+
+    s = trimesh.creation.icosphere(3, 0.9)
+    s.apply_translation([0.0, 0.0, 0.9])  # 1.8 m "tall"
+    (tmp_path / "m").mkdir()
+    s.export(tmp_path / "m" / "s_0.ply")
+    assert main(["subject", str(tmp_path / "m"), "--out", str(tmp_path / "s.npz")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"meshmocap: warning: subject: frame 0 of {tmp_path / 'm'} is not human-like: it fills "
+        "52% of its bounding box, a solid blob (a body with its limbs: under 40%"
+    )
+    assert err.count("\n") == 1
+    t = load_template("neutral_5k")
+    assert body_problem(t.V, t.F) is None  # the bundled body is human-like
+    assert body_problem(0.3 * t.V, t.F) == "it is 0.53 m tall (a person: 0.8–2.5 m)"

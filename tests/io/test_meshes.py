@@ -4,6 +4,7 @@ import gzip
 import io
 import os
 import pickle
+import re
 import tarfile
 import zlib
 
@@ -323,3 +324,20 @@ def test_crane_frames_from_folder_and_archive_are_identical(shared_data):
         assert b.path.endswith(f"mesh_{k:04d}.obj")
         raw = np.loadtxt(a.path, comments=None, usecols=(1, 2, 3), max_rows=10002)
         assert np.array_equal(a.V, raw)  # vertex k of the array is the k-th 'v' line
+
+
+def test_frame_numbers_come_from_the_file_names():
+    from meshmocap.io.meshes import frame_numbers
+
+    assert frame_numbers(["a/00000.ply", "a/00005.ply", "a/00012.ply"]) == [0, 5, 12]
+    assert frame_numbers(["c.tar.gz::mesh_0000.obj", "c.tar.gz::mesh_0174.obj"]) == [0, 174]
+    assert frame_numbers(["scan.obj"]) == [0]  # one file without a number: frame 0
+    assert frame_numbers(["take2_007.ply"]) == [7]
+    for names, bad in (
+        (["00000.ply", "00005 (1).ply"], "00005 (1).ply: not a frame number"),
+        (["00000.ply", "00001.ply", "x_00002.ply"], "x_00002.ply: not a frame number"),
+        (["a.ply", "b.ply"], "a.ply: not a frame number"),
+        (["m_1.ply", "m_001.ply"], "m_001.ply: frame 1 again (also m_1.ply)"),
+    ):
+        with pytest.raises(InputError, match=re.escape(bad)):
+            frame_numbers(names)

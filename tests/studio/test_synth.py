@@ -198,7 +198,9 @@ def test_any_mesh_folder_opens_as_a_capture(tmp_path, walk_capture):
     for i in (2, 10, 1):
         trimesh.creation.icosphere(radius=0.1 * i).export(tmp_path / f"frame_{i}.ply")
     cap = open_capture(tmp_path)
-    assert isinstance(cap, SequenceCapture) and cap.indices == [0, 1, 2]
-    radii = [np.linalg.norm(f.hull_mesh[0], axis=1).mean() for f in cap]
+    # numbered by their names: frames 3 to 9 have no file (missing, kept in the numbering)
+    assert isinstance(cap, SequenceCapture) and cap.indices == list(range(1, 11))
+    assert cap.gaps == list(range(3, 10)) and "skip from frame 2 to 10" in cap[2].missing
+    radii = [np.linalg.norm(f.hull_mesh[0], axis=1).mean() for f in cap if not f.missing]
     assert np.allclose(radii, [0.1, 0.2, 1.0], rtol=1e-3)  # natural order: 1, 2, 10
     assert isinstance(open_capture(walk_capture.path), Capture)

@@ -17,7 +17,7 @@ from meshmocap.body.articulated import (
 )
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import load_template
-from meshmocap.errors import InputError
+from meshmocap.errors import FitError, InputError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
@@ -203,3 +203,29 @@ def test_options_are_validated(template, walk):
     assert ICPOptions(fixed_joints=["Head"]).fixed_joints == ("Head",)
     with pytest.raises(InputError, match="expected R"):
         ArticulatedICP().init(template, walk[0], np.eye(3), np.zeros(3))
+
+
+class _Failing(ArticulatedICP):
+    """Cannot fit frame 3, as a frame with no usable observation would not be."""
+
+    def step(self, frame):
+        if frame.index == 3:
+            raise FitError("no compatible correspondences")
+        return super().step(frame)
+
+
+def test_a_frame_that_cannot_be_fitted_raises_fit_error_and_the_driver_coasts(
+    walk, template, tmp_path
+):
+    icp = ArticulatedICP(ICPOptions(max_iter=3))
+    icp.init(template, walk[0], walk[0].truth.rotations, walk[0].truth.root)
+    V, _ = walk[1].hull_mesh
+    few = SimpleNamespace(index=1, hull_mesh=(V[:5], None), normals=np.tile([0, 0, 1.0], (5, 1)))
+    with pytest.raises(FitError, match="only 5 observed points"):
+        icp.step(few)
+    track = track_sequence(
+        _Failing(ICPOptions(max_iter=3)), template, walk, tmp_path / "t", frames=range(5)
+    )
+    assert track.healthy.tolist() == [True, True, True, False, True]
+    assert track.messages[3] == "FitError: no compatible correspondences"
+    assert np.array_equal(track.joints[3], track.joints[2])  # the last good result repeated

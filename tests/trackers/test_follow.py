@@ -87,22 +87,40 @@ def test_follow_tracks_frames_as_written_and_resumes(walk, offline, tmp_path, ca
     assert read_track(out).healthy.all()
 
 
-def test_ctrl_c_stops_with_every_finished_frame_kept(walk, tmp_path, capsys):
-    live, out = tmp_path / "live", tmp_path / "track"
-    th = _studio(walk.path, live, range(3))
+def test_ctrl_c_stops_with_every_finished_frame_kept(walk, tmp_path, capsys, monkeypatch):
+    """Ctrl-C once the third frame is reported; every reported frame is kept. Events, not
+    clocks, order the threads: the interrupt waits for the report of frame 2 however
+    slowly a loaded machine tracks, and is never sent once the command has returned."""
+    from meshmocap.trackers import follow
 
-    def interrupt():  # Ctrl-C once three frames are done (the run would wait a minute)
-        deadline = time.monotonic() + 120
-        while len(done_frames(out) if out.exists() else []) < 3:
-            if time.monotonic() > deadline:
-                return
-            time.sleep(0.05)
-        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+    live, out = tmp_path / "live", tmp_path / "track"
+    reported, returned = threading.Event(), threading.Event()
+    real = follow.follow_sequence
+
+    def spy(*args, report, **kwargs):  # the command's own report, then the signal
+        def told(f):
+            report(f)
+            if f.index == 2:
+                reported.set()
+
+        return real(*args, report=told, **kwargs)
+
+    monkeypatch.setattr(follow, "follow_sequence", spy)
+
+    def interrupt():  # Ctrl-C once three frames are reported (the run would wait a minute)
+        reported.wait()
+        if not returned.is_set():
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
     stopper = threading.Thread(target=interrupt, daemon=True)
     stopper.start()
+    th = _studio(walk.path, live, range(3))
     args = ["track", str(live), "--method", "articulated_icp", "--out", str(out)]
-    assert main([*args, "--follow", "--idle", "60"]) == 0
+    try:
+        assert main([*args, "--follow", "--idle", "60"]) == 0
+    finally:
+        returned.set()
+        reported.set()  # release the waiter if frame 2 never came
     th.join()
     stopper.join()
     assert "Ctrl-C: tracked 3 frames" in capsys.readouterr().out

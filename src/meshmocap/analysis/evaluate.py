@@ -6,7 +6,9 @@ patch-tracking paper); bone lengths are over the tracked skeleton; the silhouett
 error re-projects the tracked mesh into every camera and compares it with the *input*
 silhouettes (Table II); surface distances compare the tracked mesh with the true surface
 (synthetic captures) or with the visual hull (real captures) on evenly spaced frames; the
-per-vertex error needs a template with the subject's connectivity. Joints and vertices are
+per-vertex error needs a template with the subject's connectivity (a synthetic capture's
+truth, or a mesh sequence of fixed connectivity whose own first frame was rigged: each
+tracked vertex against the same vertex of the file). Joints and vertices are
 scored only on frames where the true surface lies inside every camera's image: a subject
 leaving the studio (a CMU walk or run crosses 4–5 m) leaves a truncated hull, and those
 frames are listed as out of view rather than blamed on the tracker.
@@ -33,7 +35,7 @@ from meshmocap.analysis.metrics import (
 from meshmocap.analysis.tables import format_table, table
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import in_view
-from meshmocap.io.capture import Capture
+from meshmocap.io.capture import Capture, Truth
 from meshmocap.io.results import Track, template_label
 
 
@@ -116,6 +118,8 @@ def evaluate(
             f"evaluate: track frames {missing[:5]} are not in the capture {capture.path}"
         )
     truths = [f.truth for f in frames]
+    if all(t is None for t in truths):  # a 4D mesh sequence: its files are the truth
+        truths = _file_truths(frames, track) or truths
     hidden = _out_of_view(truths, capture.cameras) if in_view_only else np.zeros(0, np.int64)
     for k in hidden:  # scored as skipped frames (truth NaN): the cameras did not see it all
         truths[k] = replace(
@@ -138,7 +142,9 @@ def evaluate(
     sil = None
     if silhouettes and capture.cameras:
         meshes = ((V, track.faces) for V in track.vertices)
-        sil = mesh_silhouette_errors(meshes, (f.silhouettes for f in frames), capture.cameras)
+        sil = mesh_silhouette_errors(
+            meshes, (f.silhouettes for f in frames), capture.cameras, skip=hidden
+        )
     surf = None
     F_true = capture.truth_faces
     against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"
@@ -175,6 +181,28 @@ def evaluate(
         reinit=sum("reinit" in f for f in track.flags),
         template=template_label(track.meta),
     )
+
+
+def _file_truths(frames: list, track: Track) -> list[Truth] | None:
+    """Each frame's file vertices as its truth, where the files are a mesh sequence of the
+    tracked template's connectivity (a 4D capture whose first frame was rigged as it
+    stands: tracked vertex ``i`` is the file's vertex ``i``); a missing frame's vertices are
+    NaN (not scored). None where the connectivity differs (hulls, point clouds, another
+    template)."""
+    n = track.vertices.shape[1]
+    out = []
+    for f in frames:
+        if getattr(f, "missing", None):
+            out.append(None)
+            continue
+        V, F = f.hull_mesh
+        if F is None or len(V) != n or not np.array_equal(F, track.faces):
+            return None
+        out.append(Truth(np.asarray(V, np.float64)))
+    if all(t is None for t in out):
+        return None
+    nan = np.full((n, 3), np.nan)
+    return [Truth(nan) if t is None else t for t in out]
 
 
 def _surface_frames(frames: list, truths: list, against: str) -> np.ndarray:

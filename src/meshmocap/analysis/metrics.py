@@ -257,7 +257,8 @@ class SilhouetteErrors:
 
     @property
     def pooled(self) -> float:
-        return float(self.xor_pixels.sum() / self.true_pixels.sum())
+        n = self.true_pixels.sum()
+        return float(self.xor_pixels.sum() / n) if n else math.nan  # nothing scored: NaN
 
 
 def nan_mean(x: np.ndarray) -> float:
@@ -272,6 +273,7 @@ def silhouette_errors(
     masks_true: Iterable[Sequence[np.ndarray]],
     *,
     cameras: Sequence[str] | None = None,
+    skip: Sequence[int] = (),
 ) -> SilhouetteErrors:
     """Overlap errors of many frames, each seen by the same C cameras.
 
@@ -282,9 +284,17 @@ def silhouette_errors(
         may differ in image size); both yield the same number of frames.
     cameras : sequence of C str, optional
         Camera names; default ``cam0 ...``.
+    skip : sequence of int
+        Positions of frames not scored (NaN in every camera, like a camera that does not
+        see the subject): frames where the subject leaves a view; their predicted masks
+        may be None.
     """
     counts = []
+    skipped = {int(k) for k in skip}
     for t, (mp, mt) in enumerate(zip(masks_pred, masks_true, strict=True)):
+        if t in skipped:
+            counts.append([(0, 0)] * len(mt))
+            continue
         if len(mp) != len(mt) or (counts and len(mp) != len(counts[0])):
             want = len(counts[0]) if counts else len(mt)
             raise InputError(f"frame {t}: {len(mp)} predicted, {len(mt)} true masks; want {want}")
@@ -311,6 +321,8 @@ def mesh_silhouette_errors(
     meshes_pred: Iterable[tuple[np.ndarray, np.ndarray]],
     masks_true: Iterable[Sequence[np.ndarray]],
     cameras: Sequence[Camera],
+    *,
+    skip: Sequence[int] = (),
 ) -> SilhouetteErrors:
     """Overlap errors of tracked meshes reprojected into calibrated cameras.
 
@@ -320,10 +332,16 @@ def mesh_silhouette_errors(
         metres, world frame; streamed (one frame's silhouettes in memory at a time)
     masks_true : iterable over frames of C (H, W) bool masks, in the order of ``cameras``
     cameras : sequence of C Camera
+    skip : sequence of int
+        Positions of frames not scored (not rendered): see :func:`silhouette_errors`.
     """
-    pred = ([mesh_silhouette(V, F, cam) for cam in cameras] for V, F in meshes_pred)
+    skipped = {int(k) for k in skip}
+    pred = (
+        None if t in skipped else [mesh_silhouette(V, F, cam) for cam in cameras]
+        for t, (V, F) in enumerate(meshes_pred)
+    )
     names = [c.name or f"cam{i}" for i, c in enumerate(cameras)]
-    return silhouette_errors(pred, masks_true, cameras=names)
+    return silhouette_errors(pred, masks_true, cameras=names, skip=sorted(skipped))
 
 
 # --------------------------------------------------------------------------- bones

@@ -34,7 +34,7 @@ from typing import Any
 
 from meshmocap._atomic import write_text_atomic
 from meshmocap._progress import progress
-from meshmocap._validate import frame_slice
+from meshmocap._validate import frame_positions, frame_slice
 from meshmocap.apps.batch_items import BatchItem
 from meshmocap.apps.batch_summary import (
     CaptureSummary,
@@ -45,7 +45,7 @@ from meshmocap.apps.batch_summary import (
 )
 from meshmocap.errors import InputError, MeshmocapError
 
-__all__ = ["BatchResult", "have_dask", "run_batch"]
+__all__ = ["ONE_THREAD", "BatchResult", "available_cores", "have_dask", "run_batch"]
 
 #: Frames of hull carving per task.
 HULL_CHUNK = 20
@@ -81,6 +81,30 @@ def _hull_chunks(item: BatchItem) -> list[list[int]]:
         if not (path / "hulls" / f"{frame_name(f)}.npz").is_file()
     ]
     return [todo[i : i + HULL_CHUNK] for i in range(0, len(todo), HULL_CHUNK)]
+
+
+def _checked_chunks(
+    item: BatchItem, out: Path, results: dict[str, CaptureSummary], log: Callable[[str], None]
+) -> list[list[int]] | None:
+    """:func:`_hull_chunks`, or None when the capture cannot be read (a corrupt
+    ``cameras.json``): the capture is then recorded as failed with the one-line reason,
+    and the batch goes on with the others."""
+    try:
+        return _hull_chunks(item)
+    except MeshmocapError as exc:
+        summary = CaptureSummary(
+            item.name,
+            item.capture,
+            item.method,
+            item.template or "default",
+            "failed",
+            error=_one_line(exc),
+        )
+        (out / item.name).mkdir(parents=True, exist_ok=True)
+        write_result(out / item.name / "result.json", summary)
+        results[item.name] = summary
+        log(summary_line(summary))
+        return None
 
 
 def _carve(capture: str, frames: list[int]) -> int:
@@ -123,6 +147,7 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
 def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
     from meshmocap.analysis.evaluate import evaluate
     from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.body.light import tracking_body
     from meshmocap.estimate.axes import open_oriented
     from meshmocap.estimate.tracking_template import tracking_template
     from meshmocap.io.capture import Capture
@@ -133,10 +158,11 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     capture, _ = open_oriented(item.capture)  # mesh files: up axis and units as track reads
     choice = tracking_template(capture, item.template or None, folder / "track")
     template = choice.template
-    tracker = make_tracker(item.method, template=template)
+    tracker = make_tracker(item.method, template=tracking_body(template).light)  # as tracked
     frames = None
     if item.frames:
-        frames = range(len(capture))[frame_slice(item.frames, what="batch: frames")]
+        sl = frame_slice(item.frames, what="batch: frames")  # frame numbers, as track reads them
+        frames = frame_positions([int(i) for i in capture.indices], sl)
     track = track_sequence(
         tracker,
         template,
@@ -182,8 +208,10 @@ def _frame_total(item: BatchItem) -> int:
     try:
         from meshmocap.io.capture import open_capture
 
-        n = len(open_capture(item.capture))
-        return len(range(n)[frame_slice(item.frames, what="frames")]) if item.frames else n
+        cap = open_capture(item.capture)
+        if not item.frames:
+            return len(cap)
+        return len(frame_positions([int(i) for i in cap.indices], frame_slice(item.frames)))
     except MeshmocapError:
         return 0
 
@@ -215,12 +243,36 @@ def _client(workers: int | None, scheduler: str | None):
     # the dashboard on a free port, shown or not: None still binds 8787, so a second batch
     # on the same machine would fail to start
     cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1,
+        n_workers=workers or available_cores(),
         threads_per_worker=1,
         processes=True,
         dashboard_address=":0",
+        env=dict(ONE_THREAD),  # set before the worker process imports numpy or numba
     )
     return Client(cluster), cluster
+
+
+#: Environment of a worker process: one thread for every pool (BLAS, OpenMP, numba), so
+#: W workers keep W cores busy, not W × threads fighting over them.
+ONE_THREAD = {
+    v: "1"
+    for v in (
+        "OMP_NUM_THREADS",
+        "OPENBLAS_NUM_THREADS",
+        "MKL_NUM_THREADS",
+        "BLIS_NUM_THREADS",
+        "NUMBA_NUM_THREADS",
+        "MESHMOCAP_THREADS",
+    )
+}
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity; all cores where unknown)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover (macOS, Windows)
+        return os.cpu_count() or 1
 
 
 def have_dask() -> bool:
@@ -296,17 +348,19 @@ def run_batch(
         own_client, cluster = (client, None) if client is not None else _client(workers, scheduler)
         try:
             link = getattr(own_client, "dashboard_link", "") or "" if dashboard else ""
-            n = len(own_client.scheduler_info().get("workers", {}))
+            info = own_client.scheduler_info().get("workers", {})
+            n, threads = len(info), sum(int(w.get("nthreads", 1)) for w in info.values())
+            where = f"{available_cores()} available here" if cluster else "on the cluster"
             log(
-                f"running {len(todo)} capture(s) on Dask ({n} workers)"
-                + (f"; dashboard {link}" if link else "")
+                f"running {len(todo)} capture(s) on Dask: {n} workers, {threads} cores used "
+                f"({where})" + (f"; dashboard {link}" if link else "")
             )
             futures = {}
             for it in todo:
-                hulls = [
-                    own_client.submit(_carve, it.capture, chunk, pure=False)
-                    for chunk in _hull_chunks(it)
-                ]
+                chunks = _checked_chunks(it, out, results, log)
+                if chunks is None:
+                    continue
+                hulls = [own_client.submit(_carve, it.capture, c, pure=False) for c in chunks]
                 futures[it.name] = own_client.submit(_track, it, str(out), *hulls, pure=False)
             pending = set(futures)
             name_of = {f.key: n for n, f in futures.items()}
@@ -336,7 +390,10 @@ def run_batch(
             )
         bar = iter(progress(range(total), total=total, label="batch", enabled=show_progress))
         for it in todo:
-            for chunk in _hull_chunks(it):
+            chunks = _checked_chunks(it, out, results, log)
+            if chunks is None:
+                continue
+            for chunk in chunks:
                 _carve(it.capture, chunk)
             before = done()
             results[it.name] = CaptureSummary(**_track(it, str(out)))

@@ -71,6 +71,12 @@ def _manifest(path: Path, *, method: str, template: str, frames: str) -> list[di
             )
         rows = []
         for line, row in enumerate(reader, start=2):
+            if None in row:  # DictReader files cells beyond the header under None
+                raise InputError(
+                    f"batch: {path}:{line}: expected {len(reader.fieldnames)} cells "
+                    f"({', '.join(reader.fieldnames)}), found "
+                    f"{len(reader.fieldnames) + len(row[None])}"
+                )
             if not (row.get("capture") or "").strip():
                 raise InputError(f"batch: {path}:{line}: empty capture")
             for cap in _expand(row["capture"], path.parent):

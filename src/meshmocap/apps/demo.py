@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open
+from meshmocap._progress import phase
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.export import export_track
@@ -37,6 +38,7 @@ from meshmocap.apps.report import (
     gait_section,
     write_report,
 )
+from meshmocap.body.light import tracking_body
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
@@ -52,8 +54,11 @@ from meshmocap.trackers.registry import make_tracker
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
 #: cage tracker's pose manifold is learned on the spot from the procedural walk and jog.
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
-#: The demo capture's performer: a bundled body that the trackers are not told about.
-DEMO_PERFORMER = "heavy_male"
+#: The demo capture's subject (performer): a bundled body the trackers are not told about.
+DEMO_SUBJECT = "heavy_male"
+#: Budget of the player's per-frame data in the demo's report, MB (the plots and the
+#: meshes come on top).
+PLAYER_MB = 5.0
 #: Formats the demo's first track is exported to (``meshmocap export``).
 DEMO_EXPORTS = ("bvh", "c3d", "trc", "glb", "csv")
 #: Why the demo's comparison has no silhouette error (rendering every frame in every camera
@@ -85,9 +90,9 @@ def run_demo(
     out: str | os.PathLike,
     *,
     seconds: float = 4.0,
-    track_frames: int = 120,
+    frames: slice | None = slice(0, 120),
     clip: str | None = None,
-    performer: str = DEMO_PERFORMER,
+    subject: str = DEMO_SUBJECT,
     template: str = "auto",
     show_progress: bool | None = None,
 ) -> DemoResult:
@@ -97,21 +102,21 @@ def run_demo(
     ----------
     seconds : float
         Length of the procedural walk written as BVH and retargeted.
-    track_frames : int
-        Frames (60 fps) of the synthetic walk capture that the trackers follow; 0 skips
-        tracking.
+    frames : slice or None
+        Frame numbers (60 fps) of the synthetic walk capture that the trackers follow
+        (``START:STOP:STEP``, as ``--frames``); None skips the capture and tracking.
     clip : str, optional
         A BVH/AMC file to retarget and render as well.
-    performer : str
-        Bundled body that performs in the synthetic capture.
+    subject : str
+        Bundled body that performs in the synthetic capture (``synth --subject``).
     template : str
         Tracking template: ``"auto"`` estimates the performer's body from the hulls (what a
         user without a body scan has); a bundled name or ``.npz`` file tracks with that body
         (``neutral_5k`` is the fastest).
     """
-    if performer not in bundled_templates():
+    if subject not in bundled_templates():
         raise InputError(
-            f"demo: performer must be one of {sorted(bundled_templates())}, found {performer!r}"
+            f"demo: --subject must be one of {sorted(bundled_templates())}, found {subject!r}"
         )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -148,24 +153,27 @@ def run_demo(
         files.append((f"{name} on neutral", res.sheet))
     scores: list[TrackerScore] = []
     players, sections, evaluations, tracks, notes = [], [], [], [], []
-    if track_frames > 0:
+    if frames is not None:
         spec = SynthSpec(
             motion="walk",
             template="neutral_5k",
-            subject=performer,
+            subject=subject,
             rig="humaneva4",
-            stop=track_frames,
+            start=frames.start,
+            stop=frames.stop,
+            step=frames.step,
         )
         cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {performer})", cap.path))
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
         folders = [out / f"track_{method}" for method in DEMO_METHODS]
         choice = tracking_template(cap, template, folders[0])
-        notes.append(f"performer {performer!r}, not told to the trackers; {choice.note}")
+        notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
         for method, folder in zip(DEMO_METHODS, folders, strict=True):
             if "template_file" in choice.info and folder != folders[0]:
                 folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
                 shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
-            tracker = make_tracker(method, template=choice.template)
+            # the light body the driver tracks (meshmocap.body.light)
+            tracker = make_tracker(method, template=tracking_body(choice.template).light)
             track = track_sequence(
                 tracker,
                 choice.template,
@@ -185,14 +193,28 @@ def run_demo(
             sections.append(evaluation_section(ev, images=plots, track=track))
             drop_resume_state(folder)
         notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
-        notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
+        with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
+            notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
         title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
+        # the report holds the player's frames: a budget that keeps it under 10 MB
         templates = [choice.template] * len(tracks)
-        players.append(player_from_tracks(cap, tracks, title=title, templates=templates))
+        players.append(
+            player_from_tracks(
+                cap, tracks, title=title, templates=templates, max_megabytes=PLAYER_MB
+            )
+        )
         drop_hull_meshes(cap.path)
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
-    report = write_report(
+    with phase("writing the report"):
+        report = _report(out, players, evaluations, sections, sheets, notes)
+    files.append(("report (tables, plots, 3D player; open in a browser)", report))
+    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
+
+
+def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:
+    """Write the demo's ``report.html``."""
+    return write_report(
         out / "report.html",
         title="meshmocap demo",
         players=players,
@@ -203,8 +225,6 @@ def run_demo(
         if notes
         else "procedural motions and retargeting",
     )
-    files.append(("report (tables, plots, 3D player; open in a browser)", report))
-    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
 
 
 def _first_pose(track) -> str:

@@ -18,6 +18,15 @@ format    content                                                 writer
           joint), health and flags; Z up, metres
 ========  ======================================================  ============================
 
+Frames without a fit are never passed off as tracked. A frame the tracker coasted across
+(flagged ``missing`` or ``failed``: it holds the last good values) and a frame that
+``track.json`` planned but the run never reached, between the first and last exported, are
+*gaps*: no value in TRC, residual −1 in C3D, empty coordinate cells in CSV; BVH and glTF
+have no gaps, so the rig holds its last tracked pose there, and :attr:`ExportResult.gaps`
+lists those frames (the command prints them). Planned frames never tracked are listed in
+:attr:`ExportResult.untracked` and warned about (a run killed after 4 of 12 frames exports
+4 and says the other 8 were never tracked).
+
 The rig rotations (BVH, glTF) come from :func:`meshmocap.body.pose_fit.pose_from_surface`:
 per frame, the pose whose skinning of the template reproduces the tracked vertices and
 joints; the result reports how closely (``vertex_error_mm``, ``joint_error_mm``).
@@ -28,6 +37,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +50,7 @@ from meshmocap.body.markers import MARKER_SETS, marker_vertices
 from meshmocap.body.motion import Motion
 from meshmocap.body.pose_fit import PoseFit, pose_from_surface
 from meshmocap.body.template import Template, load_template
-from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+from meshmocap.errors import InputError, MeshmocapFileNotFoundError, MissingFrameWarning
 from meshmocap.io.bvh import LengthUnit, write_bvh
 from meshmocap.io.c3d import write_c3d
 from meshmocap.io.gltf import skinned_gltf, write_gltf
@@ -49,11 +59,15 @@ from meshmocap.io.results import Track, read_track, tracked_template
 from meshmocap.io.trc import write_trc
 
 __all__ = [
+    "GAP_FLAGS",
     "ExportFormat",
+    "ExportFrames",
     "ExportResult",
     "capture_fps",
     "export_format",
+    "export_frames",
     "export_track",
+    "frame_ranges",
     "track_fps",
     "track_gltf",
     "track_motion",
@@ -81,6 +95,12 @@ class ExportResult:
         (BVH and glTF; NaN for the point formats, which copy the track's values)
     points : tuple of str, the labelled points written (C3D, TRC, CSV)
     fps_source : str, where the frame rate came from (``capture.json``, ``given``, ...)
+    gaps : tuple of int
+        Frame numbers written as gaps (TRC, C3D, CSV) or held at the last tracked pose
+        (BVH, glTF): coasted frames and planned frames never tracked inside the range
+    untracked : tuple of int
+        Frames ``track.json`` planned (within ``frames``) that have no result
+    planned : int, frames ``track.json`` planned within ``frames`` (0 when it lists none)
     """
 
     path: Path
@@ -93,6 +113,9 @@ class ExportResult:
     joint_error_mm: float = float("nan")
     points: tuple[str, ...] = ()
     fps_source: str = ""
+    gaps: tuple[int, ...] = ()
+    untracked: tuple[int, ...] = ()
+    planned: int = 0
 
 
 def export_format(path: str | os.PathLike, format: str | None = None) -> str:
@@ -172,22 +195,105 @@ def track_rows(track: Track, frames: slice | None = None) -> np.ndarray:
     return rows
 
 
-def _step(track: Track, rows: np.ndarray, fmt: str) -> int:
-    """The constant spacing of the selected frame numbers (formats with a fixed rate)."""
-    d = np.diff(track.frames[rows])
+def _step(numbers: np.ndarray, fmt: str) -> int:
+    """The constant spacing of the frame numbers ``numbers`` (formats with a fixed rate)."""
+    d = np.diff(numbers)
     if len(d) and not np.all(d == d[0]):
         raise InputError(
             f"export: {fmt} needs evenly spaced frames, found gaps in "
-            f"{track.frames[rows][:8].tolist()}...; select a run with --frames"
+            f"{numbers[:8].tolist()}...; select a run with --frames"
         )
     return int(d[0]) if len(d) else 1
 
 
+#: Flags of frames that hold the last good values instead of a fit (exported as gaps).
+GAP_FLAGS = ("missing", "failed")
+
+
+@dataclass(frozen=True, eq=False)
+class ExportFrames:
+    """The frames an export writes, gaps included (:func:`export_frames`).
+
+    Attributes
+    ----------
+    frames : (G,) int64, frame numbers, increasing
+    rows : (G,) int64, each frame's own track row (−1: never tracked)
+    values : (G,) int64, the track row each frame's values come from: its own, or for a
+        gap the last row with a fit of its own before it, held (the first, before it)
+    gap : (G,) bool, True where the frame has no fit of its own
+    untracked : tuple of int, planned frames (within the selection) without a result
+    planned : int, frames ``track.json`` planned within the selection (0: it lists none)
+    """
+
+    frames: np.ndarray
+    rows: np.ndarray
+    values: np.ndarray
+    gap: np.ndarray
+    untracked: tuple[int, ...]
+    planned: int
+
+
+def export_frames(track: Track, frames: slice | None = None) -> ExportFrames:
+    """The frames to export from ``track`` within ``frames`` (capture frame numbers): its
+    tracked rows, plus the frames ``track.json`` planned but that have no result, between
+    the first and last tracked ones; gaps are those and the coasted frames
+    (:data:`GAP_FLAGS`)."""
+    rows = track_rows(track, frames)
+    done = track.frames[rows]
+    planned = np.unique(np.asarray(track.meta.get("frames") or [], dtype=np.int64))
+    if frames is not None and len(planned):
+        stop = int(max(planned.max(), track.frames.max())) + 1
+        planned = planned[np.isin(planned, np.arange(*frames.indices(stop)))]
+    untracked = np.setdiff1d(planned, track.frames)
+    inside = untracked[(untracked > done[0]) & (untracked < done[-1])]
+    numbers = np.union1d(done, inside)
+    never = np.isin(numbers, inside)
+    src = rows[np.searchsorted(done, numbers, side="right") - 1]  # a frame, or the one before
+    if track.flags:
+        coasted = np.array([bool(set(track.flags[r]) & set(GAP_FLAGS)) for r in src], bool)
+    else:
+        coasted = ~track.healthy[src]
+    gap = coasted | never
+    values = src
+    own = np.flatnonzero(~gap)
+    if len(own):  # a gap holds the last frame with a fit of its own (the first, before it)
+        values = src[own[np.maximum(np.searchsorted(own, np.arange(len(src)), "right") - 1, 0)]]
+    return ExportFrames(
+        numbers,
+        np.where(never, -1, src),
+        values,
+        gap,
+        tuple(int(i) for i in untracked),
+        len(planned),
+    )
+
+
+def frame_ranges(frames: Sequence[int]) -> str:
+    """``"3, 7–11, 20"``: frame numbers as runs of consecutive numbers."""
+    out: list[str] = []
+    f = sorted(int(i) for i in frames)
+    k = 0
+    while k < len(f):
+        j = k
+        while j + 1 < len(f) and f[j + 1] == f[j] + 1:
+            j += 1
+        out.append(str(f[k]) if j == k else f"{f[k]}–{f[j]}")
+        k = j + 1
+    return ", ".join(out)
+
+
 def track_motion(
-    track: Track, template: Template, rows: np.ndarray, fps: float, *, joint_weight: float = 2.0
+    track: Track,
+    template: Template,
+    rows: np.ndarray,
+    fps: float,
+    *,
+    joint_weight: float = 2.0,
+    step: int | None = None,
 ) -> tuple[Motion, PoseFit]:
     """The template's rig animated by the poses fitted to the track's rows (frame rate
-    ``fps`` divided by the rows' spacing), and the fit.
+    ``fps`` divided by the rows' spacing, or by ``step`` when given: rows may then repeat,
+    holding a pose across frames without a result), and the fit.
 
     The motion's skeleton is the template's (:func:`~meshmocap.io.bvh.write_bvh` writes
     the root's positions absolute, as every BVH reader understands them).
@@ -195,7 +301,7 @@ def track_motion(
     fit = pose_from_surface(
         template, track.vertices[rows], joints=track.joints[rows], joint_weight=joint_weight
     )
-    step = _step(track, rows, "a motion")
+    step = _step(track.frames[rows], "a motion") if step is None else int(step)
     return Motion(template.skeleton, fit.rotations, fit.root_positions, fps / step), fit
 
 
@@ -208,12 +314,15 @@ def track_gltf(
     fit: PoseFit | None = None,
     color: tuple[float, float, float] = (0.7, 0.7, 0.7),
     name: str | None = None,
+    frames: np.ndarray | None = None,
 ):
     """The skinned template animated by the track's rows as a ``pygltflib.GLTF2`` (times:
-    frame number minus the first row's, over ``fps``) and the fit it comes from."""
+    frame number minus the first row's, over ``fps``; ``frames`` gives each row's frame
+    number when rows repeat to hold a pose) and the fit it comes from."""
     if fit is None:
         fit = pose_from_surface(template, track.vertices[rows], joints=track.joints[rows])
-    times = (track.frames[rows] - track.frames[rows[0]]) / fps
+    numbers = track.frames[rows] if frames is None else np.asarray(frames)
+    times = (numbers - numbers[0]) / fps
     g = skinned_gltf(
         template.V,
         template.F,
@@ -310,49 +419,73 @@ def export_track(
     posed = fmt in ("bvh", "gltf", "glb") or markers != "none"  # these need the template
     if template is None and posed and not isinstance(track, Track):
         template = tracked_template(track, tr.meta)  # an estimated subject: its file
-    rows = track_rows(tr, frames)
+    ex = export_frames(tr, frames)
+    rows, idx = ex.values, ex.frames
     rate, source = track_fps(tr, fps)
-    idx = tr.frames[rows]
+    if ex.untracked:
+        n = len(ex.untracked)
+        warnings.warn(
+            f"export: {'the track' if isinstance(track, Track) else track}: {n} of the "
+            f"{ex.planned} frames "
+            f"track.json planned were never tracked ({frame_ranges(ex.untracked)}); "
+            "'meshmocap track' with the same arguments resumes them",
+            MissingFrameWarning,
+            stacklevel=2,
+        )
     verr = jerr = float("nan")
     labels: list[str] = []
     if fmt in ("bvh", "gltf", "glb"):
         tpl = track_template(tr, template)
+        step = _step(idx, fmt)
         if fmt == "bvh":
-            motion, fit = track_motion(tr, tpl, rows, rate, joint_weight=joint_weight)
+            motion, fit = track_motion(tr, tpl, rows, rate, joint_weight=joint_weight, step=step)
             write_bvh(out, motion, unit=bvh_unit)
         else:
             fit = pose_from_surface(
                 tpl, tr.vertices[rows], joints=tr.joints[rows], joint_weight=joint_weight
             )
-            g, _ = track_gltf(tr, tpl, rows, rate, fit=fit)
+            g, _ = track_gltf(tr, tpl, rows, rate, fit=fit, frames=idx)
             write_gltf(out, g)
-        verr, jerr = float(fit.vertex_error.mean() * 1e3), float(fit.joint_error.mean() * 1e3)
+        own = ~ex.gap  # the pose fit's error on frames with a fit of their own
+        if own.any():
+            verr = float(fit.vertex_error[own].mean() * 1e3)
+            jerr = float(fit.joint_error[own].mean() * 1e3)
     elif fmt in ("c3d", "trc"):
-        step = _step(tr, rows, fmt)
+        step = _step(idx, fmt)
         X, labels = _points(tr, rows, joints, markers, template)
         if fmt == "c3d":
-            write_c3d(out, X, labels, rate / step, first_frame=int(idx[0]), valid=tr.healthy[rows])
+            write_c3d(out, X, labels, rate / step, first_frame=int(idx[0]), valid=~ex.gap)
         else:
             write_trc(
-                out, X, labels, rate / step, first_frame=int(idx[0]), start_time=idx[0] / rate
+                out,
+                X,
+                labels,
+                rate / step,
+                first_frame=int(idx[0]),
+                start_time=idx[0] / rate,
+                valid=~ex.gap,
             )
     else:
         X, labels = _points(tr, rows, joints, "none", template)
+        own = [int(r) for r in ex.rows]
         write_joints_csv(
             out,
             X,
             labels,
             idx,
             rate,
-            healthy=tr.healthy[rows],
-            flags=[tr.flags[r] for r in rows] if tr.flags else None,
-            messages=[tr.messages[r] for r in rows] if tr.messages else None,
+            healthy=~ex.gap & tr.healthy[np.maximum(ex.rows, 0)],
+            flags=[tr.flags[r] if r >= 0 and tr.flags else () for r in own],
+            messages=[
+                "never tracked" if r < 0 else tr.messages[r] if tr.messages else "" for r in own
+            ],
             long=long,
+            valid=~ex.gap,
         )
     return ExportResult(
         out,
         fmt,
-        len(rows),
+        len(idx),
         rate,
         out.stat().st_size,
         time.perf_counter() - t0,
@@ -360,4 +493,7 @@ def export_track(
         jerr,
         tuple(labels),
         source,
+        tuple(int(i) for i in idx[ex.gap]),
+        ex.untracked,
+        ex.planned,
     )

@@ -42,7 +42,7 @@ from meshmocap.analysis.gait import (
 from meshmocap.apps.plots import new_figure, save_figure
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture
-from meshmocap.io.results import read_track
+from meshmocap.io.results import input_frame, read_track
 
 _COLOURS = {"left": "tab:red", "right": "tab:blue"}
 #: Columns of ``gait.csv``: one row per cycle, then the summaries of each side.
@@ -353,6 +353,7 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
         track = read_track(path)
         cap_path = Path(str(track.meta.get("capture", "")))
         cap = Capture(cap_path) if (cap_path / "capture.json").is_file() else None
+        fps = input_frame(track.meta).fps if fps is None else fps  # as track recorded it
         if fps is None:
             if cap is None or "fps" not in cap.meta:
                 raise InputError(
@@ -434,7 +435,8 @@ def gait_report(capture, tracks, names, folder: str | os.PathLike) -> GaitReport
     ``folder`` and returned as bytes."""
     nan = math.nan
     rows, notes, images = [], [EVENTS_NOTE], []
-    if not (isinstance(capture, Capture) and "fps" in capture.meta):
+    said = isinstance(capture, Capture) and "fps" in capture.meta
+    if not (said or getattr(capture, "fps_given", False)):
         notes.append(
             f"frame rate: the capture does not say; {capture.fps:g} fps assumed (times, "
             "speeds and cadence scale with it)"

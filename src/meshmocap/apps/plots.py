@@ -30,14 +30,14 @@ _DPI = 100
 
 
 def new_figure(width: float, height: float) -> Figure:
-    """A matplotlib figure of ``width`` x ``height`` inches on the Agg canvas (no display)."""
+    """A constrained-layout figure of ``width`` × ``height`` inches on an Agg canvas (no GUI)."""
     fig = Figure(figsize=(width, height), dpi=_DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
-    """Write ``fig`` as the PNG file ``path``; return the path."""
+    """Write ``fig`` to the PNG file ``path`` atomically and return the path."""
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise InputError(f"plot path must end in .png, found {path.name!r}")

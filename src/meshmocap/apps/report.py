@@ -43,9 +43,8 @@ from meshmocap.apps.player import (
 )
 from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-from meshmocap.estimate.axes import open_oriented
 from meshmocap.io.capture import Capture, SequenceCapture
-from meshmocap.io.results import Track, read_track
+from meshmocap.io.results import Track, open_tracked_capture, read_track
 
 ImageSource = str | os.PathLike | bytes
 
@@ -445,11 +444,12 @@ def build_report(
         frame the size budget allows, :func:`~meshmocap.apps.player.player_from_tracks`)
     silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
     """
-    # a mesh folder in metres and Z up, as `meshmocap track` read it (axes from its first frame)
-    cap = capture if isinstance(capture, Capture | SequenceCapture) else open_oriented(capture)[0]
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]
     if not trs:
         raise InputError("report: expected at least one track, found none")
+    cap = capture
+    if not isinstance(capture, Capture | SequenceCapture):  # read as the track read it
+        cap = open_tracked_capture(trs[0].meta, capture)
     if eval_dirs is not None and len(eval_dirs) != len(trs):
         raise InputError(
             f"eval_dirs: expected {len(trs)} folders (one per track), found {len(eval_dirs)}"

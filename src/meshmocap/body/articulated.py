@@ -3,9 +3,17 @@ skeleton through linear-blend skinning, posed on a fixed subset of model points,
 exact derivatives of every point with respect to a root translation and a rotation
 increment per joint.
 
-Shared by the articulated ICP baseline (:mod:`meshmocap.trackers.articulated_icp`, the
-skeleton-based baseline of patch-skeleton-tracking.txt §IV-B) and automatic rigging
-(:mod:`meshmocap.body.autorig`). Everything is in metres and radians, world frame Z up.
+**One Gauss–Newton step for every articulated fit**: the articulated ICP baseline
+(:mod:`meshmocap.trackers.articulated_icp`, the skeleton-based baseline of
+patch-skeleton-tracking.txt §IV-B), the first-pose search (:mod:`meshmocap.estimate.fit`),
+automatic rigging (:mod:`meshmocap.body.autorig`) and the shape fit
+(:mod:`meshmocap.estimate.shape_fit`) assemble their normal equations from the pieces here
+(closest pairs both ways, :func:`closest_pairs`; their point-to-plane plus point-to-point
+system, :func:`closest_point_system`; the pull towards a reference pose,
+:func:`add_pose_pull`) and take :func:`articulated_step`: one Levenberg–Marquardt damping
+(:func:`damped_solve`, :data:`DAMPING`, :data:`RIDGE`) and one step limit
+(:func:`limit_step`, :data:`MAX_STEP_ANGLE`). Everything is in metres and radians, world
+frame Z up.
 
 **Parametrisation** (documented choice): ω_j is a *world-frame* rotation increment
 left-multiplying joint j's global rotation and rotating its whole subtree about the joint's
@@ -34,24 +42,49 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
+from meshmocap.errors import FitError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import cross, so3_exp, so3_log
 
 __all__ = [
+    "DAMPING",
     "FIXED_JOINTS",
+    "MAX_STEP_ANGLE",
+    "POINT_MIX",
+    "RIDGE",
     "ArticulatedModel",
     "Residual",
+    "add_pose_pull",
     "apply_increment",
     "articulated_model",
+    "articulated_step",
+    "closest_pairs",
+    "closest_point_system",
+    "damped_solve",
     "limit_step",
     "nearest_compatible",
     "pose_points",
     "residual_jacobian",
-    "rest_rotation_error",
+    "rotation_error",
     "subtree_matrix",
 ]
 
 Residual = Literal["point_to_plane", "point_to_point"]
+
+#: Largest rotation (radians) of any joint in one Gauss–Newton step: the step is
+#: linearised in the rotations, and a longer one overshoots (:func:`limit_step`).
+MAX_STEP_ANGLE = 0.3
+#: Added to the damped diagonal of every articulated Gauss–Newton system
+#: (:func:`damped_solve`), so that a parameter nothing constrains stays at zero.
+RIDGE = 1e-9
+#: Levenberg–Marquardt damping of the articulated fits (relative to the diagonal,
+#: :func:`damped_solve`); the ICP tracker makes it an option.
+DAMPING = 1e-2
+#: Weight of the point-to-point pull added to the point-to-plane closest-point residuals
+#: (:func:`closest_point_system`): it holds a body part where its surface is flat.
+POINT_MIX = 0.1
+#: Pairs of each direction that the point-to-point pull uses (a weak pull: a subsample).
+POINT_MIX_PAIRS = 500
 
 #: Rig joints held at their initial rotation by default: CMU-style structural joints that
 #: carry no degrees of freedom in motion capture (hip offsets, fingers, thumbs, toes). Free,
@@ -202,8 +235,8 @@ def apply_increment(
     return so3_exp(local) @ R, root + delta[:3]
 
 
-def limit_step(delta: np.ndarray, max_angle: float) -> np.ndarray:
-    """Shorten each joint's rotation in an increment ``delta`` (3 + 3J,) (as in
+def limit_step(delta: np.ndarray, max_angle: float = MAX_STEP_ANGLE) -> np.ndarray:
+    """Shorten each joint's rotation in a pose increment ``delta`` (3 + 3J,) (as in
     :func:`apply_increment`) to at most ``max_angle`` radians; returns a new array."""
     out = np.array(delta, dtype=np.float64)
     w = out[3:].reshape(-1, 3)
@@ -212,14 +245,110 @@ def limit_step(delta: np.ndarray, max_angle: float) -> np.ndarray:
     return out
 
 
-def rest_rotation_error(skeleton: Skeleton, R: np.ndarray, root: np.ndarray) -> np.ndarray:
-    """(J, 3) float64: each joint's rotation away from its rest, as a world-frame rotation
-    vector ``G_parent log(R_j)`` (radians), the residual of a weak pull towards the rest
-    pose whose derivative with respect to the increments of :func:`apply_increment` is about
-    the identity."""
+def rotation_error(
+    skeleton: Skeleton, R: np.ndarray, root: np.ndarray, R_ref: np.ndarray | None = None
+) -> np.ndarray:
+    """(J, 3) float64: each joint's rotation away from ``R_ref`` (J, 3, 3) (default: the
+    rest pose), as a world-frame rotation vector ``G_parent log(R_j R̂_jᵀ)`` (radians): the
+    residual of a pull towards ``R_ref`` whose derivative with respect to the increments of
+    :func:`apply_increment` is about the identity (:func:`add_pose_pull`)."""
     G, _ = forward_kinematics(skeleton, R, root)
     Gp = np.concatenate([np.eye(3)[None], G[skeleton.parents[1:]]])
-    return np.einsum("jab,jb->ja", Gp, so3_log(R))
+    rel = R if R_ref is None else R @ np.swapaxes(R_ref, 1, 2)
+    return np.einsum("jab,jb->ja", Gp, so3_log(rel))
+
+
+def add_pose_pull(
+    H: np.ndarray, g: np.ndarray, e: np.ndarray, lam: float | np.ndarray, *, start: int = 3
+) -> None:
+    """Add the linearised pull ``Σ_j λ_j |e_j + ω_j|²`` to the normal equations in place.
+
+    Parameters
+    ----------
+    H : (n, n) float64, g : (n,) float64, the Gauss–Newton system (``H = Σ JᵀJ``, ``g = Σ Jᵀr``)
+    e : (k, 3) float64, rotation errors (:func:`rotation_error`), radians
+    lam : float or (k,) float64, weight of each joint's squared error, m²/rad²
+    start : int, the column of the first joint's ω (its three columns follow, then the
+        next joint's)
+    """
+    lam3 = np.repeat(np.broadcast_to(np.asarray(lam, dtype=np.float64), (len(e),)), 3)
+    idx = np.arange(start, start + 3 * len(e))
+    H[idx, idx] += lam3
+    g[idx] += lam3 * np.ravel(e)
+
+
+def damped_solve(H: np.ndarray, g: np.ndarray, *, damping: float) -> np.ndarray:
+    """The Levenberg–Marquardt increment ``x = −(H + damping·diag(H) + RIDGE·I)⁻¹ g``
+    (Marquardt's scaling of the damping by the diagonal; :data:`RIDGE` keeps a parameter
+    that nothing constrains at zero). ``H`` (n, n) and ``g`` (n,) float64 are not changed.
+
+    Raises
+    ------
+    FitError
+        The system is singular or the increment not finite.
+    """
+    A = np.array(H, dtype=np.float64)
+    diag = np.diag_indices(len(A))
+    A[diag] *= 1.0 + damping
+    A[diag] += RIDGE
+    try:
+        x = -np.linalg.solve(A, g)
+    except np.linalg.LinAlgError as exc:
+        raise FitError(f"singular normal equations ({exc})") from None
+    if not np.all(np.isfinite(x)):
+        raise FitError("singular normal equations (non-finite increment)")
+    return x
+
+
+def articulated_step(
+    skeleton: Skeleton,
+    R: np.ndarray,
+    root: np.ndarray,
+    H: np.ndarray,
+    g: np.ndarray,
+    *,
+    active: np.ndarray,
+    damping: float = DAMPING,
+    n_params: int | None = None,
+    max_angle: float = MAX_STEP_ANGLE,
+    G: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One damped Gauss–Newton step of the articulated pose: every articulated fit in
+    meshmocap takes this step (the ICP tracker, the first-pose search, automatic rigging,
+    the shape fit).
+
+    Parameters
+    ----------
+    R : (J, 3, 3) float64, local rotations; ``root`` (3,) float64, metres
+    H : (a, a) float64, g : (a,) float64
+        ``Σ JᵀJ`` and ``Σ Jᵀr`` over the estimated parameters ``active``.
+    active : (a,) int64
+        Their indices in the parameter vector: (t, ω_0 … ω_{J−1}) of :func:`apply_increment`
+        first, then any parameters of the caller's own (e.g. a scale).
+    damping : float
+        Levenberg–Marquardt damping relative to the diagonal (:func:`damped_solve`).
+    n_params : int, optional
+        Length of the parameter vector (default ``3 + 3J``).
+    max_angle : float
+        No joint turns by more than this in one step, radians (:func:`limit_step`).
+    G : (J, 3, 3) float64, optional, the global rotations of ``R`` if known.
+
+    Returns
+    -------
+    R, root : the pose after the step
+    delta : (n_params,) float64, the step (rotations limited; zero off ``active``)
+
+    Raises
+    ------
+    FitError
+        Singular normal equations.
+    """
+    n_pose = 3 + 3 * skeleton.n_joints
+    delta = np.zeros(n_pose if n_params is None else n_params)
+    delta[active] = damped_solve(H, g, damping=damping)
+    delta[:n_pose] = limit_step(delta[:n_pose], max_angle)
+    R, root = apply_increment(skeleton, R, root, delta[:n_pose], G=G)
+    return R, root, delta
 
 
 def residual_jacobian(
@@ -292,3 +421,94 @@ def nearest_compatible(
         first_compatible_kernel(idx, n_tree, n_q, retry, normal_cos, tree.n, partner)
     queries = np.flatnonzero(partner >= 0)
     return queries, partner[queries]
+
+
+def closest_pairs(
+    tree: KDTree,
+    Y: np.ndarray,
+    NY: np.ndarray,
+    v: np.ndarray,
+    nv: np.ndarray,
+    *,
+    max_distance: float,
+    normal_cos: float,
+    k: int = 8,
+    moving: np.ndarray | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Closest compatible points both ways between model points and observed points
+    (:func:`nearest_compatible`: within ``max_distance``, normals agreeing).
+
+    Parameters
+    ----------
+    tree : KDTree of ``Y`` (p, 3), observed points (metres); ``NY`` (p, 3) their unit normals
+    v, nv : (m, 3) float64, model points (metres) and their unit normals
+    moving : (m,) bool, optional
+        Only these model points take part (both ways), e.g. those a partial fit moves.
+
+    Returns
+    -------
+    [(i, k), (i2, k2)] : the model→data pairs and the data→model pairs, each as model point
+        indices and observed point indices (int64)
+    """
+    cand = dict(k=k, max_distance=max_distance, normal_cos=normal_cos)
+    if moving is None:
+        i, kk = nearest_compatible(tree, NY, v, nv, **cand)
+        k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)
+        return [(i, kk), (i2, k2)]
+    on = np.flatnonzero(moving)
+    i, kk = nearest_compatible(tree, NY, v[on], nv[on], **cand)
+    k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)
+    keep = moving[i2]
+    return [(on[i], kk), (i2[keep], k2[keep])]
+
+
+def closest_point_system(
+    v: np.ndarray,
+    a: np.ndarray,
+    pairs: list[tuple[np.ndarray, np.ndarray]],
+    weights: tuple[float, ...],
+    Y: np.ndarray,
+    NY: np.ndarray,
+    *,
+    extra: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Newton system of closest-point pairs: for each direction (weight w, p pairs)
+    w times the mean squared point-to-plane residual ``n_y · (v_i − y)`` plus w times
+    :data:`POINT_MIX` times the mean squared point-to-point residual ``v_i − y`` (over a
+    subsample of :data:`POINT_MIX_PAIRS` pairs).
+
+    Parameters
+    ----------
+    v : (m, 3) float64, model points; ``a`` (m, J', 3) their lever arms
+        (:func:`pose_points`, possibly of a subset of J' joints)
+    pairs : list of (model point indices, observed point indices), e.g. :func:`closest_pairs`
+    weights : tuple of float, the weight of each direction
+    Y, NY : (p, 3) float64, observed points (metres) and unit normals
+    extra : (m, 3) float64, optional
+        Every model point's derivative with respect to one more parameter (e.g. the log of a
+        scale), appended as the last column.
+
+    Returns
+    -------
+    H : (n, n) float64 and g : (n,) float64, ``n = 3 + 3J'`` (+1 with ``extra``): ``Σ JᵀJ``
+    and ``Σ Jᵀr`` over (t, ω_0 … ω_{J'−1}[, extra])
+    """
+    n = 3 + 3 * a.shape[1] + (extra is not None)
+    H, g = np.zeros((n, n)), np.zeros(n)
+    for (ii, kk), w in zip(pairs, weights, strict=True):
+        if len(ii) == 0:
+            continue
+        y, ny = Y[kk], NY[kk]
+        r, Jr = residual_jacobian(v, a, ii, y, ny, "point_to_plane")
+        if extra is not None:
+            Jr = np.concatenate([Jr, np.sum(ny * extra[ii], axis=1)[:, None]], axis=1)
+        H += (w / len(ii)) * (Jr.T @ Jr)
+        g += (w / len(ii)) * (Jr.T @ r)
+        sub = slice(None, None, max(1, len(ii) // POINT_MIX_PAIRS))
+        r, Jr = residual_jacobian(v, a, ii[sub], y[sub], ny[sub], "point_to_point")
+        if extra is not None:
+            Jr = np.concatenate([Jr, extra[ii[sub]].reshape(-1, 1)], axis=1)
+        s = w * POINT_MIX / len(ii[sub])
+        H += s * (Jr.T @ Jr)
+        g += s * (Jr.T @ r)
+    return H, g

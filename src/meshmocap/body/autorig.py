@@ -48,17 +48,17 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
-    apply_increment,
+    add_pose_pull,
     articulated_model,
-    limit_step,
-    nearest_compatible,
+    articulated_step,
+    closest_pairs,
+    closest_point_system,
     pose_points,
-    residual_jacobian,
-    rest_rotation_error,
+    rotation_error,
 )
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.template import EvalSkeleton, Template, load_template, template_problems
-from meshmocap.errors import InputError, MeshError
+from meshmocap.errors import FitError, InputError, MeshError
 from meshmocap.geometry.decimate import decimate_mesh
 from meshmocap.geometry.mesh import face_normals, mesh_problems, signed_volume, vertex_normals
 from meshmocap.geometry.proximity import closest_points_on_triangles, sample_surface
@@ -77,10 +77,6 @@ __all__ = [
 
 #: Fewest vertices of a mesh to rig (a human needs far more; this rejects toys and typos).
 MIN_VERTICES = 100
-#: Weight of the point-to-point pull added to the point-to-plane residuals.
-POINT_MIX = 0.1
-#: Largest rotation (radians) of any joint in one Gauss–Newton step.
-MAX_STEP_ANGLE = 0.3
 
 
 # ------------------------------------------------------------------------------ inputs
@@ -190,46 +186,28 @@ class _Fitter:
     def step(self, R, root, s, max_distance, normal_cos):
         """One damped Gauss–Newton step; returns the new (R, root, s)."""
         J = self.sk.n_joints
-        n_par = 4 + 3 * J
         v, nv, a = self.posed(R, root, s)
-        cand = dict(k=8, max_distance=max_distance, normal_cos=normal_cos)
-        i, k = nearest_compatible(self.tree, self.NY, v, nv, **cand)  # model → data
-        k2, i2 = nearest_compatible(KDTree(v), nv, self.Y, self.NY, **cand)  # data → model
-        H = np.zeros((n_par, n_par))
-        g = np.zeros(n_par)
-        for ii, kk in ((i, k), (i2, k2)):
-            if len(ii) == 0:
-                continue
-            y, ny = self.Y[kk], self.NY[kk]
-            arm = v[ii] - root  # ∂v/∂log s
-            r, Jr = residual_jacobian(v, a, ii, y, ny, "point_to_plane")
-            Jr = np.concatenate([Jr, np.sum(ny * arm, axis=1)[:, None]], axis=1)
-            H += (Jr.T @ Jr) / len(ii)
-            g += (Jr.T @ r) / len(ii)
-            sub = slice(None, None, max(1, len(ii) // 500))  # the weak pull: 500 pairs suffice
-            r, Jr = residual_jacobian(v, a, ii[sub], y[sub], ny[sub], "point_to_point")
-            Jr = np.concatenate([Jr, arm[sub].reshape(-1, 1)], axis=1)
-            H += (POINT_MIX / len(ii[sub])) * (Jr.T @ Jr)
-            g += (POINT_MIX / len(ii[sub])) * (Jr.T @ r)
-        if not (len(i) or len(i2)):
-            raise FloatingPointError("no compatible closest points")
+        pairs = closest_pairs(
+            self.tree, self.Y, self.NY, v, nv, max_distance=max_distance, normal_cos=normal_cos
+        )
+        if not any(len(i) for i, _ in pairs):
+            raise FitError("fit_skeleton: no compatible closest points")
+        # the log of the scale moves a point along its arm from the root
+        H, g = closest_point_system(v, a, pairs, (1.0, 1.0), self.Y, self.NY, extra=v - root)
         # weak pull of every non-root joint towards the rest pose (world-frame error)
-        e = rest_rotation_error(self.sk, R, root)
         lam = np.full(J, self.lambda_pose)
         lam[0] = 0.0
-        idx = np.arange(3, 3 + 3 * J)
-        H[idx, idx] += np.repeat(lam, 3)
-        g[idx] += (lam[:, None] * e).ravel()
+        add_pose_pull(H, g, rotation_error(self.sk, R, root), lam)
         act = self.active
-        Ha, ga = H[np.ix_(act, act)], g[act]
-        Ha[np.diag_indices(len(act))] *= 1.0 + 1e-2
-        Ha[np.diag_indices(len(act))] += 1e-9
-        delta = np.zeros(n_par)
-        delta[act] = -np.linalg.solve(Ha, ga)
-        if not np.all(np.isfinite(delta)):
-            raise FloatingPointError("singular normal equations")
-        step = limit_step(delta[: 3 + 3 * J], MAX_STEP_ANGLE)
-        R, root = apply_increment(self.sk, R, root, step)
+        R, root, delta = articulated_step(
+            self.sk,
+            R,
+            root,
+            H[np.ix_(act, act)],
+            g[act],
+            active=act,
+            n_params=4 + 3 * J,
+        )
         return R, root, s * float(np.exp(np.clip(delta[-1], -0.1, 0.1)))
 
 

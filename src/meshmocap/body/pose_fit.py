@@ -33,6 +33,7 @@ from meshmocap.body.articulated import (
     ArticulatedModel,
     apply_increment,
     articulated_model,
+    damped_solve,
     pose_points,
     subtree_matrix,
 )
@@ -161,8 +162,7 @@ def _fit_frame(
     cost, H, g = system(R, root)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
-        scale = np.maximum(np.diag(H), 1e-12)
-        delta = -np.linalg.solve(H + mu * np.diag(scale), g)
+        delta = damped_solve(H, g, damping=mu)
         R_new, root_new = apply_increment(sk, R, root, delta)
         new, H_new, g_new = system(R_new, root_new)
         if new > cost:  # reject, damp more

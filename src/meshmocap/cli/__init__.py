@@ -3,8 +3,15 @@
 Every subcommand parses its arguments, calls library functions and prints a short summary.
 Each module of this package holds a few commands and a ``register(sub)`` that adds their
 parsers; a new command is a new module listed in :data:`COMMANDS`. Errors the user can fix
-(a missing file, a malformed BVH, a bad option) are printed as one line
-``meshmocap: error: ...`` with exit status 2, never a traceback.
+(a missing file, a malformed BVH, a bad option, an ``--out`` that cannot be written) are
+printed as one line ``meshmocap: error: ...`` with exit status 2, never a traceback. An
+``OSError`` or ``MemoryError`` met while working (a disk that fills, a mesh too large for
+memory) also ends in one line, naming the path or the inputs and the cause, with exit
+status 1.
+
+Before a command runs, its ``--out`` is checked (:func:`meshmocap.io.guards.check_output_path`):
+a file where a folder is expected or the reverse, a read-only or unwritable place, and a
+track folder's own files (only ``track`` writes those) are refused.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from meshmocap import __version__
+from meshmocap._threads import blas_threads
 from meshmocap.cli import (
     batch,
     capture,
@@ -29,9 +37,28 @@ from meshmocap.cli import (
     track,
 )
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
+from meshmocap.io.guards import OutputKind, check_output_path
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
 COMMANDS = (demo, motion, capture, subject, track, evaluation, batch, export, gait)
+
+#: What each writing command's ``out`` argument names: a file or a folder.
+OUTPUTS: dict[str, OutputKind] = {
+    "export": "file",
+    "report": "file",
+    "subject": "file",
+    "learn": "file",
+    "retarget": "file",
+    "track": "folder",
+    "synth": "folder",
+    "eval": "folder",
+    "batch": "folder",
+    "bench": "folder",
+    "demo": "folder",
+    "gait": "folder",
+    "render": "folder",
+    "transfer": "folder",
+}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -63,7 +90,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a parse error already printed
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        with warnings.catch_warnings():  # the library's warnings: one line each, on stderr
+        _check_out(args)
+        # one BLAS thread while the command runs (MESHMOCAP_THREADS), and the library's
+        # warnings in one line each, on stderr
+        with blas_threads(), warnings.catch_warnings():
             warnings.simplefilter("default", MeshmocapWarning)
             warnings.showwarning = _show_warning
             return int(args.func(args))
@@ -77,6 +107,44 @@ def main(argv: Sequence[str] | None = None) -> int:
         # keep the interpreter's final flush from raising again on the closed pipe
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:  # a disk that fills, a folder removed while writing, ...
+        print(f"meshmocap: error: {args.command}: {os_error_line(exc)}", file=sys.stderr)
+        return 1
+    except MemoryError as exc:
+        print(f"meshmocap: error: {args.command}: {memory_error_line(exc, args)}", file=sys.stderr)
+        return 1
+
+
+def _check_out(args: argparse.Namespace) -> None:
+    """Refuse an ``out`` the command could not write, or a track folder's own files
+    (``track`` may name a track folder: its own, to resume)."""
+    kind = OUTPUTS.get(args.command)
+    out = getattr(args, "out", None)
+    if kind is None or out is None:
+        return
+    flag = "OUT" if args.command == "synth" else "--out"
+    track_ok = args.command == "track"  # resumed, or refused there if made otherwise
+    check_output_path(out, kind=kind, command=args.command, flag=flag, track_folder_ok=track_ok)
+
+
+def os_error_line(exc: OSError) -> str:
+    """``PATH: cause`` of an ``OSError`` (both paths of a rename), in one line."""
+    cause = exc.strerror or type(exc).__name__
+    paths = [p for p in (exc.filename, exc.filename2) if p is not None]
+    if not paths:
+        return cause if exc.strerror else f"{cause}: {(str(exc) or 'no detail').splitlines()[0]}"
+    return f"{' -> '.join(map(str, paths))}: {cause}"
+
+
+def memory_error_line(exc: MemoryError, args: argparse.Namespace) -> str:
+    """What ran out of memory, on which inputs, in one line."""
+    inputs: list[str] = []
+    for k in ("capture", "track", "mesh", "sources", "captures"):
+        v = getattr(args, k, None)
+        inputs += [] if v is None else [v] if isinstance(v, str) else [str(x) for x in v[:2]]
+    detail = str(exc).splitlines()[0] if str(exc) else "no detail"
+    on = f" on {', '.join(inputs)}" if inputs else ""
+    return f"out of memory{on} ({detail}); try a smaller input or a machine with more memory"
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

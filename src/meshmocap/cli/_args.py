@@ -24,6 +24,23 @@ def frame_range(text: str) -> slice:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("frames: ")) from None
 
 
+def add_restart(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--restart``: start over instead of resuming, the same flag on every command that
+    resumes (``what`` says what is redone); ``--overwrite`` is kept as a hidden alias."""
+    parser.add_argument("--restart", action="store_true", help=f"start over: {what}")
+    parser.add_argument("--overwrite", dest="restart", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_frames(parser: argparse.ArgumentParser, what: str = "") -> None:
+    """``--frames START:STOP[:STEP]``: frame NUMBERS (not positions) on every command that
+    reads frames (:func:`meshmocap._validate.frame_positions`)."""
+    parser.add_argument(
+        "--frames",
+        type=frame_range,
+        help="frame numbers START:STOP[:STEP] (STOP excluded)" + (f"; {what}" if what else ""),
+    )
+
+
 def number(
     lo: float, hi: float, unit: str = "", *, integer: bool = False, open_lo: bool = False
 ) -> Callable[[str], float | int]:

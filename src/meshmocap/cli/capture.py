@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-from meshmocap.cli._args import frame_range, number, xy_pair
+from meshmocap.cli._args import add_frames, add_restart, frame_range, number, xy_pair
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
@@ -46,10 +47,25 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 
 def _cmd_hull(args: argparse.Namespace) -> int:
-    from meshmocap.studio.hulls import compute_hulls
+    from meshmocap._validate import frame_positions
+    from meshmocap.errors import InputError
+    from meshmocap.io.cameras import read_cameras
+    from meshmocap.studio.hulls import camera_file, compute_hulls, silhouette_frames
 
     t0 = time.perf_counter()
-    run = compute_hulls(args.capture, voxel_size=args.voxel_size, overwrite=args.overwrite)
+    frames = None
+    path = Path(args.capture)
+    if args.frames and path.is_dir():  # frame numbers: of the silhouettes, those in range
+        numbers = silhouette_frames(path, [c.name for c in read_cameras(camera_file(path))])
+        frames = [numbers[k] for k in frame_positions(numbers, args.frames)]
+        if not frames:
+            raise InputError(
+                f"hull: --frames selects none of the {len(numbers)} frames "
+                f"(numbers {numbers[0]}..{numbers[-1]}) of {args.capture}"
+            )
+    run = compute_hulls(
+        args.capture, voxel_size=args.voxel_size, overwrite=args.restart, frames=frames
+    )
     cap = run.capture
     print(
         f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
@@ -73,7 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=60.0,
         help="frame rate (default: %(default)s)",
     )
-    y.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    add_frames(y, "of the motion")
     y.add_argument(
         "--voxel-size",
         type=number(0.002, 0.1, "metres"),
@@ -135,5 +151,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     h.add_argument(
         "--voxel-size", type=number(0.002, 0.1, "metres"), default=0.01, help="voxel edge, metres"
     )
-    h.add_argument("--overwrite", action="store_true", help="recompute existing hulls")
+    add_frames(h, "default: every frame with silhouettes")
+    add_restart(h, "recompute existing hulls")
     h.set_defaults(func=_cmd_hull)

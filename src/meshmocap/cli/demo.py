@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import argparse
 
-from meshmocap.cli._args import number
+from meshmocap.cli._args import frame_range, number
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from meshmocap.apps.demo import run_demo
 
+    frames = args.frames
+    if args.track_frames is not None:  # the old spelling: a count from frame 0, 0 skips
+        frames = slice(0, args.track_frames) if args.track_frames > 0 else None
     res = run_demo(
         args.out,
         seconds=args.seconds,
-        track_frames=args.track_frames,
+        frames=frames,
         clip=args.clip,
-        performer=args.performer,
+        subject=args.subject,
         template=args.template,
     )
     print(f"meshmocap demo: wrote {args.out}/ in {res.seconds:.1f} s")
@@ -40,16 +43,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--clip", help="also retarget and render this BVH/AMC clip")
     d.add_argument(
-        "--track-frames",
-        type=number(0, 100_000, integer=True),
-        default=120,
-        help="frames tracked (0: skip)",
+        "--frames",
+        type=frame_range,
+        default=slice(0, 120),
+        help="frame numbers START:STOP[:STEP] of the synthetic capture (60 fps) that the "
+        "trackers follow (default: 0:120)",
     )
+    d.add_argument("--no-track", dest="frames", action="store_const", const=None, help="no capture")
+    d.add_argument("--track-frames", type=number(0, 100_000, integer=True), help=argparse.SUPPRESS)
     d.add_argument(
-        "--performer",
+        "--subject",
         default="heavy_male",
-        help="bundled body that performs in the capture (default: %(default)s)",
+        help="bundled body that performs in the capture, as in `meshmocap synth --subject` "
+        "(default: %(default)s)",
     )
+    d.add_argument("--performer", dest="subject", help=argparse.SUPPRESS)
     d.add_argument(
         "--template",
         default="auto",

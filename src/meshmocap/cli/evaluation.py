@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 from meshmocap.cli._args import number
@@ -11,12 +12,22 @@ from meshmocap.cli._args import number
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.estimate.plausibility import partial_hulls
+    from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
+    track = read_track(args.track)
+    capture = open_tracked_capture(track.meta, args.capture)
+    if "input" in track.meta:
+        print(f"{args.capture}: read as tracked ({input_frame(track.meta).describe()})\n")
+    note = partial_hulls(capture, track.frames.tolist(), command="eval")
+    if note:  # scored on hulls from fewer cameras: say so
+        print(f"meshmocap: warning: {note}", file=sys.stderr)
     ev = api.evaluate(
-        args.capture,  # a mesh folder in metres and Z up, as `meshmocap track` read it
+        capture,
         args.track,
         silhouettes=not args.no_silhouettes,
         surface_frames=args.surface_frames,
+        force=args.force,
     )
     print(api.summary(ev))
     if args.out:
@@ -26,6 +37,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from meshmocap._progress import phase
     from meshmocap.apps.batch_report import build_batch_report, is_batch_folder
     from meshmocap.apps.report import build_report
     from meshmocap.errors import InputError
@@ -36,18 +48,39 @@ def _cmd_report(args: argparse.Namespace) -> int:
             raise InputError(f"report: {args.capture} is a batch folder; give no track folders")
         path = build_batch_report(args.out, args.capture)
     else:
-        path = build_report(
-            args.out,
-            args.capture,
-            args.tracks,
-            eval_dirs=args.eval_dir,
-            max_frames=args.max_frames,
-            silhouettes=not args.no_silhouettes,
-            surface_frames=args.surface_frames,
-        )
+        _check_report_tracks(args)
+        with phase("scoring the tracks and writing the report"):
+            path = build_report(
+                args.out,
+                args.capture,
+                args.tracks,
+                eval_dirs=args.eval_dir,
+                max_frames=args.max_frames,
+                silhouettes=not args.no_silhouettes,
+                surface_frames=args.surface_frames,
+            )
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
     return 0
+
+
+def _check_report_tracks(args: argparse.Namespace) -> None:
+    """Refuse a track made from another capture (unless ``--force``), before the report."""
+    import json
+    from pathlib import Path
+
+    from meshmocap.io.guards import check_track_capture
+    from meshmocap.io.results import open_tracked_capture
+
+    for t in args.tracks:
+        meta_path = Path(t) / "track.json"
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue  # the report itself says what is wrong with the folder
+        if isinstance(meta, dict):  # the capture read as this track read it
+            capture = open_tracked_capture(meta, args.capture)
+            check_track_capture(t, meta, capture, force=args.force, command="report")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -97,13 +130,27 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+_FORCE = (
+    "score a track against a capture other than the one its track.json names (refused otherwise)"
+)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the parsers of this module's commands to ``sub``."""
-    e = sub.add_parser("eval", help="score a track against its capture's ground truth")
-    e.add_argument("capture", help="capture folder")
+    e = sub.add_parser(
+        "eval",
+        help="score a track against its capture's ground truth (or, for a mesh sequence of "
+        "fixed connectivity, against its files: the per-vertex error)",
+    )
+    e.add_argument(
+        "capture",
+        help="capture folder, or the mesh files tracked (read in the up axis, "
+        "units and frame rate track.json records)",
+    )
     e.add_argument("track", help="track folder written by 'meshmocap track'")
     e.add_argument("--out", help="folder for CSV tables and PNG plots")
     e.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
+    e.add_argument("--force", action="store_true", help=_FORCE)
     e.add_argument(
         "--surface-frames",
         type=number(0, 10_000, integer=True),
@@ -126,6 +173,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="at most N frames in the 3D player (default: every frame the size budget allows)",
     )
     o.add_argument("--no-silhouettes", action="store_true", help="skip the silhouette error")
+    o.add_argument("--force", action="store_true", help=_FORCE)
     o.add_argument(
         "--surface-frames",
         type=number(0, 10_000, integer=True),

@@ -5,26 +5,28 @@ from __future__ import annotations
 import argparse
 import math
 
-from meshmocap.cli._args import frame_range, number
+from meshmocap.cli._args import add_frames, number
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from meshmocap.apps.export import export_track
+    from meshmocap._progress import phase
+    from meshmocap.apps.export import export_track, frame_ranges
 
     joints = [j for j in args.joints.split(",") if j] if args.joints else None
-    res = export_track(
-        args.track,
-        args.out,
-        format=args.format,
-        frames=args.frames,
-        joints=joints,
-        markers=args.markers,
-        long=args.long,
-        fps=args.fps,
-        template=args.template,
-        bvh_unit=args.bvh_unit,
-        joint_weight=args.joint_weight,
-    )
+    with phase(f"exporting {args.out}"):
+        res = export_track(
+            args.track,
+            args.out,
+            format=args.format,
+            frames=args.frames,
+            joints=joints,
+            markers=args.markers,
+            long=args.long,
+            fps=args.fps,
+            template=args.template,
+            bvh_unit=args.bvh_unit,
+            joint_weight=args.joint_weight,
+        )
     fit = ""
     if not math.isnan(res.vertex_error_mm):
         fit = (
@@ -37,6 +39,16 @@ def _cmd_export(args: argparse.Namespace) -> int:
         f"wrote {res.path} ({res.format}, {res.n_frames} frames at {res.fps:g} fps from "
         f"{res.fps_source}{points}, {size:.2f} MB, {res.seconds:.1f} s){fit}"
     )
+    if res.gaps:
+        how = (
+            "held at the last tracked pose (the format has no gaps)"
+            if res.format in ("bvh", "gltf", "glb")
+            else "written as gaps"
+        )
+        print(
+            f"{len(res.gaps)} frames without a fit of their own (coasted or never tracked) "
+            f"{how}: {frame_ranges(res.gaps)}"
+        )
     return 0
 
 
@@ -52,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=["bvh", "c3d", "trc", "gltf", "glb", "csv"],
         help="format (default: from the extension of --out)",
     )
-    x.add_argument("--frames", type=frame_range, help="capture frames START:STOP[:STEP]")
+    add_frames(x)
     x.add_argument("--joints", help="evaluation joints to keep, comma-separated (c3d, trc, csv)")
     x.add_argument(
         "--markers",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def _cmd_subject(args: argparse.Namespace) -> int:
@@ -10,6 +11,7 @@ def _cmd_subject(args: argparse.Namespace) -> int:
 
     from meshmocap.body.template import save_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
+    from meshmocap.estimate.plausibility import body_warnings
     from meshmocap.estimate.subject import estimate_subject
     from meshmocap.io.capture import open_capture
 
@@ -18,6 +20,8 @@ def _cmd_subject(args: argparse.Namespace) -> int:
         bad = MeshmocapFileNotFoundError if out.suffix == ".npz" else InputError
         raise bad(f"subject: --out must be a .npz file in an existing folder, found {out}")
     capture = open_capture(args.capture, up=args.up) if args.up else open_capture(args.capture)
+    for line in body_warnings(capture):  # a sphere is no performer: say so first
+        print(f"meshmocap: warning: {line}", file=sys.stderr)
     est = estimate_subject(
         capture,
         kind=args.kind,

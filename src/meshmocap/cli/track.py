@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from meshmocap.cli._args import flag, frame_range, number
+from meshmocap.cli._args import add_frames, add_restart, flag, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
 TRACK_OPTIONS = (
@@ -19,6 +19,10 @@ TRACK_OPTIONS = (
     "fast_iter_scale",
     "joint_readout",
 )
+
+#: Fewest patches ``--n-patches`` takes: about one per bone of the evaluation skeleton (the
+#: paper uses 150–250). With one patch the rigidity energy has no pair and is NaN.
+MIN_PATCHES = 16
 
 
 def _tracker_options(args: argparse.Namespace) -> dict:
@@ -40,44 +44,61 @@ def _tracker_options(args: argparse.Namespace) -> dict:
     return given
 
 
-def _capture_source(sources: list[str], up: str = "auto", units: str = "auto"):
+def _capture_source(
+    sources: list[str], up: str = "auto", units: str = "auto", fps: float | None = None
+):
     """One capture folder, or several mesh files/folders (the shell expands an unquoted
-    glob into many arguments): :func:`meshmocap.api.capture_and_axes`."""
+    glob into many arguments), in metres and Z up: :func:`meshmocap.api.capture_and_axes`
+    (``fps``: the rate of mesh files). Returns the capture and the axes read (None for a
+    capture folder)."""
     from meshmocap.api import capture_and_axes
 
-    return capture_and_axes(sources, up=up, units=units)
+    return capture_and_axes(sources, up=up, units=units, fps=fps)
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap import api
+    from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
+    from meshmocap.estimate.plausibility import check_observations
     from meshmocap.io.results import done_frames
 
     options = _tracker_options(args)
     if args.follow or args.idle is not None or args.view or args.recording:
         return _follow(args, options)
-    capture, axes = _capture_source(args.capture, args.up, args.units)
-    if axes is not None and (args.up == "auto" or args.units == "auto"):
+    capture, axes = _capture_source(args.capture, args.up, args.units, args.fps)
+    if axes is not None:
+        rate = f"{capture.fps:g} fps" + ("" if args.fps else " (assumed; --fps to set)")
         print(
             f"{args.capture[0]}: {axes.up.upper()} up, {axes.units}, a body "
-            f"{axes.span:.2f} m long (--up, --units to set)"
+            f"{axes.span:.2f} m long (--up, --units to set); {rate}"
         )
+        gaps = getattr(capture, "gaps", [])
+        if gaps:
+            print(
+                f"meshmocap: warning: {len(gaps)} frame numbers have no file (first "
+                f"{gaps[0]}): tracked as missing frames, coasted across",
+                file=sys.stderr,
+            )
     frames = None
     if args.frames:
-        frames = range(len(capture))[args.frames]
+        numbers = [int(i) for i in capture.indices]
+        frames = frame_positions(numbers, args.frames)  # frame numbers, not positions
         if not frames:
             raise InputError(
-                f"track: --frames {_text(args.frames)} selects none of the "
-                f"{len(capture)} frames of {args.capture[0]}"
+                f"track: --frames {_text(args.frames)} selects none of the {len(numbers)} "
+                f"frames (numbers {numbers[0]}..{numbers[-1]}) of {args.capture[0]}"
             )
-        if args.frames.stop is not None and args.frames.stop > len(capture):
+        if args.frames.stop is not None and args.frames.stop > numbers[-1] + 1:
             print(
                 f"meshmocap: warning: --frames {_text(args.frames)} asks for frames up to "
-                f"{args.frames.stop - 1}; the capture has {len(capture)}: tracking "
+                f"{args.frames.stop - 1}; the capture ends at frame {numbers[-1]}: tracking "
                 f"{len(frames)}",
                 file=sys.stderr,
             )
+    for line in check_observations(capture, frames):  # one person? dense? partial hulls?
+        print(f"meshmocap: warning: {line}", file=sys.stderr)
     before = set() if args.restart else set(done_frames(args.out))
     result = api.track(
         capture,
@@ -133,6 +154,7 @@ def _lost(track) -> str:
 
 def _follow(args: argparse.Namespace, options: dict) -> int:
     """``track FOLDER --follow``: frames tracked as they are written (trackers.follow)."""
+    from meshmocap.body.light import LIGHT_VERTICES, tracking_body
     from meshmocap.errors import InputError
     from meshmocap.trackers.follow import follow_sequence
     from meshmocap.trackers.registry import make_tracker
@@ -145,7 +167,9 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     choice = _follow_template(args)
     template = choice.template
     print(choice.note)
-    tracker = make_tracker(args.method, manifold=args.manifold, template=template, **options)
+    light = None if args.manifold else LIGHT_VERTICES  # as in _cmd_track
+    tracked = tracking_body(template, n_vertices=light).light
+    tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     seen: list[float] = []
     view = _live_view(args, template) if args.view or args.recording else None
 
@@ -172,6 +196,7 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
             resume=not args.restart,
             report=report,
             template_info=choice.info,
+            light=light,
         )
     except KeyboardInterrupt:
         how = "Ctrl-C"
@@ -349,9 +374,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "an estimate is cached as subject.npz in --out)",
     )
     k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
-    k.add_argument("--frames", type=frame_range, help="frame range START:STOP[:STEP]")
+    add_frames(k)
     k.add_argument(
-        "--n-patches", type=number(1, 10_000, integer=True), help="patch tracker: number of patches"
+        "--n-patches",
+        type=number(MIN_PATCHES, 10_000, integer=True),
+        help=f"patch tracker: number of patches (at least {MIN_PATCHES}: fewer cannot follow "
+        "the limbs, and one has no neighbour to be rigid with)",
     )
     k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
     k.add_argument(
@@ -418,7 +446,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not score frames, flag lost limbs or re-initialise them",
     )
-    k.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    k.add_argument(
+        "--fps",
+        type=number(0, 1e5, "frames per second", open_lo=True),
+        help="mesh/point-cloud files: their frame rate (default: 30, recorded as unknown)",
+    )
+    add_restart(k, "track again instead of resuming")
     k.add_argument(
         "--follow",
         action="store_true",
@@ -493,5 +526,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument(
         "--tolerance", type=number(0, 1, "metres"), default=0.005, help="outside tolerance, metres"
     )
-    x.add_argument("--restart", action="store_true", help="start over instead of resuming")
+    add_restart(x, "transfer again instead of resuming")
     x.set_defaults(func=_cmd_transfer)

@@ -122,13 +122,15 @@ def detect_axes(
 
 
 def open_oriented(
-    source, *, up: str = "auto", units: str = "auto"
+    source, *, up: str = "auto", units: str = "auto", fps: float | None = None
 ) -> tuple[Capture | SequenceCapture, Axes | None]:
     """Open a capture (:func:`~meshmocap.io.capture.open_capture`) in metres, Z up.
 
     A capture folder is metres and Z up by its format (``up``/``units`` other than
-    ``"auto"`` are refused). A mesh or point-cloud sequence has its up axis and units
-    detected from its first frame (:func:`detect_axes`) where not given.
+    ``"auto"`` are refused), its frame rate that of its ``capture.json`` (a different
+    ``fps`` is refused). A mesh or point-cloud sequence has its up axis and units
+    detected from its first frame (:func:`detect_axes`) where not given, its frame rate
+    ``fps`` (default 30).
 
     Returns
     -------
@@ -147,9 +149,17 @@ def open_oriented(
                 f"track: {source} is a capture folder: metres, Z up; "
                 "--up and --units apply to mesh and point-cloud files"
             )
+        said = raw.meta.get("fps")
+        if fps is not None and said is not None and abs(float(said) - fps) > 1e-9:
+            raise InputError(
+                f"track: {source} is a capture folder of {said:g} fps (capture.json); "
+                "--fps applies to mesh and point-cloud files"
+            )
+        if fps is not None and said is None:
+            raw.meta["fps"] = float(fps)
         return raw, None
     axes = detect_axes(_first_readable(raw, source), up=up, units=units, source=str(source))
-    return SequenceCapture(source, up=axes.up, scale=UNITS[axes.units]), axes
+    return SequenceCapture(source, up=axes.up, scale=UNITS[axes.units], fps=fps), axes
 
 
 def _first_readable(raw: SequenceCapture, source) -> np.ndarray:

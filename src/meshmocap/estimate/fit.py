@@ -10,9 +10,11 @@ Per iteration, for pairs (model point i, observed point y with normal n_y)::
     E(Θ) = mean_md r² + w_dm mean_dm r² + μ (mean_md |v_i − y|² + mean_dm |v_i − y|²)
            + Σ_j λ_j |G_parent(j) log(R_j R_refᵀ_j)|²
 
-with ``r = n_y · (v_i − y)`` (point-to-plane) and μ = :data:`POINT_MIX`, the pairs found
-within a distance shrinking over the iterations; one Levenberg–Marquardt-damped step, each
-joint's rotation clipped to :data:`MAX_STEP_ANGLE`. Metres and radians, world frame Z up.
+with ``r = n_y · (v_i − y)`` (point-to-plane) and μ =
+:data:`~meshmocap.body.articulated.POINT_MIX`, the pairs found within a distance shrinking
+over the iterations; one Levenberg–Marquardt-damped step
+(:func:`~meshmocap.body.articulated.articulated_step`, each joint's rotation clipped to
+:data:`~meshmocap.body.articulated.MAX_STEP_ANGLE`). Metres and radians, world frame Z up.
 
 :meth:`PoseFitter.score` is the symmetric closest-point distance a global search ranks candidate
 poses by, and :class:`PoseFitter` keeps the observed points, their k-d tree and the model
@@ -28,32 +30,31 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
-    apply_increment,
+    add_pose_pull,
     articulated_model,
-    nearest_compatible,
+    articulated_step,
+    closest_pairs,
+    closest_point_system,
     pose_points,
     residual_jacobian,
+    rotation_error,
 )
-from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
+from meshmocap.errors import FitError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.distance_field import DistanceGrid
-from meshmocap.geometry.rotations import so3_log
 from meshmocap.geometry.silhouette import silhouette
 
 __all__ = [
-    "MAX_STEP_ANGLE",
-    "POINT_MIX",
     "PoseFit",
     "PoseFitter",
     "pose_of_vertices",
     "silhouette_mismatch",
 ]
 
-#: Weight of the point-to-point pull added to the point-to-plane residuals.
-POINT_MIX = 0.1
-#: Largest rotation (radians) of any joint in one Gauss–Newton step.
-MAX_STEP_ANGLE = 0.3
+#: Damping of :func:`pose_of_vertices` (known correspondences: a lighter one than the
+#: closest-point fits' :data:`~meshmocap.body.articulated.DAMPING`).
+VERTEX_DAMPING = 1e-3
 #: Distances (metres) beyond which :meth:`PoseFitter.score` counts a point as unexplained.
 SCORE_CLIP = 0.15
 #: Distance outside the observed solid (metres) beyond which a model point costs no more.
@@ -192,68 +193,48 @@ class PoseFitter:
         if np.ndim(lambda_pose) == 0:
             lam[0] = 0.0
         free = self.free if joints is None else np.intersect1d(joints, self.free)
+        # the estimated parameters: the root's translation (if it moves), the free rotations
+        rot = (3 + 3 * free[:, None] + np.arange(3)).ravel()
+        active = np.concatenate([np.arange(3), rot]) if move_root else rot
         d0, d1 = max_distance
         for it in range(iterations):
             d = d0 * (d1 / d0) ** (it / max(iterations - 1, 1))
-            step = self._step(R, root, d, R_ref, lam, free, move_root, damping)
-            if step is None:
+            system = self._system(R, root, d, R_ref, lam, free, move_root)
+            if system is None:  # no pair left
                 break
-            R, root = apply_increment(self.sk, R, root, step)
+            try:
+                R, root, _ = articulated_step(
+                    self.sk, R, root, *system, active=active, damping=damping
+                )
+            except FitError:  # a singular system: keep the pose reached
+                break
         return PoseFit(R, root, self.score(R, root), label)
 
-    def _step(self, R, root, max_distance, R_ref, lam, joints, move_root, damping):
-        """One damped Gauss–Newton increment (3 + 3J,) of the root (if ``move_root``) and
-        the rotations of ``joints``, or None without any pair. Only the model points those
-        move, and their pairs, enter (the others' residuals do not change)."""
-        J = self.sk.n_joints
+    def _system(self, R, root, max_distance, R_ref, lam, joints, move_root):
+        """The Gauss–Newton system (H, g) of the root (if ``move_root``) and the rotations of
+        ``joints``, or None without any pair. Only the model points those move, and their
+        pairs, enter (the others' residuals do not change)."""
         v, nv, a = pose_points(self.model, R, root)
-        moving = np.ones(len(v), bool) if move_root else self.model.W_acc[:, joints].sum(1) > 0
-        cand = dict(k=8, max_distance=max_distance, normal_cos=self.normal_cos)
-        on = np.flatnonzero(moving)
-        i, k = nearest_compatible(self.tree, self.NY, v[on], nv[on], **cand)  # model → data
-        i = on[i]
-        k2, i2 = nearest_compatible(KDTree(v), nv, self.Y, self.NY, **cand)  # data → model
-        k2, i2 = k2[moving[i2]], i2[moving[i2]]
-        if not (len(i) or len(i2)):
+        moving = None if move_root else self.model.W_acc[:, joints].sum(1) > 0
+        pairs = closest_pairs(
+            self.tree,
+            self.Y,
+            self.NY,
+            v,
+            nv,
+            max_distance=max_distance,
+            normal_cos=self.normal_cos,
+            moving=moving,
+        )
+        if not any(len(i) for i, _ in pairs):
             return None
-        a = a[:, joints]  # lever arms of the estimated joints only
-        cols = np.arange(0 if move_root else 3, 3 + 3 * len(joints))
-        n = len(cols)
-        H, g = np.zeros((n, n)), np.zeros(n)
-        for ii, kk, w in ((i, k, 1.0), (i2, k2, self.w_dm)):
-            if len(ii) == 0:
-                continue
-            y, ny = self.Y[kk], self.NY[kk]
-            r, Jr = residual_jacobian(v, a, ii, y, ny, "point_to_plane")
-            Jr = Jr[:, cols]
-            H += (w / len(ii)) * (Jr.T @ Jr)
-            g += (w / len(ii)) * (Jr.T @ r)
-            sub = slice(None, None, max(1, len(ii) // 500))  # the weak pull: 500 pairs suffice
-            r, Jr = residual_jacobian(v, a, ii[sub], y[sub], ny[sub], "point_to_point")
-            Jr = Jr[:, cols]
-            s = w * POINT_MIX / len(ii[sub])
-            H += s * (Jr.T @ Jr)
-            g += s * (Jr.T @ r)
+        # lever arms of the estimated joints only
+        H, g = closest_point_system(v, a[:, joints], pairs, (1.0, self.w_dm), self.Y, self.NY)
         # pull towards the reference pose, linearised in world-frame rotation errors
-        G, _ = forward_kinematics(self.sk, R, root)
-        Gp = np.concatenate([np.eye(3)[None], G[self.sk.parents[1:]]])[joints]
-        e = np.einsum("jab,jb->ja", Gp, so3_log(R[joints] @ np.swapaxes(R_ref[joints], 1, 2)))
-        rot = np.arange(n - 3 * len(joints), n)
-        H[rot, rot] += np.repeat(lam[joints], 3)
-        g[rot] += (lam[joints][:, None] * e).ravel()
-        H[np.diag_indices(n)] *= 1.0 + damping
-        H[np.diag_indices(n)] += 1e-9
-        x = -np.linalg.solve(H, g)
-        if not np.all(np.isfinite(x)):
-            return None
-        delta = np.zeros(3 + 3 * J)
-        if move_root:
-            delta[:3] = x[:3]
-        w = x[rot].reshape(-1, 3)
-        ang = np.linalg.norm(w, axis=1, keepdims=True)
-        w = w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))
-        delta[(3 + 3 * joints[:, None] + np.arange(3)).ravel()] = w.ravel()
-        return delta
+        e = rotation_error(self.sk, R, root, R_ref)[joints]
+        add_pose_pull(H, g, e, lam[joints])
+        cols = slice(0 if move_root else 3, None)
+        return H[cols, cols], g[cols]
 
 
 def silhouette_mismatch(
@@ -307,15 +288,11 @@ def pose_of_vertices(
     for _ in range(iterations):
         v, _, a = pose_points(model, R, root)
         r, Jr = residual_jacobian(v, a, i, target, np.zeros_like(target), "point_to_point")
-        H = Jr[:, act].T @ Jr[:, act]
-        H[np.diag_indices(len(act))] *= 1.0 + 1e-3
-        H[np.diag_indices(len(act))] += 1e-9
-        delta = np.zeros(3 + 3 * sk.n_joints)
-        delta[act] = -np.linalg.solve(H, Jr[:, act].T @ r)
-        if not np.all(np.isfinite(delta)):
+        Ja = Jr[:, act]
+        try:
+            R, root, _ = articulated_step(
+                sk, R, root, Ja.T @ Ja, Ja.T @ r, active=act, damping=VERTEX_DAMPING
+            )
+        except FitError:  # a singular system: keep the pose reached
             break
-        w = delta[3:].reshape(-1, 3)
-        ang = np.linalg.norm(w, axis=1, keepdims=True)
-        delta[3:] = (w * np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(ang, 1e-12))).ravel()
-        R, root = apply_increment(sk, R, root, delta)
     return R, root

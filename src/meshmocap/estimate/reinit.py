@@ -199,7 +199,13 @@ class Recovery:
         k_best, changed = key(best), []
         if quality.outside.get("torso", 0.0) > 0.25:  # the body itself is lost: search anew
             res = initial_pose(
-                t, *obs.points, cameras=cameras, masks=masks, field=field, seed=int(frame.index)
+                t,
+                *obs.points,
+                cameras=cameras,
+                masks=masks,
+                field=field,
+                hull=obs.hull,
+                seed=int(frame.index),
             )
             cand = PoseFit(res.R, res.root, res.score)
             if key(cand) < k_best:

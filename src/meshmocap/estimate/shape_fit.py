@@ -19,7 +19,9 @@ volumes), so the fit does not pull the model onto the hull; it asks, in every ca
 each residual converted from pixels to metres at the point's depth (``r · z / f``), with
 Huber-like weights beyond 2 cm, plus a Gaussian prior on the shape (``λ_z ‖z‖²``) and a
 weak pull of every joint towards the rest pose. Damped Gauss–Newton on all frames' poses
-and the shared shape together; the outlines and the matches are recomputed every iteration.
+and the shared shape together (the damping and step limit of
+:func:`~meshmocap.body.articulated.articulated_step`); the outlines and the matches are
+recomputed every iteration.
 
 Derivatives (exact for the model; the projection's derivative ignores lens distortion):
 a skinned point ``v_i = Σ_k w_ik (G_k (X_i − P_k) + p_k)`` moves with the shape through its
@@ -41,16 +43,20 @@ from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
 from meshmocap.body.articulated import (
+    DAMPING,
     FIXED_JOINTS,
+    add_pose_pull,
     apply_increment,
     articulated_model,
+    damped_solve,
     limit_step,
     pose_points,
-    rest_rotation_error,
+    rotation_error,
 )
 from meshmocap.body.shape_space import BodyShapeSpace
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
+from meshmocap.errors import FitError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import cross
 from meshmocap.geometry.silhouette import silhouette
@@ -59,8 +65,9 @@ __all__ = ["ShapeFit", "SilhouetteView", "fit_shape", "shape_jacobian", "silhoue
 
 #: Residuals beyond this (metres) get Huber weights.
 HUBER = 0.02
-#: Largest rotation (radians) of any joint, and change of any coefficient, in one step.
-MAX_STEP_ANGLE, MAX_STEP_Z = 0.3, 0.5
+#: Largest change of any shape coefficient in one step (the joints' rotations are limited by
+#: :func:`~meshmocap.body.articulated.limit_step`).
+MAX_STEP_Z = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -325,23 +332,19 @@ def fit_shape(
                 g[:K] += Jz.T @ (w * r)
                 sq, cnt = sq + float(r @ r), cnt + len(r)
             # weak pull of every non-root joint towards the rest pose (world-frame error)
-            e = rest_rotation_error(tmpl.skeleton, R[f], root[f])[1:].ravel()
-            idx = np.arange(sl.start + 6, sl.stop)
-            H[idx, idx] += lambda_pose
-            g[idx] += lambda_pose * e
+            e = rotation_error(tmpl.skeleton, R[f], root[f])[1:]
+            add_pose_pull(H, g, e, lambda_pose, start=sl.start + 6)
         H[:K, :K] += lambda_shape * np.eye(K)
         g[:K] += lambda_shape * z
         rms = float(np.sqrt(sq / max(cnt, 1)))
         act = np.concatenate([np.arange(K)] + [K + f * n_pose + act_pose for f in range(n_f)])
-        Ha, ga = H[np.ix_(act, act)], g[act]
-        Ha[np.diag_indices(len(act))] *= 1.0 + 1e-2
-        Ha[np.diag_indices(len(act))] += 1e-10
         delta = np.zeros(n_par)
-        delta[act] = -np.linalg.solve(Ha, ga)
-        if not np.all(np.isfinite(delta)):
-            raise FloatingPointError("fit_shape: singular normal equations")
+        try:
+            delta[act] = damped_solve(H[np.ix_(act, act)], g[act], damping=DAMPING)
+        except FitError as exc:
+            raise FitError(f"fit_shape: {exc}") from None
         z = z + np.clip(delta[:K], -MAX_STEP_Z, MAX_STEP_Z)
         for f in range(n_f):
-            d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose], MAX_STEP_ANGLE)
+            d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose])
             R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
     return ShapeFit(z, R, root, rms, int(iterations))

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshmocap.body.template import Template, load_template, save_template
+from meshmocap.estimate.capture_cache import cached_subject
 from meshmocap.estimate.subject import estimate_subject
 
 __all__ = ["SUBJECT_FILE", "TemplateChoice", "tracking_template"]
@@ -94,7 +95,8 @@ def tracking_template(
     if path.is_file() and not refresh:
         t = load_template(path)
         return TemplateChoice(t, info, f"template estimated from the capture, reused from {path}")
-    est = estimate_subject(capture, kind=kind)  # type: ignore[arg-type]
+    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache)
+    est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
     # tracked as read back from the file, as a resumed run will read it: the same template

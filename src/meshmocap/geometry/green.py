@@ -206,8 +206,16 @@ def _continue(phi, psi, rows, j, F, fc, dd, dh) -> None:
 
 
 def _coordinates(
-    P: np.ndarray, V: np.ndarray, F: np.ndarray, exterior: str, chunk_size: int | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    P: np.ndarray,
+    V: np.ndarray,
+    F: np.ndarray,
+    exterior: str,
+    chunk_size: int | None,
+    out: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Green coordinates of ``P`` (n, 3) written chunk by chunk into ``out`` (nv + nf, n)
+    (φ rows, then ψ rows; any float dtype; allocated float64 when None), and which points
+    lie outside (n,). Memory: ``out`` and one chunk's temporaries, whatever ``n``."""
     centre = V.mean(axis=0)  # coordinates are translation invariant; centring keeps
     P, V = P - centre, V - centre  # the face constants accurate far from the origin
     fc = _Faces(V, F)
@@ -220,14 +228,13 @@ def _coordinates(
     def scatter(phi_f: np.ndarray) -> np.ndarray:
         return phi_f.transpose(1, 0, 2).reshape(phi_f.shape[1], -1) @ S
 
-    phi = np.empty((n, nv))
-    psi = np.empty((n, nf))
+    out = np.empty((nv + nf, n)) if out is None else out
     outside = np.zeros(n, dtype=bool)
     step = chunk_size or max(1, _PAIRS_PER_CHUNK // nf)
     for lo in range(0, n, step):
-        sl = slice(lo, min(lo + step, n))
-        phi_f, psi[sl], h, d = _chunk(P[sl], fc)
-        phi[sl] = scatter(phi_f)
+        Pc = P[lo : lo + step]
+        phi_f, psi, h, d = _chunk(Pc, fc)
+        phi = scatter(phi_f)  # (m, nv), this chunk's rows
         # On the cage (within `band` of a face) the solid angles are ill-conditioned:
         # evaluate at a point `band` inside face j instead and continue through j.
         near = (np.abs(h) <= band) & (d.min(axis=0) >= -band)
@@ -238,29 +245,30 @@ def _coordinates(
             score = np.where(near[idx], h[idx] ** 2 + np.sum(miss * miss, axis=0), np.inf)
             j = np.argmin(score, axis=1)
             nj = np.stack(fc.n, axis=1)[j]
-            foot = P[lo + idx] + h[idx, j][:, None] * nj
+            foot = Pc[idx] + h[idx, j][:, None] * nj
             g = np.stack([sum(fc.C[k][i][j] for k in range(3)) / 3 for i in range(3)], axis=1)
             margin = fc.area2[j] / (3.0 * fc.length[:, j].max(axis=0))  # in-radius-like
             tau = (2.0 * band / (margin + band))[:, None]
             inner = g + (1.0 - tau) * (foot - g) - band * nj  # ≥ band inside face j
             phi_f, psi_i, h_i, d_i = _chunk(inner, fc)
-            rows = lo + idx
-            phi[rows], psi[rows] = scatter(phi_f), psi_i
+            phi[idx], psi[idx] = scatter(phi_f), psi_i
             r = np.arange(len(idx))
-            _continue(phi, psi, rows, j, F, fc, d[:, idx, j] - d_i[:, r, j], h[idx, j] - h_i[r, j])
-        out = (phi[sl].sum(axis=1) < 0.5) & ~on  # winding number: 1 inside, 0 outside
-        outside[sl] = out
-        if exterior == "extend" and out.any():
-            idx = np.flatnonzero(out)
-            j = _nearest_faces(P[lo + idx], h[idx], d[:, idx], fc)
-            _continue(phi, psi, lo + idx, j, F, fc, d[:, idx, j], h[idx, j])
+            _continue(phi, psi, idx, j, F, fc, d[:, idx, j] - d_i[:, r, j], h[idx, j] - h_i[r, j])
+        ext = (phi.sum(axis=1) < 0.5) & ~on  # winding number: 1 inside, 0 outside
+        outside[lo : lo + step] = ext
+        if exterior == "extend" and ext.any():
+            idx = np.flatnonzero(ext)
+            j = _nearest_faces(Pc[idx], h[idx], d[:, idx], fc)
+            _continue(phi, psi, idx, j, F, fc, d[:, idx, j], h[idx, j])
+        out[:nv, lo : lo + step] = phi.T
+        out[nv:, lo : lo + step] = psi.T
     if exterior == "raise" and outside.any():
         first = int(np.flatnonzero(outside)[0])
         raise InputError(
             f"green_coordinates: {int(outside.sum())} points lie outside the cage "
             f"(first: {first} at {(P[first] + centre).tolist()}); use exterior='extend'"
         )
-    return phi, psi, outside
+    return out, outside
 
 
 def green_coordinates(
@@ -289,8 +297,8 @@ def green_coordinates(
         there, Σ φ = 0); ``"raise"`` raises :class:`InputError`.
     chunk_size : int, optional
         Points per vectorised chunk (default 32,768 // nf, which keeps the temporaries
-        in L2); memory about ``60 × 8 × chunk_size × nf`` bytes. Results do not depend
-        on it.
+        in L2); the temporaries take about ``60 × 8 × chunk_size × nf`` bytes, beside the
+        ``8 × n × (nv + nf)`` of the result. Results do not depend on it.
 
     Returns
     -------
@@ -321,8 +329,8 @@ def green_coordinates(
     P = _check_points(func, "points", points)
     if chunk_size is not None and (not isinstance(chunk_size, int | np.integer) or chunk_size < 1):
         raise InputError(f"{func}: chunk_size must be a positive integer, found {chunk_size!r}")
-    phi, psi, _ = _coordinates(P, V, F, exterior, chunk_size)
-    return phi, psi
+    GT, _ = _coordinates(P, V, F, exterior, chunk_size)
+    return GT[: len(V)].T, GT[len(V) :].T
 
 
 # ------------------------------------------------------------------------------ deformer
@@ -344,18 +352,20 @@ class GreenDeformer:
     exterior : {"extend", "raw", "raise"}
         Handling of points outside the cage, see :func:`green_coordinates`.
     dtype : {numpy.float64, numpy.float32}
-        Storage of the coordinates. float32 halves the memory traffic of :meth:`deform`
-        (about 2× faster for large point sets) at ~2e-6 relative accuracy (2 µm on a
-        human-sized cage); the derivatives always use float64.
+        Storage of the coordinates: ``(nv + nf) × n`` numbers, written chunk by chunk
+        (no full-size temporary: memory is the storage plus one chunk's temporaries).
+        float32 halves the memory and the traffic of :meth:`deform` (about 2× faster for
+        large point sets) at ~2e-6 relative accuracy (2 µm on a human-sized cage); the
+        derivatives compute in float64 from the stored coordinates.
     chunk_size : int, optional
         See :func:`green_coordinates`.
 
     Attributes
     ----------
-    phi_ : (n, nv) float64
-        Vertex coordinates. With normals and stretch factors held fixed this is also
-        the Jacobian: ``d x'[p, a] / d v'[i, b] = phi_[p, i] δ_ab``.
-    psi_ : (n, nf) float64
+    phi_ : (n, nv) float64 or float32
+        Vertex coordinates (a view of the storage). With normals and stretch factors held
+        fixed this is also the Jacobian: ``d x'[p, a] / d v'[i, b] = phi_[p, i] δ_ab``.
+    psi_ : (n, nf) float64 or float32
         Face-normal coordinates, metres.
     outside_ : (n,) bool
         Points outside the rest cage (coordinates extended or raw); points on the cage
@@ -388,13 +398,12 @@ class GreenDeformer:
             raise InputError(f"{func}: dtype must be float64 or float32, found {dtype!r}")
         V, F = _check_cage(func, cage_V, cage_F)
         P = _check_points(func, "points", points)
-        phi, psi, outside = _coordinates(P, V, F, exterior, chunk_size)
         # coordinates stored transposed, (nv + nf, n): the product B.T @ G_T is the
-        # fastest layout for a 3-column right-hand side
-        self._GT = np.ascontiguousarray(np.hstack([phi, psi]).T, dtype=dtype)
-        if self._GT.dtype == np.float64:  # share memory: phi_ and psi_ are views
-            phi, psi = self._GT[: len(V)].T, self._GT[len(V) :].T
-        self.phi_, self.psi_ = phi, psi
+        # fastest layout for a 3-column right-hand side; written chunk by chunk in their
+        # storage type (memory: the coordinates and one chunk, module notes)
+        self._GT = np.empty((len(V) + len(F), len(P)), dtype=dtype)
+        _, outside = _coordinates(P, V, F, exterior, chunk_size, self._GT)
+        self.phi_, self.psi_ = self._GT[: len(V)].T, self._GT[len(V) :].T  # views
         self.outside_, self.cage_F_, self.rest_V_ = outside, F, V
         self.rest_u_, self.rest_v_ = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
         self.rest_area_ = 0.5 * np.linalg.norm(np.cross(self.rest_u_, self.rest_v_), axis=1)

@@ -29,3 +29,14 @@ def labelled_points(
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"{func}: fps must be a positive number, found {fps!r}")
     return X, names
+
+
+def valid_mask(func: str, X: np.ndarray, valid) -> np.ndarray:
+    """``valid`` ((T,) or (T, P) bool, None: all) as a (T, P) bool mask over ``X``
+    (T, P, 3), or raise :class:`InputError`."""
+    ok = np.ones(X.shape[:2], bool) if valid is None else np.asarray(valid, dtype=bool)
+    if ok.shape == (X.shape[0],):
+        ok = np.repeat(ok[:, None], X.shape[1], axis=1)
+    if ok.shape != X.shape[:2]:
+        raise InputError(f"{func}: valid must have shape (T,) or (T, P), found {ok.shape}")
+    return ok

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.io._labelled import labelled_points
+from meshmocap.io._labelled import labelled_points, valid_mask
 
 __all__ = ["C3dPoints", "read_c3d", "write_c3d"]
 
@@ -46,12 +46,7 @@ class C3dPoints:
 
 def _check_points(func: str, points, labels, fps, valid) -> tuple[np.ndarray, np.ndarray]:
     X, _ = labelled_points(func, points, labels, fps)
-    ok = np.ones(X.shape[:2], bool) if valid is None else np.asarray(valid, dtype=bool)
-    if ok.shape == (X.shape[0],):
-        ok = np.repeat(ok[:, None], X.shape[1], axis=1)
-    if ok.shape != X.shape[:2]:
-        raise InputError(f"{func}: valid must have shape (T,) or (T, P), found {ok.shape}")
-    return X, ok
+    return X, valid_mask(func, X, valid)
 
 
 def write_c3d(
@@ -77,7 +72,7 @@ def write_c3d(
     first_frame : int
         Capture number of the first frame, counted from 0 (written as ``first_frame + 1``).
     valid : (T,) or (T, P) bool, optional
-        False marks a sample invalid (residual −1).
+        False marks a sample invalid, a gap: residual −1 and coordinates 0.
     descriptions : sequence of P str, optional
         ``POINT:DESCRIPTIONS``.
     """
@@ -98,7 +93,7 @@ def write_c3d(
     )
     c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
     data = np.ones((4, P, T))
-    data[:3] = (X * 1000.0).transpose(2, 1, 0)
+    data[:3] = (np.where(ok[..., None], X, 0.0) * 1000.0).transpose(2, 1, 0)  # gaps: 0
     c["data"]["points"] = data
     c["data"]["meta_points"]["residuals"] = np.where(ok.T, 0.0, -1.0)[None]
     c.add_parameter("TRIAL", "ACTUAL_START_FIELD", [int(first_frame) + 1, 0])

@@ -514,8 +514,17 @@ class SequenceFrame:
         return VoxelHull(occ, origin, vs)
 
 
+#: Names of the length units a mesh sequence may be scaled from (metres per unit).
+UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm"}
+
+
 class SequenceCapture:
     """Any folder, glob or archive of meshes or point clouds, read as a capture, frame by frame.
+
+    Frames are numbered by their file names (:func:`~meshmocap.io.meshes.frame_numbers`:
+    ``00005.ply`` is frame 5). A number missing between the first and the last file is a
+    frame without observation (``missing`` says so): trackers coast across it and keep it
+    in the numbering.
 
     Parameters
     ----------
@@ -526,8 +535,13 @@ class SequenceCapture:
         also carry their masks (for the silhouette overlap error).
     up : {"z", "y"}
         The files' up axis.
+    frames : positions in the files' sorted listing to keep (no gap is filled then)
     scale : float
         Metres per file unit (0.001 for millimetres).
+    fps : float, optional
+        Frames per second (default 30, :attr:`fps_given` False).
+    offset : (3,) float, optional
+        Metres subtracted from every point after scaling and turning Z up (default 0).
     """
 
     def __init__(
@@ -539,11 +553,15 @@ class SequenceCapture:
         up: str = "z",
         frames=None,
         scale: float = 1.0,
+        fps: float | None = None,
+        offset=None,
     ):
         from meshmocap.io.meshes import MeshSequence
 
         self.seq = MeshSequence(source, up=up, frames=frames)
+        self.up = up
         self.scale = float(scale)
+        self.offset = np.zeros(3) if offset is None else np.asarray(offset, np.float64).reshape(3)
         one = isinstance(source, str | os.PathLike)
         self.path = Path(
             os.fspath(source) if one else os.path.commonpath([os.path.abspath(p) for p in source])
@@ -551,26 +569,51 @@ class SequenceCapture:
         self.meta: dict = {}
         self.cameras = read_cameras(cameras) if cameras else []
         self.silhouette_dir = Path(silhouettes) if silhouettes else None
-        self.indices = [int(i) for i in self.seq.indices]
+        numbers = [int(n) for n in self.seq.numbers]
+        self._position = {n: k for k, n in enumerate(numbers)}
+        if frames is None:  # every number from the first file's to the last's
+            self.indices = list(range(min(numbers), max(numbers) + 1))
+        else:
+            self.indices = sorted(numbers)
+        #: Frame numbers without a file (gaps in the numbering).
+        self.gaps = [i for i in self.indices if i not in self._position]
         self.truth_faces = None
-        self.fps = 30.0
+        if fps is not None and not (isinstance(fps, int | float) and 0 < fps < 1e5):
+            raise InputError(f"capture: fps must be a positive number, found {fps!r}")
+        self.fps_given = fps is not None
+        self.fps = 30.0 if fps is None else float(fps)
+
+    @property
+    def units(self) -> str:
+        """The files' length unit (``"m"``, ``"cm"``, ``"mm"``; else metres per unit)."""
+        return UNIT_NAMES.get(self.scale, f"{self.scale:g} m")
 
     def __len__(self) -> int:
-        return len(self.seq)
+        return len(self.indices)
 
     def __getitem__(self, k: int) -> SequenceFrame:
-        f = self.seq[k]
+        if not -len(self) <= k < len(self):
+            raise InputError(f"capture: frame position {k} out of range for {len(self)} frames")
+        index = self.indices[k]
+        if index not in self._position:
+            before = max(i for i in self._position if i < index)
+            after = min(i for i in self._position if i > index)
+            why = f"no file of frame {index} (the files skip from frame {before} to {after})"
+            return SequenceFrame(index, (np.zeros((0, 3)), None), None, missing=why)
+        f = self.seq[self._position[index]]
         V = f.V if self.scale == 1.0 else f.V * self.scale  # in metres
+        if self.offset.any():
+            V = V - self.offset
         normals = f.normals
         if f.F is None and normals is None:  # a point cloud without normals: estimate them
             normals = point_normals(V)
         masks = None
         if self.silhouette_dir is not None and self.cameras:
             masks = [
-                read_mask(self.silhouette_dir / c.name / f"{frame_name(f.index)}.png")
+                read_mask(self.silhouette_dir / c.name / f"{frame_name(index)}.png")
                 for c in self.cameras
             ]
-        return SequenceFrame(f.index, (V, f.F), normals, masks, cameras=self.cameras)
+        return SequenceFrame(index, (V, f.F), normals, masks, cameras=self.cameras)
 
     def __iter__(self) -> Iterator[SequenceFrame]:
         for k in range(len(self)):

@@ -45,6 +45,7 @@ def write_joints_csv(
     flags: Sequence[Sequence[str]] | None = None,
     messages: Sequence[str] | None = None,
     long: bool = False,
+    valid: np.ndarray | None = None,
 ) -> Path:
     """Write joint trajectories as CSV, atomically; return the path.
 
@@ -62,6 +63,8 @@ def write_joints_csv(
     flags : T sequences of str from FRAME_FLAGS, optional; messages : T str, optional
     long : bool
         One row per frame and joint instead of one per frame.
+    valid : (T,) bool, optional
+        False marks a gap: the frame's coordinate cells are left empty.
     """
     X = np.asarray(joints, dtype=np.float64)
     if X.ndim != 3 or X.shape[2] != 3 or X.shape[0] == 0:
@@ -79,8 +82,11 @@ def write_joints_csv(
     ok = np.ones(T, bool) if healthy is None else np.asarray(healthy, dtype=bool)
     fl = [()] * T if flags is None else [tuple(f) for f in flags]
     msg = [""] * T if messages is None else [str(m) for m in messages]
-    if ok.shape != (T,) or len(fl) != T or len(msg) != T:
-        raise InputError(f"write_joints_csv: healthy, flags and messages need {T} entries each")
+    has = np.ones(T, bool) if valid is None else np.asarray(valid, dtype=bool)
+    if ok.shape != (T,) or has.shape != (T,) or len(fl) != T or len(msg) != T:
+        raise InputError(
+            f"write_joints_csv: healthy, valid, flags and messages need {T} entries each"
+        )
     head = ["frame", "time_s", "healthy", *FLAG_COLUMNS, "message"]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -91,10 +97,11 @@ def write_joints_csv(
     for t in range(T):
         lead = [int(idx[t]), f"{idx[t] / fps:.6f}", int(ok[t])]
         lead += [int(f in fl[t]) for f in FLAG_COLUMNS] + [msg[t]]
+        cells = [f"{v:.6f}" if has[t] else "" for v in X[t].ravel()]
         if long:
             for k in range(K):
-                w.writerow([*lead, names[k], *(f"{v:.6f}" for v in X[t, k])])
+                w.writerow([*lead, names[k], *cells[3 * k : 3 * k + 3]])
         else:
-            w.writerow([*lead, *(f"{v:.6f}" for v in X[t].ravel())])
+            w.writerow([*lead, *cells])
     write_text_atomic(path, buf.getvalue())
     return Path(path)

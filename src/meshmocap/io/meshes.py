@@ -489,6 +489,18 @@ class MeshSequence:
         """(len,) int64: the selected frames' positions in the full sorted listing."""
         return np.array(self._select, dtype=np.int64)
 
+    @property
+    def numbers(self) -> np.ndarray:
+        """(len,) int64: the selected frames' numbers, read from their file names
+        (:func:`frame_numbers`: ``00005.ply`` is frame 5, whatever files are missing).
+
+        Raises
+        ------
+        InputError : a name that is not a frame number, or two files of one number.
+        """
+        numbers = frame_numbers([self._label(i) for i in range(len(self._names))])
+        return np.array([numbers[i] for i in self._select], dtype=np.int64)
+
     def _label(self, i: int) -> str:
         return f"{self._archive.path}::{self._names[i]}" if self._archive else self._names[i]
 
@@ -549,8 +561,47 @@ def frame_files(sources: Sequence[str | os.PathLike]) -> list[str]:
     return sorted(dict.fromkeys(names), key=natural_key)
 
 
+_NUMBERED = re.compile(r"^(.*?)(\d+)$")
+
+
+def frame_numbers(names: Sequence[str]) -> list[int]:
+    """The frame number of each file name: the run of digits that ends its stem
+    (``mesh_0042.obj`` → 42, ``00005.ply`` → 5), after a prefix the names share. A single
+    file without digits is frame 0.
+
+    Raises
+    ------
+    InputError
+        One line naming the file: a name that does not end in digits (``00005 (1).ply``, a
+        copy), whose prefix differs from the others' (``00005_1.ply`` among ``NNNNN.ply``), or
+        two files of the same number.
+    """
+    stems = [os.path.splitext(os.path.basename(n.split("::")[-1]))[0] for n in names]
+    matches = [_NUMBERED.match(s) for s in stems]
+    if len(names) == 1 and matches[0] is None:
+        return [0]
+    prefixes = [m.group(1) for m in matches if m is not None]
+    common = max(set(prefixes), key=prefixes.count) if prefixes else ""
+    seen: dict[int, str] = {}
+    out = []
+    for name, m in zip(names, matches, strict=True):
+        if m is None or m.group(1) != common:
+            like = f"{common}NNNN{_ext(name)}"
+            raise InputError(
+                f"{name}: not a frame number (frame files are named like {like}, the frame "
+                "number last); rename or remove it"
+            )
+        k = int(m.group(2))
+        if k in seen:
+            raise InputError(f"{name}: frame {k} again (also {seen[k]}); remove one of them")
+        seen[k] = name
+        out.append(k)
+    return out
+
+
 def is_frame_file(name: str) -> bool:
-    """Whether ``name`` is a mesh or point-cloud file a sequence reads (not hidden)."""
+    """Whether the file ``name`` is a frame of a mesh or point folder (a known extension,
+    not hidden)."""
     base = os.path.basename(name)
     return not base.startswith(".") and _ext(base) in _FRAME_EXTENSIONS
 

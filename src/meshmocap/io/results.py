@@ -7,6 +7,9 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
                         terms, iterations, seconds, health flag, flags and message
+      light.npz         only for a track of a light body (meshmocap.body.light): the frames
+                        hold the light body's vertices, and this binding reads the
+                        template's out of them (read_track does)
 
 A frame file is written atomically once the frame is done: the folder always holds whole
 frames, and :func:`done_frames` tells a resumed run where to continue.
@@ -23,6 +26,7 @@ import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap._npz import read_npz
+from meshmocap.body.light import SurfaceBinding, bound_vertices
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 
@@ -153,6 +157,105 @@ def tracked_template(path: str | os.PathLike, meta: dict | None = None) -> Templ
         ) from None
 
 
+@dataclass(frozen=True)
+class InputFrame:
+    """How a track's input files relate to the world frame the track is in (``track.json``:
+    ``input`` and ``fps``). A file point ``x`` is the world point
+    ``scale · turn_up(x) − offset`` (metres, Z up), ``turn_up`` the rotation of
+    :func:`~meshmocap.io.meshes.read_mesh` for Y-up files.
+
+    Attributes
+    ----------
+    up : {"z", "y"}, the files' up axis
+    units : str, their length unit (``"m"``, ``"cm"``, ``"mm"``)
+    scale : float, metres per file unit
+    offset : (3,) float64, metres subtracted after scaling
+    fps : float or None, frames per second (None: the track does not say)
+    """
+
+    up: str = "z"
+    units: str = "m"
+    scale: float = 1.0
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    fps: float | None = None
+
+    def describe(self) -> str:
+        """One phrase: ``"Y up, mm, 30 fps"``."""
+        rate = f", {self.fps:g} fps" if self.fps else ""
+        shift = f", offset {', '.join(f'{v:g}' for v in self.offset)} m" if any(self.offset) else ""
+        return f"{self.up.upper()} up, {self.units}{rate}{shift}"
+
+
+def input_meta(capture) -> dict:
+    """What ``track.json`` records of how ``capture``'s files were read (see
+    :class:`InputFrame`): ``input`` (``up``, ``units``, ``scale``, ``offset``) and ``fps``
+    where the rate is known (given for a mesh sequence, in a capture folder's
+    ``capture.json``); a capture folder is metres and Z up by its format."""
+    given = getattr(capture, "fps_given", None)
+    if given is None:  # a capture folder: its capture.json says, or not
+        given = "fps" in getattr(capture, "meta", {})
+    info = {
+        "up": str(getattr(capture, "up", "z")),
+        "units": str(getattr(capture, "units", "m")),
+        "scale": float(getattr(capture, "scale", 1.0)),
+        "offset": [float(v) for v in getattr(capture, "offset", np.zeros(3))],
+    }
+    return {"input": info, **({"fps": float(capture.fps)} if given else {})}
+
+
+def input_frame(meta: dict) -> InputFrame:
+    """The :class:`InputFrame` a track's ``track.json`` contents ``meta`` record (tracks
+    written before it was recorded: Z up, metres, the ``fps`` they hold, if any).
+
+    Raises
+    ------
+    FormatError
+        A recorded value of the wrong kind (names ``track.json``'s key).
+    """
+    info = meta.get("input") or {}
+    try:
+        up = str(info.get("up", "z"))
+        scale = float(info.get("scale", 1.0))
+        offset = tuple(float(v) for v in info.get("offset", (0.0, 0.0, 0.0)))
+        fps = meta.get("fps")
+        fps = None if fps is None else float(fps)
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise FormatError(f"track.json: a bad 'input' or 'fps' ({exc})") from None
+    bad = up not in ("z", "y") or not scale > 0 or len(offset) != 3
+    if bad or not np.all(np.isfinite(offset)) or (fps is not None and not fps > 0):
+        raise FormatError(
+            f"track.json: 'input' must hold up z|y, a scale > 0 and a 3-vector offset, and "
+            f"'fps' a rate > 0; found {info}, fps {meta.get('fps')}"
+        )
+    units = str(info.get("units", "m"))
+    return InputFrame(up, units, scale, offset, fps)  # type: ignore[arg-type]
+
+
+def open_tracked_capture(meta: dict, source: str | os.PathLike | None = None):
+    """The capture a track was made from, read as the track read it: ``source`` (default:
+    ``track.json``'s ``capture``) in the up axis, units, offset and frame rate that
+    ``meta`` records (:func:`input_frame`), so scores, reports and exports are in the
+    track's frame. A capture folder is opened as it is.
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError : no ``source`` given and the recorded one is gone.
+    """
+    from meshmocap.io.capture import SequenceCapture, open_capture
+
+    if source is None:
+        source = str(meta.get("capture") or "")
+        if not source or not Path(source).exists():
+            raise MeshmocapFileNotFoundError(
+                f"track: its capture {source or '(not recorded)'} is gone; give the capture"
+            )
+    raw = open_capture(source)
+    if not isinstance(raw, SequenceCapture):
+        return raw
+    f = input_frame(meta)
+    return SequenceCapture(source, up=f.up, scale=f.scale, fps=f.fps, offset=f.offset)
+
+
 def start_track(
     path: str | os.PathLike, meta: dict, faces: np.ndarray, *, resume: bool = True
 ) -> list[int]:
@@ -231,6 +334,10 @@ def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
     if not vertices:
         for r in rows:
             r["vertices"] = r["vertices"][:0]
+    binding = read_light_binding(path) if vertices else None
+    if binding is not None:  # tracked on a light body: the template's vertices read out
+        for r in rows:
+            r["vertices"] = bound_vertices(binding, r["vertices"].astype(np.float64))
     keys = sorted({k for r in rows for k in r if k.startswith("energy_")})
     faces = _read_faces(path / "faces.npy")
     shapes = {(r["joints"].shape, r["vertices"].shape) for r in rows}
@@ -256,6 +363,39 @@ def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
         flags=tuple(frame_flags(r) for r in rows),
         messages=tuple(str(r["message"]) for r in rows),
     )
+
+
+#: The binding of a track made on a light body (module docstring).
+LIGHT_FILE = "light.npz"
+
+
+def write_light_binding(path: str | os.PathLike, binding: SurfaceBinding) -> None:
+    """Write ``binding`` (:mod:`meshmocap.body.light`) into the track folder ``path``."""
+    with atomic_open(Path(path) / LIGHT_FILE) as f:
+        np.savez_compressed(
+            f,
+            F=binding.F.astype(np.int32),
+            tri=binding.tri.astype(np.int32),
+            bary=binding.bary,
+            offset=binding.offset,
+        )
+
+
+def read_light_binding(path: str | os.PathLike) -> SurfaceBinding | None:
+    """The binding of a track folder made on a light body, or None."""
+    file = Path(path) / LIGHT_FILE
+    if not file.is_file():
+        return None
+    z = read_npz(file, "light body binding")
+    try:
+        return SurfaceBinding(
+            z["F"].astype(np.int64),
+            z["tri"].astype(np.int64),
+            z["bary"].astype(np.float64),
+            z["offset"].astype(np.float64),
+        )
+    except KeyError as exc:
+        raise FormatError(f"{file}: not a light body binding (no {exc})") from None
 
 
 _SCALARS = {"n_iter": int, "seconds": float, "healthy": bool}

@@ -12,6 +12,8 @@ Conventions of the files written here (OpenSim's):
 * Rows: ``Frame#`` (1, 2, ...), ``Time`` (seconds from the capture's start), then the
   coordinates with 6 decimals. ``OrigDataStartFrame`` is the capture's number of the
   first frame, counted from 1.
+* A gap (a marker without a value on a frame: ``valid`` False) is written as three empty
+  cells, as OpenSim and Pose2Sim read missing markers; :func:`read_trc` gives NaN there.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import numpy as np
 
 from meshmocap._atomic import write_text_atomic
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
-from meshmocap.io._labelled import labelled_points
+from meshmocap.io._labelled import labelled_points, valid_mask
 
 __all__ = ["Z_UP_TO_OPENSIM", "TrcMarkers", "read_trc", "write_trc"]
 
@@ -61,6 +63,7 @@ def write_trc(
     *,
     first_frame: int = 0,
     start_time: float = 0.0,
+    valid: np.ndarray | None = None,
 ) -> Path:
     """Write labelled points as a TRC file, atomically; return the path.
 
@@ -76,9 +79,12 @@ def write_trc(
         Capture number of the first frame, counted from 0.
     start_time : float
         Time of the first frame, seconds (the others follow at ``1 / fps``).
+    valid : (T,) or (T, P) bool, optional
+        False marks a gap: the marker has no value on that frame (empty cells).
     """
     X, labels = labelled_points("write_trc", points, labels, fps)
     T, P = X.shape[:2]
+    ok = valid_mask("write_trc", X, valid)
     if int(first_frame) < 0 or not np.isfinite(start_time):
         raise InputError(f"write_trc: first_frame must be ≥ 0, found {first_frame}")
     path = Path(path)
@@ -94,16 +100,18 @@ def write_trc(
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, P + 1)),
         "",
     ]
-    table = np.column_stack([np.arange(1, T + 1), start_time + np.arange(T) / fps, Y])
-    fmt = "\t".join(["%d", "%.6f"] + ["%.6f"] * (3 * P))
-    rows = "\n".join([fmt] * T) % tuple(table.ravel().tolist())
+    cells = np.char.mod("%.6f", Y)
+    cells[~np.repeat(ok, 3, axis=1)] = ""
+    lead = [f"{k + 1}\t{start_time + k / fps:.6f}" for k in range(T)]
+    rows = "\n".join(a + "\t" + "\t".join(c) for a, c in zip(lead, cells, strict=True))
     write_text_atomic(path, "\n".join(head) + "\n" + rows + "\n")
     return path
 
 
 def read_trc(path: str | os.PathLike) -> TrcMarkers:
     """Read a TRC file written in millimetres or metres (as :func:`write_trc` writes it,
-    or by other tools with the same header), back to metres in the Z-up world frame."""
+    or by other tools with the same header), back to metres in the Z-up world frame; a gap
+    (empty cells) reads as NaN."""
     path = Path(path)
     if not path.is_file():
         raise MeshmocapFileNotFoundError(f"{path}: no such TRC file")
@@ -124,7 +132,9 @@ def read_trc(path: str | os.PathLike) -> TrcMarkers:
         raise FormatError(f"{path}:4: NumMarkers is {n_markers}, found {len(labels)} names")
     rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
     try:
-        table = np.array([[float(x) for x in r[: 2 + 3 * n_markers]] for r in rows])
+        table = np.array(
+            [[float(x) if x.strip() else np.nan for x in r[: 2 + 3 * n_markers]] for r in rows]
+        )
     except ValueError as exc:
         raise FormatError(f"{path}: unreadable number in the data ({exc})") from None
     if table.ndim != 2 or table.shape[1] != 2 + 3 * n_markers:

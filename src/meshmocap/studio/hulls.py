@@ -1,8 +1,10 @@
 """Visual hulls of a real capture folder: cameras + silhouettes → hull files, frame by frame.
 
 A studio drops frames and loses cameras for a while: a camera whose mask is empty (the
-subject left its view) or missing (a dropped frame) is left out of that frame's carving,
-which uses the cameras that see the subject, and the hull file records it (its ``note``).
+subject left its view), missing (a dropped frame) or implausible (mostly foreground: an
+inverted mask, :func:`~meshmocap.estimate.plausibility.mask_problems`) is left out of that
+frame's carving, which uses the cameras that see the subject, and the hull file records it
+(its ``note``). Carving inverted masks would take the whole studio for the subject, slowly.
 A frame seen by fewer than ``min_cameras`` cameras has no hull: its file records why
 (:func:`~meshmocap.io.capture.write_missing_hull`), and trackers coast across it, flagging
 it ``missing``. Nothing else of the capture is lost.
@@ -25,6 +27,7 @@ from meshmocap.errors import (
     MeshmocapFileNotFoundError,
     MissingFrameWarning,
 )
+from meshmocap.estimate.plausibility import mask_problems
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import VoxelHull, carve
 from meshmocap.io.cameras import read_cameras
@@ -66,6 +69,7 @@ def carve_seen(
         for m, c in zip(masks, cameras, strict=True)
         if m is None or not m.any()
     }
+    why |= mask_problems(masks, [c.name for c in cameras])  # inverted: left out too
     used = [k for k, c in enumerate(cameras) if c.name not in why]
     left_out = ", ".join(f"{n}: {w}" for n, w in why.items())
     if len(used) < min_cameras:

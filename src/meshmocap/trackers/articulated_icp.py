@@ -15,8 +15,9 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
      observed point's nearest compatible model point (data→model). Compatible: closer than
      ``max_distance`` and normals agreeing (``n_model · n_data > normal_cos``), the nearest
      such among ``k_neighbours`` candidates;
-   * one Levenberg–Marquardt-damped Gauss–Newton step on the pose Θ = (root translation t,
-     a rotation increment ω_j per free joint) for
+   * one Levenberg–Marquardt-damped Gauss–Newton step
+     (:func:`~meshmocap.body.articulated.articulated_step`, shared by every articulated fit)
+     on the pose Θ = (root translation t, a rotation increment ω_j per free joint) for
 
          ``E(Θ) = E_md + w_dm E_dm + λ_pose Σ_j |log(R_j R̂_jᵀ)|² + λ_root |root − root̂|²``
 
@@ -53,8 +54,8 @@ from meshmocap.body.articulated import (
     FIXED_JOINTS,
     ArticulatedModel,
     Residual,
-    apply_increment,
     articulated_model,
+    articulated_step,
     nearest_compatible,
 )
 from meshmocap.body.articulated_system import (
@@ -66,7 +67,7 @@ from meshmocap.body.articulated_system import (
     rotation_error,
 )
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError
+from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.observe import frame_points
 from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.io.capture import CaptureFrame
@@ -305,7 +306,7 @@ class ArticulatedICP:
         self.n_steps += 1
         Y, NY = self.observations(frame)
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points")
+            raise FitError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.root.copy())
         if o.predict:  # constant velocity: R ← (R R_prevᵀ) R, root ← 2 root − root_prev
             Rp, rp = self.prev
@@ -315,24 +316,24 @@ class ArticulatedICP:
         R_ref, root_ref = last  # the regulariser pulls towards the previous pose
         data_tree = KDTree(Y)
         self._lap("observations")
-        n = 3 + 3 * sk.n_joints
-        act = self.active
-        diag = np.diag_indices(len(act))
         energies: dict[str, float] = {}
         n_iter = 0
         while n_iter < o.max_iter:
             n_iter += 1
             posed = posed_model(self.plan, self.R, self.root)
             H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref)
-            H, g = H[np.ix_(act, act)], g[act]
-            H[diag] *= 1 + o.damping
-            H[diag] += 1e-12
+            act = self.active
             self._lap("system")
-            delta = np.zeros(n)
-            delta[act] = -np.linalg.solve(H, g)
-            if not np.all(np.isfinite(delta)):
-                raise FloatingPointError("singular normal equations")
-            self.R, self.root = apply_increment(sk, self.R, self.root, delta, G=posed.G)
+            self.R, self.root, delta = articulated_step(
+                sk,
+                self.R,
+                self.root,
+                H[np.ix_(act, act)],
+                g[act],
+                active=act,
+                damping=o.damping,
+                G=posed.G,
+            )
             move = point_motion(self.plan, posed, delta)
             self._lap("solve")
             if np.max(np.einsum("mc,mc->m", move, move)) < o.tol * o.tol:
@@ -353,7 +354,7 @@ class ArticulatedICP:
             parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
         self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
-            raise FloatingPointError("no compatible correspondences")
+            raise FitError("no compatible correspondences")
         # every pair weighs 1/len of its direction: the mean over pairs, metres² whatever
         # the sampling; both directions summed into per-model-point moments at once
         ii = np.concatenate([p[0] for p in parts])

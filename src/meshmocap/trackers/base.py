@@ -1,12 +1,12 @@
 """What every tracker provides, and how a tracking run starts.
 
-A tracker is a small stateful object: ``init`` places the template on the first frame
-(from a known or estimated pose), ``step`` fits the next frame and returns a
-:class:`~meshmocap.io.results.FrameResult`, and ``reseat`` re-initialises it mid-track at
-a pose found from the current frame (loss recovery, :mod:`meshmocap.estimate.reinit`).
-The state it needs to continue is returned with each result (``FrameResult.state``) and
-restored by ``set_state``, so the sequence driver can resume an interrupted run and
-recover from a failed frame.
+A tracker is a small stateful object: ``setup`` prepares it for a template, ``init`` places
+the template on the first frame (from a known or estimated pose), ``step`` fits the next
+frame and returns a :class:`~meshmocap.io.results.FrameResult`, and ``reseat``
+re-initialises it mid-track at a pose found from the current frame (loss recovery,
+:mod:`meshmocap.estimate.reinit`). The state it needs to continue is returned with each
+result (``FrameResult.state``) and restored by ``set_state``, so the sequence driver can
+resume an interrupted run and recover from a failed frame.
 """
 
 from __future__ import annotations
@@ -25,6 +25,13 @@ class Tracker(Protocol):
 
     #: Short method name written in ``track.json``.
     name: str
+    #: The template the tracker is set up for (None before :meth:`setup` or :meth:`init`).
+    template: Template | None
+
+    def setup(self, template: Template) -> None:
+        """Precompute what tracking ``template`` needs (rig, model points, solvers) without
+        placing it on a frame: a resumed run calls this, then :meth:`set_state`."""
+        ...
 
     def init(
         self, template: Template, frame: CaptureFrame, R: np.ndarray, root: np.ndarray

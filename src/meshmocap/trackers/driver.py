@@ -1,12 +1,14 @@
 """The sequence driver shared by every tracker: streams frames, writes results frame by
 frame, shows progress, resumes interrupted runs and never emits NaN.
 
-A frame whose fit raises a numerical error or returns non-finite values is flagged
-``failed`` (``healthy = False``, with the reason), the tracker is reset to the last good
-state, and tracking continues with the next frame; the flagged frame repeats the last good
-result. A frame without observation (the capture records it as dropped, or its hull or mesh
-file is absent or unreadable) is flagged ``missing`` with the reason, and the tracker
-coasts across it the same way: the next real frame is fitted from the last good state.
+One function tracks a frame, here and in live mode (:func:`track_frame`). A frame whose fit
+raises :class:`~meshmocap.errors.FitError` (or a numerical error) or returns non-finite
+values is flagged ``failed`` (``healthy = False``, with the reason), the tracker is reset
+to the last good state, and tracking continues with the next frame; the flagged frame
+repeats the last good result. A frame without observation (the capture records it as
+dropped, or its hull or mesh file is absent or unreadable) is flagged ``missing`` with the
+reason, and the tracker coasts across it the same way: the next real frame is fitted from
+the last good state.
 
 Only one process writes into a track folder at a time: a second one is refused in one line
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
@@ -25,9 +27,10 @@ a run (CMU 09_01, patch, 55 frames: 13.5 → 35.8 mm mean; ``benchmarks/bench_re
 
 from __future__ import annotations
 
+import functools
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Literal, get_args
@@ -36,10 +39,19 @@ import numpy as np
 
 from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
+from meshmocap._threads import blas_threads
 from meshmocap._validate import check_choice
+from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
 from meshmocap.body.template import Template
-from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
-from meshmocap.estimate.init import initial_pose
+from meshmocap.errors import (
+    FitError,
+    FormatError,
+    InputError,
+    MeshError,
+    MeshmocapFileNotFoundError,
+)
+from meshmocap.estimate.capture_cache import cached_first_pose
+from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
 from meshmocap.estimate.observe import observed
 from meshmocap.estimate.reinit import Recovery
 from meshmocap.io.capture import Capture
@@ -53,18 +65,21 @@ from meshmocap.io.results import (
     read_track,
     start_track,
     write_frame,
+    write_light_binding,
 )
 from meshmocap.trackers.base import Tracker
 
 #: How the first frame's pose is found: from the capture alone, or from its ground truth.
 Init = Literal["auto", "truth"]
 
-#: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake.
-NUMERICAL_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ArithmeticError)
+#: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake:
+#: a tracker's :class:`~meshmocap.errors.FitError`, and the numerical errors of numpy
+#: (a singular solve; floating-point traps under ``np.errstate``).
+NUMERICAL_ERRORS = (FitError, np.linalg.LinAlgError, ArithmeticError)
 
 
 def is_finite_result(r: FrameResult) -> bool:
-    """Whether every joint and vertex of ``r`` is finite."""
+    """Whether a frame's joints and vertices are all finite."""
     return bool(np.all(np.isfinite(r.joints)) and np.all(np.isfinite(r.vertices)))
 
 
@@ -82,6 +97,8 @@ def track_sequence(
     recover: bool = True,
     reseat: bool = False,
     template_info: dict | None = None,
+    light: int | None = LIGHT_VERTICES,
+    init_options: dict | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -103,7 +120,7 @@ def track_sequence(
         :func:`~meshmocap.io.results.read_track`).
     init : {"auto", "truth"}
         The first frame's pose: found from the frame alone (a global search over heading,
-        place and a few seed poses, :func:`~meshmocap.estimate.init.initial_pose`), or
+        place and the bundled pose library, :func:`~meshmocap.estimate.init.initial_pose`), or
         copied from its ground truth (the papers' protocol; the capture must have it).
         ``track.json`` records which, the first frame's message the search's winner.
     recover : bool
@@ -115,6 +132,14 @@ def track_sequence(
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
         :func:`meshmocap.estimate.tracking_template.tracking_template`.
+    light : int or None
+        Track a light copy of the template with about this many vertices
+        (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
+        is): the frames hold its vertices, and :func:`~meshmocap.io.results.read_track`
+        reads the template's out of them. None tracks the template itself.
+    init_options : dict, optional
+        Options of the automatic first pose's search
+        (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
 
     Returns
     -------
@@ -139,11 +164,16 @@ def track_sequence(
         "reseat": bool(recover and reseat),
         **(template_info or {}),
     }
+    body = tracking_body(template, n_vertices=light)
+    meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
-    with folder_lock(out, "track"):  # a second run into the same folder is refused
+    # one BLAS thread while tracking; a second run into the same folder is refused
+    with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         if indices[0] not in done:
-            initialise_tracker(tracker, template, capture, out, positions, init)
+            initialise_tracker(tracker, body, capture, out, positions, init, init_options)
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
         if todo:
@@ -151,37 +181,87 @@ def track_sequence(
                 (i for i in indices if i in done and i < capture.indices[todo[0]]),
                 default=indices[0],
             )
-            if getattr(tracker, "template", None) is not template:  # resuming: not initialised
-                tracker.setup(template)
-            tracker.set_state(read_state(out, last))
+            resume_tracker(tracker, body.light, out, last)
             recovery = None
             if recover:
                 pose = _last_pose(out, [i for i in indices if i in done and i <= last])
-                recovery = Recovery(template, *pose)
+                recovery = Recovery(body.light, *pose)
             good = last
             for k in progress(todo, label=tracker.name, enabled=show_progress):
-                index, reason = int(capture.indices[k]), None
-                t0 = time.perf_counter()
-                try:
-                    frame = capture[k]  # a mesh sequence reads the file here
-                    reason = missing_reason(frame)
-                    if reason is None:
-                        frame = observed(frame)  # points, normals, occupancy: made once
-                        r = tracker.step(frame)
-                        if not is_finite_result(r):
-                            raise FloatingPointError("non-finite joints or vertices")
-                        if recovery is not None:
-                            r = recovered(tracker, recovery, frame, r, reseat=reseat)
-                        r = replace(r, index=index, seconds=time.perf_counter() - t0)
-                        good = index
-                except NUMERICAL_ERRORS as exc:
-                    r = coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
-                except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
-                    reason = failure_reason(exc)
-                if reason is not None:
-                    r = coast_frame(tracker, out, good, index, t0, "missing", reason)
+                index = int(capture.indices[k])
+                r = track_frame(
+                    tracker,
+                    functools.partial(capture.__getitem__, k),  # a mesh sequence reads here
+                    index,
+                    out,
+                    good,
+                    recovery=recovery,
+                    reseat=reseat,
+                )
+                good = index if r.healthy else good
                 write_frame(out, r)
     return read_track(out, vertices=vertices)
+
+
+def resume_tracker(tracker: Tracker, template: Template, out, last: int) -> None:
+    """Set ``tracker`` up for ``template`` (a resumed run has not initialised it) and
+    restore the state saved with frame ``last`` of the track folder ``out``."""
+    if tracker.template is not template:
+        tracker.setup(template)
+    tracker.set_state(read_state(out, last))
+
+
+def track_frame(
+    tracker: Tracker,
+    read: Callable[[], object],
+    index: int,
+    out: str | os.PathLike,
+    good: int,
+    *,
+    recovery: Recovery | None = None,
+    reseat: bool = False,
+    retry: Callable[[], bool] | None = None,
+) -> FrameResult | None:
+    """Track one frame: the per-frame step of the driver and of live mode
+    (:mod:`meshmocap.trackers.follow`).
+
+    Parameters
+    ----------
+    tracker : Tracker, in the state of the frame before
+    read : callable returning the frame (a mesh sequence reads its file here)
+    index : int, its frame number
+    out : path, the track folder; ``good`` : int, its last well-fitted frame
+    recovery, reseat : score the frame and flag lost limbs (:func:`recovered`)
+    retry : callable, optional
+        Asked when the frame cannot be read: True means "not yet" (live mode: a file still
+        being written), and None is returned for the caller to try again later.
+
+    Returns
+    -------
+    FrameResult
+        The fit, or (flagged ``failed``, with the reason, after a :class:`FitError` or
+        another numerical error) or (flagged ``missing``, when the frame has no
+        observation) a copy of frame ``good``'s result, the tracker reset to its state.
+    """
+    t0 = time.perf_counter()
+    try:
+        frame = read()
+        reason = missing_reason(frame)
+        if reason is None:
+            frame = observed(frame)  # points, normals, occupancy: made once
+            r = tracker.step(frame)
+            if not is_finite_result(r):
+                raise FitError("non-finite joints or vertices")
+            if recovery is not None:
+                r = recovered(tracker, recovery, frame, r, reseat=reseat)
+            return replace(r, index=index, seconds=time.perf_counter() - t0)
+    except NUMERICAL_ERRORS as exc:
+        return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
+    except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
+        if retry is not None and retry():
+            return None
+        reason = failure_reason(exc)
+    return coast_frame(tracker, out, good, index, t0, "missing", reason)
 
 
 #: Errors reading one frame's observation (an absent, empty or corrupt hull or mesh file):
@@ -196,7 +276,7 @@ def missing_reason(frame: object) -> str | None:
 
 
 def failure_reason(exc: BaseException) -> str:
-    """One line (at most 200 characters) naming ``exc``'s type and message."""
+    """One line (at most 200 characters) naming why a frame failed, for its flag."""
     return f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
 
 
@@ -219,11 +299,17 @@ def coast_frame(
 
 
 def initialise_tracker(
-    tracker: Tracker, template: Template, capture, out, positions: list[int], init: Init = "auto"
+    tracker: Tracker,
+    body: TrackingBody,
+    capture,
+    out,
+    positions: list[int],
+    init: Init = "auto",
+    init_options: dict | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds (its message says how). Frames before it are written as copies of it, flagged
-    ``missing``."""
+    finds for the full body (its message says how), the tracker on ``body.light``. Frames
+    before it are written as copies of it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -235,17 +321,18 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                R, root, how = first_pose(template, frame, init, capture=capture)
-                r = tracker.init(template, frame, R, root)
+                R, root, how = first_pose(
+                    body.template, frame, init, capture=capture, options=init_options
+                )
+                r = tracker.init(body.light, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:
             skipped.append((index, reason))
             continue
         state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
-        write_frame(
-            out, replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
-        )
+        r = replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
+        write_frame(out, replace(r, flags=(*r.flags, *start_flags(how))))
         for index, why in skipped:
             write_frame(
                 out,
@@ -284,17 +371,13 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
     )
 
 
-#: Automatic first poses found in this process: (template, capture, frame) → result, so
-#: several trackers started on one capture (the demo, a benchmark) search once.
-_FOUND: dict[tuple, tuple[np.ndarray, np.ndarray, str]] = {}
-
-
 def first_pose(
-    template: Template, frame, init: Init, *, capture=None
+    template: Template, frame, init: Init, *, capture=None, options: dict | None = None
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
-    found (the frame's message in the track). An automatic search is remembered for
-    ``capture``'s frame for the rest of the process."""
+    found (the frame's message in the track). An automatic search is made once per
+    capture, frame and template, and cached with the capture
+    (:func:`~meshmocap.estimate.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)
         if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
@@ -307,24 +390,30 @@ def first_pose(
                 "(a synthetic capture); this one has none: use --init auto"
             )
         return truth.rotations, truth.root, "init truth: the first pose from ground truth"
-    key = None
-    if capture is not None:
-        key = (template.name, template.n_vertices, str(Path(capture.path).resolve()), frame.index)
-        if key in _FOUND:
-            return _FOUND[key]
+    if capture is None:
+        return _search_first_pose(template, frame, options)
+    return cached_first_pose(
+        capture,
+        template,
+        frame.index,
+        functools.partial(_search_first_pose, template, frame, options),
+        options=options,
+    )
+
+
+def _search_first_pose(
+    template: Template, frame, options: dict | None = None
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The automatic first pose of ``frame`` (:func:`first_pose`)."""
     obs = observed(frame)
-    P, N = obs.points
+    P = obs.points[0]
     if len(P) < 50:
         raise InputError(
             f"track: frame {frame.index} has {len(P)} observed points; "
             "--init auto needs a body to start from"
         )
-    masks = obs.silhouettes if obs.cameras else None
-    res = initial_pose(template, P, N, cameras=obs.cameras, masks=masks, field=obs.field)
-    found = res.R, res.root, f"init auto: {res.label}, fit score {1000 * res.score:.1f} mm"
-    if key is not None:
-        _FOUND[key] = found
-    return found
+    res = initial_pose_of_frame(template, obs, **(options or {}))
+    return res.R, res.root, start_message(res)
 
 
 def _is_rest(template: Template, truth) -> bool:

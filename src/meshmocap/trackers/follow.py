@@ -3,8 +3,9 @@
 :func:`follow_sequence` watches a capture folder's ``hulls/`` or a folder of meshes
 (:class:`~meshmocap.io.live.FrameFolder`: complete files only, written then renamed),
 tracks each new frame as soon as it appears, in frame order, and writes its result into the
-track folder at once, exactly as :func:`~meshmocap.trackers.driver.track_sequence` would:
-the same initialisation on the first frame with an observation, the same ``failed`` and
+track folder at once, exactly as :func:`~meshmocap.trackers.driver.track_sequence` would
+(the same per-frame function, :func:`~meshmocap.trackers.driver.track_frame`): the same
+initialisation on the first frame with an observation, the same ``failed`` and
 ``missing`` flags, the same results. A frame that arrives after a later one has been
 tracked is left out (tracking goes forwards in time). It stops when ``stop()`` says so,
 after ``idle`` seconds without a new frame, or on Ctrl-C (``KeyboardInterrupt``: every
@@ -17,27 +18,26 @@ The track folder records ``"frames": "follow"`` in ``track.json``: it resumes wi
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from meshmocap._atomic import folder_lock
+from meshmocap._threads import blas_threads
+from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.io.live import FrameFile, FrameFolder, young
-from meshmocap.io.results import done_frames, read_state, start_track, write_frame
+from meshmocap.io.results import done_frames, start_track, write_frame, write_light_binding
 from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.driver import (
-    FRAME_ERRORS,
-    NUMERICAL_ERRORS,
-    coast_frame,
-    failure_reason,
     initialise_tracker,
-    is_finite_result,
-    missing_reason,
     read_track_frame,
+    resume_tracker,
+    track_frame,
 )
 
 __all__ = ["FollowedFrame", "follow_sequence"]
@@ -91,6 +91,7 @@ def follow_sequence(
     stop: Callable[[], bool] | None = None,
     report: Callable[[FollowedFrame], None] | None = None,
     template_info: dict | None = None,
+    light: int | None = LIGHT_VERTICES,
 ) -> list[int]:
     """Track the frames written into the folder ``source`` as they arrive.
 
@@ -117,6 +118,8 @@ def follow_sequence(
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (as for
         :func:`~meshmocap.trackers.driver.track_sequence`).
+    light : int or None
+        The light body tracked (as for :func:`~meshmocap.trackers.driver.track_sequence`).
 
     Returns
     -------
@@ -136,30 +139,39 @@ def follow_sequence(
         "options": tracker.options(),
         **(template_info or {}),
     }
+    body = tracking_body(template, n_vertices=light)
+    meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
     tracked: list[int] = []
-    with folder_lock(out, "track"):
+    with blas_threads(), folder_lock(out, "track"):
         done = start_track(out, meta, template.F, resume=resume)
+        if body.binding is not None:  # frames hold the light body; read_track reads out
+            write_light_binding(out, body.binding)
         last = good = done[-1] if done else -1
         if done:  # resuming: continue from the state saved with the last frame
-            if getattr(tracker, "template", None) is not template:
-                tracker.setup(template)
-            tracker.set_state(read_state(out, last))
+            resume_tracker(tracker, body.light, out, last)
         waited = time.monotonic()
         while not (stop is not None and stop()):
             files = folder.poll(after=last)
             new = []
             if files and not done:  # the first frame with an observation starts the track
-                new = _start(tracker, template, folder, files, out)
+                new = _start(tracker, body, folder, files, out)
                 done = done_frames(out)
             for f in files if done and not new else ():
                 if stop is not None and stop():
                     break
-                r = _track_frame(tracker, folder, f, out, good)
+                r = track_frame(
+                    tracker,
+                    functools.partial(folder.frame, f),  # a mesh file is read here
+                    f.index,
+                    out,
+                    good,
+                    retry=functools.partial(young, f),
+                )
                 if r is None:  # still being written in place: try again at the next poll
                     break
                 write_frame(out, r)
-                good = f.index if not r.flags else good
+                good = f.index if r.healthy else good
                 new.append((f, r))
             for f, r in new:
                 if f.index not in done:
@@ -178,34 +190,12 @@ def follow_sequence(
     return tracked
 
 
-def _start(tracker, template, folder, files: list[FrameFile], out) -> list:
+def _start(tracker, body, folder, files: list[FrameFile], out) -> list:
     """Initialise on the first of ``files`` with an observation (the driver's way); the
     frames written, with their results, or none when no file has an observation yet."""
     try:
-        initialise_tracker(tracker, template, _Pending(folder, files), out, list(range(len(files))))
+        initialise_tracker(tracker, body, _Pending(folder, files), out, list(range(len(files))))
     except InputError:  # no observation in any of them: wait for more frames
         return []
     written = set(done_frames(out))
     return [(f, read_track_frame(out, f.index)) for f in files if f.index in written]
-
-
-def _track_frame(tracker, folder: FrameFolder, f: FrameFile, out, good: int):
-    """The result of frame ``f`` (flagged ``failed`` or ``missing`` as the driver flags
-    them), or None when its file cannot be read yet (:func:`~meshmocap.io.live.young`)."""
-    t0 = time.perf_counter()
-    reason = None
-    try:
-        frame = folder.frame(f)  # a mesh file is read here, a hull in step()
-        reason = missing_reason(frame)
-        if reason is None:
-            r = tracker.step(frame)
-            if not is_finite_result(r):
-                raise FloatingPointError("non-finite joints or vertices")
-            return replace(r, index=f.index, seconds=time.perf_counter() - t0)
-    except NUMERICAL_ERRORS as exc:
-        return coast_frame(tracker, out, good, f.index, t0, "failed", failure_reason(exc))
-    except FRAME_ERRORS as exc:
-        if young(f):
-            return None
-        reason = failure_reason(exc)
-    return coast_frame(tracker, out, good, f.index, t0, "missing", reason)

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from meshmocap.errors import InputError
 from meshmocap.trackers.base import Tracker
+from meshmocap.trackers.patch.options import PAPER
 
 if TYPE_CHECKING:
     from meshmocap.body.template import Template
@@ -33,7 +34,7 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
         {"classifier": "none"},
     ),
     # the patch tracker with or without each of its extensions beyond the paper (issue 20;
-    # PATCH_ABLATIONS), and with none of them (the paper's method with earlier fixes)
+    # PATCH_ABLATIONS), and the paper's method alone (Eq. 1 and the SVM of §III-B)
     **{
         name: ("meshmocap.trackers.patch.tracker", "PatchTracker", "PatchOptions", fixed)
         for name, fixed in (
@@ -42,13 +43,7 @@ METHODS: dict[str, tuple[str, str, str, dict[str, Any]]] = {
             ("patch_sil", {"lambda_silhouette": 10.0}),
             ("patch_coarse", {"coarse_iter": 2}),
             ("patch_temporal", {"lambda_temporal": 1.0}),
-            (
-                "patch_paper",
-                dict.fromkeys(
-                    ("accel_gate", "interior_scale", "lambda_silhouette", "lambda_temporal"), 0.0
-                )
-                | {"coarse_iter": 0},
-            ),
+            ("patch_paper", PAPER),
         )
     },
     "articulated_icp": ("meshmocap.trackers.articulated_icp", "ArticulatedICP", "ICPOptions", {}),
@@ -75,7 +70,7 @@ PATCH_ABLATIONS: dict[str, str] = {
     "patch_sil": "+ silhouette coverage",
     "patch_coarse": "+ part-rigid first iterations",
     "patch_temporal": "+ temporal prior on the joints",
-    "patch_paper": "− every extension beyond the paper",
+    "patch_paper": "− every extension (the paper alone)",
 }
 
 #: Methods whose tracker needs a pose manifold (``make_tracker(..., manifold=)``).
@@ -131,6 +126,15 @@ def make_tracker(
             named = isinstance(manifold, str | os.PathLike)
             pm.check(template, tracker.oqr, source=manifold if named else None)
     return tracker
+
+
+def resolved_options(method: str) -> Any:
+    """The options dataclass ``method`` runs with by default (its fixed options over the
+    class's defaults): two methods that resolve to equal options are the same method."""
+    if method not in METHODS:
+        raise InputError(f"track: method must be one of {sorted(METHODS)}, found {method!r}")
+    module, _, opts_cls, fixed = METHODS[method]
+    return getattr(importlib.import_module(module), opts_cls)(**fixed)
 
 
 def method_options(method: str) -> tuple[str, ...]:

@@ -13,6 +13,7 @@ from meshmocap.errors import FormatError, InputError, MeshmocapWarning
 from meshmocap.io.meshes import read_mesh
 from meshmocap.io.results import frame_path, read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
+from meshmocap.trackers.cage import transfer as transfer_module
 from meshmocap.trackers.cage.manifold import fit_pose_manifold
 from meshmocap.trackers.cage.oqr import build_oqr
 from meshmocap.trackers.cage.training_poses import load_pose_sources
@@ -112,6 +113,18 @@ def test_outside_policy(tracked):
         transfer_motion(ct, t.V, outside="silent")
     with pytest.raises(InputError, match="tolerance must be"):
         transfer_motion(ct, t.V, tolerance=-1.0)
+
+
+def test_transfer_binds_a_bounded_number_of_vertices(tracked, monkeypatch):
+    t, _, _, ct = tracked
+    ref = transfer_motion(ct, t.V[:400])
+    # above FLOAT32_VERTICES the coordinates are stored in float32: micrometres apart
+    monkeypatch.setattr(transfer_module, "FLOAT32_VERTICES", 100)
+    np.testing.assert_allclose(transfer_motion(ct, t.V[:400]), ref, rtol=0, atol=1e-5)
+    # above the cap: refused in one line that names the size, the cap and the remedy
+    monkeypatch.setattr(transfer_module, "MAX_TRANSFER_VERTICES", 300)
+    with pytest.raises(InputError, match=r"400 vertices, more than the 300 .* decimate it"):
+        transfer_motion(ct, t.V[:400])
 
 
 def test_write_transfer_is_atomic_per_frame_and_resumes(tracked, tmp_path):

@@ -41,7 +41,8 @@ def test_assign_equals_the_numpy_e_step(classes):
     NY /= np.linalg.norm(NY, axis=1, keepdims=True)
     tracker.sigma = 0.02
     ycls = rng.integers(-1, tracker.model.bone_of_patch.max() + 1, 3000) if classes else None
-    got = tracker._assign(Y, NY, ycls, Vc, Nc)
+    k = tracker.correspondences(Y, NY, ycls, Vc, Nc)
+    got = (k.patch, k.vertex, k.weight, k.point, k.normal)
     ref = _reference(tracker, Y, NY, ycls, Vc, Nc)
     for a, b in zip(got[:2] + got[3:], ref[:2] + ref[3:], strict=True):
         assert np.array_equal(a, b)

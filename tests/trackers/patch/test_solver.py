@@ -13,25 +13,14 @@ from meshmocap.trackers.patch.solver import (
     add_point_terms,
     add_rigidity,
     normal_pattern,
-    rigidity_moments,
 )
 
 RNG = np.random.default_rng(0)
 
 
 @pytest.fixture(scope="module")
-def setup():
-    t = load_template("neutral_5k")
-    m = build_patch_model(t, n_patches=60, seed=1)
-    R = so3_exp(RNG.normal(scale=0.2, size=(m.P, 3)))
-    c = m.centres0 + RNG.normal(scale=0.02, size=(m.P, 3))
-    X = t.eval_skeleton.rest_positions + RNG.normal(scale=0.02, size=(15, 3))
-    n_obs = 300
-    patch = RNG.integers(0, m.P, n_obs)
-    v = np.array([RNG.choice(np.flatnonzero(m.labels == k)) for k in patch])
-    y = m.V0[v] + RNG.normal(scale=0.03, size=(n_obs, 3))
-    w = RNG.uniform(0.2, 1.0, n_obs)
-    return m, rigidity_moments(m), R, c, X, (patch, v, y, w)
+def setup(patch_problem):
+    return patch_problem
 
 
 def _energies(m, R, c, X, obs):

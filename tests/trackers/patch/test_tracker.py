@@ -212,27 +212,34 @@ def test_reverse_term_measures_vertex_to_data_distances(walk):
     observations = the fitted surface moved 10 µm (less than half the ≥ 0.2 mm spacing of
     neutral_5k's vertices, so each vertex's nearest observation is its own copy) give
     1e-10 m²; beyond ``reverse_cap`` nothing."""
-    from pykdtree.kdtree import KDTree
+    from types import SimpleNamespace
 
+    from meshmocap.trackers.patch.energy import Correspondences, Iterate, ReverseTerm
     from meshmocap.trackers.patch.solver import System
 
     cap, t = walk
     tracker = PatchTracker(PatchOptions(n_patches=120))
     tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
     Vc, Nc = tracker.own_vertices()
+    term = ReverseTerm(10.0, cap=0.3, cauchy_scale=0.03)
+    none = Correspondences(*(np.zeros(0, int),) * 2, np.zeros(0), *(np.zeros((0, 3)),) * 2)
+
+    def reverse(Y, cameras=()):
+        frame = SimpleNamespace(cameras=list(cameras), silhouettes=[])
+        fd = tracker.frame_data(Y, Nc, frame, tracker.X)
+        it = Iterate(fd, tracker.R, tracker.c, tracker.X, Vc, Nc, none)
+        return term.add(System.empty(tracker.pattern), it)
+
     for shift, expected in (([0.0, 0.0, 1e-5], 1e-10), ([2.0, 0.0, 0.0], 0.0)):
-        Y = Vc + shift
-        sys = System.empty(tracker.pattern)
-        e = tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc)
+        e = reverse(Vc + shift)
         assert e == pytest.approx(expected, rel=1e-6, abs=1e-18)  # rounding of 1 m coordinates
     assert len(tracker.reverse_sample) >= 2000  # every k-th of the 5000 vertices
     # vertices a camera does not see are left alone (no hull exists there)
     rig = list(cap.cameras)
     Y = Vc + [0.0, 0.0, 1e-5]
-    sys = System.empty(tracker.pattern)
-    assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, rig) == pytest.approx(1e-10)
+    assert reverse(Y, rig) == pytest.approx(1e-10)
     blind = [replace(rig[0], t=rig[0].t + [0.0, 0.0, -50.0])]  # the body is behind it
-    assert tracker._add_reverse(sys, KDTree(Y), Y, Nc, Vc, Nc, blind) == 0.0
+    assert reverse(Y, blind) == 0.0
 
 
 def test_skeleton_floor_is_zero_for_rigid_poses_and_largest_on_the_torso():

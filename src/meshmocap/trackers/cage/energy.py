@@ -36,6 +36,10 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.errors import InputError
 from meshmocap.geometry.rotations import skew
+from meshmocap.trackers.cage.kernels import silhouette_residuals
+
+#: Pixels between views in :class:`SilhouetteCoverage`'s k-d tree (no image is this wide).
+_VIEW_GAP = 1e12
 
 __all__ = ["HullCoverage", "distance_terms", "placement_errors", "surface_sample"]
 
@@ -292,11 +296,17 @@ class SilhouetteCoverage:
         from scipy import ndimage
 
         rng = np.random.default_rng(seed)
-        self.views = []
-        for cam, mask in zip(cameras, masks, strict=True):
-            m = np.asarray(mask, dtype=bool)
-            if not m.any():
+        qs, Ks, Rs, ts, cam = [], [], [], [], []
+        for camera, mask in zip(cameras, masks, strict=True):
+            full = np.asarray(mask, dtype=bool)
+            rows_on, cols_on = np.flatnonzero(full.any(axis=1)), np.flatnonzero(full.any(axis=0))
+            if not len(rows_on):
                 continue
+            # the mask's bounding box and one empty pixel around it where the image has one:
+            # labelling and erosion there equal the whole image's (the same contour pixels,
+            # in the same order) at a fraction of the pixels
+            r0, c0 = max(rows_on[0] - 1, 0), max(cols_on[0] - 1, 0)
+            m = full[r0 : rows_on[-1] + 2, c0 : cols_on[-1] + 2]
             if min_component > 0:  # small pieces apart from the body: noise
                 lab, n = ndimage.label(m)
                 if n > 1:
@@ -306,13 +316,24 @@ class SilhouetteCoverage:
             if len(rows) > n_per_camera:
                 pick = rng.choice(len(rows), n_per_camera, replace=False)
                 rows, cols = rows[pick], cols[pick]
-            q = np.stack([cols, rows], axis=1).astype(np.float64)  # (x, y) = (column, row)
-            K = np.asarray(cam.K, dtype=np.float64)
-            self.views.append(
-                (q, K, np.asarray(cam.R, dtype=np.float64), np.asarray(cam.t, dtype=np.float64))
-            )
+            # (x, y) = (column, row) in the whole image
+            qs.append(np.stack([cols + c0, rows + r0], axis=1).astype(np.float64))
+            Ks.append(np.asarray(camera.K, dtype=np.float64))
+            Rs.append(np.asarray(camera.R, dtype=np.float64))
+            ts.append(np.asarray(camera.t, dtype=np.float64))
+            cam.append(np.full(len(rows), len(Ks) - 1))
+        self.views = list(zip(qs, Ks, Rs, ts, strict=True))
         self.margin, self.cap = float(margin), float(cap)
-        self.n = sum(len(v[0]) for v in self.views)
+        self.n = sum(len(q) for q in qs)
+        # all views stacked: samples (m, 2) and their view (m,), per view K, R (C, 3, 3), t (C, 3)
+        self._q = np.concatenate(qs) if qs else np.zeros((0, 2))
+        self._cam = np.concatenate(cam) if cam else np.zeros(0, dtype=np.intp)
+        self._K = np.array(Ks).reshape(-1, 3, 3)
+        self._R = np.array(Rs).reshape(-1, 3, 3)
+        self._t = np.array(ts).reshape(-1, 3)
+        self._ptr = np.concatenate([[0], np.cumsum([len(q) for q in qs])]).astype(np.int64)
+        # k-d tree coordinates of a sample: its pixel and its view far apart (_VIEW_GAP)
+        self._query = np.concatenate([self._q, _VIEW_GAP * self._cam[:, None]], axis=1)
 
     def __len__(self) -> int:
         return self.n
@@ -323,33 +344,54 @@ class SilhouetteCoverage:
         (n, 3) with ``r_i a_i`` the gradient of ``½ Σ_m ρ_m²`` (ρ in metres) at ``P_i``."""
         P = np.ascontiguousarray(P, dtype=np.float64)
         n = len(P)
-        rr = np.zeros(n)
-        g = np.zeros((n, 3))
-        for q, K, R, t in self.views:
-            X = P @ R.T + t  # camera frame
-            z = np.maximum(X[:, 2], 1e-6)
-            f = K[0, 0]
-            uv = np.stack([f * X[:, 0] / z + K[0, 2], K[1, 1] * X[:, 1] / z + K[1, 2]], 1)
-            d, i = KDTree(uv).query(q, k=1)
-            on = d > self.margin
-            if self.cap:  # farther: a spurious blob, not the body (truncated, robust)
-                on &= d <= self.cap
-            if not on.any():
-                continue
-            i, d = i[on].astype(np.intp), d[on]
-            s = z[i] / f  # metres per pixel at the point
-            rho = (d - self.margin) * s
-            e = (uv[i] - q[on]) / d[:, None]  # image direction away from the sample
-            # dρ/dX_cam = s (f / z) [e_x, e_y, −e·(x, y) / z] + (d − margin) / f [0, 0, 1]
-            # (the scale s = z / f moves with depth too); s f / z = 1: unit-free
-            xy = X[i, :2] / z[i, None]
-            dz = (d - self.margin) / f - np.sum(e * xy, axis=1)
-            dX = np.concatenate([e, dz[:, None]], axis=1)
-            u = (dX @ R) * rho[:, None]  # ρ ∂ρ/∂P, world frame
-            rr += np.bincount(i, rho * rho, minlength=n)
-            g += np.bincount(
-                (3 * i[:, None] + np.arange(3)).ravel(), u.ravel(), minlength=3 * n
-            ).reshape(n, 3)
+        if not self.n:
+            return np.zeros(n), np.zeros((n, 3))
+        if self.cap > 0:  # a sample looks only within the cap: a grid of cells, compiled
+            return silhouette_residuals(
+                P, self._R, self._t, self._K, self._q, self._ptr, self.margin, self.cap
+            )
+        return self.residuals_reference(P)
+
+    def residuals_reference(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`residuals` as array expressions and a k-d tree (any ``cap``, 0 included;
+        the compiled version's reference in the tests)."""
+        P = np.ascontiguousarray(P, dtype=np.float64)
+        n, C = len(P), len(self._K)
+        if not self.n:
+            return np.zeros(n), np.zeros((n, 3))
+        # every view at once: one k-d tree over the projections (C n points, the view as a
+        # third coordinate _VIEW_GAP apart, so a sample only finds its own view's points)
+        X = np.matmul(P, self._R.transpose(0, 2, 1)) + self._t[:, None]  # (C, n, 3) cameras
+        z = np.maximum(X[:, :, 2], 1e-6)
+        K = self._K
+        f = K[:, 0, 0]
+        pts = np.empty((C, n, 3))
+        pts[:, :, 0] = f[:, None] * X[:, :, 0] / z + K[:, 0, 2, None]
+        pts[:, :, 1] = K[:, 1, 1, None] * X[:, :, 1] / z + K[:, 1, 2, None]
+        pts[:, :, 2] = _VIEW_GAP * np.arange(C)[:, None]
+        pts = pts.reshape(-1, 3)
+        d, k = KDTree(pts).query(self._query, k=1)
+        on = d > self.margin
+        if self.cap:  # farther: a spurious blob, not the body (truncated, robust)
+            on &= d <= self.cap
+        if not on.any():
+            return np.zeros(n), np.zeros((n, 3))
+        k, d, c = k[on].astype(np.intp), d[on], self._cam[on]
+        i = k % n  # the model point
+        zk, fc = z.reshape(-1)[k], f[c]
+        s = zk / fc  # metres per pixel at the point
+        rho = (d - self.margin) * s
+        e = (pts[k, :2] - self._q[on]) / d[:, None]  # image direction away from the sample
+        # dρ/dX_cam = s (f / z) [e_x, e_y, −e·(x, y) / z] + (d − margin) / f [0, 0, 1]
+        # (the scale s = z / f moves with depth too); s f / z = 1: unit-free
+        xy = X.reshape(-1, 3)[k, :2] / zk[:, None]
+        dz = (d - self.margin) / fc - np.sum(e * xy, axis=1)
+        dX = np.concatenate([e, dz[:, None]], axis=1)
+        u = np.einsum("ma,mab->mb", dX, self._R[c]) * rho[:, None]  # ρ ∂ρ/∂P, world frame
+        rr = np.bincount(i, rho * rho, minlength=n)
+        g = np.bincount(
+            (3 * i[:, None] + np.arange(3)).ravel(), u.ravel(), minlength=3 * n
+        ).reshape(n, 3)
         r = np.sqrt(rr)
         return r, g / np.where(r > 0, r, np.inf)[:, None]
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
+from meshmocap.trackers.cage.kernels import quad_skinning_transforms
 from meshmocap.trackers.cage.oqr import OQR
 
 __all__ = ["QuadSkinning"]
@@ -139,6 +140,18 @@ class QuadSkinning:
                 )
             )
         self._parents = parents
+        # the same steps as rows (joint, kind, target or start of targets) for the kernel
+        plan, targets = [], []
+        for swing, target, fit, keep in self._steps:
+            plan += [(j, 1, t) for j, t in zip(swing, target, strict=True)]
+            plan += [(j, 0, -1) for j in keep]
+            for j, t in fit:
+                plan.append((j, 2, len(targets)))
+                targets += [*t, -1]
+        self._plan = np.array(plan, dtype=np.int64).reshape(-1, 3)
+        self._fit_targets = np.array(targets + [-1], dtype=np.int64)
+        self._own_R0T = np.ascontiguousarray(self._R0T)
+        self._parents64 = np.asarray(parents, dtype=np.int64)
 
     def transforms(self, centres: np.ndarray, rotations: np.ndarray) -> np.ndarray:
         """Skinning transforms ``A_j = [G_j | P_j − G_j P_j⁰]`` (J, 3, 4) of a configuration.
@@ -155,6 +168,21 @@ class QuadSkinning:
         (J, 3, 4) float64
             For :func:`~meshmocap.body.skinning.apply_skinning`.
         """
+        return quad_skinning_transforms(
+            np.ascontiguousarray(centres, dtype=np.float64),
+            np.ascontiguousarray(rotations, dtype=np.float64),
+            self._P0,
+            self._parents64,
+            self._own.astype(np.int64),
+            self._own_quad.astype(np.int64),
+            self._own_R0T,
+            self._off,
+            self._plan,
+            self._fit_targets,
+        )
+
+    def transforms_reference(self, centres: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+        """:meth:`transforms` as array expressions (the kernel's reference in the tests)."""
         J, P0, par = len(self._P0), self._P0, self._parents
         G = np.empty((J, 3, 3))
         P = np.empty((J, 3))

@@ -70,8 +70,8 @@ def orthonormalised(y: np.ndarray) -> np.ndarray:
 
 
 class StageClock:
-    """Wall time per stage of :meth:`CageTracker.step`, added to ``totals``; lazy
-    distance-field evaluations (``field.seconds``) are booked to ``"distance"``."""
+    """Wall time per stage of :meth:`CageTracker.step`, added to ``totals``; building the
+    distance field (``field.seconds``) is booked to ``"distance"``."""
 
     def __init__(self, totals: dict[str, float]) -> None:
         self.totals, self.t, self.field, self.f0 = totals, time.perf_counter(), None, 0.0

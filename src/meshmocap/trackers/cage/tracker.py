@@ -64,8 +64,9 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
   the joints back), the joints' coordinates are taken in the rest cage instead.
 
 Cost per frame (template vertices ``N``, ``n_sample`` points ``n``, cage of 85 vertices):
-the distance field is evaluated lazily at the grid points the lookups touch
-(:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid`), pose Jacobians are the
+the distance field is evaluated at the grid points the lookups touch, inside compiled
+lookups (:class:`~meshmocap.trackers.cage.field.HullDistanceField`), as are the silhouette
+term and the quads' skinning (:mod:`~meshmocap.trackers.cage.kernels`); pose Jacobians are the
 rigid motion of the points (no cage derivative), the latent shape's come from one batched
 :meth:`~meshmocap.geometry.green.GreenDeformer.jvp`, the local adjustment's from each
 point's gradient with respect to the cage vertices
@@ -82,7 +83,6 @@ import numpy as np
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.estimate.observe import frame_hull
-from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import skew, so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
@@ -96,6 +96,7 @@ from meshmocap.trackers.cage.energy import (
     placement_errors,
     surface_sample,
 )
+from meshmocap.trackers.cage.field import HullDistanceField
 from meshmocap.trackers.cage.manifold import learn_manifold
 from meshmocap.trackers.cage.options import CageOptions, Joints, Space, manifold_digest
 from meshmocap.trackers.cage.oqr import (
@@ -242,7 +243,6 @@ class CageTracker:
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
         self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
         self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
-        self._last_P = self._trail = None  # last frame's final points, prefetch (step)
         return c, Q
 
     def _set_keep(self, keep: np.ndarray) -> None:
@@ -258,7 +258,6 @@ class CageTracker:
         """Restore latent point, pelvis transform, local quads and their last motion, the
         joints' cage and the vertices in the data term."""
         self.x, self.local = state["x"].copy(), state["local"].copy()
-        self._last_P = self._trail = None
         self._set_keep(state["keep"] if "keep" in state else np.ones(len(self.sample), bool))
         self.pelvis_R, self.pelvis_c = state["pelvis_R"].copy(), state["pelvis_c"].copy()
         self._set_joints(state["cage0"].copy(), state["joints0"].copy())
@@ -515,11 +514,9 @@ class CageTracker:
         hull = frame_hull(frame)  # a capture's hull, or the solid a mesh or point cloud bounds
         k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
         stride = max(1, round(o.field_spacing / hull.voxel_size))
-        field = clock.field = LazyDistanceGrid(
+        field = clock.field = HullDistanceField(
             hull.occupancy, hull.origin, hull.voxel_size, pad=k, stride=stride
         )
-        if self._trail is not None:  # speed only: the grid cells this frame will likely
-            field.prefetch(self._trail)  # need, in one batch (LazyDistanceGrid.prefetch)
         clock.lap("distance")
         it, anchor, off, self._memo = 0, None, False, []
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
@@ -591,10 +588,6 @@ class CageTracker:
         it += n
         P = cache[2]
         r = cache[0][: len(P)]
-        # the sampled points where this frame ended and, moved on as from the last frame,
-        # where the next one may: ~80 % of the grid points its lookups will touch
-        self._trail = P if self._last_P is None else np.concatenate([P, 2 * P - self._last_P])
-        self._last_P = P
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
         energies = {"distance": float(r @ r), "variance": var, "off_manifold": float(off)}
         for t, _, _ in terms:  # mean ρ² (m²) of the final fit
@@ -620,7 +613,6 @@ class CageTracker:
         X = np.array(cands)
         Y, var = gp.predict(X, return_var=True)
         P = self.surface.points_batch(Y, self.pelvis_R, self.pelvis_c)
-        field.prefetch(P[:, _SUB])  # and one batch of new grid points (speed only)
         r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
         noise = gp.Y_scale_**2 / gp.beta_
         E = 0.5 * np.array([v @ v for v in r]) + self.opts.variance_weight * np.log(var + noise)

@@ -51,6 +51,8 @@ from meshmocap.io.results import done_frames, read_state, tracked_template
 from meshmocap.trackers.cage.oqr import OQR, build_oqr, cage_vertices, configuration_from_vector
 
 __all__ = [
+    "FLOAT32_VERTICES",
+    "MAX_TRANSFER_VERTICES",
     "CageTrack",
     "Placement",
     "TransferResult",
@@ -65,6 +67,14 @@ Fit = Literal["none", "scale", "stretch"]
 Outside = Literal["warn", "raise", "ignore"]
 TRANSFER_FORMAT = "meshmocap-transfer-1"
 _CHUNK = 64  # frames deformed per batch
+#: Vertices at most that a transfer binds to the cage. Each bound vertex stores one Green
+#: coordinate per cage vertex and face (float32 above :data:`FLOAT32_VERTICES`), so memory
+#: is bounded by design: ``4 × (nv + nf)`` bytes a vertex, about 0.5 GB at the cap for the
+#: 86-vertex, 166-face cage. A larger mesh is refused in one line (decimate it first).
+MAX_TRANSFER_VERTICES = 500_000
+#: Meshes with more vertices than this store their coordinates in float32 (half the
+#: memory, ~2 µm on a human-sized cage); smaller ones in float64 (the tracker's own numbers).
+FLOAT32_VERTICES = 100_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -262,9 +272,18 @@ def _encode(track: CageTrack, points, fit, outside: Outside, tolerance: float, f
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise InputError(f"{func}: tolerance must be a number ≥ 0, found {tolerance!r}")
     P = _points(func, "points", points)
+    if len(P) > MAX_TRANSFER_VERTICES:
+        per = 4 * (len(track.rest_cage) + len(track.faces))
+        raise InputError(
+            f"{func}: the mesh has {len(P):,} vertices, more than the {MAX_TRANSFER_VERTICES:,} "
+            f"a transfer binds (their Green coordinates take {per} bytes a vertex: "
+            f"{len(P) * per / 1e9:.1f} GB); decimate it first (e.g. to {MAX_TRANSFER_VERTICES:,} "
+            "vertices)"
+        )
     placement = fit if isinstance(fit, Placement) else place_in_cage(P, track.template.V, fit=fit)
     P = placement.apply(P)
-    deformer = GreenDeformer(track.rest_cage, track.faces, P)
+    dtype = np.float32 if len(P) > FLOAT32_VERTICES else np.float64
+    deformer = GreenDeformer(track.rest_cage, track.faces, P, dtype=dtype)
     d = outside_distances(P, track.rest_cage, track.faces, deformer.outside_)
     far = d > tolerance
     if far.any() and outside != "ignore":

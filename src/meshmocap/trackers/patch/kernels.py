@@ -61,3 +61,100 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
             rows[u] = t
             w[u] = w[u] / (total + p_out)
     return rows[:m], patch[:m], vert[:m], w[:m]
+
+
+@njit(cache=True, nogil=True)
+def point_moments(patch, q, r, w, n_p):
+    """Per-patch sums over weighted 3-D residuals ``r`` (m, 3) moved by one patch each
+    (``patch`` (m,) in ``0 .. n_p-1``, offsets ``q = R_k d`` (m, 3), weights ``w`` (m,)),
+    in one pass: ``W = Σ w``, ``s = Σ w q``, ``Q = Σ w q qᵀ`` (P, 3, 3), the gradient
+    ``G = Σ w [q × r, r]`` (P, 6) and the value ``Σ w |r|²``
+    (:func:`~meshmocap.trackers.patch.solver.add_point_terms`)."""
+    W = np.zeros(n_p)
+    s = np.zeros((n_p, 3))
+    Q = np.zeros((n_p, 3, 3))
+    G = np.zeros((n_p, 6))
+    value = 0.0
+    for t in range(patch.shape[0]):
+        k = patch[t]
+        wt = w[t]
+        q0, q1, q2 = q[t, 0], q[t, 1], q[t, 2]
+        r0, r1, r2 = r[t, 0], r[t, 1], r[t, 2]
+        W[k] += wt
+        s[k, 0] += wt * q0
+        s[k, 1] += wt * q1
+        s[k, 2] += wt * q2
+        Q[k, 0, 0] += wt * q0 * q0
+        Q[k, 0, 1] += wt * q0 * q1
+        Q[k, 0, 2] += wt * q0 * q2
+        Q[k, 1, 1] += wt * q1 * q1
+        Q[k, 1, 2] += wt * q1 * q2
+        Q[k, 2, 2] += wt * q2 * q2
+        G[k, 0] += wt * (q1 * r2 - q2 * r1)
+        G[k, 1] += wt * (q2 * r0 - q0 * r2)
+        G[k, 2] += wt * (q0 * r1 - q1 * r0)
+        G[k, 3] += wt * r0
+        G[k, 4] += wt * r1
+        G[k, 5] += wt * r2
+        value += wt * (r0 * r0 + r1 * r1 + r2 * r2)
+    for k in range(n_p):
+        Q[k, 1, 0] = Q[k, 0, 1]
+        Q[k, 2, 0] = Q[k, 0, 2]
+        Q[k, 2, 1] = Q[k, 1, 2]
+    return W, s, Q, G, value
+
+
+@njit(cache=True, nogil=True)
+def nearest_among(Y, V, cand, k):
+    """For each point ``Y[t]`` (m, 3), its ``k`` nearest vertices of ``V`` (n, 3) among the
+    candidates ``cand[t]`` (m, K) int64, by increasing distance (ties in candidate order):
+    distances (m, k) float64 and vertex indices (m, k) int64."""
+    m, K = cand.shape
+    d = np.empty((m, k))
+    idx = np.empty((m, k), dtype=np.int64)
+    bd = np.empty(K)
+    bi = np.empty(K, dtype=np.int64)
+    for t in range(m):
+        for c in range(K):
+            v = cand[t, c]
+            x = V[v, 0] - Y[t, 0]
+            y = V[v, 1] - Y[t, 1]
+            z = V[v, 2] - Y[t, 2]
+            dd = np.sqrt(x * x + y * y + z * z)
+            u = c  # insert into the c sorted so far
+            while u > 0 and bd[u - 1] > dd:
+                bd[u], bi[u] = bd[u - 1], bi[u - 1]
+                u -= 1
+            bd[u], bi[u] = dd, v
+        for c in range(k):
+            d[t, c] = bd[c]
+            idx[t, c] = bi[c]
+    return d, idx
+
+
+@njit(cache=True, nogil=True)
+def stale_rows(Y, kth, far, epoch, moved, centres, radius):
+    """Points whose ``k`` nearest candidates may miss a nearer vertex
+    (:mod:`~meshmocap.trackers.patch.nearest`): point t (``Y[t]``, k-th candidate at
+    ``kth[t]``, every other vertex at least ``far[t]`` away at snapshot ``epoch[t]``) is
+    stale if a patch ``p`` that moved at least ``far[t] − kth[t]`` since that snapshot
+    (``moved[epoch[t], p]``) now reaches within ``kth[t]`` of it (its vertices lie within
+    ``radius[p]`` of ``centres[p]``). Returns (m,) bool."""
+    m = Y.shape[0]
+    P = centres.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    for t in range(m):
+        slack = far[t] - kth[t]
+        if not slack > 0:
+            out[t] = True
+            continue
+        e = epoch[t]
+        for p in range(P):
+            if moved[e, p] >= slack:
+                x = centres[p, 0] - Y[t, 0]
+                y = centres[p, 1] - Y[t, 1]
+                z = centres[p, 2] - Y[t, 2]
+                if np.sqrt(x * x + y * y + z * z) - radius[p] < kth[t]:
+                    out[t] = True
+                    break
+    return out

@@ -15,9 +15,41 @@ PartMatching = Literal["all", "on_bone", "none"]
 JointReadout = Literal["blend", "skeleton", "surface"]
 
 
+#: The paper's method alone (``patch_paper``): Eq. (1)'s three terms with the paper's
+#: weights, the linear SVM of §III-B with Eq. (6)'s thresholds, Eq. (2) as printed across
+#: joints, frame-to-frame tracking from the last fit, the skeleton's joints; every term and
+#: option beyond the paper off.
+PAPER: dict[str, object] = {
+    "classifier": "svc",  # §III-B: linear SVM, Platt probabilities
+    "on_bone": 0.9,  # Eq. (6)
+    "outlier": 0.5,
+    "max_distance": None,  # Eq. (6) alone decides the outliers
+    "lambda_data": 10.0,  # Eq. (1): λd = 10, λr = 1, λb = 1
+    "lambda_rigid": 1.0,
+    "lambda_bone": 1.0,
+    "joint_rigidity": 1.0,  # Eq. (2) as printed, across joints too
+    "residual": "point_to_point",  # Eq. (7)
+    "lambda_reverse": 0.0,
+    "lambda_length": 0.0,
+    "lambda_silhouette": 0.0,
+    "lambda_temporal": 0.0,
+    "interior_scale": 0.0,
+    "prediction": "none",
+    "accel_gate": 0.0,
+    "fast_iter_scale": 1.0,
+    "coarse_iter": 0,
+    "joint_readout": "skeleton",  # the joints of Eq. (8)-(11)
+}
+
+
 @dataclass(frozen=True)
 class PatchOptions:
     """Settings of the patch tracker (defaults from the paper where it gives them).
+
+    The energy is a list of terms (:func:`~meshmocap.trackers.patch.energy.energy_terms`):
+    Eq. (1)'s three, each with its λ, and the extensions beyond the paper, each left out
+    with a zero weight. :data:`PAPER` lists the settings that give the paper's method
+    alone. The measurements behind the defaults are in ``docs/patch.rst``.
 
     Parameters
     ----------
@@ -26,106 +58,105 @@ class PatchOptions:
     joint_rigidity : float
         Scale of Er (Eq. 2) between neighbouring patches bound to different bones (1: as
         printed). Er penalises bending away from the rest pose, so across a joint it pulls
-        limbs back towards the template's pose: on perfect observations (true surfaces)
-        full weight leaves 30 mm joint errors after 20 frames, 0.3 about 10 mm.
+        limbs back towards the template's pose; the bone binding already holds such
+        patches together through their shared joint.
     lambda_data, lambda_rigid, lambda_bone : float
-        λd, λr, λb of Eq. (1) (the paper's 10, 1, 1).
+        λd, λr, λb of Eq. (1) (the paper's 10, 1, 1): the weights of
+        :class:`~meshmocap.trackers.patch.energy.DataTerm`,
+        :class:`~meshmocap.trackers.patch.energy.RigidityTerm` and
+        :class:`~meshmocap.trackers.patch.energy.BoneTerm`.
     lambda_reverse : float
-        Weight of a reverse data term (not in the paper; 0 turns it off): mean squared
-        distance from template vertices
-        (:data:`~meshmocap.trackers.patch.tracker.REVERSE_SAMPLES` of them) to their nearest
-        compatible kept observation, ignoring pairs farther than ``reverse_cap``. Eq. (7)
-        only pulls patches that observations pick as candidates, so a limb that moved
-        further than its neighbours' vertices in one frame (a 10 cm kick at 30 fps) is
-        left in empty space; this term pulls it back onto the data. First 40 frames of
-        the crane: 29.5 → 20.9 mm per vertex (right foot 151 → 17 mm, frames 20–29);
-        first 150 frames of CMU 05_01: 16.9 → 14.4 mm joint error.
+        Weight of the reverse data term (not in the paper; 0 leaves it out,
+        :class:`~meshmocap.trackers.patch.energy.ReverseTerm`): mean squared distance from
+        sampled template vertices (:data:`~meshmocap.trackers.patch.tracker.REVERSE_SAMPLES`)
+        to their nearest compatible kept observation. Eq. (7) only pulls patches that
+        observations pick as candidates, so a limb that moved further than its neighbours'
+        vertices in one frame (a fast kick) is left in empty space; this term pulls it back
+        onto the data.
     reverse_cap : float
         Largest vertex-to-observation distance (metres) the reverse term uses.
     reverse_scale : float
         Scale τ (metres) of the reverse term's Cauchy weights ``1 / (1 + (d/τ)²)``: a
-        vertex 3 cm from the data pulls half as hard as one on it. Holes in the
-        silhouettes carve tunnels into the hull that unweighted pulls follow (degraded
-        05_01, 150 frames: 31.4 mm without the term, 57.2 unweighted, 34.8 at τ = 3 cm)
-        while clean data hardly notices (150 frames of 05_01: 14.4 → 14.7 mm; crane,
-        40 frames: 20.9 → 21.3 mm).
+        vertex τ from the data pulls half as hard as one on it, so the term does not follow
+        the tunnels that silhouette holes carve into the hull.
     lambda_length : float
-        Weight of a bone-length prior (not in the paper; 0 turns it off): mean squared
-        change of each bone's length (and of the hip-to-hip and shoulder-to-shoulder
-        distances, :data:`~meshmocap.trackers.patch.tracker.RIGID_PAIRS`) from the first tracked
-        frame, metres². Without it the joints drift with the patches over a long walk
-        (bone-length std 29 mm on 120 frames of CMU 05_01; 0.1 mm with it, and a lower
-        joint error).
+        Weight of the bone-length prior (not in the paper; 0 leaves it out,
+        :class:`~meshmocap.trackers.patch.energy.LengthTerm`): mean squared change of each
+        bone's length (and of the hip-to-hip and shoulder-to-shoulder distances,
+        :data:`~meshmocap.trackers.patch.tracker.RIGID_PAIRS`) from the first tracked
+        frame, metres². Without it the joints drift with the patches over a long walk.
     classifier : {"logistic", "svc", "none"}
         Body-part classifier sorting the observed points (§III-B); "svc" is the paper's
-        linear SVM with Platt scaling, "none" the tracker without classification.
+        linear SVM with Platt scaling, "logistic" a multinomial logistic regression (as
+        accurate, faster, warm-started from the last frame), "none" the tracker without
+        classification.
     keep_fraction : float
-        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8). Default 1
-        (all): on CMU 05_01 (humaneva4, 299 frames) 0.5 gave 21.5 mm mean joint error and
-        a 59.5 mm worst frame, 1.0 16.3 mm and 34.0 mm; fewer points are faster.
+        Fraction of on-bone points kept (the speed/accuracy knob of Fig. 8; 1: all).
     part_matching : {"all", "on_bone", "none"}
         Which kept points may only correspond to patches of their predicted body part:
         every one ("all"), the on-bone ones (near-joint points, whose label is uncertain by
         Eq. 6, match any patch), or none (the classifier only selects points; Eq. 7 sums
         over every patch).
     on_bone, outlier : float
-        Probability thresholds of Eq. (6).
+        Probability thresholds of Eq. (6) (the paper's 0.9 and 0.5).
     max_distance : float or None
-        Points farther than this (metres) from the previous fitted mesh are outliers too (a
-        linear classifier is confident far from the body, where phantom volumes lie).
+        Points farther than this (metres) from the previous fitted mesh are outliers too (not
+        in the paper: a linear classifier is confident far from the body, where phantom
+        volumes lie); None: no distance test.
     max_points : int
         Observed points sampled from each hull before classification.
     max_iter : int
-        EM iterations per frame; ``tol`` (metres): stop when no vertex moves more.
+        EM iterations per frame (E-step, then one Gauss–Newton step).
+    tol : float
+        Stop a frame's EM early when no patch moves more than this in one step (metres:
+        translation plus a 10 cm lever arm times the rotation, radians).
+    sigma0 : float
+        σ (metres) of the E-step's Gaussians at the start of each frame: EM restarts broad,
+        the new frame having moved.
+    sigma_min, sigma_max : float
+        Bounds (metres) of σ, re-estimated after each step from the data term's weighted
+        residuals (one Gaussian per correspondence).
+    outlier_sigmas : float
+        Width of the outlier class of Eq. (7): a point farther than this many σ from its
+        candidates is more likely an outlier than theirs (the class's likelihood is that
+        of a candidate ``outlier_sigmas`` σ away).
     fast_iter_scale, fast_motion : float
-        EM iterations of a fast frame, as a multiple of ``max_iter`` (1 turns it off): a
-        frame after one where a joint moved more than ``fast_motion`` metres.
+        EM iterations of a fast frame, as a multiple of ``max_iter`` (1 turns it off, not in
+        the paper): a frame after one where a joint moved more than ``fast_motion`` metres.
         Correspondences to the nearest points close a gap of several centimetres only a
-        fraction at a time, so a kick at 30 fps (12 cm per frame) outruns 10 iterations
-        and is lost. Twice as many on fast frames: the crane (real data, 30 fps, 87 % of
-        its frames fast) 35.6 → 31.2 mm per vertex (right foot in its last kick 163 → 30
-        mm); CMU 09_01 (a run at 60 fps, all frames fast; 20 iterations throughout) 12.5 →
-        11.2 mm, worst frame 26.2 → 17.8 mm. Slow captures hardly pay: 16 % of CMU 05_01's
-        frames are fast, 2 % of 01_01's.
+        fraction at a time, so a fast kick outruns ``max_iter`` iterations and is lost.
     coarse_iter : int
         EM iterations at the start of each frame (added to its budget) in which the
         patches of each body part move as one rigid group (a reduced Gauss–Newton step,
         :func:`~meshmocap.trackers.patch.solver.group_basis`) before every patch moves on
-        its own; 0 turns it off. A limb that moved far since the last frame is pulled back
-        whole by the points it still reaches, instead of patch by patch onto the nearest
-        wrong points. (Matching every kept point freely in these iterations, as
-        articulated ICP does, instead of by the classifier's parts: CMU 08_05 from its
-        T-pose, with ``accel_gate=72``, 11.7 → 43.7 mm.)
+        its own (not in the paper; 0 turns it off). A limb that moved far since the last
+        frame is pulled back whole by the points it still reaches, instead of patch by
+        patch onto the nearest wrong points.
     k_neighbours : int
-        Candidate vertices per observed point.
+        Candidate vertices per observed point (its nearest ones, among which the E-step
+        keeps the nearest compatible vertex of each patch).
     damping : float
         Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
     prediction : {"bones", "patches", "none"}
         Warm start of each frame: constant-velocity extrapolation of the joints, each patch
         carried rigidly by its bone ("bones"); of every patch transform and joint on its
-        own ("patches"); or the last frame as it is ("none"). Steps are clipped.
+        own ("patches"); or the last frame as it is ("none", the paper's frame-to-frame
+        tracking). Steps are clipped.
     accel_gate : float
         With ``prediction="bones"``: a joint whose velocity changed in the last frame by
         more than this acceleration (m/s², at the capture's frame rate) and more than
-        half its speed is not extrapolated (0: every joint is). A velocity that just jumped
-        comes from an abrupt start or a fit that slipped; extrapolating it throws the joint
-        further off. Off by default: at 72 m/s² (``--method patch_gate``) clips that start
-        from a T-pose gain (60 frames at 60 fps, 4 cameras, ``benchmarks/sweep_patch.py``:
-        CMU 13_32 31.8 → 21.5 mm, 08_05 55.1 → 11.7 mm; without it the left forearm is
-        thrown 0.5 m at frame 2 and then gets all its data from phantom volumes and other
-        parts' points), but a run loses its feet (09_01: 11.9 → 34.5 mm, the right ankle
-        up to 94 mm off for 25 frames: a foot's push-off exceeds the gate, and without
-        its prediction the foot is left behind) and the held-out 05_03 loses (24.6 →
-        31.0). In metres per frame² it would also gate ordinary motion at 30 fps.
+        half its speed is not extrapolated (0: every joint is; not in the paper). A
+        velocity that just jumped comes from an abrupt start or a fit that slipped;
+        extrapolating it throws the joint further off. Off by default (``patch_gate``
+        turns it on): it helps clips that start from a T-pose but leaves a runner's feet
+        behind at push-off.
     interior_scale : float
         Hull points inside the model (not in the paper; 0 turns it off). A visual hull
         contains the body, so a hull point deeper than
-        :data:`~meshmocap.trackers.patch.tracker.INTERIOR_MARGIN` behind the model surface comes
-        from a silhouette hole (which carves a tunnel through the hull: 16 % of the hull
-        points of CMU 05_01 with the ``degraded`` silhouettes lie over 1 cm inside the
-        true body, none with clean ones) or a model out of place. Each metre of depth
-        beyond the margin counts as ``1 / interior_scale`` σ of distance in the E-step,
-        so deep points fall to the outlier class.
+        :data:`~meshmocap.trackers.patch.tracker.INTERIOR_MARGIN` behind the model surface
+        comes from a silhouette hole (which carves a tunnel through the hull) or a model out
+        of place. Each metre of depth beyond the margin counts as ``1 / interior_scale`` σ of
+        distance in the E-step, so deep points fall to the outlier class.
     normal_cos : float
         Correspondences need ``n_vertex · n_point`` above this (normal compatibility).
     residual : {"point_to_point", "point_to_plane"}
@@ -136,29 +167,31 @@ class PatchOptions:
         The joints reported per frame (tracking itself always runs on the skeleton of
         Eq. 8–11). "skeleton": the paper's, bound to the patches by Ebone. "surface": read
         off the output mesh by the template's joint regressor
-        (:func:`~meshmocap.body.joint_regressor.joint_regressor`). "blend" (default): per
-        joint, the surface read-out weighted by ``f² / (f² + s²)`` and the skeleton by the
-        rest, where ``f`` is the skeleton's model floor for that joint (its error with
-        exact patches on the template's own training poses,
+        (:func:`~meshmocap.body.joint_regressor.joint_regressor`). "blend" (default, not in
+        the paper): per joint, the surface read-out weighted by ``f² / (f² + s²)`` and the
+        skeleton by the rest, where ``f`` is the skeleton's model floor for that joint (its
+        error with exact patches on the template's own training poses,
         :func:`~meshmocap.trackers.patch.model.skeleton_floor`) and ``s`` the surface
         read-out's typical error on a tracked mesh
-        (:data:`~meshmocap.trackers.patch.tracker.SURFACE_JOINT_ERROR`). The pelvis and thorax,
-        which no patch follows rigidly (floors 30–40 mm), come from the surface; the
-        limbs mostly from the skeleton. Both read-outs are then moved the least that keeps
-        the skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
+        (:data:`~meshmocap.trackers.patch.tracker.SURFACE_JOINT_ERROR`). The pelvis and
+        thorax, which no patch follows rigidly, come from the surface; the limbs mostly
+        from the skeleton. Both read-outs are then moved the least that keeps the
+        skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
     lambda_silhouette : float
-        Weight of the silhouette coverage term (not in the paper; 0 turns it off; used
-        where the capture has cameras and silhouettes): silhouette pixels that no model
-        vertex covers pull their nearest projected vertex onto their viewing ray
+        Weight of the silhouette coverage term (not in the paper; 0 leaves it out,
+        :class:`~meshmocap.trackers.patch.energy.SilhouetteTerm`; used where the capture
+        has cameras and silhouettes): silhouette pixels that no model vertex covers pull
+        their nearest projected vertex onto their viewing ray
         (:mod:`~meshmocap.trackers.patch.terms`). The hull's points cannot tell a limb on
         the true surface from one in a phantom wedge beside it; the silhouettes can.
     silhouette_scale : float
         Cauchy scale (metres) of the coverage term's weights: a pixel that far from the
         model pulls half as hard (spurious blobs far from the body pull little).
     lambda_temporal : float
-        Weight of the temporal prior (not in the paper; 0 turns it off): mean squared
-        distance of the joints from their constant-velocity prediction (an acceleration
-        penalty), so that a limb coasts through a few frames without data.
+        Weight of the temporal prior (not in the paper; 0 leaves it out,
+        :class:`~meshmocap.trackers.patch.energy.TemporalTerm`): mean squared distance of
+        the joints from their constant-velocity prediction (an acceleration penalty), so
+        that a limb coasts through a few frames without data.
     seed : int
         Patches and subsampling seed.
     """
@@ -209,10 +242,6 @@ class PatchOptions:
         check_choice("PatchOptions", "joint_readout", self.joint_readout, get_args(JointReadout))
         if self.n_patches < 1:
             raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
-        if not self.lambda_reverse >= 0:  # also rejects NaN
-            raise InputError(
-                f"PatchOptions: lambda_reverse must be ≥ 0, found {self.lambda_reverse}"
-            )
         if self.coarse_iter < 0:
             raise InputError(f"PatchOptions: coarse_iter must be ≥ 0, found {self.coarse_iter}")
         if self.max_iter < 1:
@@ -221,7 +250,17 @@ class PatchOptions:
             raise InputError(
                 f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
             )
-        for name in ("lambda_silhouette", "lambda_temporal", "accel_gate", "interior_scale"):
+        for name in (
+            "lambda_data",
+            "lambda_rigid",
+            "lambda_bone",
+            "lambda_reverse",
+            "lambda_length",
+            "lambda_silhouette",
+            "lambda_temporal",
+            "accel_gate",
+            "interior_scale",
+        ):
             if not getattr(self, name) >= 0:  # also rejects NaN
                 raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
         for name, unit in (

@@ -25,7 +25,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from meshmocap.errors import FitError
 from meshmocap.geometry.rotations import skew
+from meshmocap.trackers.patch.kernels import point_moments
 from meshmocap.trackers.patch.model import PatchModel
 
 
@@ -82,6 +84,8 @@ class Pattern:
         :class:`System` (``D``, ``O``, ``Oᵀ``, ``PJ``, ``PJᵀ``, ``JJ``; no entry repeats: the
         pairs are distinct and a bone joins two different joints)
     diag : (n,) int, stored positions of the ordered diagonal
+    pair_sum : (P, 2E) sparse, sums blocks given per pair end (the first patches of every
+        pair, then the second ones) into per-patch blocks
     """
 
     n_patches: int
@@ -92,6 +96,7 @@ class Pattern:
     indices: np.ndarray
     gather: np.ndarray
     diag: np.ndarray
+    pair_sum: sp.csr_matrix
 
     @property
     def n(self) -> int:
@@ -139,7 +144,11 @@ def normal_pattern(model: PatchModel, n_joints: int) -> Pattern:
     indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))])
     indices = r[gather]
     diag = np.flatnonzero(indices == c[gather])
-    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag)
+    ends = np.concatenate([k, l])
+    pair_sum = sp.csr_matrix(
+        (np.ones(len(ends)), (ends, np.arange(len(ends)))), shape=(P, len(ends))
+    )
+    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag, pair_sum)
 
 
 @dataclass
@@ -182,6 +191,11 @@ class System:
             self.D[k] += B
         else:
             np.add.at(self.D, k, B)
+
+    def add_pair_ends(self, B: np.ndarray) -> None:
+        """Add 6×6 blocks ``B`` (2E, 6, 6) to the diagonal blocks of the pattern's pairs'
+        first patches (``B[:E]``) and second patches (``B[E:]``)."""
+        self.D += (self.pattern.pair_sum @ B.reshape(len(B), 36)).reshape(-1, 6, 6)
 
     def add_pairs(self, B: np.ndarray) -> None:
         """Add blocks ``B`` (E, 6, 6) between the pattern's neighbouring pairs (k, l): rows
@@ -245,7 +259,7 @@ class System:
                 H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
             )
         except RuntimeError as exc:  # "Factor is exactly singular": the driver flags the frame
-            raise FloatingPointError(f"singular normal equations ({exc})") from None
+            raise FitError(f"singular normal equations ({exc})") from None
         delta = np.empty(self.n)
         delta[pt.order] = lu.solve(-self.g[pt.order])
         return delta
@@ -263,7 +277,7 @@ class System:
         try:
             dr = np.linalg.solve(Hr, -gr)
         except np.linalg.LinAlgError as exc:
-            raise FloatingPointError(f"singular grouped normal equations ({exc})") from None
+            raise FitError(f"singular grouped normal equations ({exc})") from None
         return S @ dr
 
 
@@ -301,10 +315,6 @@ def group_basis(groups: np.ndarray, c: np.ndarray, n_joints: int) -> sp.csr_matr
     )
 
 
-#: Upper-triangle indices of a 3×3 matrix (``np.triu_indices`` costs 0.2 ms a call).
-_TRIU3 = np.triu_indices(3)
-
-
 def _ata_blocks(
     Q_ab: np.ndarray, Q_ba: np.ndarray, s_a: np.ndarray, s_b: np.ndarray, W: np.ndarray
 ) -> np.ndarray:
@@ -338,7 +348,7 @@ def add_rigidity(
     k, l = model.pairs[:, 0], model.pairs[:, 1]
     Rs = np.stack([R[k], R[l]], 1)  # (E, 2, 3, 3)
     s = np.einsum("eaij,eaj->eai", Rs, mom.m)  # s_a = R_a m_a
-    Q = np.einsum("eaij,eabjk,ebkl->eabil", Rs, mom.M, np.swapaxes(Rs, -1, -2))  # R_a M_ab R_bᵀ
+    Q = Rs[:, :, None] @ mom.M @ np.swapaxes(Rs, -1, -2)[:, None]  # R_a M_ab R_bᵀ
     W = mom.W
     dc = c[k] - c[l]
     # energy: Σ w |q_k − q_l + Δc|²
@@ -350,7 +360,7 @@ def add_rigidity(
     Hkk = _ata_blocks(Q[:, 0, 0], Q[:, 0, 0], s[:, 0], s[:, 0], W)
     Hll = _ata_blocks(Q[:, 1, 1], Q[:, 1, 1], s[:, 1], s[:, 1], W)
     Hkl = -_ata_blocks(Q[:, 0, 1], Q[:, 1, 0], s[:, 0], s[:, 1], W)
-    sys.add_patches(np.concatenate([k, l]), weight * np.concatenate([Hkk, Hll]))
+    sys.add_pair_ends(weight * np.concatenate([Hkk, Hll]))
     sys.add_pairs(weight * Hkl)
     # gradient: Σ w A(q_a)ᵀ r with r = q_k − q_l + Δc; Σ w q_a × q_b = axial(Q_ba − Q_ab)
     r_sum = s[:, 0] - s[:, 1] + W[:, None] * dc
@@ -370,23 +380,21 @@ def add_point_terms(
     Returns the weighted sum before ``weight``.
     """
     # Per-patch moments W = Σ w, s = Σ w q, Q = Σ w q qᵀ give Σ w A(q)ᵀ A(q) (module
-    # docstring): 10 sums per patch instead of 36, and no (m, 6, 6) array.
+    # docstring): 10 sums per patch instead of 36, and no (m, 6, 6) array; one pass.
     n_p = int(patch.max()) + 1 if len(patch) else 0
-    W = np.bincount(patch, w, minlength=n_p)
-    used = np.flatnonzero(W > 0)
-    wq = w[:, None] * q
-    s = np.stack([np.bincount(patch, wq[:, a], minlength=n_p) for a in range(3)], 1)
-    iu = _TRIU3
-    Q = np.zeros((n_p, 3, 3))
-    Q[:, iu[0], iu[1]] = np.stack(
-        [np.bincount(patch, wq[:, a] * q[:, b], minlength=n_p) for a, b in zip(*iu, strict=True)], 1
+    W, s, Q, G, value = point_moments(
+        np.ascontiguousarray(patch, dtype=np.int64),
+        np.ascontiguousarray(q, dtype=np.float64),
+        np.ascontiguousarray(r, dtype=np.float64),
+        np.ascontiguousarray(w, dtype=np.float64),
+        n_p,
     )
-    Q[:, iu[1], iu[0]] = Q[:, iu[0], iu[1]]
-    Q, s, W = Q[used], s[used], W[used]
-    sys.add_patches(used, weight * _ata_blocks(Q, Q, s, s, W), unique=True)
-    G = w[:, None] * np.concatenate([np.cross(q, r), r], 1)
-    sys.add_g(6 * patch, weight * G)
-    return float(np.sum(w * np.sum(r * r, axis=1)))
+    used = np.flatnonzero(W > 0)
+    sys.add_patches(
+        used, weight * _ata_blocks(Q[used], Q[used], s[used], s[used], W[used]), unique=True
+    )
+    sys.g[: 6 * n_p] += weight * G.ravel()
+    return float(value)
 
 
 def add_bone(

@@ -21,14 +21,23 @@ from dataclasses import replace
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap.body.articulated import MAX_STEP_ANGLE
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
+from meshmocap.errors import FitError
 from meshmocap.estimate.observe import frame_points
-from meshmocap.geometry.camera import in_view
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
+from meshmocap.trackers.patch.energy import (
+    Correspondences,
+    FrameData,
+    Iterate,
+    assemble,
+    energy_terms,
+    total_energy,
+)
 from meshmocap.trackers.patch.kernels import assign_kernel
 from meshmocap.trackers.patch.model import (
     PatchModel,
@@ -37,31 +46,16 @@ from meshmocap.trackers.patch.model import (
     rebind_bones,
     skeleton_floor,
 )
+from meshmocap.trackers.patch.nearest import NearestVertices, k_nearest
 from meshmocap.trackers.patch.options import PatchOptions
 from meshmocap.trackers.patch.solver import (
     System,
-    add_bone,
-    add_bone_lengths,
-    add_plane_terms,
-    add_point_terms,
-    add_rigidity,
     group_basis,
     length_residuals,
     normal_pattern,
     rigidity_moments,
 )
-from meshmocap.trackers.patch.terms import add_joint_prior, add_silhouette, silhouette_rays
 
-#: Weight of the point-to-point pull that keeps point-to-plane residuals from sliding freely.
-PLANE_POINT_MIX = 0.1
-
-#: Scale of the rigidity and bone terms relative to the data term after each is normalised
-#: by its total weight (mean squared residuals). Neighbouring patches' predictions and the
-#: bone points stay within millimetres, the data within centimetres: without this factor the
-#: paper's λr = λb = 1 against λd = 10 lets patches drift apart (tuned on synthetic walks;
-#: see benchmarks/bench_patch.py).
-RIGIDITY_SCALE = 10.0
-BONE_SCALE = 100.0
 #: Divergence guards (metres): no joint moves this far in one frame (10 m/s at 60 fps) ...
 MAX_JOINT_JUMP = 0.5
 #: ... and the patch centres' mean stays this close to the observed points' mean.
@@ -77,8 +71,6 @@ MAX_BONE_PREDICTION = 0.15
 GATE_RATIO = 0.5
 #: Frame rate assumed where a capture states none (``accel_gate``).
 DEFAULT_FPS = 60.0
-#: Largest rotation (radians) of a patch in one Gauss–Newton step.
-MAX_STEP_ANGLE = 0.3
 #: Stages of :attr:`PatchTracker.stage_seconds`: reading and subsampling the hull, body-part
 #: classification (training and prediction), E-steps, building the normal equations,
 #: solving them, and the output mesh with the frame's result.
@@ -94,6 +86,9 @@ REACQUIRE_OFFSET = 0.15
 SURFACE_JOINT_ERROR = 0.01
 #: Every k-th training pose enters the skeleton's floor (skeleton_floor).
 FLOOR_POSE_STEP = 4
+#: Candidate vertices kept per observed point beyond ``k_neighbours``, re-ranked in later
+#: iterations of a frame instead of a new k-d query (:mod:`~meshmocap.trackers.patch.nearest`).
+NEAREST_SPARE = 8
 #: Template vertices (every k-th) pulled to their nearest observed point by the reverse term.
 REVERSE_SAMPLES = 2000
 #: Depth (metres) inside the model below which a hull point is not yet suspect
@@ -144,10 +139,16 @@ class PatchTracker:
         """Cut ``template`` into patches and precompute the solver's constant parts."""
         o = self.opts
         self.template = template
+        self.terms = energy_terms(o)
         self.model = build_patch_model(
             template, n_patches=o.n_patches, joint_rigidity=o.joint_rigidity, seed=o.seed
         )
         self.moments = rigidity_moments(self.model)
+        m = self.model  # each patch's radius: its vertices' largest distance from its centre
+        self.patch_radius = np.zeros(m.P)
+        np.maximum.at(
+            self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
+        )
         self.pairs = _held_pairs(template.eval_skeleton)
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
@@ -256,15 +257,15 @@ class PatchTracker:
         return V, np.einsum("nij,nj->ni", Rl, m.N0)
 
     def vertices(self) -> np.ndarray:
-        """The output mesh: patch predictions blended over neighbouring patches (n, 3)."""
+        """The output mesh: patch predictions blended over neighbouring patches (n, 3).
+
+        ``Σ_k α_k (R_k (v0 − c0_k) + c_k) = (Σ_k α_k R_k) v0 + Σ_k α_k (c_k − R_k c0_k)``:
+        two sparse products with the (n, P) weights instead of one prediction per weight.
+        """
         m = self.model
-        B = m.blend.tocoo()
-        pred = (
-            np.einsum("nij,nj->ni", self.R[B.col], m.V0[B.row] - m.centres0[B.col]) + self.c[B.col]
-        )
-        return np.stack(
-            [np.bincount(B.row, B.data * pred[:, a], minlength=len(m.V0)) for a in range(3)], 1
-        )
+        M = (m.blend @ self.R.reshape(-1, 9)).reshape(-1, 3, 3)
+        t = m.blend @ (self.c - np.einsum("kij,kj->ki", self.R, m.centres0))
+        return np.einsum("nij,nj->ni", M, m.V0) + t
 
     # ------------------------------------------------------------------ tracking
     def observations(
@@ -311,13 +312,35 @@ class PatchTracker:
             labels[part.kind != ON_BONE] = -1  # near-joint points: any patch
         return V[keep], N[keep], labels[keep]
 
+    def frame_data(
+        self, Y: np.ndarray, NY: np.ndarray, frame: CaptureFrame | None, X_hat: np.ndarray
+    ) -> FrameData:
+        """What the energy's terms read over one frame: the kept points ``Y`` (m, 3) and
+        their normals ``NY`` (m, 3), the ``frame`` (its cameras and silhouettes; None: no
+        cameras) and the joints' prediction ``X_hat`` (K, 3), metres."""
+        return FrameData(
+            model=self.model,
+            moments=self.moments,
+            Y=Y,
+            NY=NY,
+            cameras=list(getattr(frame, "cameras", [])),
+            frame=frame,
+            X_hat=X_hat,
+            pairs=self.pairs,
+            lengths=self.lengths,
+            reverse_sample=self.reverse_sample,
+            cover_sample=self.cover_sample,
+            cover_radius=self.cover_radius,
+            normal_cos=self.opts.normal_cos,
+        )
+
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by EM + Gauss–Newton (see the module docstring)."""
         o, m = self.opts, self.model
         self._t = time.perf_counter()
         Y, NY, rng = self.observations(frame)
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points")
+            raise FitError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.c.copy(), self.X.copy())
         # A fast frame gets more EM iterations: nearest-point correspondences close a gap
         # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
@@ -345,103 +368,44 @@ class PatchTracker:
         shift[2] = 0.0
         if np.linalg.norm(shift) > REACQUIRE_OFFSET:
             self.c, self.X = self.c + shift, self.X + shift
-        X_hat = self.X.copy()  # the temporal prior's prediction (lambda_temporal)
-        rays = None
-        cameras = getattr(frame, "cameras", [])
-        if o.lambda_silhouette > 0 and cameras:
-            masks = _masks(frame)
-            rays = silhouette_rays(cameras, masks) if masks else None
+        X_hat = self.X.copy()  # the temporal prior's prediction (TemporalTerm)
         self._lap("observations")
         Y, NY, ycls = self.classify(Y, NY, rng)
         self._lap("classify")
         if len(Y) < 10:
-            raise FloatingPointError(f"only {len(Y)} observed points kept by the classifier")
-        tree_y = KDTree(Y) if o.lambda_reverse > 0 else None
+            raise FitError(f"only {len(Y)} observed points kept by the classifier")
+        fd = self.frame_data(Y, NY, frame, X_hat)
+        nearest = self.nearest_vertices(Y, spare=NEAREST_SPARE)
         self.sigma = o.sigma0  # EM restarts broad each frame: the new frame moved
-        energies: dict[str, float] = {}
+        values: dict[str, float] = {}
         n_iter = 0
         while n_iter < budget:
             n_iter += 1
             Vc, Nc = self.own_vertices()
-            coarse = n_iter <= o.coarse_iter
-            patch, v, w, y, ny = self._assign(Y, NY, ycls, Vc, Nc)
+            corr = self.correspondences(Y, NY, ycls, Vc, Nc, nearest=nearest)
             self._lap("assign")
             sys = System.empty(self.pattern)
-            q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
-            r = q + self.c[patch] - y
-            wd = max(float(w.sum()), 1e-12)
-            if o.residual == "point_to_plane":  # slide along the surface, with a little pull
-                s_n = np.sum(ny * r, axis=1)
-                e_data = add_plane_terms(sys, patch, q, ny, s_n, w, o.lambda_data / wd)
-                add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * o.lambda_data / wd)
-            else:  # Eq. (7) as printed
-                e_data = add_point_terms(sys, patch, q, r, w, o.lambda_data / wd)
-            e_rev = 0.0
-            if tree_y is not None:
-                e_rev = self._add_reverse(sys, tree_y, Y, NY, Vc, Nc, cameras)
-            w_rig = o.lambda_rigid * RIGIDITY_SCALE / m.rig_w.sum()
-            e_rig = add_rigidity(sys, m, self.moments, self.R, self.c, w_rig)
-            w_bone = o.lambda_bone * BONE_SCALE / m.bone_w.sum()
-            e_bone = add_bone(sys, m, self.R, self.c, self.X, w_bone)
-            e_len = 0.0
-            if o.lambda_length > 0:
-                e_len = add_bone_lengths(
-                    sys, self.X, self.pairs, self.lengths, o.lambda_length / len(self.pairs)
-                )
-            e_sil = e_tmp = 0.0
-            if rays is not None:
-                s = self.cover_sample
-                qs = np.einsum("nij,nj->ni", self.R[m.labels[s]], m.V0[s] - m.centres0[m.labels[s]])
-                e_sil, _ = add_silhouette(
-                    sys,
-                    rays,
-                    Vc[s],
-                    m.labels[s],
-                    qs,
-                    radius=self.cover_radius,
-                    scale=o.silhouette_scale,
-                    weight=o.lambda_silhouette,
-                )
-            if o.lambda_temporal > 0:
-                K = len(self.X)
-                e_tmp = add_joint_prior(sys, self.X, X_hat, o.lambda_temporal / K) / K
+            it = Iterate(fd, self.R, self.c, self.X, Vc, Nc, corr)
+            values = assemble(self.terms, sys, it)
             self._lap("system")
-            if coarse:  # body parts as rigid groups first (coarse_iter)
+            if n_iter <= o.coarse_iter:  # body parts as rigid groups first (coarse_iter)
                 S = group_basis(m.bone_of_patch, self.c, len(self.X))
                 delta = sys.solve_grouped(o.damping, S)
             else:
                 delta = sys.solve(o.damping)
             self._lap("solve")
             if not np.all(np.isfinite(delta)):
-                raise FloatingPointError("singular normal equations")
+                raise FitError("singular normal equations")
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
-            self.sigma = float(np.clip(np.sqrt(e_data / (3 * wd)), o.sigma_min, o.sigma_max))
-            energies = {
-                "data": e_data / wd,
-                "rigidity": e_rig / m.rig_w.sum(),
-                "bone": e_bone / m.bone_w.sum(),
-                "sigma": self.sigma,
-                "length": e_len / max(len(self.pairs), 1),
-                "reverse": e_rev,
-                "silhouette": e_sil,
-                "temporal": e_tmp,
-            }
+            self.sigma = float(np.clip(np.sqrt(values["data"] / 3), o.sigma_min, o.sigma_max))
             d = delta[: 6 * m.P].reshape(m.P, 6)  # largest move of a patch, 10 cm lever arm
             move = np.max(np.linalg.norm(d[:, 3:], axis=1) + 0.1 * np.linalg.norm(d[:, :3], axis=1))
             if move < o.tol and n_iter > o.coarse_iter:
                 break
-        energies["total"] = (
-            o.lambda_data * energies["data"]
-            + o.lambda_rigid * RIGIDITY_SCALE * energies["rigidity"]
-            + o.lambda_bone * BONE_SCALE * energies["bone"]
-            + o.lambda_length * energies["length"]
-            + o.lambda_reverse * energies["reverse"]
-            + o.lambda_silhouette * energies["silhouette"]
-            + o.lambda_temporal * energies["temporal"]
-        )
+        energies = {**values, "sigma": self.sigma, "total": total_energy(self.terms, values)}
         # the last E-step and the kept points, for diagnostics (benchmarks/diag_patch.py)
-        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": (patch, v, w, y)}
+        self.last_fit = {"Y": Y, "NY": NY, "ycls": ycls, "assign": corr, "frame": fd}
         self._check_divergence(Y, last[2])
         result = self._result(frame.index, energies, n_iter)
         self._lap("output")
@@ -478,20 +442,39 @@ class PatchTracker:
         jump = float(np.linalg.norm(self.X - X_last, axis=1).max())
         offset = float(np.linalg.norm(self.c.mean(axis=0) - Y.mean(axis=0)))
         if jump > MAX_JOINT_JUMP or offset > MAX_CENTRE_OFFSET:
-            raise FloatingPointError(
-                f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)"
-            )
+            raise FitError(f"diverged (joint jump {jump:.2f} m, centre offset {offset:.2f} m)")
 
-    def _assign(self, Y, NY, ycls, Vc, Nc):
+    def nearest_vertices(self, Y: np.ndarray, *, spare: int) -> NearestVertices:
+        """The nearest vertices of observed points ``Y`` (m, 3) over a frame's iterations,
+        ``spare`` candidates kept beyond ``k_neighbours``."""
+        return NearestVertices(Y, self.patch_radius, k=self.opts.k_neighbours, spare=spare)
+
+    def correspondences(
+        self,
+        Y: np.ndarray,
+        NY: np.ndarray,
+        ycls: np.ndarray | None,
+        Vc: np.ndarray,
+        Nc: np.ndarray,
+        *,
+        nearest: NearestVertices | None = None,
+    ) -> Correspondences:
         """E-step: soft assignments of observed points to patches (+ an outlier class).
 
-        Returns, per (point, patch) correspondence, the patch, the chosen vertex, the
-        posterior weight and the observed point.
+        Parameters
+        ----------
+        Y : (m, 3) kept observed points, metres; NY : (m, 3) their unit normals
+        ycls : (m,) int body part of each point (−1: any), or None (no classes)
+        Vc : (n, 3) each vertex as its own patch predicts it; Nc : (n, 3) its normal
+        nearest : NearestVertices of ``Y``, optional
+            The frame's candidate vertices, re-used across its iterations where they
+            provably are the nearest (default: a new k-d query).
         """
         o, m = self.opts, self.model
-        K = min(o.k_neighbours, len(Vc))
-        d, idx = KDTree(Vc).query(Y, k=K)
-        d, idx = d.reshape(len(Y), K), idx.reshape(len(Y), K).astype(np.int64)
+        if nearest is None:
+            d, idx = k_nearest(Vc, Y, min(o.k_neighbours, len(Vc)))
+        else:
+            d, idx = nearest.query(Vc, self.R, self.c)
         if o.interior_scale > 0:  # the E-step with depth penalties, in numpy
             return self._assign_interior(Y, NY, ycls, Vc, Nc, d, idx)
         # per point, the nearest vertex per patch among those whose normals agree and, with
@@ -509,10 +492,10 @@ class PatchTracker:
             self.sigma**2,
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
         )
-        return patch, v, w, Y[i], NY[i]
+        return Correspondences(patch, v, w, Y[i], NY[i])
 
-    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx):
-        """:meth:`_assign` with ``interior_scale``: each metre a point lies deeper than
+    def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx) -> Correspondences:
+        """:meth:`correspondences` with ``interior_scale``: each metre a point lies deeper than
         :data:`INTERIOR_MARGIN` behind its candidate vertex adds ``σ / interior_scale`` to
         their distance (in quadrature), so points deep inside the model fall to the outlier
         class."""
@@ -530,29 +513,7 @@ class PatchTracker:
         d2 = d2 + (np.maximum(depth, 0.0) / o.interior_scale * self.sigma) ** 2
         p = np.exp(-0.5 * d2 / self.sigma**2)
         denom = np.bincount(i, p, minlength=len(Y)) + np.exp(-0.5 * o.outlier_sigmas**2)
-        return patch, vx, p / denom[i], Y[i], NY[i]
-
-    def _add_reverse(self, sys: System, tree_y: KDTree, Y, NY, Vc, Nc, cameras=()) -> float:
-        """Add the reverse data term (``lambda_reverse``): each sampled template vertex (as
-        its own patch predicts it) to its nearest observed point, with a Cauchy weight
-        (``reverse_scale``), where their normals agree, they lie within ``reverse_cap``, and
-        every camera of ``cameras`` sees the vertex (carving removes what a camera does not
-        see: feet outside an image have no hull to be pulled onto). Returns the weighted
-        mean squared distance (metres²)."""
-        o, m = self.opts, self.model
-        v = self.reverse_sample
-        d, j = tree_y.query(Vc[v], k=1)
-        j = j.astype(np.int64)
-        ok = (np.einsum("ij,ij->i", Nc[v], NY[j]) > o.normal_cos) & (d < o.reverse_cap)
-        ok &= in_view(Vc[v], cameras)
-        v, y = v[ok], Y[j[ok]]
-        if len(v) == 0:
-            return 0.0
-        patch = m.labels[v]
-        q = np.einsum("nij,nj->ni", self.R[patch], m.V0[v] - m.centres0[patch])
-        w = 1.0 / (1.0 + (d[ok] / o.reverse_scale) ** 2)  # Cauchy IRLS weights
-        e = add_point_terms(sys, patch, q, q + self.c[patch] - y, w, o.lambda_reverse / len(v))
-        return e / len(v)
+        return Correspondences(patch, vx, p / denom[i], Y[i], NY[i])
 
     def _apply(self, delta: np.ndarray) -> None:
         P = self.model.P
@@ -563,15 +524,6 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
-
-
-def _masks(frame: CaptureFrame) -> list[np.ndarray]:
-    """The frame's silhouettes, one per camera, or [] where the capture has none."""
-    try:
-        masks = frame.silhouettes
-    except (OSError, AttributeError, ValueError):
-        return []
-    return masks if len(masks) == len(frame.cameras) else []
 
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:

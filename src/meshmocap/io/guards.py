@@ -1,0 +1,209 @@
+"""Checks a command makes before it writes or scores: is the output place writable and of
+the right kind, does it leave a track folder's own files alone, is the capture the track's.
+
+Each check raises one error whose message is one line naming the path, what was expected
+and what was found, so a run that would fail at its last step (an unwritable ``--out``
+after ten minutes of tracking) fails before it starts, and a run that would silently lie
+(a walk's track scored against a jog capture, ``export TRACK --out TRACK/track.json``
+overwriting the track) is refused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from meshmocap.errors import (
+    CaptureMismatchError,
+    FormatError,
+    MeshError,
+    MeshmocapFileNotFoundError,
+    MeshmocapWarning,
+    OutputPathError,
+    ProtectedPathError,
+)
+
+__all__ = [
+    "TRACK_OWN_FILES",
+    "capture_digest",
+    "check_output_path",
+    "check_track_capture",
+    "protected_track_file",
+    "track_folder",
+]
+
+#: What a track folder is made of (:mod:`meshmocap.io.results`): only ``meshmocap track``
+#: writes these (``subject.npz``: the estimated body; ``.meshmocap.lock``: its lock).
+TRACK_OWN_FILES = ("track.json", "faces.npy", "frames", "subject.npz", ".meshmocap.lock")
+
+OutputKind = Literal["file", "folder"]
+
+
+def track_folder(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a folder written by ``meshmocap track`` (its ``track.json``
+    says ``meshmocap-track-1``)."""
+    meta = Path(path) / "track.json"
+    if not meta.is_file():
+        return False
+    try:
+        return json.loads(meta.read_text(encoding="utf-8")).get("format") == "meshmocap-track-1"
+    except (OSError, ValueError, AttributeError):
+        return (Path(path) / "frames").is_dir()  # a damaged track.json is still a track's
+
+
+def protected_track_file(path: str | os.PathLike) -> Path | None:
+    """The track folder whose own files ``path`` is or lies in (the folder itself, its
+    ``track.json``, ``faces.npy``, ``frames/``, ...: :data:`TRACK_OWN_FILES`), or None.
+    A new file beside them (``TRACK/walk.bvh``) is not protected."""
+    p = Path(os.path.abspath(path))
+    if track_folder(p):
+        return p
+    for parent in p.parents:
+        if track_folder(parent):
+            first = p.relative_to(parent).parts[0]
+            return parent if first in TRACK_OWN_FILES else None
+    return None
+
+
+def _readonly(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):  # pragma: no cover (no statvfs: Windows)
+        return False
+
+
+def check_output_path(
+    path: str | os.PathLike,
+    *,
+    kind: OutputKind,
+    command: str,
+    flag: str = "--out",
+    track_folder_ok: bool = False,
+) -> None:
+    """Refuse an output ``path`` that cannot be written, before any work starts.
+
+    ``kind`` is what the command writes there: a ``"file"`` or a ``"folder"`` (made with its
+    parents when absent). ``command`` and ``flag`` name the argument in the message.
+    ``track_folder_ok``: ``path`` may be a track folder itself (``meshmocap track``
+    resuming its own), though still none of a track folder's files.
+
+    Raises
+    ------
+    OutputPathError
+        ``path`` is a folder where a file is expected (or the reverse), a file stands where
+        a folder of its path should be, or the nearest existing folder is on a read-only
+        file system or not writable by this user.
+    ProtectedPathError
+        ``path`` is a track folder's own file (:func:`protected_track_file`).
+    """
+    p = Path(path)
+    head = f"{command}: {flag} {p}"
+    if p.is_dir() and kind == "file":
+        raise OutputPathError(f"{head}: is a folder; expected a file name to write")
+    if p.exists() and not p.is_dir() and kind == "folder":
+        raise OutputPathError(f"{head}: is a file; expected a folder")
+    near = p if p.is_dir() else p.parent
+    while not near.exists() and near != near.parent:
+        near = near.parent
+    if not near.is_dir():
+        raise OutputPathError(f"{head}: {near} is a file, not a folder")
+    if _readonly(near):
+        raise OutputPathError(f"{head}: {near} is on a read-only file system")
+    try:  # the true test (root ignores permission bits; /proc takes no new file)
+        fd, probe = tempfile.mkstemp(prefix=".meshmocap-probe.", dir=near)
+    except OSError as exc:
+        raise OutputPathError(f"{head}: cannot write in {near} ({exc.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+    track = protected_track_file(p)
+    itself = track is not None and Path(os.path.abspath(p)) == track
+    if track is not None and not (itself and track_folder_ok):
+        what = "is the track folder" if itself else "is a file of"
+        raise ProtectedPathError(
+            f"{head}: {what} {track}, which only 'meshmocap track' writes; "
+            f"expected a path outside its own files ({', '.join(TRACK_OWN_FILES[:3])})"
+        )
+
+
+def capture_digest(capture) -> str:
+    """A digest of what a capture holds: its frame numbers, ``capture.json`` and the
+    observed geometry of its first, middle and last frames (vertices as float32). A copy
+    of a capture has the digest of the original; another take does not.
+
+    ``capture``: a :class:`~meshmocap.io.capture.Capture` or
+    :class:`~meshmocap.io.capture.SequenceCapture`.
+    """
+    h = hashlib.sha256()
+    h.update(json.dumps([int(i) for i in capture.indices]).encode())
+    meta = {k: v for k, v in dict(getattr(capture, "meta", {}) or {}).items() if k != "path"}
+    h.update(json.dumps(meta, sort_keys=True, default=str).encode())
+    n = len(capture)
+    for k in sorted({0, n // 2, n - 1}):
+        try:
+            frame = capture[k]
+            if getattr(frame, "missing", None):
+                h.update(b"missing")
+                continue
+            V = frame.hull_mesh[0]
+        except (MeshmocapFileNotFoundError, FormatError, MeshError):
+            h.update(b"unreadable")
+            continue
+        h.update(np.ascontiguousarray(V, dtype=np.float32).tobytes())
+    return h.hexdigest()
+
+
+def check_track_capture(
+    track: str | os.PathLike, meta: dict, capture, *, force: bool = False, command: str = "eval"
+) -> str | None:
+    """Check that ``capture`` is the capture the track in folder ``track`` was made from.
+
+    ``meta`` is the track's ``track.json`` contents; it names the capture's folder
+    (``capture``) and the frames tracked (``frames``). The capture is the track's when it
+    is that folder, or a copy of it (same :func:`capture_digest`) holding every tracked
+    frame. Anything else is refused unless ``force``, which turns the refusal into a
+    :class:`~meshmocap.errors.MeshmocapWarning` and returns its message (None when the
+    capture is the track's).
+
+    Raises
+    ------
+    CaptureMismatchError
+        Another capture, or one that cannot be confirmed (the named folder is gone), and
+        not ``force``.
+    """
+    named = meta.get("capture")
+    if not named:  # a track written by hand or by an old version: nothing to compare
+        return None
+    here = Path(os.path.abspath(capture.path))
+    if Path(os.path.abspath(named)) == here:
+        return None
+    frames = [int(i) for i in meta.get("frames") or []]
+    absent = sorted(set(frames) - {int(i) for i in capture.indices})
+    if absent:
+        why = f"{len(absent)} of its {len(frames)} frames are not in it (first {absent[0]})"
+    elif not Path(named).exists():
+        why = f"{named} no longer exists, so the two cannot be compared"
+    else:
+        from meshmocap.io.capture import open_capture
+
+        try:
+            same = capture_digest(open_capture(named)) == capture_digest(capture)
+        except (MeshmocapFileNotFoundError, FormatError, MeshError):
+            same = False
+        if same:
+            return None  # a copy of the track's capture
+        why = f"its frames differ from those of {named}"
+    msg = (
+        f"{command}: track {track} was made from capture {named}, expected it or a copy, "
+        f"found {here} ({why})"
+    )
+    if not force:
+        raise CaptureMismatchError(f"{msg}; pass --force to score it anyway")
+    warnings.warn(f"{msg}; scored anyway (--force)", MeshmocapWarning, stacklevel=2)
+    return msg

@@ -1,0 +1,117 @@
+"""``meshmocap track`` on mesh files as studios hand them out: frames numbered by their
+file names (a gap is a missing frame, a stray copy is refused), the files' up axis, units
+and frame rate recorded in ``track.json`` and read back by ``eval`` and ``report``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshmocap.analysis.evaluate import evaluate
+from meshmocap.analysis.metrics import correspondence_error
+from meshmocap.cli import main
+from meshmocap.io.capture import Capture
+from meshmocap.io.meshes import write_mesh
+from meshmocap.io.results import input_frame, open_tracked_capture, read_track
+from toys import small_walk_capture
+
+ICP = ["--method", "articulated_icp", "--max-iter", "2", "--template", "neutral_5k"]
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory) -> Path:
+    """A 4-frame synthetic capture (neutral_5k walk at 30 fps, 2 cm voxels)."""
+    return small_walk_capture(tmp_path_factory.mktemp("track") / "cap", 4).path
+
+
+def _truth_files(cap: Path, folder: Path, numbers, *, up="y", mm=True) -> dict[int, np.ndarray]:
+    """The capture's true surfaces (neutral_5k's connectivity: a clean 4D capture) written as
+    ``NNNNN.ply`` for ``numbers``, in millimetres and Y up; returns them in metres, Z up."""
+    folder.mkdir()
+    c = Capture(cap)
+    out = {}
+    for i in numbers:
+        V = c[i].truth.vertices
+        write_mesh(folder / f"{i:05d}.ply", V * (1000 if mm else 1), c.truth_faces, up=up)
+        out[i] = V
+    return out
+
+
+def test_a_4d_capture_in_mm_and_y_up_is_scored_in_its_own_frame(cap, tmp_path, capsys):
+    seq = tmp_path / "seq"
+    truth = _truth_files(cap, seq, (0, 1, 3))  # frame 2 has no file
+    out = tmp_path / "t"
+    assert main(["track", str(seq), *ICP, "--fps", "25", "--out", str(out)]) == 0
+    run = capsys.readouterr()
+    assert "Y up, mm" in run.out and "25 fps" in run.out
+    assert "1 frame numbers have no file (first 2)" in run.err
+    meta = json.loads((out / "track.json").read_text())
+    assert meta["fps"] == 25.0
+    assert meta["input"] == {"up": "y", "units": "mm", "scale": 0.001, "offset": [0.0, 0.0, 0.0]}
+    t = read_track(out)
+    assert t.frames.tolist() == [0, 1, 2, 3]  # the gap kept in the numbering
+    assert [("missing" in f) for f in t.flags] == [False, False, True, False]
+    assert "no file of frame 2" in t.messages[2]
+    # eval reads the files as track did, and scores every tracked vertex against the file's
+    assert main(["eval", str(seq), str(out), "--surface-frames", "2"]) == 0
+    said = capsys.readouterr().out
+    assert "read as tracked (Y up, mm, 25 fps)" in said and "nan" not in said.lower()
+    ev = evaluate(t, open_tracked_capture(t.meta, seq), silhouettes=False, surface_frames=0)
+    k = [0, 1, 3]
+    want = correspondence_error(t.vertices[k], np.stack([truth[i] for i in k]))
+    assert ev.correspondence is not None and ev.correspondence.frames.tolist() == [0, 1, 3]
+    assert ev.correspondence.overall.mean == pytest.approx(want.overall.mean, abs=1e-3)
+    assert ev.correspondence.overall.mean < 100.0  # the files, not a frame 1000× off
+    # the report's input (its player's points) lies where the track is: within 0.1 mm
+    V = open_tracked_capture(t.meta)[3].hull_mesh[0]  # the capture recorded in track.json
+    assert np.abs(V - truth[3]).max() < 1e-4
+    assert input_frame(t.meta).describe() == "Y up, mm, 25 fps"
+
+
+def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
+    from meshmocap.apps.report import build_report
+
+    seq = tmp_path / "seq"
+    _truth_files(cap, seq, (0, 1))
+    out = tmp_path / "t"
+    assert main(["track", str(seq), *ICP, "--out", str(out)]) == 0
+    html = build_report(tmp_path / "r.html", seq, [out], silhouettes=False, surface_frames=1)
+    text = html.read_text()
+    assert "Surface distance to the hull" in text
+    ev = evaluate(read_track(out), open_tracked_capture(read_track(out).meta, seq))
+    # the surface of the tracked mesh is near the input's (mm, not the 786 of a Z-up reread)
+    assert ev.surface is not None and ev.surface.mean.max() < 60.0
+
+
+def test_track_without_fps_records_none_and_gait_asks_for_it(cap, tmp_path):
+    seq = tmp_path / "seq"
+    _truth_files(cap, seq, (0, 1), up="z", mm=False)
+    out = tmp_path / "t"
+    assert main(["track", str(seq), *ICP, "--out", str(out)]) == 0
+    meta = json.loads((out / "track.json").read_text())
+    assert "fps" not in meta and input_frame(meta).fps is None
+    assert meta["input"]["up"] == "z" and meta["input"]["units"] == "m"
+
+
+@pytest.mark.parametrize(
+    ("names", "bad"),
+    [
+        (["00000.ply", "00001.ply", "00001 (1).ply"], "00001 (1).ply: not a frame number"),
+        (["00000.ply", "00001.ply", "00001_1.ply"], "00001_1.ply: not a frame number"),
+        (["mesh_1.ply", "mesh_01.ply"], "frame 1 again"),
+    ],
+)
+def test_a_name_that_is_not_a_frame_number_is_refused_in_one_line(
+    cap, tmp_path, capsys, names, bad
+):
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    c = Capture(cap)
+    for k, name in enumerate(names):
+        write_mesh(seq / name, c[min(k, 3)].truth.vertices, c.truth_faces)
+    assert main(["track", str(seq), *ICP, "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert bad in err and len(err.splitlines()) == 1

@@ -1,0 +1,94 @@
+"""Estimate once per capture: the body and the first pose are cached with the capture, keyed
+by its content, the options, the code and (first pose) the template; every track of the
+capture shares them."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from meshmocap.apps.demo import drop_hull_meshes
+from meshmocap.body.template import load_template
+from meshmocap.estimate import capture_cache as cc
+from meshmocap.estimate import tracking_template as tt
+from meshmocap.estimate.subject import SubjectEstimate
+from meshmocap.io.capture import open_capture
+from meshmocap.io.results import read_state
+from meshmocap.studio.synth import SynthSpec, synthesize
+from meshmocap.trackers import driver
+from meshmocap.trackers.registry import make_tracker
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    spec = SynthSpec(motion="walk", template="neutral_5k", stop=3)
+    return synthesize(tmp_path_factory.mktemp("walk") / "cap", spec, show_progress=False).path
+
+
+def _counting(calls):
+    def estimate(capture, **options):
+        calls.append(options)
+        t = load_template("neutral_5k")
+        R = np.tile(np.eye(3), (1, 31, 1, 1))
+        root = t.skeleton.rest_positions[:1]
+        return SubjectEstimate(t, "hull", (0,), np.zeros(3), R, root, 0.002, 1.0, {"a": 1.5})
+
+    return estimate
+
+
+def test_the_digest_follows_the_content_not_the_place_nor_derived_files(walk, tmp_path):
+    d = cc.capture_digest(open_capture(walk))
+    copy = tmp_path / "copy"
+    shutil.copytree(walk, copy)
+    assert cc.capture_digest(open_capture(copy)) == d  # a copy: the same content
+    drop_hull_meshes(copy)  # hulls rewritten (derived from the silhouettes): no change
+    shutil.rmtree(copy / "truth")  # the truth is not read by the estimators
+    assert cc.capture_digest(open_capture(copy)) == d
+    mask = sorted((copy / "silhouettes").rglob("*.png"))[0]
+    mask.write_bytes(mask.read_bytes() + b"\0")  # one mask changes
+    assert cc.capture_digest(open_capture(copy)) != d
+
+
+def test_the_body_is_estimated_once_per_capture_and_options(walk, tmp_path, monkeypatch):
+    cap = open_capture(walk)
+    calls: list = []
+    monkeypatch.setattr(tt, "estimate_subject", _counting(calls))
+    a = tt.tracking_template(cap, "auto", tmp_path / "track_a")
+    b = tt.tracking_template(cap, "auto", tmp_path / "track_b")  # another track: cached
+    assert len(calls) == 1 and (tmp_path / "track_b" / tt.SUBJECT_FILE).is_file()
+    np.testing.assert_array_equal(a.template.V, b.template.V)
+    est = cc.cached_subject(cap, kind="auto", estimate=_counting(calls))
+    assert len(calls) == 1 and est.notes == {"a": 1.5} and est.frames == (0,)
+    assert est.rms == 0.002 and est.z.shape == (3,) and est.R.shape == (1, 31, 3, 3)
+    cc.cached_subject(cap, kind="hull", estimate=_counting(calls))  # other options
+    assert len(calls) == 2
+    tt.tracking_template(cap, "auto", tmp_path / "track_c", refresh=True)  # estimate again
+    assert len(calls) == 3
+    assert (walk / cc.CACHE_FOLDER).is_dir()  # with the capture
+
+
+def test_the_first_pose_is_searched_once_for_every_tracker(walk, tmp_path, monkeypatch):
+    cap = open_capture(walk)
+    found = []
+    search = driver._search_first_pose
+
+    def counting(template, frame):
+        found.append(frame.index)
+        return search(template, frame)
+
+    monkeypatch.setattr(driver, "_search_first_pose", counting)
+    t = load_template("neutral_5k")
+    tracks = [
+        driver.track_sequence(
+            make_tracker(method, template=t), t, cap, tmp_path / method, show_progress=False
+        )
+        for method in ("articulated_icp", "patch")
+    ]
+    assert found == [0]  # searched for the first tracker, read back for the second
+    assert tracks[0].messages[0] == tracks[1].messages[0]
+    assert tracks[0].messages[0].startswith("init auto: ")
+    first = [read_state(tmp_path / m, 0)["pose_R"] for m in ("articulated_icp", "patch")]
+    np.testing.assert_array_equal(*first)  # the very same pose
+    other = load_template("neutral")  # another template: its own search
+    R, _, how = cc.cached_first_pose(cap, other, 0, lambda: (np.eye(3)[None], np.zeros(3), "x"))
+    assert R.shape == (1, 3, 3) and how == "x"
