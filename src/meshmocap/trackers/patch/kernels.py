@@ -16,9 +16,11 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_out):
-    """Pairs of the E-step: for each point t (in order) and each patch (ascending) whose
-    nearest compatible candidate among ``idx[t]`` (k,) (by increasing distance ``d[t]``)
-    is candidate c: the row t, the patch, the vertex ``idx[t, c]`` and the posterior weight
+    """Pairs of the E-step: rows, patches, vertices and posterior weights.
+
+    For each point t (in order) and each patch (ascending) whose nearest compatible
+    candidate among ``idx[t]`` (k,) (by increasing distance ``d[t]``) is candidate c: the
+    row t, the patch, the vertex ``idx[t, c]`` and the posterior weight
     ``p / (Σ_t p + p_out)`` with ``p = exp(−d²/2 / s2)``. Compatible: normals agree
     (``Nc[v] · NY[t] > normal_cos``) and, where ``cls[t] ≥ 0``, the patch lies on bone
     ``cls[t]`` (``cls`` of length 0: no classes)."""
