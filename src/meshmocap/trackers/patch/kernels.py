@@ -67,7 +67,9 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
 
 @njit(cache=True, nogil=True)
 def point_moments(patch, q, r, w, n_p):
-    """Per-patch sums over weighted 3-D residuals ``r`` (m, 3) moved by one patch each
+    """Per-patch moments of weighted residuals, in one pass.
+
+    Sums over weighted 3-D residuals ``r`` (m, 3) moved by one patch each
     (``patch`` (m,) in ``0 .. n_p-1``, offsets ``q = R_k d`` (m, 3), weights ``w`` (m,)),
     in one pass: ``W = Σ w``, ``s = Σ w q``, ``Q = Σ w q qᵀ`` (P, 3, 3), the gradient
     ``G = Σ w [q × r, r]`` (P, 6) and the value ``Σ w |r|²``
