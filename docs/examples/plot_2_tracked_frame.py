@@ -16,17 +16,12 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from meshmocap.body.template import load_template
+import meshmocap
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.registry import make_tracker
 
 work = Path(tempfile.mkdtemp())
-template = load_template("neutral_5k")
 capture = synthesize(work / "walk", SynthSpec(motion="walk", template="neutral_5k", stop=4))
-track = track_sequence(
-    make_tracker("patch"), template, capture, work / "walk-patch", show_progress=False
-)
+track = meshmocap.track(capture, method="patch", out=work / "walk-patch", show_progress=False)
 
 # %%
 # The last frame: the hull (a superset of the body, with phantom volume between the legs),
@@ -36,7 +31,7 @@ k = len(track.frames) - 1
 hull_V, _ = capture[k].hull_mesh
 true_J = capture[k].truth.joints
 V, J = track.vertices[k], track.joints[k]
-parents = track.meta["eval_parents"]
+parents = track.parents
 
 rng = np.random.default_rng(0)
 hull_sample = hull_V[rng.choice(len(hull_V), 3000, replace=False)]

@@ -4,7 +4,7 @@ Error curves: three trackers on one capture
 
 A short jog, tracked by the patch tracker, the cage tracker and the articulated ICP
 baseline, each scored against the capture's ground truth with
-:func:`meshmocap.analysis.evaluate.evaluate`. The curves are the mean error over the 15
+:func:`meshmocap.evaluate <meshmocap.api.evaluate>`. The curves are the mean error over the 15
 evaluation joints of every frame, the papers' measure; the bars the mean error of each
 joint. Every tracker starts from the first frame's true pose (``init="truth"``, the papers'
 protocol, to compare the trackers alone), so errors grow from 0.
@@ -16,23 +16,18 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from meshmocap.analysis.evaluate import evaluate
-from meshmocap.body.template import load_template
+import meshmocap
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.registry import make_tracker
 
 work = Path(tempfile.mkdtemp())
-template = load_template("neutral_5k")
 capture = synthesize(work / "jog", SynthSpec(motion="jog", template="neutral_5k", stop=8))
 
 results = {}
 for method in ("patch", "cage", "articulated_icp"):
-    tracker = make_tracker(method, template=template) if method == "cage" else make_tracker(method)
-    track = track_sequence(
-        tracker, template, capture, work / method, init="truth", show_progress=False
+    track = meshmocap.track(
+        capture, method=method, out=work / method, init="truth", show_progress=False
     )
-    results[method] = evaluate(track, capture, silhouettes=False, surface_frames=0)
+    results[method] = meshmocap.evaluate(capture, track, silhouettes=False, surface_frames=0)
 
 # %%
 # Per frame and per joint (millimetres).

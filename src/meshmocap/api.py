@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -72,7 +73,11 @@ Source = str | os.PathLike | Sequence[str | os.PathLike]
 
 
 def capture_and_axes(
-    source: Source, *, up: str = "auto", units: str = "auto", fps: float | None = None
+    source: Source,
+    *,
+    up: Literal["auto", "z", "y"] = "auto",
+    units: Literal["auto", "m", "cm", "mm"] = "auto",
+    fps: float | None = None,
 ) -> tuple[Capture | SequenceCapture, Axes | None]:
     """:func:`open_capture`, and the up axis and units it read from a mesh sequence's first
     frame (None for a capture folder, which is metres and Z up by its format)."""
@@ -93,7 +98,11 @@ def capture_and_axes(
 
 
 def open_capture(
-    source: Source, *, up: str = "auto", units: str = "auto", fps: float | None = None
+    source: Source,
+    *,
+    up: Literal["auto", "z", "y"] = "auto",
+    units: Literal["auto", "m", "cm", "mm"] = "auto",
+    fps: float | None = None,
 ) -> Capture | SequenceCapture:
     """Open what ``meshmocap track`` tracks, in metres with Z up.
 
@@ -163,6 +172,11 @@ class TrackResult:
         return self.data.healthy
 
     @property
+    def parents(self) -> np.ndarray:
+        """(15,) int64, each evaluation joint's parent in :attr:`joints` (-1: the root)."""
+        return np.asarray(self.data.meta.get("eval_parents", ()), dtype=np.int64)
+
+    @property
     def method(self) -> str:
         """The tracker (``patch``, ``cage``, ``articulated_icp``, ...)."""
         return str(self.data.meta.get("method", ""))
@@ -201,12 +215,13 @@ def track(
     out: str | os.PathLike | None = None,
     template: str | os.PathLike | None = None,
     frames: Sequence[int] | slice | None = None,
-    init: str = "auto",
+    init: Literal["auto", "truth"] = "auto",
     resume: bool = True,
     recover: bool = True,
     reseat: bool = False,
     manifold: str | os.PathLike | None = None,
     vertices: bool = True,
+    show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
     **options,
 ) -> TrackResult:
@@ -238,6 +253,9 @@ def track(
     vertices : bool
         Read the tracked vertices back into the result (False for long runs: ``vertices``
         is then empty; exports read them from the folder).
+    show_progress : bool, optional
+        Progress lines while tracking (default: where the output is not a terminal, every
+        few seconds).
     log : callable, optional
         Called with one line on how the template was chosen (the CLI prints it).
     **options
@@ -282,6 +300,7 @@ def track(
         recover=recover,
         reseat=reseat,
         vertices=vertices,
+        show_progress=show_progress,
         template_info={**choice.info, **input_meta(capture)},
         light=light,
         start=start,
@@ -361,8 +380,8 @@ def example_capture(
     n_frames: int = 60,
     fps: float = 30.0,
     performer: str = "neutral_5k",
-    up: str = "y",
-    units: str = "cm",
+    up: Literal["y", "z"] = "y",
+    units: Literal["m", "cm", "mm"] = "cm",
 ) -> Path:
     """Write a small 4D capture as studios export them, to try the tools on.
 

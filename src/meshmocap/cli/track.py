@@ -65,7 +65,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.io.results import done_frames
 
     options = _tracker_options(args)
-    if args.follow or args.idle is not None:
+    if args.follow or args.idle is not None or args.view or args.recording:
         return _follow(args, options)
     capture, axes = _capture_source(args.capture, args.up, args.units, args.fps)
     if axes is not None:
@@ -160,7 +160,8 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     from meshmocap.trackers.registry import make_tracker
 
     if not args.follow:
-        raise InputError("track: --idle goes with --follow")
+        given = "--idle" if args.idle is not None else "--view" if args.view else "--recording"
+        raise InputError(f"track: {given} goes with --follow")
     if len(args.capture) != 1 or args.frames:
         raise InputError("track --follow: give one folder (a capture or meshes) and no --frames")
     choice = _follow_template(args)
@@ -170,9 +171,12 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
     tracked = tracking_body(template, n_vertices=light).light
     tracker = make_tracker(args.method, manifold=args.manifold, template=tracked, **options)
     seen: list[float] = []
+    view = _live_view(args, template) if args.view or args.recording else None
 
     def report(f) -> None:
         seen.append(f.seconds)
+        if view is not None:
+            view.show(f.index)
         flags = f"  {','.join(f.flags)}: {f.message}" if f.flags else ""
         print(
             f"frame {f.index}: {1000 * f.seconds:.0f} ms, latency {1000 * f.latency:.0f} ms{flags}",
@@ -201,7 +205,19 @@ def _follow(args: argparse.Namespace, options: dict) -> int:
         f"{how}: tracked {len(seen)} frames (median {1000 * per:.0f} ms per frame); "
         f"results in {args.out}"
     )
+    if view is not None:
+        view.close()
+        if view.path is not None:
+            print(f"live view: {view.frames} frames recorded in {view.path} (rerun {view.path})")
     return 0
+
+
+def _live_view(args: argparse.Namespace, template):
+    """``--view``: :class:`meshmocap.apps.live_view.LiveView` of the track folder."""
+    from meshmocap.apps.live_view import LiveView
+
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    return LiveView(args.out, parents=template.eval_skeleton.parents, recording=args.recording)
 
 
 def _follow_template(args: argparse.Namespace):
@@ -448,6 +464,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=number(0, 1e6, "seconds", open_lo=True),
         help="with --follow: stop after this many seconds without a new frame",
     )
+    k.add_argument(
+        "--view",
+        action="store_true",
+        help="with --follow: show the body as it is tracked in the rerun viewer "
+        '(pip install "meshmocap[view]"); headless, save the recording as OUT/live.rrd',
+    )
+    k.add_argument("--recording", help="with --follow: --view, saved to this .rrd file")
     k.set_defaults(func=_cmd_track)
     m = sub.add_parser("learn", help="learn the cage tracker's pose manifold (GPLVM) from poses")
     m.add_argument(

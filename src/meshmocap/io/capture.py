@@ -540,7 +540,7 @@ class SequenceCapture:
     scale : float
         Metres per file unit (0.001 for millimetres).
     fps : float, optional
-        Frames per second (default 30, :attr:`fps_given` False).
+        Frames per second (default 30, ``fps_given`` False).
     offset : (3,) float, optional
         Metres subtracted from every point after scaling and turning Z up (default 0).
     """

@@ -20,9 +20,11 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_out):
-    """Pairs of the E-step: for each point t (in order) and each patch (ascending) whose
-    nearest compatible candidate among ``idx[t]`` (k,) (by increasing distance ``d[t]``)
-    is candidate c: the row t, the patch, the vertex ``idx[t, c]`` and the posterior weight
+    """Pairs of the E-step: rows, patches, vertices and posterior weights.
+
+    For each point t (in order) and each patch (ascending) whose nearest compatible
+    candidate among ``idx[t]`` (k,) (by increasing distance ``d[t]``) is candidate c: the
+    row t, the patch, the vertex ``idx[t, c]`` and the posterior weight
     ``p / (Σ_t p + p_out)`` with ``p = exp(−d²/2 / s2)``. Compatible: normals agree
     (``Nc[v] · NY[t] > normal_cos``) and, where ``cls[t] ≥ 0``, the patch lies on bone
     ``cls[t]`` (``cls`` of length 0: no classes)."""
@@ -69,7 +71,9 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
 
 @njit(cache=True, nogil=True)
 def point_moments(patch, q, r, w, n_p):
-    """Per-patch sums over weighted 3-D residuals ``r`` (m, 3) moved by one patch each
+    """Per-patch moments of weighted residuals, in one pass.
+
+    Sums over weighted 3-D residuals ``r`` (m, 3) moved by one patch each
     (``patch`` (m,) in ``0 .. n_p-1``, offsets ``q = R_k d`` (m, 3), weights ``w`` (m,)),
     in one pass: ``W = Σ w``, ``s = Σ w q``, ``Q = Σ w q qᵀ`` (P, 3, 3), the gradient
     ``G = Σ w [q × r, r]`` (P, 6) and the value ``Σ w |r|²``
