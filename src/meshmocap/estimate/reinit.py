@@ -79,6 +79,10 @@ COOLDOWN = 3
 #: Metres a tracked limb must stand from where it was last seen (mean over its vertices)
 #: to count as having jumped away from observations that no longer show it.
 JUMP = 0.08
+#: Consecutive frames a missed limb, as tracked, must fit the observations well (few of its
+#: vertices outside them, few unexplained points near it) to count as seen again where it
+#: is now: a fast limb that the observations follow is not held as lost.
+SEEN_AGAIN = 3
 #: Joints above a limb's own that move with it (an arm's clavicle).
 _ROOTS = {"left_arm": ("LeftShoulder",), "right_arm": ("RightShoulder",)}
 
@@ -138,6 +142,7 @@ class Recovery:
         }
         self.held: np.ndarray | None = None
         self.missing: set[str] = set()
+        self.fits_well: dict[str, int] = {}
 
     def _inputs(self, frame):
         obs = observed(frame)
@@ -178,7 +183,12 @@ class Recovery:
         unseen = {n: v for n, v in limb_shares(self.labels, out).items() if n in self.limb_joints}
         moved = self._limb_moves(V, self.template.pose(Vc, root).V)
         for n, v in unseen.items():  # hysteresis: missed until clearly seen again
-            if v > UNSEEN_LOST and moved[n] > JUMP:
+            good = q.outside[n] < OUTSIDE_LOST / 2 and q.unexplained[n] < UNEXPLAINED_LOST / 2
+            # frames in a row a missed limb, as tracked, has fitted the observations well
+            self.fits_well[n] = self.fits_well.get(n, 0) + 1 if good and n in self.missing else 0
+            if self.fits_well[n] > SEEN_AGAIN:  # the observations follow it where it is
+                self.missing.discard(n)
+            elif v > UNSEEN_LOST and moved[n] > JUMP:
                 self.missing.add(n)
             elif v < UNSEEN_LOST / 2 or moved[n] < JUMP / 2:
                 self.missing.discard(n)
