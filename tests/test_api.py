@@ -38,6 +38,7 @@ def test_mistakes_are_one_line(tmp_path):
         meshmocap.track(tmp_path / "cap", method="pach")
 
 
+@pytest.mark.slow
 def test_a_mesh_folder_tracks_and_exports(tmp_path):
     """Three posed frames of neutral_5k as OBJ files, in centimetres with Y up (as many
     tools write them): opened, tracked with articulated ICP, exported, evaluated."""

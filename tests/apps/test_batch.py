@@ -82,6 +82,7 @@ def _summary(out: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_dask_results_are_bit_identical_to_tracking_alone(captures, alone, cluster, tmp_path):
     items = batch_items([str(captures / "*")], method=METHOD)
     assert [i.name for i in items] == ["jog", "squat", "walk"]
@@ -107,6 +108,7 @@ def test_dask_results_are_bit_identical_to_tracking_alone(captures, alone, clust
     assert before == {m: (tmp_path / "b" / m / "result.json").stat().st_mtime_ns for m in MOTIONS}
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, cluster, tmp_path):
     items = batch_items([str(captures / "squat")], method=METHOD)
     out = tmp_path / "b"
@@ -134,6 +136,7 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_the_result(captures, alone, c
     _same_frames(frames, alone / "squat")
 
 
+@pytest.mark.slow
 def test_a_bad_capture_fails_alone_and_the_summary_names_its_error(captures, cluster, tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()

@@ -42,6 +42,7 @@ def _csv(path):
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_writes_table_markdown_and_plots(bench):
     res, root = bench
     out = root / "out"
@@ -118,6 +119,7 @@ def test_rerun_reuses_captures_tracks_and_scores(bench):
         assert np.array_equal(a.per_frame_mm, b.per_frame_mm)
 
 
+@pytest.mark.slow
 def test_changed_tracking_code_tracks_afresh(bench, tmp_path, monkeypatch):
     """Tracks are keyed by the tracking code too: after an edit to the package a re-run
     tracks again instead of resuming the old code's frames."""

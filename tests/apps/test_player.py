@@ -46,6 +46,7 @@ def _glb_json(glb: bytes) -> dict:
     return json.loads(glb[20 : 20 + length])
 
 
+@pytest.mark.slow
 def test_every_frame_of_the_track(long_track):
     folder, cap = long_track
     track = read_track(folder)

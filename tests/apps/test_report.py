@@ -277,6 +277,7 @@ def _chromium(browser, tmp_path, page, *args):
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180)
 
 
+@pytest.mark.slow
 def test_player_draws_in_headless_chromium(player, tmp_path):
     browser = _browser()
     if browser is None:

@@ -140,6 +140,7 @@ def crane0(shared_data):
     return rig_mesh(V, F, name="crane_frame0")
 
 
+@pytest.mark.slow
 def test_crane_frame0_gets_an_oqr_enclosing_every_vertex(crane0):
     from meshmocap.trackers.cage.cage_mesh import cage_problems
     from meshmocap.trackers.cage.oqr import build_oqr, heading
@@ -166,6 +167,7 @@ def test_crane_frame0_joints_are_inside_the_body(crane0):
     assert 1.4 < E["head"][2] - E["left_ankle"][2] < 1.9
 
 
+@pytest.mark.slow
 def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
     import math
 

@@ -66,6 +66,7 @@ def test_learn_from_the_cmu35_walk_jog_mat(cmu, tmp_path, capsys):
     assert set(PoseManifold.load(out).groups) == {"walk", "jog"}
 
 
+@pytest.mark.slow
 def test_track_with_a_manifold_then_transfer_the_motion(setup, tmp_path, capsys):
     _, t, manifold, cap = setup
     track_dir = tmp_path / "track"
@@ -152,6 +153,7 @@ def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
     assert not (tmp_path / "m.npz").exists()
 
 
+@pytest.mark.slow
 def test_cage_tracks_a_folder_of_meshes_in_millimetres(setup, tmp_path, capsys):
     # ~15 s: the automatic first pose (a mesh folder has no truth); the cage needs a distance
     # field, made from each mesh (estimate.observe)

@@ -58,6 +58,7 @@ def test_render_rest_pose_and_clip(tmp_path):
     assert (tmp_path / "sq" / "contact_sheet.png").is_file()
 
 
+@pytest.mark.slow
 def test_demo_runs_on_bundled_defaults(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--seconds", "1", "--track-frames", "4"]) == 0
     assert (tmp_path / "walk.bvh").is_file()

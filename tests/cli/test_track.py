@@ -40,6 +40,7 @@ def _truth_files(cap: Path, folder: Path, numbers, *, up="y", mm=True) -> dict[i
     return out
 
 
+@pytest.mark.slow
 def test_a_4d_capture_in_mm_and_y_up_is_scored_in_its_own_frame(cap, tmp_path, capsys):
     seq = tmp_path / "seq"
     truth = _truth_files(cap, seq, (0, 1, 3))  # frame 2 has no file
@@ -71,6 +72,7 @@ def test_a_4d_capture_in_mm_and_y_up_is_scored_in_its_own_frame(cap, tmp_path, c
     assert input_frame(t.meta).describe() == "Y up, mm, 25 fps"
 
 
+@pytest.mark.slow
 def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
     from meshmocap.apps.report import build_report
 
@@ -86,6 +88,7 @@ def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
     assert ev.surface is not None and ev.surface.mean.max() < 60.0
 
 
+@pytest.mark.slow
 def test_track_without_fps_records_none_and_files_of_every_other_frame_miss_none(cap, tmp_path):
     seq = tmp_path / "seq"
     _truth_files(cap, seq, (0, 2), up="z", mm=False)

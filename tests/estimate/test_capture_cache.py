@@ -67,6 +67,7 @@ def test_the_body_is_estimated_once_per_capture_and_options(walk, tmp_path, monk
     assert (walk / cc.CACHE_FOLDER).is_dir()  # with the capture
 
 
+@pytest.mark.slow
 def test_the_first_pose_is_searched_once_for_every_tracker(walk, tmp_path, monkeypatch):
     cap = open_capture(walk)
     found = []

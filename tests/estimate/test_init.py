@@ -71,6 +71,7 @@ def test_up_axis_units_and_distance_are_read_or_refused(body):
     assert detect_axes(V * 10, units="cm").units == "cm"  # given: not detected
 
 
+@pytest.mark.slow
 def test_first_pose_found_anywhere_facing_any_way(body):
     # ~10 s: the whole global search (6 seeds × 8 headings, limbs re-seeded)
     t, posed = body[0], body[3]

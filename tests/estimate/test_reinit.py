@@ -85,6 +85,7 @@ def test_the_hull_misses_the_limb_only_on_its_frames(gap):
         Degradation(missed_limb=True, missed_limb_frames=(3, 3))
 
 
+@pytest.mark.slow
 def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     t = load_template("neutral_5k")
     track = track_sequence(
@@ -176,6 +177,7 @@ def test_inputs_that_cannot_be_tracked_as_given_are_refused_in_one_line(gap, tmp
         assert len(err) == 1 and message in err[0]
 
 
+@pytest.mark.slow
 def test_a_capture_without_truth_or_template_is_tracked_from_itself(tmp_path, monkeypatch, capsys):
     """A user's default path, ``meshmocap track CAPTURE``: no ground truth, no capture.json,
     the performer turned 200° and 0.86 m from the origin. The body is estimated (1 frame, 8

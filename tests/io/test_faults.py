@@ -52,6 +52,7 @@ def _real(cap: Path, tmp: Path) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_a_dropped_frame_is_carved_from_the_others_and_tracked_through(cap, tmp_path, capsys):
     real = _real(cap, tmp_path)
     empty = np.zeros((480, 640), bool)
@@ -97,6 +98,7 @@ def test_a_dropped_frame_is_carved_from_the_others_and_tracked_through(cap, tmp_
     assert np.isfinite(t.joints).all()
 
 
+@pytest.mark.slow
 def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
     from meshmocap.body.template import load_template
     from meshmocap.trackers.driver import track_sequence
@@ -117,6 +119,7 @@ def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
     assert "hulls/00002.npz" in t.messages[2]
 
 
+@pytest.mark.slow
 def test_an_unreadable_frame_of_a_mesh_sequence_is_skipped(cap, tmp_path, capsys):
     from meshmocap.io.meshes import write_mesh
 
@@ -173,6 +176,7 @@ def test_synth_keeps_frames_when_the_subject_leaves_a_camera(tmp_path, capsys):
     )
 
 
+@pytest.mark.slow
 def test_a_motion_asked_for_more_frames_than_it_has_says_so(tmp_path, capsys):
     argv = [
         "synth",
@@ -222,6 +226,7 @@ def test_grey_masks_are_thresholded_with_one_warning(cap, tmp_path, capsys):
     assert np.array_equal(Capture(real)[2].hull.occupancy, Capture(cap)[2].hull.occupancy)
 
 
+@pytest.mark.slow
 def test_a_rerun_says_what_was_resumed(cap, tmp_path, capsys):
     argv = ["track", str(cap), *ICP, "--out", str(tmp_path / "t")]
     assert main([*argv, "--frames", "0:3"]) == 0
@@ -281,6 +286,7 @@ def test_long_runs_log_progress_lines_when_stderr_is_not_a_terminal(monkeypatch,
     assert capsys.readouterr().err == ""  # a short run stays quiet
 
 
+@pytest.mark.slow
 def test_eval_takes_a_mesh_folder_that_track_accepts(cap, tmp_path, capsys):
     from meshmocap.io.meshes import write_mesh
 
@@ -294,6 +300,7 @@ def test_eval_takes_a_mesh_folder_that_track_accepts(cap, tmp_path, capsys):
     assert "Surface distance to the hull" in out and "nan" not in out.lower()
 
 
+@pytest.mark.slow
 def test_point_clouds_without_normals_are_tracked_by_the_patch_tracker(cap, tmp_path, capsys):
     import trimesh
 
@@ -576,6 +583,7 @@ def test_a_hull_of_the_whole_studio_is_refused_by_track(cap, tmp_path, capsys):
     assert err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_frames_carved_from_fewer_cameras_are_named_by_track_and_eval(cap, tmp_path, capsys):
     real = _real(cap, tmp_path)
     empty = np.zeros((480, 640), bool)
@@ -616,6 +624,7 @@ def test_subject_says_a_sphere_is_not_a_performer(tmp_path, capsys):
     assert body_problem(0.3 * t.V, t.F) == "it is 0.53 m tall (a person: 0.8–2.5 m)"
 
 
+@pytest.mark.slow
 def test_a_dense_mesh_folder_is_tracked_with_a_warning(cap, tmp_path, capsys, monkeypatch):
     from meshmocap.estimate import plausibility
     from meshmocap.io.meshes import write_mesh

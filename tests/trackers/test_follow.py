@@ -62,6 +62,7 @@ def _studio(src: Path, dst: Path, frames, *, delay: float = 0.05) -> threading.T
     return th
 
 
+@pytest.mark.slow
 def test_follow_tracks_frames_as_written_and_resumes(walk, offline, tmp_path, capsys):
     """Frames written one by one are tracked as they come, with the offline results;
     a second run resumes after the last frame written."""
@@ -127,6 +128,7 @@ def test_ctrl_c_stops_with_every_finished_frame_kept(walk, tmp_path, capsys, mon
     assert done_frames(out) == [0, 1, 2]
 
 
+@pytest.mark.slow
 def test_a_mesh_folder_and_a_stop_callback(walk, tmp_path):
     """Mesh files in natural order (m_2 before m_10), written then renamed; a name sorting
     before frames already tracked is left out; stop() ends the run."""

@@ -73,6 +73,8 @@ LIMB_HYPOTHESES = 4
 #: stands from where its recent motion (constant velocity over the last two frames) puts
 #: it, counted up to :data:`MOTION_REACH`: a fast limb that moves on as it moved is kept.
 MOTION_WEIGHT = 0.05
+#: Metres (RMS over the limb's joints) past which a re-seeded limb's distance from its
+#: predicted motion costs no more (:data:`MOTION_WEIGHT`).
 MOTION_REACH = 0.3
 #: Frames only flagged after a search that found no better pose.
 COOLDOWN = 3

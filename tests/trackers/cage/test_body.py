@@ -48,6 +48,7 @@ def test_posed_reference_stands_on_the_templates_skeleton(ref):
     assert np.median(d) < 0.03 and np.percentile(d, 75) < 0.06, (np.median(d), d.max())
 
 
+@pytest.mark.slow
 def test_cage_body_keeps_a_body_and_replaces_a_dress(ref):
     body, oqr = cage_body(ref)  # a bundled body: its own cage
     assert body is ref

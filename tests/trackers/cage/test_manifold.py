@@ -134,6 +134,7 @@ def test_registry_errors(tiny, tmp_path):
         make_tracker("cage", manifold=pm.gp, n_patches=3)
 
 
+@pytest.mark.slow
 def test_no_manifold_learns_one_from_the_pose_library_and_caches_it(
     tiny, monkeypatch, caplog, tmp_path
 ):

@@ -67,6 +67,7 @@ def test_bundled_templates_are_the_ones_tested():
     assert set(bundled_templates()) == set(TEMPLATES)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", TEMPLATES)
 def test_cage_is_a_closed_outward_manifold_enclosing_the_template(built, name):
     t, o = built[name]
@@ -280,6 +281,7 @@ def test_trunk_quads_fitted_into_the_arms_are_untangled_and_regrown(built):
     assert cage_problems(o.rest_vertices, o.faces, t.V, clearance=0.004) == []
 
 
+@pytest.mark.slow
 def test_arms_held_against_the_trunk_get_a_cage(built):
     # neutral_5k re-rested with its arms lowered 0.3 rad towards the trunk and its elbows
     # bent forward (the MIT crane's frame 0 stands so): the first placement leaves the

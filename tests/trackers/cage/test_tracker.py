@@ -159,6 +159,7 @@ def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setu
         manifold_digest(GPLVM(2))
 
 
+@pytest.mark.slow
 def test_a_manifold_of_other_motions_is_noticed_and_not_pulled_back_to(setup, tmp_path):
     """A manifold of modern-dance poses cannot explain a walk: its configuration fits the
     frames far worse than the tracked quads, so the frames are marked off the manifold
