@@ -145,8 +145,9 @@ def young(f: FrameFile) -> bool:
 
 
 def _listing(folder: Path) -> list[Path]:
-    try:
-        return [Path(e.path) for e in os.scandir(folder) if e.is_file()]
+    try:  # closed even when a Ctrl-C lands mid-listing
+        with os.scandir(folder) as entries:
+            return [Path(e.path) for e in entries if e.is_file()]
     except FileNotFoundError:  # hulls/ not made yet
         return []
 
