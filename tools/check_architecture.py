@@ -30,7 +30,16 @@ from pathlib import Path
 #: Layers from the bottom up. A module may import its own layer and the layers below.
 #: Top-level modules and packages of ``meshmocap``; ``meshmocap/__init__.py`` is base.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("__init__", "errors", "_atomic", "_npz", "_validate", "_progress", "_threads"),  # base
+    (
+        "__init__",
+        "errors",
+        "_atomic",
+        "_npz",
+        "_validate",
+        "_progress",
+        "_threads",
+        "_version",
+    ),  # base
     ("geometry",),
     ("models",),
     ("body",),

@@ -7,7 +7,7 @@ the commands and the tracking driver, :mod:`meshmocap._threads`).
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from meshmocap._version import __version__ as __version__
 
 #: The Python API (:mod:`meshmocap.api`), loaded on first use so that ``import meshmocap``
 #: stays light: ``meshmocap.open_capture``, ``meshmocap.track``, ``meshmocap.evaluate``...

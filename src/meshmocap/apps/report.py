@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap import __version__
 from meshmocap._atomic import write_text_atomic
+from meshmocap._version import __version__
 from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.analysis.tables import summary_table
 from meshmocap.apps.evaluation_files import write_evaluation

@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap import __version__
 from meshmocap._atomic import atomic_open
 from meshmocap._progress import phase
+from meshmocap._version import __version__
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.estimate.subject import SubjectEstimate
 
