@@ -54,7 +54,7 @@ from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 METHODS = ("cage", "patch", "articulated_icp")
-MODULES = {"cage": "cage", "patch": "patch", "articulated_icp": "articulated_icp"}
+MODULES = {"cage": "cage.tracker", "patch": "patch.tracker", "articulated_icp": "articulated_icp"}
 
 
 def _load() -> str:
