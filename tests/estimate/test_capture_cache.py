@@ -9,9 +9,9 @@ import pytest
 
 from meshmocap.apps.demo import drop_hull_meshes
 from meshmocap.body.template import load_template
-from meshmocap.estimate import capture_cache as cc
-from meshmocap.estimate import tracking_template as tt
-from meshmocap.estimate.subject import SubjectEstimate
+from meshmocap.estimate.performer import capture_cache as cc
+from meshmocap.estimate.performer import tracking_template as tt
+from meshmocap.estimate.performer.subject import SubjectEstimate
 from meshmocap.io.capture import open_capture
 from meshmocap.io.results import read_state
 from meshmocap.studio.synth import SynthSpec, synthesize

@@ -7,14 +7,14 @@ import pytest
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.estimate.axes import detect_axes
-from meshmocap.estimate.fit import PoseFitter, pose_of_vertices
-from meshmocap.estimate.init import initial_pose, limb_candidates, seed_pose
-from meshmocap.estimate.observe import ObservedFrame
-from meshmocap.estimate.quality import fit_quality, limb_labels
-from meshmocap.estimate.reinit import Recovery
+from meshmocap.estimate.pose.first_pose import initial_pose, limb_candidates, seed_pose
+from meshmocap.estimate.pose.fit import PoseFitter, pose_of_vertices
+from meshmocap.estimate.recovery.observe import ObservedFrame
+from meshmocap.estimate.recovery.quality import fit_quality, limb_labels
+from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
+from meshmocap.io.axes import detect_axes
 from meshmocap.io.capture import SequenceFrame
 
 TURN, SHIFT = 2.3, np.array([0.7, -0.4, 0.0])

@@ -7,8 +7,7 @@ import pytest
 
 from meshmocap.body.pose_library import load_pose_library
 from meshmocap.body.template import load_template
-from meshmocap.estimate.fit import PoseFitter
-from meshmocap.estimate.init import (
+from meshmocap.estimate.pose.first_pose import (
     coarse_candidates,
     initial_pose_of_frame,
     library_limb_candidates,
@@ -16,8 +15,8 @@ from meshmocap.estimate.init import (
     start_flags,
     start_message,
 )
-from meshmocap.estimate.observe import ObservedFrame
-from meshmocap.estimate.pose_search import (
+from meshmocap.estimate.pose.fit import PoseFitter
+from meshmocap.estimate.pose.pose_search import (
     FrameScorer,
     body_sample,
     farthest_point_indices,
@@ -25,6 +24,7 @@ from meshmocap.estimate.pose_search import (
     posed_samples,
     turned_about_z,
 )
+from meshmocap.estimate.recovery.observe import ObservedFrame
 from meshmocap.io.capture import SequenceFrame
 
 HELD = "13_32"  # the library trial the performer's pose comes from, kept out of the search

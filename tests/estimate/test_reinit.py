@@ -13,9 +13,9 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError
-from meshmocap.estimate import tracking_template as tt
-from meshmocap.estimate.reinit import SEEN_AGAIN
-from meshmocap.estimate.subject import estimate_subject
+from meshmocap.estimate.performer import tracking_template as tt
+from meshmocap.estimate.performer.subject import estimate_subject
+from meshmocap.estimate.recovery.reinit import SEEN_AGAIN
 from meshmocap.geometry.carving import distance_grid
 from meshmocap.io.capture import SequenceFrame, open_capture
 from meshmocap.io.meshes import write_mesh

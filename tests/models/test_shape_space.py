@@ -10,7 +10,7 @@ from meshmocap.body.articulated import apply_increment, articulated_model, pose_
 from meshmocap.body.shape_space import load_shape_space
 from meshmocap.body.template import load_template, template_problems
 from meshmocap.errors import InputError, MeshError
-from meshmocap.estimate.shape_fit import _frame_terms, shape_jacobian, silhouette_view
+from meshmocap.estimate.performer.shape_fit import _frame_terms, shape_jacobian, silhouette_view
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.models.shape_space import ShapeSpace

@@ -14,9 +14,9 @@ Only one process writes into a track folder at a time: a second one is refused i
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
 
 The first frame's pose comes from the capture alone (``init="auto"``,
-:func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground
+:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) or, the papers' protocol, from its ground
 truth (``init="truth"``). With ``recover``, every fitted frame is scored
-(:class:`~meshmocap.estimate.reinit.Recovery`): a frame with a limb lost is flagged
+(:class:`~meshmocap.estimate.recovery.reinit.Recovery`): a frame with a limb lost is flagged
 ``lost`` (the message names the limbs). With ``reseat`` too, where a better pose is found
 from the frame the tracker is re-seated there (``Tracker.reseat``) and the frame also
 flagged ``reinit``, and a limb the observations miss is held as last seen. Re-seating is
@@ -50,10 +50,10 @@ from meshmocap.errors import (
     MeshError,
     MeshmocapFileNotFoundError,
 )
-from meshmocap.estimate.capture_cache import cached_first_pose
-from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.reinit import Recovery
+from meshmocap.estimate.performer.capture_cache import cached_first_pose
+from meshmocap.estimate.pose.first_pose import initial_pose_of_frame, start_flags, start_message
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
@@ -121,9 +121,10 @@ def track_sequence(
         :func:`~meshmocap.io.results.read_track`).
     init : {"auto", "truth"}
         The first frame's pose: found from the frame alone (a global search over heading,
-        place and the bundled pose library, :func:`~meshmocap.estimate.init.initial_pose`), or
-        copied from its ground truth (the papers' protocol; the capture must have it).
-        ``track.json`` records which, the first frame's message the search's winner.
+        place and the bundled pose library,
+        :func:`~meshmocap.estimate.pose.first_pose.initial_pose`), or copied from its
+        ground truth (the papers' protocol; the capture must have it). ``track.json``
+        records which, and how the first pose was found (its ``start``).
     recover : bool
         Score every frame and flag lost limbs (module docstring).
     reseat : bool
@@ -132,7 +133,7 @@ def track_sequence(
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
-        :func:`meshmocap.estimate.tracking_template.tracking_template`.
+        :func:`meshmocap.estimate.performer.tracking_template.tracking_template`.
     light : int or None
         Track a light copy of the template with about this many vertices
         (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
@@ -140,7 +141,7 @@ def track_sequence(
         reads the template's out of them. None tracks the template itself.
     init_options : dict, optional
         Options of the automatic first pose's search
-        (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
+        (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`, e.g. ``exclude_trials``).
     start : (frame number, R (J, 3, 3), root (3,), message), optional
         The pose of that frame when it is already known (a template made from that very
         frame): with ``init="auto"``, the track starts there without a search.
@@ -390,7 +391,7 @@ def first_pose(
     """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
     found (the frame's message in the track). An automatic search is made once per
     capture, frame and template, and cached with the capture
-    (:func:`~meshmocap.estimate.capture_cache.cached_first_pose`)."""
+    (:func:`~meshmocap.estimate.performer.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)
         if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)

@@ -8,12 +8,12 @@ global search covers that (no ground truth, no hand placement):
    everyday actions, retargeted onto the template, their heading removed) and a few seed
    poses (:data:`SEEDS`), each turned to ``n_headings`` headings about the vertical and
    placed with its centroid on the observations'; all scored at once against the frame
-   (:class:`~meshmocap.estimate.pose_search.FrameScorer`: model points outside the
+   (:class:`~meshmocap.estimate.pose.pose_search.FrameScorer`: model points outside the
    observed solid, and silhouette pixels — or, without cameras, observed points — far
    from the model), the best shifted by a few ICP translation steps and scored again
    (:func:`coarse_candidates`).
 2. **Coarse fits.** The ``n_candidates`` best distinct candidates get a few iterations of
-   the articulated Gauss–Newton (:class:`~meshmocap.estimate.fit.PoseFitter`: closest points
+   the articulated Gauss–Newton (:class:`~meshmocap.estimate.pose.fit.PoseFitter`: closest points
    both ways, normals agreeing) on a subsample of the points, pulled weakly towards their
    start, and are ranked by the fit score plus the silhouette mismatch
    (:func:`ranking_key`).
@@ -39,15 +39,15 @@ from meshmocap.body.pose_library import PoseLibrary, load_pose_library
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.estimate.fit import PoseFit, PoseFitter, silhouette_mismatch
-from meshmocap.estimate.pose_search import (
+from meshmocap.estimate.pose.fit import PoseFit, PoseFitter, silhouette_mismatch
+from meshmocap.estimate.pose.pose_search import (
     FrameScorer,
     body_sample,
     headings_removed,
     posed_samples,
     turned_about_z,
 )
-from meshmocap.estimate.quality import fit_quality, limb_labels
+from meshmocap.estimate.recovery.quality import fit_quality, limb_labels
 from meshmocap.geometry.carving import VoxelHull
 from meshmocap.geometry.distance_field import DistanceGrid
 from meshmocap.geometry.rotations import rotation_between, so3_exp
@@ -185,9 +185,9 @@ class InitResult:
         winner's (some evaluation joint more than :data:`DISTINCT` away)
     runner_up_key : float, its ranking key (inf without one)
     mismatch : float, the winner's silhouette mismatch
-        (:func:`~meshmocap.estimate.fit.silhouette_mismatch`; nan without silhouettes)
+        (:func:`~meshmocap.estimate.pose.fit.silhouette_mismatch`; nan without silhouettes)
     lost : tuple of str, the winner's limbs that the fit-quality check
-        (:func:`~meshmocap.estimate.quality.fit_quality`) finds lost (empty without a
+        (:func:`~meshmocap.estimate.recovery.quality.fit_quality`) finds lost (empty without a
         signed distance of the observed solid)
     """
 
@@ -266,7 +266,7 @@ def library_poses(
 ) -> LibraryPoses:
     """The pose library's poses (default: the bundled CMU library, all of them or its
     first ``n``: a diverse subset) on ``template``'s skeleton, with their heading removed
-    (:func:`~meshmocap.estimate.pose_search.headings_removed`), plus the seed poses
+    (:func:`~meshmocap.estimate.pose.pose_search.headings_removed`), plus the seed poses
     ``seeds`` (:data:`SEEDS`). Poses of the trials ``exclude_trials`` are left out (a
     motion that trains the prior must not be scored by it). Cached per template."""
     lib = load_pose_library() if library is None else library
@@ -390,7 +390,7 @@ def initial_pose(
         The tracking template (rest frames world-aligned, CMU MotionBuilder joint names).
     P, N : (p, 3) float64
         Observed surface points (metres, world frame Z up) and outward unit normals, e.g.
-        :func:`~meshmocap.estimate.observe.frame_points` of the first frame.
+        :func:`~meshmocap.estimate.recovery.observe.frame_points` of the first frame.
     n_headings : int
         Headings tried per candidate pose, evenly spaced over 360°.
     seeds : tuple of str
@@ -411,15 +411,15 @@ def initial_pose(
         Gauss–Newton iterations of each coarse fit and of each refinement.
     cameras, masks : list of Camera and of (height, width) bool, optional
         The capture's cameras and this frame's silhouettes: candidates are then ranked by
-        their silhouette mismatch (:func:`~meshmocap.estimate.fit.silhouette_mismatch`)
+        their silhouette mismatch (:func:`~meshmocap.estimate.pose.fit.silhouette_mismatch`)
         plus the 3-D score, which tells a torso turned 90° in a 4-camera hull apart
         where the points alone hardly do.
     field : DistanceGrid, optional
         Signed distance of the observed solid (e.g. of the frame's hull): model points
-        outside it cost in the score (:class:`~meshmocap.estimate.fit.PoseFitter`).
+        outside it cost in the score (:class:`~meshmocap.estimate.pose.fit.PoseFitter`).
     hull : VoxelHull, optional
         The observed solid as voxels: the coarse search scores its candidates against it
-        (:class:`~meshmocap.estimate.pose_search.FrameScorer`); without it only the seed
+        (:class:`~meshmocap.estimate.pose.pose_search.FrameScorer`); without it only the seed
         poses are searched, each fitted.
     seed : int
         Seed of the point subsamples.
@@ -547,10 +547,10 @@ def _refit(fitter: PoseFitter, f: PoseFit, iterations: int, distance, lam: float
 
 def initial_pose_of_frame(template: Template, frame, **options) -> InitResult:
     """:func:`initial_pose` on a capture frame (any frame
-    :func:`~meshmocap.estimate.observe.observed` reads): its points and normals, occupancy,
+    :func:`~meshmocap.estimate.recovery.observe.observed` reads): its points and normals, occupancy,
     signed distance and, where it has cameras, silhouettes. ``options`` go to
     :func:`initial_pose`."""
-    from meshmocap.estimate.observe import observed
+    from meshmocap.estimate.recovery.observe import observed
 
     obs = observed(frame)
     P, N = obs.points

@@ -15,12 +15,12 @@ In order:
    depends on what the frames are (:func:`frames_kind`):
 
    * ``"hull"``: a studio capture (cameras and silhouettes): the shape space fitted to
-     the silhouettes (:func:`~meshmocap.estimate.subject.estimate_subject`);
+     the silhouettes (:func:`~meshmocap.estimate.performer.subject.estimate_subject`);
    * ``"mesh"``: closed 2-manifold meshes of one connectivity in every frame (a clean 4D
      capture): the first frame rigged as it stands;
    * ``"points"``: anything else without cameras (visual hulls, never quite manifold,
      holed meshes, meshes whose connectivity changes, point clouds): the shape space
-     fitted to the points (:func:`~meshmocap.estimate.point_subject.fit_body_to_points`).
+     fitted to the points (:func:`~meshmocap.estimate.performer.point_subject.fit_body_to_points`).
 
    A template made from a frame knows that frame's pose (the rest pose of a rigged first
    frame, the fitted pose of the points' body): :attr:`TemplateChoice.start` holds it
@@ -39,9 +39,9 @@ import numpy as np
 from meshmocap._atomic import atomic_open
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
-from meshmocap.estimate.capture_cache import cached_subject
-from meshmocap.estimate.point_subject import fit_body_to_points, readable_frame
-from meshmocap.estimate.subject import estimate_subject, subject_kind
+from meshmocap.estimate.performer.capture_cache import cached_subject
+from meshmocap.estimate.performer.point_subject import fit_body_to_points, readable_frame
+from meshmocap.estimate.performer.subject import estimate_subject, subject_kind
 from meshmocap.geometry.mesh import mesh_problems
 
 __all__ = [
@@ -113,8 +113,8 @@ def frames_kind(capture) -> str:
 
 
 def _points_body(capture, *, kind: str):
-    """:func:`~meshmocap.estimate.point_subject.fit_body_to_points` in the signature of
-    :func:`~meshmocap.estimate.capture_cache.cached_subject`'s estimators."""
+    """:func:`~meshmocap.estimate.performer.point_subject.fit_body_to_points` in the signature of
+    :func:`~meshmocap.estimate.performer.capture_cache.cached_subject`'s estimators."""
     return fit_body_to_points(capture)
 
 
@@ -191,7 +191,7 @@ def tracking_template(
         return TemplateChoice(t, info, note, start)
     check_choice("tracking_template", "kind", kind, FRAME_KINDS)
     chosen = frames_kind(capture) if kind == "auto" else kind
-    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache);
+    # estimated once per capture and cached with it (meshmocap.estimate.performer.capture_cache);
     # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
     if chosen == "points":
         est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)

@@ -1,15 +1,15 @@
 """Loss detection and re-initialisation during tracking.
 
 After every frame, :class:`Recovery` scores the tracked mesh against the frame's
-observations (:func:`~meshmocap.estimate.quality.fit_quality`). When a limb is lost it
+observations (:func:`~meshmocap.estimate.recovery.quality.fit_quality`). When a limb is lost it
 searches, from the frame alone, for a better pose with the machinery of the automatic
-initialisation (:mod:`meshmocap.estimate.init`):
+initialisation (:mod:`meshmocap.estimate.pose.first_pose`):
 
-1. the tracked mesh's pose in the articulated model (:func:`~meshmocap.estimate.fit.
+1. the tracked mesh's pose in the articulated model (:func:`~meshmocap.estimate.pose.fit.
    pose_of_vertices`, warm-started from the last frame's);
 2. each limb lost for what the observations show (outside them, buried, or leaving
    observations unexplained) re-fitted from the pose library's hypotheses for that limb
-   (:func:`~meshmocap.estimate.init.library_limb_candidates`: what people do with it,
+   (:func:`~meshmocap.estimate.pose.first_pose.library_limb_candidates`: what people do with it,
    scored on this frame), each fitted with only that limb free, and the limb as tracked
    fitted alike; each is ranked by the fit score plus the silhouette mismatch plus how far
    the limb stands from where its recent motion puts it (:meth:`Recovery.motion_cost`: a
@@ -36,8 +36,7 @@ import numpy as np
 
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.estimate.fit import PoseFit, PoseFitter, pose_of_vertices
-from meshmocap.estimate.init import (
+from meshmocap.estimate.pose.first_pose import (
     LIMBS,
     library_limb_candidates,
     library_poses,
@@ -45,9 +44,10 @@ from meshmocap.estimate.init import (
     ranking_key,
     subsample_points,
 )
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.pose_search import FrameScorer
-from meshmocap.estimate.quality import (
+from meshmocap.estimate.pose.fit import PoseFit, PoseFitter, pose_of_vertices
+from meshmocap.estimate.pose.pose_search import FrameScorer
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.quality import (
     BURIED_LOST,
     LIMB_PARTS,
     OUTSIDE_LOST,
@@ -117,7 +117,7 @@ class Recovery:
         The first frame's pose (the warm start of the pose estimates).
     exclude_trials : tuple of str
         Pose-library trials the limb hypotheses leave out
-        (:func:`~meshmocap.estimate.init.library_poses`).
+        (:func:`~meshmocap.estimate.pose.first_pose.library_poses`).
     """
 
     def __init__(
