@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.body.template import load_template
-from meshmocap.estimate.pose.first_pose import LIMBS
+from meshmocap.estimate.recovery.limbs import LIMBS
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS, fit_quality, limb_labels
 from meshmocap.geometry.rotations import so3_exp

@@ -48,7 +48,8 @@ import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.body.template import load_template
-from meshmocap.estimate.pose.first_pose import initial_pose_of_frame, start_flags, start_message
+from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
+from meshmocap.estimate.pose.start import search_start
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
@@ -154,7 +155,7 @@ def first_case(case: dict, work: str, options: dict) -> dict:
         margin=1000 * res.margin,
         mismatch=100 * res.mismatch,
         runner_up=res.runner_up.label if res.runner_up is not None else "",
-        flagged=bool(start_flags(start_message(res))),
+        flagged=not search_start(int(cap.indices[0]), res).confident,
         seconds=time.perf_counter() - t0,
     )
 

@@ -276,7 +276,7 @@ def track(
     say = log or (lambda line: None)
     say(choice.note)
     start = choice.start  # a template made from a frame starts in that frame's pose
-    if start is not None and frames is not None and capture.indices[frames[0]] != start[0]:
+    if start is not None and frames is not None and capture.indices[frames[0]] != start.frame:
         start = None
     if method in MANIFOLD_METHODS and manifold is None:
         say(

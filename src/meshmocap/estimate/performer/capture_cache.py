@@ -35,6 +35,7 @@ from meshmocap._progress import phase
 from meshmocap._version import __version__
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.estimate.performer.subject import SubjectEstimate
+from meshmocap.io.start import Start, start_json, start_of_json
 
 __all__ = [
     "CACHE_FOLDER",
@@ -63,10 +64,14 @@ SUBJECT_CODE = (
 #: Modules whose source keys the first-pose search.
 FIRST_POSE_CODE = (
     "meshmocap.estimate.pose.first_pose",
+    "meshmocap.estimate.pose.library",
+    "meshmocap.estimate.pose.start",
     "meshmocap.estimate.pose.pose_search",
     "meshmocap.estimate.pose.fit",
+    "meshmocap.estimate.recovery.limbs",
     "meshmocap.estimate.recovery.observe",
     "meshmocap.estimate.recovery.quality",
+    "meshmocap.io.start",
     "meshmocap.body.articulated",
     "meshmocap.body.pose_library",
     "meshmocap.geometry.silhouette",
@@ -217,12 +222,13 @@ def cached_first_pose(
     capture,
     template: Template,
     index: int,
-    find: Callable[[], tuple[np.ndarray, np.ndarray, str]],
+    find: Callable[[], Start],
     *,
     options: dict | None = None,
-) -> tuple[np.ndarray, np.ndarray, str]:
-    """The first pose ``(R, root, how)`` of frame ``index`` of ``capture`` for ``template``
-    (searched with ``options``): ``find()`` once, then read from the capture's cache."""
+) -> Start:
+    """The start (:class:`~meshmocap.io.start.Start`: the first pose and how it was found)
+    of frame ``index`` of ``capture`` for ``template`` (searched with ``options``):
+    ``find()`` once, then read from the capture's cache (the pose bit for bit)."""
     key = _key(
         "first_pose",
         capture_digest(capture),
@@ -235,15 +241,15 @@ def cached_first_pose(
     if path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
-                return z["R"].astype(np.float64), z["root"].astype(np.float64), str(z["how"])
-        except (OSError, ValueError, KeyError):
+                return start_of_json(json.loads(str(z["start"])), str(path))
+        except (OSError, ValueError, KeyError):  # damaged (FormatError is a ValueError)
             pass
     with phase("finding the first pose (once per capture and template)"):
-        R, root, how = find()
+        start = find()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_open(path) as f:
-            np.savez(f, R=R, root=root, how=np.array(how))
+            np.savez(f, start=np.array(json.dumps(start_json(start))))
     except OSError:
         pass
-    return R, root, how
+    return start

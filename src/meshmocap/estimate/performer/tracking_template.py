@@ -30,6 +30,7 @@ In order:
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,7 @@ from meshmocap.estimate.performer.capture_cache import cached_subject
 from meshmocap.estimate.performer.point_subject import fit_body_to_points, readable_frame
 from meshmocap.estimate.performer.subject import estimate_subject, subject_kind
 from meshmocap.geometry.mesh import mesh_problems
+from meshmocap.io.start import Start, start_json, start_of_json
 
 __all__ = [
     "FRAME_KINDS",
@@ -79,14 +81,14 @@ class TemplateChoice:
     info : dict, for ``track.json`` (``template_source``: ``"given"``, ``"capture"`` or
         ``"estimated"``; ``template_file`` for an estimated one)
     note : str, one line for the user
-    start : (frame number, R (J, 3, 3), root (3,), message) or None: the pose of the frame
-        an estimated template was made from (module docstring)
+    start : Start or None, the pose of the frame an estimated template was made from
+        (module docstring; source ``"subject-rest"`` or ``"subject-fit"``)
     """
 
     template: Template
     info: dict
     note: str
-    start: tuple[int, np.ndarray, np.ndarray, str] | None = None
+    start: Start | None = None
 
 
 def frames_kind(capture) -> str:
@@ -118,25 +120,19 @@ def _points_body(capture, *, kind: str):
     return fit_body_to_points(capture)
 
 
-def _save_start(path: Path, start) -> None:
-    index, R, root, message = start
+def _save_start(path: Path, start: Start) -> None:
     with atomic_open(path) as f:
-        np.savez(f, index=np.int64(index), R=R, root=root, message=np.str_(message))
+        np.savez(f, start=np.str_(json.dumps(start_json(start))))
 
 
-def _load_start(path: Path) -> tuple[int, np.ndarray, np.ndarray, str] | None:
-    """The start kept beside a cached subject, or None (absent or unreadable: search)."""
+def _load_start(path: Path) -> Start | None:
+    """The start kept beside a cached subject, or None (absent, unreadable, or written
+    before starts were records: search)."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            R, root = z["R"].astype(np.float64), z["root"].astype(np.float64)
-            return int(z["index"]), R, root, str(z["message"])
-    except (OSError, ValueError, KeyError, EOFError):
+            return start_of_json(json.loads(str(z["start"])), str(path))
+    except (OSError, ValueError, KeyError, EOFError):  # FormatError is a ValueError
         return None
-
-
-def _start_message(kind: str, index: int) -> str:
-    what = "its rest pose" if kind == "mesh" else "the pose fitted with the body"
-    return f"init template: the template was made from frame {index}, in {what}"
 
 
 def _named_by(capture) -> str | None:
@@ -205,7 +201,8 @@ def tracking_template(
         if est.kind == "mesh":  # rigged as it stands: rest rotations at the rest root
             R = np.tile(np.eye(3), (est.template.skeleton.n_joints, 1, 1))
             root = est.template.skeleton.rest_positions[0]
-        start = (int(est.frames[0]), R, root, _start_message(est.kind, int(est.frames[0])))
+        source = "subject-rest" if est.kind == "mesh" else "subject-fit"
+        start = Start(int(est.frames[0]), R, root, source)
         _save_start(pose_path, start)
     else:
         pose_path.unlink(missing_ok=True)
