@@ -73,13 +73,12 @@ class Evaluation:
     correspondence: CorrespondenceErrors | None
     out_of_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     #: How the track's first pose was found (:func:`track_init`: in words, from its
-    #: record), and its frames flagged ``lost`` and ``reinit``.
+    #: record, which ``start`` holds: :attr:`~meshmocap.io.results.Track.start`, None where
+    #: the track does not record it), and its frames flagged ``lost`` and ``reinit``.
     init: str = ""
     lost: int = 0
     reinit: int = 0
     template: str = ""
-    #: The track's start record (:attr:`~meshmocap.io.results.Track.start`; None: the track
-    #: does not record it).
     start: Start | None = None
 
 

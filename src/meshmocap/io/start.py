@@ -9,7 +9,7 @@ message is made from it (:func:`~meshmocap.estimate.pose.start.start_message`) a
 read back.
 
 :func:`start_json` and :func:`start_of_json` convert it to and from plain JSON values:
-``float`` written by :mod:`json` is the shortest text that reads back to the same
+``float`` written by ``json`` is the shortest text that reads back to the same
 ``float64``, so the pose comes back bit for bit.
 """
 
