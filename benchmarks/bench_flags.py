@@ -11,7 +11,7 @@ Per frame (every ``--step``-th), ``--samples`` poses:
 * **off** — the same, and one limb (arm or leg, drawn) turned at its upper or lower joint
   by an angle drawn uniformly in 10–120°: from a limb slightly off to one lost.
 
-Each pose is scored by :func:`~meshmocap.estimate.quality.fit_quality` with the frame's
+Each pose is scored by :func:`~meshmocap.estimate.recovery.quality.fit_quality` with the frame's
 silhouettes (the driver's check). Per sample: the largest joint error of each limb (mm)
 and whether the check names that limb lost. Reported: for "a joint more than 100 mm off"
 and "more than 150 mm off", the recall (samples with such a limb whose limb is named) and
@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.body.template import load_template
-from meshmocap.estimate.init import LIMBS
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.quality import LIMB_PARTS, fit_quality, limb_labels
+from meshmocap.estimate.recovery.limbs import LIMBS
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.quality import LIMB_PARTS, fit_quality, limb_labels
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.capture import open_capture
 

@@ -12,7 +12,7 @@ one of 8 compass directions that keeps the tracked frames closest to the volume'
 view). Each case starts at frame ``start`` of the clip (``--starts``; a start past the
 clip's end is replaced by the clip's middle frame, once) and is tracked to frame 300 by
 ``--method`` (patch) twice: ``init="auto"`` (the first pose found from the capture alone,
-:func:`~meshmocap.estimate.init.initial_pose`) and ``init="truth"`` (the papers'
+:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) and ``init="truth"`` (the papers'
 protocol), both with loss recovery on (the default). Scores: the mean joint error over the
 15 evaluation joints of the first frame (auto) and of the whole tracked segment (auto and
 truth, mm; :func:`~meshmocap.analysis.evaluate.evaluate`, frames whose subject leaves a
@@ -25,8 +25,8 @@ tracking), in a fraction of the time (issue 28's first-pose acceptance): clips 0
 ``--subjects`` (heavy_male and small_female, alternating with the heading), the first pose
 searched with the performer's body as the template; per start the mean and worst joint
 error, the search's winner, ranking key and margin to a distinct runner-up, and whether the
-start is flagged uncertain (:func:`~meshmocap.estimate.init.start_message`). None of these
-clips is in the pose library the search uses (``tools/make_pose_library.py``). Acceptance:
+start is flagged uncertain (:func:`~meshmocap.estimate.pose.start.start_message`). None of
+these clips is in the pose library the search uses (``tools/make_pose_library.py``). Acceptance:
 ≤ 30 mm in ≥ 95 % of starts, every start above that flagged. ``--jobs N`` runs cases
 in N processes (each case is independent). Run:
 ``python benchmarks/bench_init.py [--clips 05_01 09_01 01_01] [--headings 0 45 ...]
@@ -48,8 +48,9 @@ import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.body.template import load_template
-from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
-from meshmocap.estimate.observe import observed
+from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
+from meshmocap.estimate.pose.start import search_start
+from meshmocap.estimate.recovery.observe import observed
 from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
 from meshmocap.trackers.driver import track_sequence
@@ -154,7 +155,7 @@ def first_case(case: dict, work: str, options: dict) -> dict:
         margin=1000 * res.margin,
         mismatch=100 * res.mismatch,
         runner_up=res.runner_up.label if res.runner_up is not None else "",
-        flagged=bool(start_flags(start_message(res))),
+        flagged=not search_start(int(cap.indices[0]), res).confident,
         seconds=time.perf_counter() - t0,
     )
 

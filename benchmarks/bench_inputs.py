@@ -4,7 +4,7 @@ a user runs it, in-process (``meshmocap.cli.main``), default options.
 **Real meshes.** ``meshmocap track ../shared/data/meshes/crane/crane_mesh_0000-0174.tar.gz
 --up y --method M --out t`` for the clean MIT crane meshes (175 frames, 10,002 vertices, Y
 up, metres), default options: the template is the capture's own first frame rigged
-(:func:`~meshmocap.estimate.subject.estimate_subject`, mesh kind:
+(:func:`~meshmocap.estimate.performer.subject.estimate_subject`, mesh kind:
 :func:`~meshmocap.body.autorig.rig_mesh`), the first pose found automatically
 (``--init auto``). Per-vertex error: each tracked template
 vertex against the same vertex of the crane's frame (fixed connectivity; mm: mean, median,

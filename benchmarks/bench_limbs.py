@@ -20,7 +20,7 @@ Each capture is tracked by each ``--methods`` two ways:
 * **papers' protocol** — the performer's own body as the template, the first pose from
   the truth (``init="truth"``);
 * **default path** — the body estimated from the capture
-  (:func:`~meshmocap.estimate.tracking_template.tracking_template` with ``"auto"``), the
+  (:func:`~meshmocap.estimate.performer.tracking_template.tracking_template` with ``"auto"``), the
   first pose searched (``init="auto"``), loss checks on (the driver's defaults).
 
 Per track: mean and worst joint error over the 15 evaluation joints (mm), the longest run
@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.body.template import load_template
-from meshmocap.estimate.tracking_template import tracking_template
+from meshmocap.estimate.performer.tracking_template import tracking_template
 from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence

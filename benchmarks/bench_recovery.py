@@ -18,7 +18,7 @@ measured apart from initialisation) by each ``--methods`` with recovery (``resea
 limbs flagged and re-initialised) and
 without (``recover=False``). Per track: the mean joint error; the frames where a joint is
 more than 150 mm off and how many of them are flagged ``lost`` with that joint's limb
-(:data:`~meshmocap.estimate.quality.LIMB_PARTS`; "body" counts for every limb) named in the
+(:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`; "body" counts for every limb) named in the
 frame's message; the longest run of consecutive frames with some joint more than 100 mm
 off; for gap captures, the frames after the gap until every joint is within 40 mm again.
 Acceptance: every >150 mm frame flagged with its limb, no >100 mm run longer than 10
@@ -41,7 +41,7 @@ import numpy as np
 
 from bench_init import DATA
 from meshmocap.body.template import load_template
-from meshmocap.estimate.quality import LIMB_PARTS
+from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence

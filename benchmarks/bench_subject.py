@@ -40,7 +40,7 @@ import numpy as np
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.analysis.metrics import surface_distance
 from meshmocap.body.template import load_template, save_template
-from meshmocap.estimate.subject import estimate_subject
+from meshmocap.estimate.performer.subject import estimate_subject
 from meshmocap.io.capture import Capture
 from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
 from meshmocap.trackers.driver import track_sequence

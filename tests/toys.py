@@ -270,3 +270,13 @@ def small_walk_capture(out, frames: int):
 
     spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=frames, voxel_size=0.02)
     return synthesize(out, spec, show_progress=False)
+
+
+def observed_frame(V: np.ndarray, F: np.ndarray | None = None, index: int = 0):
+    """Frame ``index`` of a mesh (``F`` given) or point cloud (``F`` None) sequence, its
+    points, normals, occupancy and signed distance computed once
+    (:class:`~meshmocap.estimate.recovery.observe.ObservedFrame`)."""
+    from meshmocap.estimate.recovery.observe import ObservedFrame
+    from meshmocap.io.capture import SequenceFrame
+
+    return ObservedFrame(SequenceFrame(index, (V, F), None))

@@ -11,11 +11,14 @@ Walks ``src/meshmocap`` with :mod:`ast` (nothing is imported) and reports:
   ``trackers/cage/``): each method is whole in its folder, and shares only what lies in
   the layers below;
 * a private name (``_name``) imported from another module: what a module shares, it names
-  publicly.
+  publicly. The tests are held to it too (``tests/``, when given): a test reaches a module
+  through what it shares, or the name is made public (a module itself, ``_atomic``, is not
+  a private name).
 
 A module is as long as its one concept needs: there is no line limit.
 
-Usage: ``python tools/check_architecture.py [SRC]``; exit status 1 when anything is found.
+Usage: ``python tools/check_architecture.py [SRC [TESTS]]`` (default: the project's ``src``
+and ``tests``); exit status 1 when anything is found.
 The test suite runs the same check (``tests/tools/test_check_architecture.py``).
 """
 
@@ -116,8 +119,8 @@ def imports(path: Path, name: str, known: set[str]) -> set[str]:
 
 
 def private_imports(path: Path, name: str, known: set[str]) -> list[str]:
-    """``from M import _x`` in the file at ``path`` (module ``name``), ``M`` another module of
-    ``known``: one line each."""
+    """``from M import _x`` in the file at ``path`` (module ``name``, or a test file's path),
+    ``M`` another module of ``known`` and ``M._x`` not itself a module: one line each."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     is_package = path.name == "__init__.py"
     found = []
@@ -133,7 +136,8 @@ def private_imports(path: Path, name: str, known: set[str]) -> list[str]:
         if module not in known or module == name:
             continue
         for alias in node.names:
-            if alias.name.startswith("_") and not alias.name.startswith("__"):
+            private = alias.name.startswith("_") and not alias.name.startswith("__")
+            if private and f"{module}.{alias.name}" not in known:
                 found.append(f"{name} imports {alias.name} from {module}")
     return found
 
@@ -198,8 +202,9 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return sorted(found)
 
 
-def check(src: Path) -> Report:
-    """Check the package ``src/meshmocap`` (``src`` is the folder that holds it)."""
+def check(src: Path, tests: Path | None = None) -> Report:
+    """Check the package ``src/meshmocap`` (``src`` is the folder that holds it) and, given
+    ``tests`` (the folder of the test suite), the tests' imports of private names."""
     files = {module_name(p, src): p for p in sorted((src / "meshmocap").rglob("*.py"))}
     known = set(files)
     layer = {u: k for k, names in enumerate(LAYERS) for u in names}
@@ -234,12 +239,18 @@ def check(src: Path) -> Report:
                 sibling.append(f"{name} imports {target} (method {other} from method {own})")
 
     private = [line for name, path in files.items() for line in private_imports(path, name, known)]
+    if tests is not None:
+        for path in sorted(tests.rglob("*.py")):
+            where = path.relative_to(tests.parent).as_posix()
+            private += private_imports(path, where, known)
     return Report(upward, cycles(graph), cycles(dict(packages)), sibling, sorted(private))
 
 
 def main(argv: list[str]) -> int:
-    src = Path(argv[0]) if argv else Path(__file__).resolve().parents[1] / "src"
-    report = check(src)
+    root = Path(__file__).resolve().parents[1]
+    src = Path(argv[0]) if argv else root / "src"
+    tests = Path(argv[1]) if len(argv) > 1 else (None if argv else root / "tests")
+    report = check(src, tests)
     for line in report.upward:
         print("upward import:", line)
     for c in report.file_cycles:
@@ -253,7 +264,7 @@ def main(argv: list[str]) -> int:
     if report.ok:
         print(
             f"ok: {len(LAYERS)} layers, imports point down, no cycle, methods apart, "
-            "no private name imported across modules"
+            "no private name imported across modules" + (" or by a test" if tests else "")
         )
     return 0 if report.ok else 1
 

@@ -33,8 +33,8 @@ from meshmocap.apps.export import ExportFormat, ExportResult, export_track, trac
 from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.estimate.axes import Axes, open_oriented
-from meshmocap.estimate.tracking_template import tracking_template
+from meshmocap.estimate.performer.tracking_template import tracking_template
+from meshmocap.io.axes import Axes, open_oriented
 from meshmocap.io.capture import (
     Capture,
     SequenceCapture,
@@ -276,7 +276,7 @@ def track(
     say = log or (lambda line: None)
     say(choice.note)
     start = choice.start  # a template made from a frame starts in that frame's pose
-    if start is not None and frames is not None and capture.indices[frames[0]] != start[0]:
+    if start is not None and frames is not None and capture.indices[frames[0]] != start.frame:
         start = None
     if method in MANIFOLD_METHODS and manifold is None:
         say(

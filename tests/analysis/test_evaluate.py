@@ -1,5 +1,7 @@
 """Evaluating a track against a capture: known perturbations give known errors."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -57,6 +59,15 @@ def test_exact_truth_scores_zero(capture, tmp_path):
         _track(capture, tmp_path / "tr", 0.0), capture, silhouettes=False, surface_frames=0
     )
     assert ev.joints.overall.max == 0.0 and ev.silhouettes is None and ev.surface is None
+
+
+def test_a_track_without_a_start_record_reports_its_start_unknown(capture, tmp_path):
+    """A track made before starts were recorded: its first message is not parsed."""
+    track = _track(capture, tmp_path / "tr", 0.0)
+    track = replace(track, messages=("init auto: 02_02:2@0°, fit score 34.5 mm",) * 4)
+    ev = evaluate(track, capture, silhouettes=False, surface_frames=0)
+    assert ev.start is None and ev.init == "truth (start unknown)"
+    assert "; init truth (start unknown)" in summary(ev)
 
 
 def test_eval_command(capture, tmp_path, capsys):

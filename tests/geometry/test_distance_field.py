@@ -7,7 +7,7 @@ from meshmocap.errors import InputError
 from meshmocap.geometry.distance_field import (
     DistanceGrid,
     LazyDistanceGrid,
-    _inner_boundary,
+    inner_boundary,
     signed_distance,
 )
 
@@ -79,8 +79,8 @@ def test_inner_boundary_is_the_six_neighbour_definition(shape):
         & pad[1:-1, 1:-1, :-2]
         & pad[1:-1, 1:-1, 2:]
     )
-    assert np.array_equal(_inner_boundary(occ), c & ~full)
-    assert np.array_equal(_inner_boundary(np.asfortranarray(occ)), c & ~full)
+    assert np.array_equal(inner_boundary(occ), c & ~full)
+    assert np.array_equal(inner_boundary(np.asfortranarray(occ)), c & ~full)
 
 
 def test_gradient_matches_central_differences_inside_cells():

@@ -606,7 +606,7 @@ def test_subject_says_a_sphere_is_not_a_performer(tmp_path, capsys):
     import trimesh
 
     from meshmocap.body.template import load_template
-    from meshmocap.estimate.plausibility import body_problem
+    from meshmocap.io.plausibility import body_problem
 
     s = trimesh.creation.icosphere(3, 0.9)
     s.apply_translation([0.0, 0.0, 0.9])  # 1.8 m "tall"

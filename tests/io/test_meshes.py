@@ -19,7 +19,7 @@ from meshmocap.errors import (
     MeshmocapFileNotFoundError,
     MeshmocapWarning,
 )
-from meshmocap.io.archives import _GzipIndex, _GzipReader
+from meshmocap.io.archives import GzipIndex, GzipReader
 from meshmocap.io.meshes import (
     Frame,
     MeshSequence,
@@ -282,9 +282,9 @@ def test_gzip_reader_random_access_with_checkpoints(tmp_path):
     data = RNG.integers(0, 20, size=3_000_000, dtype=np.uint8).tobytes()  # compressible
     path = tmp_path / "x.gz"
     path.write_bytes(gzip.compress(data[:1_000_000]) + gzip.compress(data[1_000_000:]))
-    index = _GzipIndex(spacing=100_000, max_points=8)  # small: forces snapshots and thinning
+    index = GzipIndex(spacing=100_000, max_points=8)  # small: forces snapshots and thinning
     with open(path, "rb") as f:
-        r = _GzipReader(f, index)
+        r = GzipReader(f, index)
         assert r.seek(0, 2) == len(data)  # decompresses to the end, taking snapshots
         assert 2 <= len(index.points) <= 8
         for start in RNG.integers(0, len(data), size=20):
@@ -303,7 +303,7 @@ def test_corrupt_archive(tmp_path):
     with pytest.raises(FormatError, match=r"bad\.tar\.gz"):
         MeshSequence(bad)
     with pytest.raises(zlib.error):  # the archive layer turns it into a FormatError
-        _GzipReader(io.BytesIO(b"\x1f\x8bnot really"), _GzipIndex()).read(10)
+        GzipReader(io.BytesIO(b"\x1f\x8bnot really"), GzipIndex()).read(10)
 
 
 # ---------------------------------------------------------------- the real crane sequence

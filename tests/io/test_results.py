@@ -1,10 +1,22 @@
-"""Track folders: frame flags written, read back and checked; older frame files still read."""
+"""Track folders: frame flags and the start written, read back and checked; older frame files
+and folders still read."""
+
+import json
 
 import numpy as np
 import pytest
 
-from meshmocap.errors import InputError
-from meshmocap.io.results import FrameResult, frame_path, read_track, start_track, write_frame
+from meshmocap.errors import FormatError, InputError
+from meshmocap.io.results import (
+    FrameResult,
+    frame_path,
+    read_start,
+    read_track,
+    start_track,
+    write_frame,
+    write_start,
+)
+from meshmocap.io.start import Start
 from meshmocap.trackers.driver import read_track_frame
 
 
@@ -46,3 +58,34 @@ def test_frame_files_without_flags_read_as_failed_when_unhealthy(tmp_path):
 def test_unknown_flag_is_rejected_naming_the_valid_ones():
     with pytest.raises(InputError, match=r"flags must be among \('failed', 'missing'.*'lsot'"):
         _result(0, flags=("lsot",))
+
+
+def test_the_start_is_recorded_in_track_json_and_read_back(tmp_path):
+    rng = np.random.default_rng(2)
+    s = Start(0, rng.normal(size=(31, 3, 3)), rng.normal(size=3), "search", False, "a@0°")
+    meta, F = {"method": "test"}, np.array([[0, 1, 2]])
+    start_track(tmp_path, meta, F)
+    assert read_start(tmp_path) is None  # not started yet
+    write_start(tmp_path, s)
+    write_frame(tmp_path, _result(0, flags=("lost",)))
+    for back in (read_start(tmp_path), read_track(tmp_path).start):
+        assert back.R.tobytes() == s.R.tobytes() and back.root.tobytes() == s.root.tobytes()
+        assert (back.frame, back.source, back.confident, back.label) == (0, "search", False, "a@0°")
+    assert start_track(tmp_path, meta, F) == [0]  # resumed: the start found is kept
+    assert read_start(tmp_path).label == "a@0°"
+    with pytest.raises(FormatError, match="other settings"):
+        start_track(tmp_path, {"method": "other"}, F)
+    start_track(tmp_path, meta, F, resume=False)  # started over: no start yet
+    assert read_start(tmp_path) is None
+
+
+def test_a_track_folder_without_a_start_reads_with_the_start_unknown(tmp_path):
+    """A track written before starts were recorded: its first frame's message is not read."""
+    start_track(tmp_path, {"method": "test", "init": "auto"}, np.array([[0, 1, 2]]))
+    write_frame(tmp_path, _result(0, message="init auto: 02_02:2@0°; uncertain start (x)"))
+    assert read_start(tmp_path) is None and read_track(tmp_path).start is None
+    assert read_track(tmp_path).flags == ((),)  # no flag made from the message
+    meta = json.loads((tmp_path / "track.json").read_text())
+    (tmp_path / "track.json").write_text(json.dumps({**meta, "start": {"frame": 0}}))
+    with pytest.raises(FormatError, match=r"track.json: 'start': not a start record"):
+        read_track(tmp_path)

@@ -20,9 +20,9 @@ from meshmocap.models.bodyparts import (
     OUTLIER,
     BodyPartClassifier,
     Partition,
-    _couple,
-    _platt,
+    coupled_probabilities,
     partition,
+    platt_sigmoid,
 )
 
 # Non-leaf bone labels the tracker uses: head→thorax, wrists→elbows, ankles→knees.
@@ -124,7 +124,7 @@ def test_coupling_recovers_consistent_posteriors():
         p = rng.dirichlet(np.ones(K), size=50)
         pairs = np.array([(i, j) for i in range(K) for j in range(i + 1, K)])
         rij = p[:, pairs[:, 0]] / (p[:, pairs[:, 0]] + p[:, pairs[:, 1]])
-        np.testing.assert_allclose(_couple(rij, pairs, K), p, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(coupled_probabilities(rij, pairs, K), p, rtol=0, atol=1e-10)
 
 
 def test_coupling_solves_the_stationarity_conditions():
@@ -134,7 +134,7 @@ def test_coupling_solves_the_stationarity_conditions():
     K = 6
     pairs = np.array([(i, j) for i in range(K) for j in range(i + 1, K)])
     rij = rng.uniform(0.05, 0.95, size=(20, len(pairs)))
-    p = _couple(rij, pairs, K)
+    p = coupled_probabilities(rij, pairs, K)
     np.testing.assert_allclose(p.sum(1), 1.0, atol=1e-12)
     for row, pr in zip(rij, p, strict=True):
         r = np.zeros((K, K))
@@ -152,7 +152,7 @@ def test_platt_recovers_a_sigmoid():
     rng = np.random.default_rng(3)
     f = rng.uniform(-4, 4, size=20_000)
     positive = rng.random(f.size) < 1 / (1 + np.exp(-2.0 * f + 0.5))
-    A, B = _platt(f, positive)
+    A, B = platt_sigmoid(f, positive)
     assert abs(A + 2.0) < 0.15 and abs(B - 0.5) < 0.15
 
 

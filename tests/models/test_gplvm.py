@@ -9,7 +9,7 @@ from scipy.stats import spearmanr
 from meshmocap.apps.latent_plot import plot_latent_space
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import rbf, sqdist
-from meshmocap.models.gplvm import GPLVM, _Problem
+from meshmocap.models.gplvm import GPLVM, LatentProblem
 
 # Central differences in float64 with h = 1e-6: truncation error O(h² f''') ≈ 1e-12 and
 # rounding error ≈ eps |f| / h ≈ 1e-16 · 100 / 1e-6 = 1e-8 for the objectives below, so
@@ -46,7 +46,7 @@ def test_log_likelihood_gradient_matches_finite_differences(bc):
     N, D, q, H_units = 12, 4, 2, 3
     Y = rng.standard_normal((N, D))
     Kbc = rbf(sqdist(Y), 1.0, 0.3) if bc == "rbf" else None
-    prob = _Problem(Y, q, bc, Kbc=Kbc, n_hidden=H_units)
+    prob = LatentProblem(Y, q, bc, Kbc=Kbc, n_hidden=H_units)
     n_w = D * H_units + H_units + H_units * q + q if bc == "mlp" else N * q
     # every parameter: log α, log γ, log β, then the back-constraint weights (or X)
     theta = np.concatenate([[0.2, -0.3, 1.5], 0.4 * rng.standard_normal(n_w)])
@@ -67,7 +67,7 @@ def test_objective_is_eq2():
 
     rng = np.random.default_rng(1)
     Y, X = rng.standard_normal((8, 3)), rng.standard_normal((8, 2))
-    prob = _Problem(Y, 2, None)
+    prob = LatentProblem(Y, 2, None)
     f, _ = prob(np.concatenate([np.log([1.3, 0.7, 20.0]), X.ravel()]))
     K = rbf(sqdist(X), 1.3, 0.7) + np.eye(8) / 20.0
     ref = sum(multivariate_normal(np.zeros(8), K).logpdf(Y[:, d]) for d in range(3))

@@ -10,7 +10,7 @@ from meshmocap.body.articulated import apply_increment, articulated_model, pose_
 from meshmocap.body.shape_space import load_shape_space
 from meshmocap.body.template import load_template, template_problems
 from meshmocap.errors import InputError, MeshError
-from meshmocap.estimate.shape_fit import _frame_terms, shape_jacobian, silhouette_view
+from meshmocap.estimate.performer.shape_fit import frame_terms, shape_jacobian, silhouette_view
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.models.shape_space import ShapeSpace
@@ -110,7 +110,7 @@ def test_silhouette_residual_derivatives_match_finite_differences(space):
         sample = articulated_model(t, n_points=500, seed=0).sample
         return {
             term: (r, Jp, Jz)
-            for term, r, Jp, Jz in _frame_terms(views, v, n, a, S, t.F, sample, 25.0).rows
+            for term, r, Jp, Jz in frame_terms(views, v, n, a, S, t.F, sample, 25.0).rows
         }
 
     base = terms(z, R, root)

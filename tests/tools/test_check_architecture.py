@@ -1,5 +1,6 @@
 """The package's architecture: imports point down, no import cycle, a method package never
-imports another, and no private name is imported across modules.
+imports another, and no private name is imported across modules, by the package or its
+tests.
 
 The check itself is ``tools/check_architecture.py`` (an ``ast`` walk, nothing imported); the
 second test shows it catches each kind of fault on a small package written here.
@@ -23,7 +24,7 @@ def _checker():
 
 
 def test_meshmocap_imports_only_point_down():
-    report = _checker().check(ROOT / "src")
+    report = _checker().check(ROOT / "src", ROOT / "tests")
     assert report.upward == []
     assert report.file_cycles == []
     assert report.package_cycles == []
@@ -61,7 +62,17 @@ def test_checker_finds_upward_imports_cycles_sibling_methods_and_private_names(t
     (pkg / "trackers" / "registry.py").write_text(
         "from meshmocap.trackers.patch.tracker import t\n"
     )
-    report = _checker().check(tmp_path)
+    # a test imports a private name of a module (a private module itself is no name)
+    (tmp_path / "tests" / "io").mkdir(parents=True)
+    (tmp_path / "tests" / "io" / "test_bvh.py").write_text(
+        "from meshmocap.io.bvh import _read, read\nfrom meshmocap import _atomic\n"
+    )
+    (pkg / "_atomic.py").write_text("")
+    (tmp_path / "tests" / "helpers.py").write_text("from toys import _small\n")  # not ours
+    assert _checker().check(tmp_path).private_imports == [
+        "meshmocap.trackers.patch.tracker imports _w from meshmocap.trackers.patch.terms"
+    ]
+    report = _checker().check(tmp_path, tmp_path / "tests")
     assert report.upward == [
         "meshmocap.body.autorig imports meshmocap.trackers.icp (layer trackers is above body)",
         "meshmocap.body.clips imports meshmocap.io (layer io is above body)",
@@ -74,6 +85,7 @@ def test_checker_finds_upward_imports_cycles_sibling_methods_and_private_names(t
         "(method meshmocap.trackers.cage from method meshmocap.trackers.patch)"
     ]
     assert report.private_imports == [
-        "meshmocap.trackers.patch.tracker imports _w from meshmocap.trackers.patch.terms"
+        "meshmocap.trackers.patch.tracker imports _w from meshmocap.trackers.patch.terms",
+        "tests/io/test_bvh.py imports _read from meshmocap.io.bvh",
     ]
     assert not report.ok

@@ -1,15 +1,19 @@
 """The driver tracks a light body and writes the full one: a 12k-vertex template is tracked
 on its 5,000-vertex copy, the track holds the full template's vertices, as close to the
-truth as tracking the full template gives."""
+truth as tracking the full template gives. The start is a record: the first frame's flag
+and message are made from it, and the evaluation reads it back."""
 
 import json
 
 import numpy as np
 import pytest
 
+from meshmocap.analysis.evaluate import evaluate, summary
 from meshmocap.body.light import tracking_body
 from meshmocap.body.template import load_template
+from meshmocap.estimate.pose.start import start_description, start_message
 from meshmocap.io.results import LIGHT_FILE, read_frame_arrays
+from meshmocap.io.start import Start
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -61,3 +65,27 @@ def test_the_full_template_is_read_out_of_the_tracked_light_one(walk, tmp_path):
     # measured: surface 8.8 mm light, 9.9 mm full
     assert ev["light"][0] < ev["full"][0] + 1.0 and ev["light"][1] < ev["full"][1] + 1.0
     assert ev["light"][0] < 15 and ev["light"][1] < 15
+
+
+@pytest.mark.parametrize("confident", [True, False])
+def test_the_start_record_sets_the_first_frames_flag_and_message(walk, tmp_path, confident):
+    t = load_template("neutral")
+    truth = walk[0].truth
+    start = Start(0, truth.rotations, truth.root, "search", confident, "02_02:2@0°", 0.03, 0.04)
+    tracker = make_tracker("articulated_icp", template=tracking_body(t).light, max_iter=3)
+    track = track_sequence(
+        tracker, t, walk, tmp_path, frames=[0, 1], start=start, show_progress=False
+    )
+    assert track.flags[0] == (() if confident else ("lost",))  # from the record, not the text
+    assert track.messages[0] == start_message(start)
+    assert ("uncertain start" in track.messages[0]) is not confident
+    assert track.start.R.tobytes() == truth.rotations.tobytes() and track.start.label == start.label
+    ev = evaluate(track, walk, silhouettes=False, surface_frames=0)
+    assert ev.start is track.start and ev.init == start_description(start)
+    assert f"init {start_description(start)}" in summary(ev)
+    # from ground truth: recorded as such, never flagged
+    tracker = make_tracker("articulated_icp", template=tracking_body(t).light, max_iter=3)
+    truth_track = track_sequence(
+        tracker, t, walk, tmp_path / "truth", frames=[0], init="truth", show_progress=False
+    )
+    assert truth_track.start.source == "truth" and truth_track.flags == ((),)

@@ -34,9 +34,11 @@ from meshmocap.analysis.metrics import (
 )
 from meshmocap.analysis.tables import format_table, table
 from meshmocap.errors import InputError
+from meshmocap.estimate.pose.start import start_description
 from meshmocap.geometry.camera import in_view
 from meshmocap.io.capture import Capture, Truth
 from meshmocap.io.results import Track, template_label
+from meshmocap.io.start import Start
 
 
 @dataclass(frozen=True)
@@ -70,21 +72,26 @@ class Evaluation:
     surface: SurfaceErrors | None
     correspondence: CorrespondenceErrors | None
     out_of_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    #: How the track's first pose was found (``track.json``'s ``init``, with the search's
-    #: winner), and its frames flagged ``lost`` and ``reinit``.
+    #: How the track's first pose was found (:func:`track_init`: in words, from its
+    #: record, which ``start`` holds: :attr:`~meshmocap.io.results.Track.start`, None where
+    #: the track does not record it), and its frames flagged ``lost`` and ``reinit``.
     init: str = ""
     lost: int = 0
     reinit: int = 0
     template: str = ""
+    start: Start | None = None
 
 
 def track_init(track: Track) -> str:
-    """How a track's first pose was found: ``"truth"``, or ``"auto"`` with the search's
-    winner (tracks made before ``init`` existed started from ground truth)."""
-    for m in track.messages:  # the first observed frame's (frames before it are missing)
-        if m.startswith("init "):
-            return m[len("init ") :]
-    return str(track.meta.get("init", "truth"))
+    """How a track's first pose was found, in words, from its start record
+    (:func:`~meshmocap.estimate.pose.start.start_description`: ``"truth: …"``, or
+    ``"auto: …"`` with the search's winner). A track that does not record its start (made
+    before starts were recorded) says only how it was asked to start (``track.json``'s
+    ``init``; tracks made before ``init`` existed started from ground truth) and that the
+    start is unknown: nothing is read out of its messages."""
+    if track.start is not None:
+        return start_description(track.start)
+    return f"{track.meta.get('init', 'truth')} (start {start_description(None)})"
 
 
 def evaluate(
@@ -177,6 +184,7 @@ def evaluate(
         correspondence=corr,
         out_of_view=track.frames[hidden] if len(hidden) else np.zeros(0, np.int64),
         init=track_init(track),
+        start=track.start,
         lost=sum("lost" in f for f in track.flags),
         reinit=sum("reinit" in f for f in track.flags),
         template=template_label(track.meta),

@@ -159,8 +159,8 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     from meshmocap.analysis.evaluate import evaluate
     from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.body.light import tracking_body
-    from meshmocap.estimate.axes import open_oriented
-    from meshmocap.estimate.tracking_template import tracking_template
+    from meshmocap.estimate.performer.tracking_template import tracking_template
+    from meshmocap.io.axes import open_oriented
     from meshmocap.io.capture import Capture
     from meshmocap.io.results import template_label
     from meshmocap.trackers.driver import track_sequence

@@ -15,7 +15,8 @@ __all__ = ["DEFAULT_TEMPLATE", "BatchItem", "batch_items"]
 
 #: Template of a capture when neither the command nor the manifest names one: as
 #: ``meshmocap track`` chooses (the one capture.json names, else the performer's body
-#: estimated from the capture; :func:`~meshmocap.estimate.tracking_template.tracking_template`).
+#: estimated from the capture;
+#: :func:`~meshmocap.estimate.performer.tracking_template.tracking_template`).
 DEFAULT_TEMPLATE = ""
 
 

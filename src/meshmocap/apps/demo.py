@@ -4,7 +4,7 @@ analysed, and scored against the truth that only the studio knows.
 
 The capture walks the real user's path: its performer (``heavy_male``) is a body the
 trackers are not told about, so the tracking template is estimated from the hulls
-(:func:`~meshmocap.estimate.tracking_template.tracking_template`), and the first pose is
+(:func:`~meshmocap.estimate.performer.tracking_template.tracking_template`), and the first pose is
 found from the capture (the trackers' default ``init="auto"``). The ground truth is read
 only to score. The patch track is exported to BVH, C3D, TRC, glTF and CSV and its gait
 analysed, as ``meshmocap export`` and ``meshmocap gait`` do.
@@ -43,7 +43,7 @@ from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
 from meshmocap.errors import InputError
-from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
+from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
 from meshmocap.io.results import done_frames, frame_path

@@ -5,9 +5,9 @@ increment per joint.
 
 **One Gauss–Newton step for every articulated fit**: the articulated ICP baseline
 (:mod:`meshmocap.trackers.articulated_icp`, the skeleton-based baseline of
-patch-skeleton-tracking.txt §IV-B), the first-pose search (:mod:`meshmocap.estimate.fit`),
+patch-skeleton-tracking.txt §IV-B), the first-pose search (:mod:`meshmocap.estimate.pose.fit`),
 automatic rigging (:mod:`meshmocap.body.autorig`) and the shape fit
-(:mod:`meshmocap.estimate.shape_fit`) assemble their normal equations from the pieces here
+(:mod:`meshmocap.estimate.performer.shape_fit`) assemble their normal equations from the pieces here
 (closest pairs both ways, :func:`closest_pairs`; their point-to-plane plus point-to-point
 system, :func:`closest_point_system`; the pull towards a reference pose,
 :func:`add_pose_pull`) and take :func:`articulated_step`: one Levenberg–Marquardt damping

@@ -12,7 +12,7 @@ from meshmocap.cli._args import number
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap import api
     from meshmocap.apps.evaluation_files import write_evaluation
-    from meshmocap.estimate.plausibility import partial_hulls
+    from meshmocap.io.plausibility import partial_hulls
     from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
     track = read_track(args.track)

@@ -11,9 +11,9 @@ def _cmd_subject(args: argparse.Namespace) -> int:
 
     from meshmocap.body.template import save_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-    from meshmocap.estimate.plausibility import body_warnings
-    from meshmocap.estimate.subject import estimate_subject
+    from meshmocap.estimate.performer.subject import estimate_subject
     from meshmocap.io.capture import open_capture
+    from meshmocap.io.plausibility import body_warnings
 
     out = Path(args.out)
     if out.suffix != ".npz" or not out.parent.is_dir():  # fail before the work

@@ -61,7 +61,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
-    from meshmocap.estimate.plausibility import check_observations
+    from meshmocap.io.plausibility import check_observations
     from meshmocap.io.results import done_frames
 
     options = _tracker_options(args)
@@ -227,7 +227,7 @@ def _follow_template(args: argparse.Namespace):
     from types import SimpleNamespace
 
     from meshmocap.errors import InputError
-    from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
+    from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
 
     meta_file = Path(args.capture[0]) / "capture.json"
     try:

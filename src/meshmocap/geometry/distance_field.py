@@ -177,8 +177,9 @@ def signed_distance(occupancy: np.ndarray, spacing: float) -> np.ndarray:
     return np.where(occ, -0.5 - e, e - 0.5) * spacing
 
 
-def _inner_boundary(occ: np.ndarray) -> np.ndarray:
-    """Occupied voxels with an empty 6-neighbour (beyond the grid counts as empty).
+def inner_boundary(occ: np.ndarray) -> np.ndarray:
+    """(nx, ny, nz) bool: the occupied voxels of ``occ`` (nx, ny, nz) bool with an empty
+    6-neighbour (beyond the grid counts as empty).
 
     Computed on the flat array: a voxel's neighbours are at flat offsets ±1, ±nz, ±ny nz,
     which wrap around on the grid's border layers, so those are set apart (every occupied
@@ -282,7 +283,7 @@ class LazyDistanceGrid(DistanceGrid):
             v.setflags(write=False)
         self.upper = self.origin + (np.array(self.shape) - 1) * m * h
         self._set_strides()
-        flat = np.flatnonzero(_inner_boundary(occ))
+        flat = np.flatnonzero(inner_boundary(occ))
         ijk = np.empty((len(flat), 3))  # np.unravel_index, without int → float copies
         _, ny, nz = occ.shape
         ijk[:, 0], rest = np.divmod(flat, ny * nz)

@@ -108,7 +108,7 @@ def _check_patches_nonempty(func: str, labels: np.ndarray) -> int:
 # ----------------------------------------------------------------------------- helpers
 
 
-def _vertex_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def vertex_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """(n,) float64 barycentric vertex areas (m²): one third of each incident face area."""
     A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     return np.bincount(F.ravel(), np.repeat(A / 3.0, 3), minlength=len(V))
@@ -184,8 +184,9 @@ def _assign(G: sp.csr_matrix, seeds: np.ndarray, offsets: np.ndarray) -> np.ndar
     return lookup[root]
 
 
-def _first_per_group(groups: np.ndarray, keys: np.ndarray, n_groups: int) -> np.ndarray:
-    """Index of the smallest ``key`` in every group ``0..n_groups-1`` (all non-empty).
+def first_per_group(groups: np.ndarray, keys: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups,) int64: the index of the smallest of ``keys`` (n,) in every group
+    ``0..n_groups-1`` of ``groups`` (n,) int (all non-empty).
 
     Ties go to the smallest index, as with ``np.lexsort((keys, groups))``, ~9× faster: a
     stable (radix) sort of int16 group ids, per-group minima by ``np.minimum.reduceat``,
@@ -200,10 +201,10 @@ def _first_per_group(groups: np.ndarray, keys: np.ndarray, n_groups: int) -> np.
     return order[hit[np.searchsorted(g[hit], np.arange(n_groups))]]
 
 
-def _fix_split_patches(
+def connected_patches(
     labels: np.ndarray, E: np.ndarray, L: np.ndarray, weights: np.ndarray, n_patches: int
 ) -> np.ndarray:
-    """Make every patch connected through mesh edges.
+    """(n,) int64: ``labels`` with every patch connected through mesh edges.
 
     Each patch keeps its largest (by ``weights``) connected component; vertices of the other
     components are handed, wave by wave, to the patch of an already assigned neighbour
@@ -227,7 +228,7 @@ def _fix_split_patches(
     comp_patch = np.empty(n_comp, dtype=np.int64)
     comp_patch[comp] = labels
     keep = np.zeros(n_comp, dtype=bool)
-    keep[_first_per_group(comp_patch, -size, n_patches)] = True
+    keep[first_per_group(comp_patch, -size, n_patches)] = True
     labels = np.where(keep[comp], labels, -1)
     a = np.concatenate([E[:, 0], E[:, 1]])
     b = np.concatenate([E[:, 1], E[:, 0]])
@@ -329,7 +330,7 @@ def surface_patches(
             f"{func}: n_patches must be at least the number of connected components of "
             f"the mesh ({n_comp}, unreferenced vertices included), found {P}"
         )
-    area = _vertex_areas(V, F)
+    area = vertex_areas(V, F)
     w = area + 1e-300  # vertices of zero area still define a centroid
     r_mean = max(float(np.sqrt(area.sum() / P / np.pi)), 1e-300)  # disc of mean cell area
     offsets = np.zeros(P)
@@ -346,7 +347,7 @@ def surface_patches(
         c = np.stack([np.bincount(labels, w * V[:, i], minlength=P) for i in range(3)], 1)
         c /= tot[:, None]
         d2 = np.einsum("ij,ij->i", V - c[labels], V - c[labels])
-        seeds = _first_per_group(labels, d2, P)
+        seeds = first_per_group(labels, d2, P)
         if it >= n_iter:
             step = 2 * _GAMMA * (np.sqrt(tot / np.pi) - r_mean)
             offsets += np.clip(step, -_STEP_MAX * r_mean, _STEP_MAX * r_mean)
@@ -355,7 +356,7 @@ def surface_patches(
     A = np.bincount(labels, area, minlength=P)
     if A.max() / max(A.min(), 1e-300) < best_ratio:
         best = labels
-    return _fix_split_patches(best, E, L, area, P)
+    return connected_patches(best, E, L, area, P)
 
 
 def patch_adjacency(F: np.ndarray, labels: np.ndarray) -> np.ndarray:

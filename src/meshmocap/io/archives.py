@@ -32,7 +32,7 @@ class TarArchive:
     def __init__(self, path: Path, check_size: Callable[[int, str], None]) -> None:
         self.path, self.gz = path, not str(path).lower().endswith(".tar")
         self._check_size = check_size
-        self._index = _GzipIndex() if self.gz else None
+        self._index = GzipIndex() if self.gz else None
         try:
             with open(path, "rb") as f, tarfile.open(fileobj=self._raw(f), mode="r:") as tf:
                 members = [m for m in tf.getmembers() if m.isreg()]
@@ -47,7 +47,7 @@ class TarArchive:
         self._where = {m.name: (m.offset_data, m.size) for m in members}
 
     def _raw(self, f):
-        return _GzipReader(f, self._index) if self.gz else f
+        return GzipReader(f, self._index) if self.gz else f
 
     def read(self, name: str) -> bytes:
         """Return the bytes of member ``name``."""
@@ -64,10 +64,10 @@ class TarArchive:
         return data
 
     def __getstate__(self) -> dict:  # zlib states do not pickle: the index is rebuilt
-        return {**self.__dict__, "_index": _GzipIndex() if self.gz else None}
+        return {**self.__dict__, "_index": GzipIndex() if self.gz else None}
 
 
-class _GzipIndex:
+class GzipIndex:
     """Decompressor snapshots ``(uncompressed offset, compressed offset, zlib state)``.
 
     One is taken every ``spacing`` uncompressed bytes the first time the stream is
@@ -80,17 +80,20 @@ class _GzipIndex:
         self.points: list[tuple[int, int, object]] = [(0, 0, None)]
 
     def add(self, u: int, c: int, d) -> None:
+        """Keep a copy of decompressor ``d`` at uncompressed offset ``u`` and compressed
+        offset ``c`` if it is ``spacing`` past the last snapshot."""
         if u - self.points[-1][0] >= self.spacing:
             self.points.append((u, c, d.copy()))
             if len(self.points) > self.max_points:
                 self.points, self.spacing = self.points[::2], 2 * self.spacing
 
     def best(self, u: int) -> tuple[int, int, object]:
+        """The last snapshot at or before uncompressed offset ``u``."""
         return self.points[bisect.bisect_right([p[0] for p in self.points], u) - 1]
 
 
-class _GzipReader:
-    """A seekable, read-only file over a (multi-member) gzip file, through a :class:`_GzipIndex`.
+class GzipReader:
+    """A seekable, read-only file over a (multi-member) gzip file, through a :class:`GzipIndex`.
 
     ``_buf`` holds the uncompressed bytes ``[_u, _u + len(_buf))``; ``_c`` is the compressed
     offset of the next input byte; ``_d`` has consumed all input before ``_c``.
@@ -98,7 +101,7 @@ class _GzipReader:
 
     _CHUNK = 1 << 18
 
-    def __init__(self, f, index: _GzipIndex) -> None:
+    def __init__(self, f, index: GzipIndex) -> None:
         self._f, self._index, self._pos = f, index, 0
         self._restore(index.points[0])
 
@@ -133,9 +136,11 @@ class _GzipReader:
             self._index.add(self._u + len(self._buf), self._c, self._d)
 
     def tell(self) -> int:
+        """The uncompressed read position."""
         return self._pos
 
     def seek(self, offset: int, whence: int = 0) -> int:
+        """Move the uncompressed read position, as ``io.IOBase.seek`` does."""
         if whence == 2:
             while not self._end:
                 self._step()
@@ -144,6 +149,8 @@ class _GzipReader:
         return self._pos
 
     def read(self, n: int = -1) -> bytes:
+        """At most ``n`` uncompressed bytes from the read position (all of them: ``-1``),
+        resumed from the nearest snapshot before it."""
         point = self._index.best(self._pos)
         if self._pos < self._u or point[0] > self._u + len(self._buf):
             self._restore(point)

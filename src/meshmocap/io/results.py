@@ -3,7 +3,8 @@
 Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
 
     TRACK/
-      track.json        method, template, capture, evaluation-joint names and parents, options
+      track.json        method, template, capture, evaluation-joint names and parents, options,
+                        and once the first frame is done, how it started ("start": a Start)
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
                         terms, iterations, seconds, health flag, flags and message
@@ -13,6 +14,11 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
 
 A frame file is written atomically once the frame is done: the folder always holds whole
 frames, and :func:`done_frames` tells a resumed run where to continue.
+
+How the first pose was found is a record (:class:`~meshmocap.io.start.Start`), written into
+``track.json`` by :func:`write_start` and read back by :func:`read_start` (and
+:attr:`Track.start`); a track folder written before it was recorded has none (its start is
+unknown: nothing is read out of its first frame's message).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from meshmocap._npz import read_npz
 from meshmocap.body.light import SurfaceBinding, bound_vertices
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap.io.start import Start, start_json, start_of_json
 
 FORMAT = "meshmocap-track-1"
 
@@ -38,7 +45,8 @@ FORMAT = "meshmocap-track-1"
 #:   repeats the last good result (``healthy`` is False);
 #: * ``missing``: the capture has no usable observation of the frame (a dropped frame, an
 #:   empty hull); the tracker coasted across it (``healthy`` is False);
-#: * ``lost``: the fit is below the quality threshold (``message`` names the body parts);
+#: * ``lost``: the fit is below the quality threshold (``message`` names the body parts), or
+#:   the frame is an uncertain start (:attr:`~meshmocap.io.start.Start.confident`);
 #: * ``reinit``: the tracker re-initialised the body, or some limbs, at this frame.
 FRAME_FLAGS = ("failed", "missing", "lost", "reinit")
 
@@ -94,6 +102,8 @@ class Track:
     n_iter : (T,) int64; seconds : (T,) float64; healthy : (T,) bool
     flags : tuple of T tuples of str, each frame's :attr:`FrameResult.flags`
     messages : tuple of T str, each frame's :attr:`FrameResult.message`
+    start : Start or None, how the first pose was found (:func:`read_start`; None: the
+        track folder does not record it)
     """
 
     meta: dict
@@ -107,6 +117,7 @@ class Track:
     healthy: np.ndarray
     flags: tuple[tuple[str, ...], ...] = ()
     messages: tuple[str, ...] = ()
+    start: Start | None = None
 
 
 def frame_path(track: str | os.PathLike, index: int) -> Path:
@@ -261,7 +272,8 @@ def start_track(
 ) -> list[int]:
     """Create (or reopen) a track folder and return the frames already done.
 
-    ``faces`` (m, 3) are the template's triangles (stored as ``faces.npy``).
+    ``faces`` (m, 3) are the template's triangles (stored as ``faces.npy``). A resumed
+    folder keeps the start it recorded (:func:`write_start`).
 
     Raises :class:`FormatError` when resuming a folder written with other metadata.
     """
@@ -271,10 +283,13 @@ def start_track(
     full = {"format": FORMAT, **meta}
     if meta_path.is_file() and resume:
         old = _read_json(meta_path)
+        start = old.pop(START_KEY, None)  # found by the run, not one of its settings
         if old != json.loads(json.dumps(full)):
             raise FormatError(
                 f"{meta_path}: holds a track made with other settings; use another folder"
             )
+        if start is not None:
+            full[START_KEY] = start
     else:
         for p in (path / "frames").glob("*.npz"):
             p.unlink()
@@ -282,6 +297,39 @@ def start_track(
     with atomic_open(path / "faces.npy") as f:
         np.save(f, np.asarray(faces, dtype=np.int32))
     return done_frames(path)
+
+
+#: The key of ``track.json`` that holds the start (:func:`write_start`).
+START_KEY = "start"
+
+
+def write_start(path: str | os.PathLike, start: Start) -> None:
+    """Record ``start`` (how the first pose was found) in the ``track.json`` of the track
+    folder ``path`` (made by :func:`start_track`), atomically."""
+    meta_path = Path(path) / "track.json"
+    meta = {**_read_json(meta_path), START_KEY: start_json(start)}
+    write_text_atomic(meta_path, json.dumps(meta, indent=2) + "\n")
+
+
+def read_start(path: str | os.PathLike) -> Start | None:
+    """How the track in folder ``path`` started (its ``track.json``'s start), or None for a
+    track folder that does not record it (made before starts were recorded, or not yet
+    started): its start is unknown.
+
+    Raises
+    ------
+    MeshmocapFileNotFoundError : ``path`` has no ``track.json``.
+    FormatError : its start is not a start record.
+    """
+    meta_path = Path(path) / "track.json"
+    if not meta_path.is_file():
+        raise MeshmocapFileNotFoundError(f"track: {path} has no track.json")
+    return _start_of_meta(_read_json(meta_path), meta_path)
+
+
+def _start_of_meta(meta: dict, meta_path: Path) -> Start | None:
+    record = meta.get(START_KEY)
+    return None if record is None else start_of_json(record, f"{meta_path}: '{START_KEY}'")
 
 
 def done_frames(path: str | os.PathLike) -> list[int]:
@@ -362,6 +410,7 @@ def read_track(path: str | os.PathLike, *, vertices: bool = True) -> Track:
         **scalars,
         flags=tuple(frame_flags(r) for r in rows),
         messages=tuple(str(r["message"]) for r in rows),
+        start=_start_of_meta(meta, meta_path),
     )
 
 

@@ -100,7 +100,7 @@ def _stratified_subset(labels: np.ndarray, n_keep: int, rng: np.random.Generator
     return np.sort(take)
 
 
-def _platt(f: np.ndarray, positive: np.ndarray) -> tuple[float, float]:
+def platt_sigmoid(f: np.ndarray, positive: np.ndarray) -> tuple[float, float]:
     """Platt sigmoid ``P(positive | f) = 1 / (1 + exp(A f + B))`` fitted to decision values.
 
     libsvm's ``sigmoid_train``: Newton's method with backtracking on the regularised
@@ -137,7 +137,7 @@ def _platt(f: np.ndarray, positive: np.ndarray) -> tuple[float, float]:
     return A, B
 
 
-def _couple(rij: np.ndarray, pairs: np.ndarray, K: int) -> np.ndarray:
+def coupled_probabilities(rij: np.ndarray, pairs: np.ndarray, K: int) -> np.ndarray:
     """Class posteriors from pairwise probabilities (Wu, Lin & Weng 2004, method 2).
 
     Parameters
@@ -210,7 +210,7 @@ class _PairwiseSVC:
         platt = np.empty((len(pairs), 2))
         for c, (i, j) in enumerate(pairs):
             rows = (inv == i) | (inv == j)
-            platt[c] = _platt(F[rows, c], inv[rows] == i)
+            platt[c] = platt_sigmoid(F[rows, c], inv[rows] == i)
         self.svc_ = SVC(kernel="linear", C=self.C).fit(Z, y)
         self.classes_ = classes
         self.pairs_ = np.array(pairs, dtype=np.int64).reshape(-1, 2)
@@ -225,7 +225,7 @@ class _PairwiseSVC:
         np.exp(z, out=z)
         z += 1.0
         rij = np.reciprocal(z, out=z)
-        return _couple(rij, self.pairs_, len(self.classes_))
+        return coupled_probabilities(rij, self.pairs_, len(self.classes_))
 
 
 def _initial_logits(

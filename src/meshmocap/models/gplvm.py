@@ -72,7 +72,7 @@ _LOG2PI = float(np.log(2.0 * np.pi))
 _HYPER_BOUNDS = [(-14.0, 14.0), (-18.0, 18.0), (-7.0, 14.0)]
 
 
-class _Problem:
+class LatentProblem:
     """The negative log-likelihood of Eq. (2) as a function of one flat parameter vector.
 
     Parameter layout: ``[log α, log γ, log β, back-constraint weights...]`` where the weights
@@ -99,6 +99,8 @@ class _Problem:
             self.Tinv = (U * s**0.5) @ U.T
 
     def unpack(self, theta: np.ndarray) -> tuple[float, float, float, list[np.ndarray]]:
+        """``(α, γ, β, back-constraint weights)`` of the flat parameters ``theta`` (the
+        class docstring's layout; the hyperparameters exponentiated)."""
         parts = np.split(theta, self.splits)
         alpha, gamma, beta = np.exp(parts[0])
         if self.bc == "mlp":
@@ -372,7 +374,7 @@ class GPLVM:
             w0 = [W1, b1, sol[:H], sol[H]]
         else:
             w0 = [X0]
-        prob = _Problem(Ys, q, bc, Kbc=Kbc, n_hidden=int(self.n_hidden))
+        prob = LatentProblem(Ys, q, bc, Kbc=Kbc, n_hidden=int(self.n_hidden))
         logs = np.log([self.alpha, self.gamma, self.beta])
         phi0 = prob.from_model(np.concatenate([logs, *[w.ravel() for w in w0]]))
         bounds = _HYPER_BOUNDS + [(None, None)] * (phi0.size - 3)

@@ -2,7 +2,7 @@
 
 A studio drops frames and loses cameras for a while: a camera whose mask is empty (the
 subject left its view), missing (a dropped frame) or implausible (mostly foreground: an
-inverted mask, :func:`~meshmocap.estimate.plausibility.mask_problems`) is left out of that
+inverted mask, :func:`~meshmocap.io.plausibility.mask_problems`) is left out of that
 frame's carving, which uses the cameras that see the subject, and the hull file records it
 (its ``note``). Carving inverted masks would take the whole studio for the subject, slowly.
 A frame seen by fewer than ``min_cameras`` cameras has no hull: its file records why
@@ -27,11 +27,11 @@ from meshmocap.errors import (
     MeshmocapFileNotFoundError,
     MissingFrameWarning,
 )
-from meshmocap.estimate.plausibility import mask_problems
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import VoxelHull, carve
 from meshmocap.io.cameras import read_cameras
 from meshmocap.io.capture import Capture, frame_name, write_hull, write_missing_hull
+from meshmocap.io.plausibility import mask_problems
 from meshmocap.io.silhouettes import read_mask
 
 #: Fewest cameras that must see the subject for a frame to be carved (one camera's hull is

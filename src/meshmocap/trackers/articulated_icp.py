@@ -68,7 +68,7 @@ from meshmocap.body.articulated_system import (
 )
 from meshmocap.body.template import Template
 from meshmocap.errors import FitError, InputError
-from meshmocap.estimate.observe import frame_points
+from meshmocap.estimate.recovery.observe import frame_points
 from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult

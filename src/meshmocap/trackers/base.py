@@ -4,7 +4,7 @@ A tracker is a small stateful object: ``setup`` prepares it for a template, ``in
 the template on the first frame (from a known or estimated pose), ``step`` fits the next
 frame and returns a :class:`~meshmocap.io.results.FrameResult`, and ``reseat``
 re-initialises it mid-track at a pose found from the current frame (loss recovery,
-:mod:`meshmocap.estimate.reinit`). The state it needs to continue is returned with each
+:mod:`meshmocap.estimate.recovery.reinit`). The state it needs to continue is returned with each
 result (``FrameResult.state``) and restored by ``set_state``, so the sequence driver can
 resume an interrupted run and recover from a failed frame.
 """

@@ -14,15 +14,17 @@ Only one process writes into a track folder at a time: a second one is refused i
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
 
 The first frame's pose comes from the capture alone (``init="auto"``,
-:func:`~meshmocap.estimate.init.initial_pose`) or, the papers' protocol, from its ground
-truth (``init="truth"``). With ``recover``, every fitted frame is scored
-(:class:`~meshmocap.estimate.reinit.Recovery`): a frame with a limb lost is flagged
-``lost`` (the message names the limbs). With ``reseat`` too, where a better pose is found
-from the frame the tracker is re-seated there (``Tracker.reseat``) and the frame also
-flagged ``reinit``, and a limb the observations miss is held as last seen. Re-seating is
-off by default: it rescues a limb lost behind a hole in the hull (CMU 05_01 with a forearm
-missed for 10 frames: worst joint 342 → 62 mm) but mistakes a fast limb for a lost one on
-a run (CMU 09_01, patch, 55 frames: 13.5 → 35.8 mm mean; ``benchmarks/bench_recovery.py``).
+:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) or, the papers' protocol, from its
+ground truth (``init="truth"``); how is recorded (:class:`~meshmocap.io.start.Start`, in
+``track.json``), and an uncertain start flags its frame ``lost``. With ``recover``, every
+fitted frame is scored (:class:`~meshmocap.estimate.recovery.reinit.Recovery`): a frame
+with a limb lost is flagged ``lost`` (the message names the limbs). With ``reseat`` too,
+where a better pose is found from the frame the tracker is re-seated there
+(``Tracker.reseat``) and the frame also flagged ``reinit``, and a limb the observations
+miss is held as last seen. Re-seating is off by default: it rescues a limb lost behind a
+hole in the hull (CMU 05_01 with a forearm missed for 10 frames: worst joint 342 → 62 mm)
+but mistakes a fast limb for a lost one on a run (CMU 09_01, patch, 55 frames: 13.5 →
+35.8 mm mean; ``benchmarks/bench_recovery.py``).
 """
 
 from __future__ import annotations
@@ -50,10 +52,11 @@ from meshmocap.errors import (
     MeshError,
     MeshmocapFileNotFoundError,
 )
-from meshmocap.estimate.capture_cache import cached_first_pose
-from meshmocap.estimate.init import initial_pose_of_frame, start_flags, start_message
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.reinit import Recovery
+from meshmocap.estimate.performer.capture_cache import cached_first_pose
+from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
+from meshmocap.estimate.pose.start import search_start, start_flags, start_message
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import (
     FrameResult,
@@ -66,7 +69,9 @@ from meshmocap.io.results import (
     start_track,
     write_frame,
     write_light_binding,
+    write_start,
 )
+from meshmocap.io.start import Start
 from meshmocap.trackers.base import Tracker
 
 #: How the first frame's pose is found: from the capture alone, or from its ground truth.
@@ -99,7 +104,7 @@ def track_sequence(
     template_info: dict | None = None,
     light: int | None = LIGHT_VERTICES,
     init_options: dict | None = None,
-    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
+    start: Start | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -121,9 +126,10 @@ def track_sequence(
         :func:`~meshmocap.io.results.read_track`).
     init : {"auto", "truth"}
         The first frame's pose: found from the frame alone (a global search over heading,
-        place and the bundled pose library, :func:`~meshmocap.estimate.init.initial_pose`), or
-        copied from its ground truth (the papers' protocol; the capture must have it).
-        ``track.json`` records which, the first frame's message the search's winner.
+        place and the bundled pose library,
+        :func:`~meshmocap.estimate.pose.first_pose.initial_pose`), or copied from its
+        ground truth (the papers' protocol; the capture must have it). ``track.json``
+        records which, and how the first pose was found (its ``start``).
     recover : bool
         Score every frame and flag lost limbs (module docstring).
     reseat : bool
@@ -132,7 +138,7 @@ def track_sequence(
     template_info : dict, optional
         How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
         ``"capture"`` or ``"estimated"``; ``template_file``); see
-        :func:`meshmocap.estimate.tracking_template.tracking_template`.
+        :func:`meshmocap.estimate.performer.tracking_template.tracking_template`.
     light : int or None
         Track a light copy of the template with about this many vertices
         (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
@@ -140,10 +146,11 @@ def track_sequence(
         reads the template's out of them. None tracks the template itself.
     init_options : dict, optional
         Options of the automatic first pose's search
-        (:func:`~meshmocap.estimate.init.initial_pose`, e.g. ``exclude_trials``).
-    start : (frame number, R (J, 3, 3), root (3,), message), optional
-        The pose of that frame when it is already known (a template made from that very
-        frame): with ``init="auto"``, the track starts there without a search.
+        (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`, e.g. ``exclude_trials``).
+    start : Start, optional
+        The pose of its frame (:attr:`~meshmocap.io.start.Start.frame`) when it is already
+        known (a template made from that very frame): with ``init="auto"``, the track
+        starts there without a search.
 
     Returns
     -------
@@ -314,12 +321,15 @@ def initialise_tracker(
     init: Init = "auto",
     init_options: dict | None = None,
     *,
-    start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
+    start: Start | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
-    finds for the full body (its message says how), or at ``start``'s where that is this
-    frame (:func:`track_sequence`), the tracker on ``body.light``. Frames before it are
-    written as copies of it, flagged ``missing``."""
+    finds for the full body, or at ``start``'s where that is this frame
+    (:func:`track_sequence`), the tracker on ``body.light``. The start is recorded in
+    ``track.json`` (:func:`~meshmocap.io.results.write_start`); the frame's message and
+    flags (``lost`` for an uncertain start) are made from it
+    (:mod:`~meshmocap.estimate.pose.start`). Frames before it are written as copies of
+    it, flagged ``missing``."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -331,21 +341,24 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                if start is not None and init == "auto" and start[0] == index:
-                    R, root, how = start[1], start[2], start[3]
+                if start is not None and init == "auto" and start.frame == index:
+                    found = start
                 else:
-                    R, root, how = first_pose(
+                    found = first_pose(
                         body.template, frame, init, capture=capture, options=init_options
                     )
-                r = tracker.init(body.light, frame, R, root)
+                r = tracker.init(body.light, frame, found.R, found.root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:
             skipped.append((index, reason))
             continue
-        state = {**r.state, "pose_R": R, "pose_root": root}  # the recovery's first pose
-        r = replace(r, index=index, seconds=time.perf_counter() - t0, message=how, state=state)
-        write_frame(out, replace(r, flags=(*r.flags, *start_flags(how))))
+        # the recovery's first pose
+        state = {**r.state, "pose_R": found.R, "pose_root": found.root}
+        message = start_message(found)
+        r = replace(r, index=index, seconds=time.perf_counter() - t0, message=message, state=state)
+        write_start(out, found)  # before the frame: a folder whose first frame is done has it
+        write_frame(out, replace(r, flags=(*r.flags, *start_flags(found))))
         for index, why in skipped:
             write_frame(
                 out,
@@ -386,23 +399,22 @@ def read_track_frame(out: str | os.PathLike, index: int) -> FrameResult:
 
 def first_pose(
     template: Template, frame, init: Init, *, capture=None, options: dict | None = None
-) -> tuple[np.ndarray, np.ndarray, str]:
-    """The first frame's pose ``(R (J, 3, 3), root (3,))`` and a line saying how it was
-    found (the frame's message in the track). An automatic search is made once per
+) -> Start:
+    """The first frame's pose and how it was found. An automatic search is made once per
     capture, frame and template, and cached with the capture
-    (:func:`~meshmocap.estimate.capture_cache.cached_first_pose`)."""
+    (:func:`~meshmocap.estimate.performer.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)
+        index = int(frame.index)
         if _is_rest(template, truth):  # a template cut from this frame (the crane's rig)
             rest = np.tile(np.eye(3), (template.skeleton.n_joints, 1, 1))
-            how = "init truth: the template is this frame, in its rest pose"
-            return rest, template.skeleton.rest_positions[0], how
+            return Start(index, rest, template.skeleton.rest_positions[0], "rest")
         if truth is None or truth.rotations is None:
             raise InputError(
                 "track: --init truth needs a capture with ground-truth poses "
                 "(a synthetic capture); this one has none: use --init auto"
             )
-        return truth.rotations, truth.root, "init truth: the first pose from ground truth"
+        return Start(index, truth.rotations, truth.root, "truth")
     if capture is None:
         return _search_first_pose(template, frame, options)
     return cached_first_pose(
@@ -414,9 +426,7 @@ def first_pose(
     )
 
 
-def _search_first_pose(
-    template: Template, frame, options: dict | None = None
-) -> tuple[np.ndarray, np.ndarray, str]:
+def _search_first_pose(template: Template, frame, options: dict | None = None) -> Start:
     """The automatic first pose of ``frame`` (:func:`first_pose`)."""
     obs = observed(frame)
     P = obs.points[0]
@@ -426,7 +436,7 @@ def _search_first_pose(
             "--init auto needs a body to start from"
         )
     res = initial_pose_of_frame(template, obs, **(options or {}))
-    return res.R, res.root, start_message(res)
+    return search_start(frame.index, res)
 
 
 def _is_rest(template: Template, truth) -> bool:

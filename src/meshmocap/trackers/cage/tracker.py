@@ -81,7 +81,7 @@ import numpy as np
 
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
-from meshmocap.estimate.observe import frame_hull
+from meshmocap.estimate.recovery.observe import frame_hull
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame

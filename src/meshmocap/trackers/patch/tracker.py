@@ -25,7 +25,7 @@ from meshmocap.body.articulated import MAX_STEP_ANGLE
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.errors import FitError
-from meshmocap.estimate.observe import frame_points
+from meshmocap.estimate.recovery.observe import frame_points
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult

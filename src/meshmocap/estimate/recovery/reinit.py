@@ -1,20 +1,22 @@
 """Loss detection and re-initialisation during tracking.
 
 After every frame, :class:`Recovery` scores the tracked mesh against the frame's
-observations (:func:`~meshmocap.estimate.quality.fit_quality`). When a limb is lost it
-searches, from the frame alone, for a better pose with the machinery of the automatic
-initialisation (:mod:`meshmocap.estimate.init`):
+observations (:func:`~meshmocap.estimate.recovery.quality.fit_quality`). When a limb is
+lost it searches, from the frame alone, for a better pose with the machinery of the
+automatic initialisation (:mod:`meshmocap.estimate.pose`) and the lost-limb search
+(:mod:`meshmocap.estimate.recovery.limbs`):
 
-1. the tracked mesh's pose in the articulated model (:func:`~meshmocap.estimate.fit.
-   pose_of_vertices`, warm-started from the last frame's);
+1. the tracked mesh's pose in the articulated model
+   (:func:`~meshmocap.estimate.pose.fit.pose_of_vertices`, warm-started from the last
+   frame's);
 2. each limb lost for what the observations show (outside them, buried, or leaving
    observations unexplained) re-fitted from the pose library's hypotheses for that limb
-   (:func:`~meshmocap.estimate.init.library_limb_candidates`: what people do with it,
-   scored on this frame), each fitted with only that limb free, and the limb as tracked
-   fitted alike; each is ranked by the fit score plus the silhouette mismatch plus how far
-   the limb stands from where its recent motion puts it (:meth:`Recovery.motion_cost`: a
-   fast limb moving on as it moved is kept), and a hypothesis replaces the limb only when
-   it ranks better by more than :data:`MIN_GAIN`;
+   (:func:`~meshmocap.estimate.recovery.limbs.library_limb_candidates`: what people do
+   with it, scored on this frame), each fitted with only that limb free, and the limb as
+   tracked fitted alike; each is ranked by the fit score plus the silhouette mismatch plus
+   how far the limb stands from where its recent motion puts it
+   (:meth:`Recovery.motion_cost`: a fast limb moving on as it moved is kept), and a
+   hypothesis replaces the limb only when it ranks better by more than :data:`MIN_GAIN`;
 3. when the body itself is outside the observations (the torso more than
    :data:`TORSO_OUT` outside: the performer leaving the cameras' view, a truncated hull),
    nothing (a whole-body search re-seated there ran 1.2 m off on a run leaving the view);
@@ -36,18 +38,18 @@ import numpy as np
 
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.estimate.fit import PoseFit, PoseFitter, pose_of_vertices
-from meshmocap.estimate.init import (
+from meshmocap.estimate.pose.first_pose import ranking_key, subsample_points
+from meshmocap.estimate.pose.fit import PoseFit, PoseFitter, pose_of_vertices
+from meshmocap.estimate.pose.library import library_poses
+from meshmocap.estimate.pose.pose_search import FrameScorer
+from meshmocap.estimate.recovery.limbs import (
+    LIMB_ROOTS,
     LIMBS,
     library_limb_candidates,
-    library_poses,
     limb_joint_indices,
-    ranking_key,
-    subsample_points,
 )
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.pose_search import FrameScorer
-from meshmocap.estimate.quality import (
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.quality import (
     BURIED_LOST,
     LIMB_PARTS,
     OUTSIDE_LOST,
@@ -85,8 +87,6 @@ JUMP = 0.08
 #: vertices outside them, few unexplained points near it) to count as seen again where it
 #: is now: a fast limb that the observations follow is not held as lost.
 SEEN_AGAIN = 3
-#: Joints above a limb's own that move with it (an arm's clavicle).
-_ROOTS = {"left_arm": ("LeftShoulder",), "right_arm": ("RightShoulder",)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,7 +117,7 @@ class Recovery:
         The first frame's pose (the warm start of the pose estimates).
     exclude_trials : tuple of str
         Pose-library trials the limb hypotheses leave out
-        (:func:`~meshmocap.estimate.init.library_poses`).
+        (:func:`~meshmocap.estimate.pose.first_pose.library_poses`).
     """
 
     def __init__(
@@ -139,7 +139,7 @@ class Recovery:
         #: each limb's joints (an arm's from the clavicle), their rotations when the limb was
         #: last seen, and the limbs the observations miss now
         self.limb_joints = {
-            n: np.array([sk.index(j) for j in (*_ROOTS.get(n, ()), *js) if j in sk.names])
+            n: np.array([sk.index(j) for j in (*LIMB_ROOTS.get(n, ()), *js) if j in sk.names])
             for n, (js, _) in LIMBS.items()
         }
         self.held: np.ndarray | None = None

@@ -15,12 +15,12 @@ In order:
    depends on what the frames are (:func:`frames_kind`):
 
    * ``"hull"``: a studio capture (cameras and silhouettes): the shape space fitted to
-     the silhouettes (:func:`~meshmocap.estimate.subject.estimate_subject`);
+     the silhouettes (:func:`~meshmocap.estimate.performer.subject.estimate_subject`);
    * ``"mesh"``: closed 2-manifold meshes of one connectivity in every frame (a clean 4D
      capture): the first frame rigged as it stands;
    * ``"points"``: anything else without cameras (visual hulls, never quite manifold,
      holed meshes, meshes whose connectivity changes, point clouds): the shape space
-     fitted to the points (:func:`~meshmocap.estimate.point_subject.fit_body_to_points`).
+     fitted to the points (:func:`~meshmocap.estimate.performer.point_subject.fit_body_to_points`).
 
    A template made from a frame knows that frame's pose (the rest pose of a rigged first
    frame, the fitted pose of the points' body): :attr:`TemplateChoice.start` holds it
@@ -30,6 +30,7 @@ In order:
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,10 +40,11 @@ import numpy as np
 from meshmocap._atomic import atomic_open
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
-from meshmocap.estimate.capture_cache import cached_subject
-from meshmocap.estimate.point_subject import fit_body_to_points, readable_frame
-from meshmocap.estimate.subject import estimate_subject, subject_kind
+from meshmocap.estimate.performer.capture_cache import cached_subject
+from meshmocap.estimate.performer.point_subject import fit_body_to_points, readable_frame
+from meshmocap.estimate.performer.subject import estimate_subject, subject_kind
 from meshmocap.geometry.mesh import mesh_problems
+from meshmocap.io.start import Start, start_json, start_of_json
 
 __all__ = [
     "FRAME_KINDS",
@@ -79,14 +81,14 @@ class TemplateChoice:
     info : dict, for ``track.json`` (``template_source``: ``"given"``, ``"capture"`` or
         ``"estimated"``; ``template_file`` for an estimated one)
     note : str, one line for the user
-    start : (frame number, R (J, 3, 3), root (3,), message) or None: the pose of the frame
-        an estimated template was made from (module docstring)
+    start : Start or None, the pose of the frame an estimated template was made from
+        (module docstring; source ``"subject-rest"`` or ``"subject-fit"``)
     """
 
     template: Template
     info: dict
     note: str
-    start: tuple[int, np.ndarray, np.ndarray, str] | None = None
+    start: Start | None = None
 
 
 def frames_kind(capture) -> str:
@@ -113,30 +115,24 @@ def frames_kind(capture) -> str:
 
 
 def _points_body(capture, *, kind: str):
-    """:func:`~meshmocap.estimate.point_subject.fit_body_to_points` in the signature of
-    :func:`~meshmocap.estimate.capture_cache.cached_subject`'s estimators."""
+    """:func:`~meshmocap.estimate.performer.point_subject.fit_body_to_points` in the signature of
+    :func:`~meshmocap.estimate.performer.capture_cache.cached_subject`'s estimators."""
     return fit_body_to_points(capture)
 
 
-def _save_start(path: Path, start) -> None:
-    index, R, root, message = start
+def _save_start(path: Path, start: Start) -> None:
     with atomic_open(path) as f:
-        np.savez(f, index=np.int64(index), R=R, root=root, message=np.str_(message))
+        np.savez(f, start=np.str_(json.dumps(start_json(start))))
 
 
-def _load_start(path: Path) -> tuple[int, np.ndarray, np.ndarray, str] | None:
-    """The start kept beside a cached subject, or None (absent or unreadable: search)."""
+def _load_start(path: Path) -> Start | None:
+    """The start kept beside a cached subject, or None (absent, unreadable, or written
+    before starts were records: search)."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            R, root = z["R"].astype(np.float64), z["root"].astype(np.float64)
-            return int(z["index"]), R, root, str(z["message"])
-    except (OSError, ValueError, KeyError, EOFError):
+            return start_of_json(json.loads(str(z["start"])), str(path))
+    except (OSError, ValueError, KeyError, EOFError):  # FormatError is a ValueError
         return None
-
-
-def _start_message(kind: str, index: int) -> str:
-    what = "its rest pose" if kind == "mesh" else "the pose fitted with the body"
-    return f"init template: the template was made from frame {index}, in {what}"
 
 
 def _named_by(capture) -> str | None:
@@ -191,7 +187,7 @@ def tracking_template(
         return TemplateChoice(t, info, note, start)
     check_choice("tracking_template", "kind", kind, FRAME_KINDS)
     chosen = frames_kind(capture) if kind == "auto" else kind
-    # estimated once per capture and cached with it (meshmocap.estimate.capture_cache);
+    # estimated once per capture and cached with it (meshmocap.estimate.performer.capture_cache);
     # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
     if chosen == "points":
         est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
@@ -205,7 +201,8 @@ def tracking_template(
         if est.kind == "mesh":  # rigged as it stands: rest rotations at the rest root
             R = np.tile(np.eye(3), (est.template.skeleton.n_joints, 1, 1))
             root = est.template.skeleton.rest_positions[0]
-        start = (int(est.frames[0]), R, root, _start_message(est.kind, int(est.frames[0])))
+        source = "subject-rest" if est.kind == "mesh" else "subject-fit"
+        start = Start(int(est.frames[0]), R, root, source)
         _save_start(pose_path, start)
     else:
         pose_path.unlink(missing_ok=True)

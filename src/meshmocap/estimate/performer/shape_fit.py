@@ -184,8 +184,16 @@ class ShapeFit:
     n_iter: int
 
 
-class _Terms:
-    """Residual rows of one frame, accumulated into the normal equations."""
+class FrameTerms:
+    """Residual rows of one frame (:func:`frame_terms`), accumulated into the normal
+    equations.
+
+    Attributes
+    ----------
+    rows : list of (term name, residuals (p,) metres, pose Jacobian (p, n_pose), shape
+        Jacobian (p, K))
+    population : dict of str → int, the candidates each term is a mean over
+    """
 
     def __init__(self, n_pose: int, K: int):
         self.rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -223,9 +231,9 @@ def _outline(v, n, cam, F, *, ring: float = 2.0, rim_cos: float = 0.35) -> np.nd
     return np.unique(cand[k[np.isfinite(dist) & (k < len(cand))].astype(np.int64)])
 
 
-def _frame_terms(views, v, n, a, S, F, sample, max_match):
-    """The three silhouette terms of one frame (module docstring), as a :class:`_Terms`."""
-    t = _Terms(a.shape[1] * 3 + 3, S.shape[2])
+def frame_terms(views, v, n, a, S, F, sample, max_match):
+    """The three silhouette terms of one frame (module docstring), as a :class:`FrameTerms`."""
+    t = FrameTerms(a.shape[1] * 3 + 3, S.shape[2])
     for view in views:
         cam = view.camera
         # inside: sampled points outside the silhouette
@@ -314,7 +322,7 @@ def fit_shape(
         for f in range(n_f):
             v, n, a = pose_points(model, R[f], root[f])
             S = shape_jacobian(space, tmpl, R[f], root[f])
-            frames.append(_frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
+            frames.append(frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
         counts: dict[str, int] = {}
         for t in frames:
             for term, n_term in t.population.items():

@@ -7,17 +7,10 @@ import pytest
 
 from meshmocap.body.pose_library import load_pose_library
 from meshmocap.body.template import load_template
-from meshmocap.estimate.fit import PoseFitter
-from meshmocap.estimate.init import (
-    coarse_candidates,
-    initial_pose_of_frame,
-    library_limb_candidates,
-    library_poses,
-    start_flags,
-    start_message,
-)
-from meshmocap.estimate.observe import ObservedFrame
-from meshmocap.estimate.pose_search import (
+from meshmocap.estimate.pose.first_pose import coarse_candidates, initial_pose_of_frame
+from meshmocap.estimate.pose.fit import PoseFitter
+from meshmocap.estimate.pose.library import library_poses
+from meshmocap.estimate.pose.pose_search import (
     FrameScorer,
     body_sample,
     farthest_point_indices,
@@ -25,7 +18,9 @@ from meshmocap.estimate.pose_search import (
     posed_samples,
     turned_about_z,
 )
-from meshmocap.io.capture import SequenceFrame
+from meshmocap.estimate.pose.start import search_start, start_flags, start_message
+from meshmocap.estimate.recovery.limbs import library_limb_candidates
+from toys import observed_frame
 
 HELD = "13_32"  # the library trial the performer's pose comes from, kept out of the search
 
@@ -42,7 +37,7 @@ def scene():
     R = turned_about_z(R, 2.3)
     root = np.array([0.7, -0.4, 0.95])
     posed = t.pose(R, root)
-    frame = ObservedFrame(SequenceFrame(0, (posed.V, t.F), None))
+    frame = observed_frame(posed.V, t.F)
     h = frame.hull
     scorer = FrameScorer(h.occupancy, h.origin, h.voxel_size, frame.points[0])
     return t, R, root, posed, frame, scorer
@@ -112,6 +107,8 @@ def test_the_first_pose_of_a_held_out_trial_is_found_and_reported(scene):
     res = initial_pose_of_frame(t, frame, exclude_trials=(HELD,), n_candidates=6, keep=2)
     err = np.linalg.norm(t.pose(res.R, res.root).eval_joints - posed.eval_joints, axis=1)
     assert err.mean() < 0.02 and err.max() < 0.06
-    msg = start_message(res)
-    assert msg.startswith("init auto: ") and "runner-up" in msg
-    assert start_flags(msg) == (("lost",) if "uncertain start" in msg else ())
+    start = search_start(0, res)
+    assert start.source == "search" and start.label == res.label and start.runner_up
+    assert start.margin == res.margin and start.confident == (not res.lost and res.margin >= 0.002)
+    assert start_flags(start) == (() if start.confident else ("lost",))
+    assert start_message(start).startswith(f"init auto: {res.label}, fit score ")

@@ -1,7 +1,7 @@
 """Estimate once per capture: the performer's body and the first pose, cached with the capture.
 
-Estimating the body (:func:`~meshmocap.estimate.subject.estimate_subject`) and searching
-the first pose (:func:`~meshmocap.estimate.init.initial_pose`) are the slow steps before
+Estimating the body (:func:`~meshmocap.estimate.performer.subject.estimate_subject`) and searching
+the first pose (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) are the slow steps before
 tracking, and every track of a capture (each method of the demo, each item of a batch, a
 restarted run) needs the same answers. They are stored in the capture's folder
 (``<capture>/.meshmocap/``; under ``MESHMOCAP_CACHE`` when that folder is read-only) under
@@ -34,7 +34,8 @@ from meshmocap._atomic import atomic_open
 from meshmocap._progress import phase
 from meshmocap._version import __version__
 from meshmocap.body.template import Template, load_template, save_template
-from meshmocap.estimate.subject import SubjectEstimate
+from meshmocap.estimate.performer.subject import SubjectEstimate
+from meshmocap.io.start import Start, start_json, start_of_json
 
 __all__ = [
     "CACHE_FOLDER",
@@ -50,9 +51,9 @@ __all__ = [
 CACHE_FOLDER = ".meshmocap"
 #: Modules whose source keys the body estimate.
 SUBJECT_CODE = (
-    "meshmocap.estimate.subject",
-    "meshmocap.estimate.point_subject",
-    "meshmocap.estimate.shape_fit",
+    "meshmocap.estimate.performer.subject",
+    "meshmocap.estimate.performer.point_subject",
+    "meshmocap.estimate.performer.shape_fit",
     "meshmocap.body.autorig",
     "meshmocap.body.articulated",
     "meshmocap.body.shape_space",
@@ -62,11 +63,15 @@ SUBJECT_CODE = (
 )
 #: Modules whose source keys the first-pose search.
 FIRST_POSE_CODE = (
-    "meshmocap.estimate.init",
-    "meshmocap.estimate.pose_search",
-    "meshmocap.estimate.fit",
-    "meshmocap.estimate.observe",
-    "meshmocap.estimate.quality",
+    "meshmocap.estimate.pose.first_pose",
+    "meshmocap.estimate.pose.library",
+    "meshmocap.estimate.pose.start",
+    "meshmocap.estimate.pose.pose_search",
+    "meshmocap.estimate.pose.fit",
+    "meshmocap.estimate.recovery.limbs",
+    "meshmocap.estimate.recovery.observe",
+    "meshmocap.estimate.recovery.quality",
+    "meshmocap.io.start",
     "meshmocap.body.articulated",
     "meshmocap.body.pose_library",
     "meshmocap.geometry.silhouette",
@@ -167,10 +172,10 @@ def cached_subject(
     **options,
 ) -> SubjectEstimate:
     """The performer's body of ``capture`` (``estimate(capture, **options)``, by default
-    :func:`~meshmocap.estimate.subject.estimate_subject`), estimated once and then read
+    :func:`~meshmocap.estimate.performer.subject.estimate_subject`), estimated once and then read
     from the capture's cache; ``refresh`` estimates again (and replaces the entry)."""
     if estimate is None:
-        from meshmocap.estimate.subject import estimate_subject as estimate
+        from meshmocap.estimate.performer.subject import estimate_subject as estimate
     key = _key("subject", capture_digest(capture), options, code_digest(SUBJECT_CODE))
     folder = cache_folder(capture)
     body, fit = folder / f"subject-{key}.npz", folder / f"subject-{key}-fit.npz"
@@ -217,12 +222,13 @@ def cached_first_pose(
     capture,
     template: Template,
     index: int,
-    find: Callable[[], tuple[np.ndarray, np.ndarray, str]],
+    find: Callable[[], Start],
     *,
     options: dict | None = None,
-) -> tuple[np.ndarray, np.ndarray, str]:
-    """The first pose ``(R, root, how)`` of frame ``index`` of ``capture`` for ``template``
-    (searched with ``options``): ``find()`` once, then read from the capture's cache."""
+) -> Start:
+    """The start (:class:`~meshmocap.io.start.Start`: the first pose and how it was found)
+    of frame ``index`` of ``capture`` for ``template`` (searched with ``options``):
+    ``find()`` once, then read from the capture's cache (the pose bit for bit)."""
     key = _key(
         "first_pose",
         capture_digest(capture),
@@ -235,15 +241,15 @@ def cached_first_pose(
     if path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
-                return z["R"].astype(np.float64), z["root"].astype(np.float64), str(z["how"])
-        except (OSError, ValueError, KeyError):
+                return start_of_json(json.loads(str(z["start"])), str(path))
+        except (OSError, ValueError, KeyError):  # damaged (FormatError is a ValueError)
             pass
     with phase("finding the first pose (once per capture and template)"):
-        R, root, how = find()
+        start = find()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_open(path) as f:
-            np.savez(f, R=R, root=root, how=np.array(how))
+            np.savez(f, start=np.array(json.dumps(start_json(start))))
     except OSError:
         pass
-    return R, root, how
+    return start

@@ -2,20 +2,20 @@
 manifold, with holes) or of point clouds, without cameras.
 
 The body is a point of the bundled shape space (:mod:`meshmocap.body.shape_space`), as for
-a studio capture's silhouettes (:mod:`meshmocap.estimate.subject`); without silhouettes the
-points only bound the body (a hull's phantom volumes widen it), so what is fitted is its
-size, the first of the space's directions (nearly all of its variance), along the scaled
-mean body:
+a studio capture's silhouettes (:mod:`meshmocap.estimate.performer.subject`); without
+silhouettes the points only bound the body (a hull's phantom volumes widen it), so what is
+fitted is its size, the first of the space's directions (nearly all of its variance), along
+the scaled mean body:
 
 1. **Surfaces.** The chosen frames (the first with points, and others evenly spread) are
    observed as the automatic initialisation observes them
-   (:class:`~meshmocap.estimate.observe.ObservedFrame`: points, normals, the solid they
+   (:class:`~meshmocap.estimate.recovery.observe.ObservedFrame`: points, normals, the solid they
    enclose and its signed distance); a closed surface of that solid (Gaussian-smoothed
    occupancy cut by marching cubes) serves the heading search.
 2. **First pose.** The mean body is fitted with its size to the first frame's surface from
-   8 headings (:func:`~meshmocap.estimate.subject.initial_body_pose`), then refined as
+   8 headings (:func:`~meshmocap.estimate.performer.subject.initial_body_pose`), then refined as
    the automatic initialisation refines its candidates, model points held inside the
-   observed solid (:class:`~meshmocap.estimate.fit.PoseFitter` with its signed distance);
+   observed solid (:class:`~meshmocap.estimate.pose.fit.PoseFitter` with its signed distance);
    the other frames start from that pose, moved to their points.
 3. **Size.** In each frame, the size that gives the posed body the height of the points
    (a hull is as tall as the body: phantom volumes widen it, never heighten it), the pose
@@ -36,10 +36,10 @@ from scipy import ndimage
 from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
-from meshmocap.estimate.fit import PoseFit, PoseFitter
-from meshmocap.estimate.init import subsample_points
-from meshmocap.estimate.observe import observed
-from meshmocap.estimate.subject import SubjectEstimate, initial_body_pose
+from meshmocap.estimate.performer.subject import SubjectEstimate, initial_body_pose
+from meshmocap.estimate.pose.first_pose import subsample_points
+from meshmocap.estimate.pose.fit import PoseFit, PoseFitter
+from meshmocap.estimate.recovery.observe import observed
 
 __all__ = ["closed_surface", "fit_body_to_points", "readable_frame"]
 
@@ -64,7 +64,7 @@ def closed_surface(frame) -> tuple[np.ndarray, np.ndarray]:
 
 def _pose_fit(template: Template, obs, R, root, *, seed: int, settle: bool = True) -> PoseFit:
     """The pose of ``template`` on an observed frame from ``(R, root)``: the refinement of
-    the automatic initialisation (:func:`~meshmocap.estimate.init.initial_pose`, step 3),
+    the automatic initialisation (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`, step 3),
     model points held inside the observed solid (its signed distance)."""
     P, N = subsample_points(*obs.points, 5000, seed)
     fitter = PoseFitter(template, P, N, n_model_points=1500, field=obs.field, seed=seed)
@@ -143,7 +143,7 @@ def fit_body_to_points(
     SubjectEstimate
         ``kind`` ``"points"``; ``R``, ``root``: each fitted frame's pose, the first frame's
         first; ``rms``: the first pose's fit score
-        (:meth:`~meshmocap.estimate.fit.PoseFitter.score`), metres.
+        (:meth:`~meshmocap.estimate.pose.fit.PoseFitter.score`), metres.
 
     Raises
     ------

@@ -11,8 +11,8 @@ import trimesh
 
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.estimate.point_subject import fit_body_to_points
-from meshmocap.estimate.tracking_template import frames_kind
+from meshmocap.estimate.performer.point_subject import fit_body_to_points
+from meshmocap.estimate.performer.tracking_template import frames_kind
 from meshmocap.io.capture import Capture, SequenceCapture
 from meshmocap.io.meshes import write_mesh
 from toys import small_walk_capture
@@ -88,7 +88,7 @@ def test_bad_options_are_refused_in_one_line(cap, tmp_path):
 
 
 def test_an_unreadable_frame_is_passed_over(cap, tmp_path):
-    from meshmocap.estimate.point_subject import readable_frame
+    from meshmocap.estimate.performer.point_subject import readable_frame
 
     seq = _write(cap, tmp_path / "clean", "clean")
     (tmp_path / "clean" / "00000.ply").write_bytes(b"ply\nformat ascii 1.0\nend_header\n")

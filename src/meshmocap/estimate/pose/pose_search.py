@@ -1,9 +1,9 @@
 """Many candidate poses scored against one frame at once: the coarse stage of the first
-pose's search (:func:`~meshmocap.estimate.init.initial_pose`) and of a lost limb's
-(:mod:`~meshmocap.estimate.reinit`).
+pose's search (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) and of a lost limb's
+(:mod:`~meshmocap.estimate.recovery.reinit`).
 
 A candidate is a whole pose (local rotations and root position). It is scored by the same
-symmetric clipped distance as :meth:`~meshmocap.estimate.fit.PoseFitter.score`, made cheap
+symmetric clipped distance as :meth:`~meshmocap.estimate.pose.fit.PoseFitter.score`, made cheap
 enough to score tens of thousands of candidates in a few seconds:
 
 * the template is reduced to a few hundred surface points, each carried rigidly by the
@@ -14,8 +14,8 @@ enough to score tens of thousands of candidates in a few seconds:
 * data → model: each of a few hundred observed surface points (farthest-point sampled, so
   hands and feet are in) to its nearest model point.
 
-Both clipped as :data:`~meshmocap.estimate.fit.SCORE_CLIP` and
-:data:`~meshmocap.estimate.fit.OUTSIDE_CLIP`. Metres, world frame Z up.
+Both clipped as :data:`~meshmocap.estimate.pose.fit.SCORE_CLIP` and
+:data:`~meshmocap.estimate.pose.fit.OUTSIDE_CLIP`. Metres, world frame Z up.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.estimate.fit import OUTSIDE_CLIP, SCORE_CLIP
+from meshmocap.estimate.pose.fit import OUTSIDE_CLIP, SCORE_CLIP
 from meshmocap.geometry.camera import Camera, project
 from meshmocap.geometry.distance_field import signed_distance
 from meshmocap.geometry.rotations import so3_exp
@@ -255,7 +255,7 @@ class FrameScorer:
     def shift(self, X: np.ndarray) -> np.ndarray:
         """(C, 3) float64: one ICP step of translation for each candidate's points ``X``
         (C, m, 3): the mean offset from each observed point's nearest model point to it,
-        over the pairs closer than :data:`~meshmocap.estimate.fit.SCORE_CLIP`."""
+        over the pairs closer than :data:`~meshmocap.estimate.pose.fit.SCORE_CLIP`."""
         X = np.asarray(X)
         out = np.zeros((len(X), 3))
         Y = self.Y

@@ -111,7 +111,7 @@ class FitQuality:
     lost : tuple of str, the limbs past a threshold, in :data:`LIMB_PARTS` order
     unseen : dict of limb → float, where known: fraction of the limb, posed as when last
         seen on the tracked trunk, outside the observations (the observations miss it:
-        :class:`~meshmocap.estimate.reinit.Recovery`)
+        :class:`~meshmocap.estimate.recovery.reinit.Recovery`)
     """
 
     outside: dict[str, float]

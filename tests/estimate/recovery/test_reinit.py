@@ -13,9 +13,9 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError
-from meshmocap.estimate import tracking_template as tt
-from meshmocap.estimate.reinit import SEEN_AGAIN
-from meshmocap.estimate.subject import estimate_subject
+from meshmocap.estimate.performer import tracking_template as tt
+from meshmocap.estimate.performer.subject import estimate_subject
+from meshmocap.estimate.recovery.reinit import SEEN_AGAIN, Recovery
 from meshmocap.geometry.carving import distance_grid
 from meshmocap.io.capture import SequenceFrame, open_capture
 from meshmocap.io.meshes import write_mesh
@@ -25,6 +25,7 @@ from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
 from meshmocap.trackers.articulated_icp import ArticulatedICP
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.patch.tracker import PatchTracker
+from toys import observed_frame
 
 
 @pytest.fixture(scope="module")
@@ -124,6 +125,23 @@ def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     )
     assert any("held as last seen" in m or "re-initialised" in m for m in acted.messages)
     assert json.loads((tmp_path / "acted" / "track.json").read_text())["reseat"] is True
+
+
+def test_a_limb_the_observations_miss_is_lost_until_seen_again(walker):
+    t, R, root, posed = walker
+    names = t.eval_skeleton.names
+    arm = np.isin(t.part_labels, [names.index(n) for n in ("left_elbow", "left_wrist")])
+    down = R.copy()
+    down[t.skeleton.index("LeftArm")] = np.eye(3)
+    hanging = t.pose(down, root).V  # where a tracker pulls an arm the observations miss
+    rec = Recovery(t, R, root)
+    assert rec.assess(observed_frame(posed.V, index=0), posed.V).lost == ()
+    for i in (1, 2):  # the observations miss the forearm and hand; the tracked arm hangs
+        q = rec.assess(observed_frame(posed.V[~arm], index=i), hanging)
+        assert "left_arm" in q.lost and "not observed where it was last seen" in q.describe()
+    held = rec.coast_pose()[t.skeleton.index("LeftArm")]
+    assert np.abs(held - R[t.skeleton.index("LeftArm")]).max() < 0.05  # held as last seen
+    assert rec.assess(observed_frame(posed.V, index=3), posed.V).lost == ()  # seen again
 
 
 @pytest.mark.parametrize("tracker", [ArticulatedICP, PatchTracker])

@@ -6,7 +6,7 @@ Two kinds of capture (:func:`subject_kind` tells which, ``kind=`` forces one):
     supersets of the body). The body is a point of the bundled shape space
     (:mod:`meshmocap.body.shape_space`), fitted jointly with a pose per frame to the
     silhouettes of a few frames spread over the capture in different poses
-    (:func:`choose_frames`, :func:`~meshmocap.estimate.shape_fit.fit_shape`). Each frame's
+    (:func:`choose_frames`, :func:`~meshmocap.estimate.performer.shape_fit.fit_shape`). Each frame's
     starting pose is a simple internal one: the mean body fitted with its size to the hull
     mesh from 8 headings (:func:`~meshmocap.body.autorig.fit_skeleton`), the best kept.
     The result is a template in the bundled topology and A-pose rest, so poses, motions
@@ -30,7 +30,7 @@ from meshmocap.body.autorig import fit_skeleton, rig_mesh
 from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshError
-from meshmocap.estimate.shape_fit import fit_shape, silhouette_view
+from meshmocap.estimate.performer.shape_fit import fit_shape, silhouette_view
 from meshmocap.geometry.rotations import so3_exp
 
 __all__ = [

@@ -3,17 +3,19 @@ by its content, the options, the code and (first pose) the template; every track
 capture shares them."""
 
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from meshmocap.apps.demo import drop_hull_meshes
 from meshmocap.body.template import load_template
-from meshmocap.estimate import capture_cache as cc
-from meshmocap.estimate import tracking_template as tt
-from meshmocap.estimate.subject import SubjectEstimate
+from meshmocap.estimate.performer import capture_cache as cc
+from meshmocap.estimate.performer import tracking_template as tt
+from meshmocap.estimate.performer.subject import SubjectEstimate
 from meshmocap.io.capture import open_capture
 from meshmocap.io.results import read_state
+from meshmocap.io.start import Start
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers import driver
 from meshmocap.trackers.registry import make_tracker
@@ -90,6 +92,26 @@ def test_the_first_pose_is_searched_once_for_every_tracker(walk, tmp_path, monke
     assert tracks[0].messages[0].startswith("init auto: ")
     first = [read_state(tmp_path / m, 0)["pose_R"] for m in ("articulated_icp", "patch")]
     np.testing.assert_array_equal(*first)  # the very same pose
-    other = load_template("neutral")  # another template: its own search
-    R, _, how = cc.cached_first_pose(cap, other, 0, lambda: (np.eye(3)[None], np.zeros(3), "x"))
-    assert R.shape == (1, 3, 3) and how == "x"
+    assert tracks[0].start.source == "search" and tracks[0].start.label in tracks[0].messages[0]
+
+
+def test_a_start_is_cached_with_the_capture_bit_for_bit(walk):
+    cap = open_capture(walk)
+    rng = np.random.default_rng(5)
+    s = Start(0, rng.normal(size=(31, 3, 3)), rng.normal(size=3), "search", False, "x@0°")
+    s = replace(s, score=0.01234567890123, key=0.02, runner_up="y@90°", runner_up_key=0.021)
+    found = []
+    t = load_template("neutral")  # a template no other test searches with
+
+    def find():
+        found.append(1)
+        return s
+
+    first = cc.cached_first_pose(cap, t, 0, find, options={"seed": 123})
+    again = cc.cached_first_pose(cap, t, 0, find, options={"seed": 123})
+    assert first is s and len(found) == 1  # found once, then read from the cache
+    assert again.R.tobytes() == s.R.tobytes() and again.root.tobytes() == s.root.tobytes()
+    assert (again.score, again.runner_up, again.margin) == (s.score, s.runner_up, s.margin)
+    assert not again.confident and again.label == "x@0°"
+    cc.cached_first_pose(cap, t, 0, find, options={"seed": 124})  # other options: searched
+    assert len(found) == 2

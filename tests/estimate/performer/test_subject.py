@@ -12,8 +12,8 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError
-from meshmocap.estimate import tracking_template as tt
-from meshmocap.estimate.subject import SubjectEstimate, estimate_subject, subject_kind
+from meshmocap.estimate.performer import tracking_template as tt
+from meshmocap.estimate.performer.subject import SubjectEstimate, estimate_subject, subject_kind
 from meshmocap.io.capture import open_capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import template_label
@@ -122,7 +122,7 @@ def test_track_records_how_the_template_was_chosen(mesh_folder, tmp_path, monkey
 
 
 def test_subject_command(mesh_folder, tmp_path, monkeypatch, capsys):
-    import meshmocap.estimate.subject as su
+    import meshmocap.estimate.performer.subject as su
 
     monkeypatch.setattr(su, "estimate_subject", stub_estimate([]))
     out = tmp_path / "me.npz"

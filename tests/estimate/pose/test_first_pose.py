@@ -1,0 +1,18 @@
+"""The automatic first pose: the global search finds a body anywhere, facing any way."""
+
+import numpy as np
+import pytest
+
+from meshmocap.estimate.pose.first_pose import initial_pose
+from meshmocap.geometry.mesh import vertex_normals
+
+
+@pytest.mark.slow
+def test_first_pose_found_anywhere_facing_any_way(walker):
+    # ~10 s: the whole global search (6 seeds × 8 headings, limbs re-seeded)
+    t, posed = walker[0], walker[3]
+    V = posed.V
+    res = initial_pose(t, V, vertex_normals(V, t.F), keep=2)
+    err = np.linalg.norm(t.pose(res.R, res.root).eval_joints - posed.eval_joints, axis=1)
+    assert err.mean() < 0.015 and err.max() < 0.04  # measured 3.6 mm mean, 9.6 max
+    assert len(res.candidates) == 2 and res.score <= res.candidates[1].score + 1e-12
