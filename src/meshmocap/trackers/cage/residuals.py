@@ -1,5 +1,7 @@
-"""Where the cage tracker's energy looks: the sampled template vertices, the ones the cage
-cannot place, and the hull the model leaves unexplained (cage-manifold-tracking §5.1).
+"""Residuals of the cage tracker's terms (the terms: :mod:`~meshmocap.trackers.cage.terms`):
+where the energy looks (the sampled template vertices, the ones the cage cannot place), the
+hull and silhouettes the model leaves unexplained, and the soft joints between quads
+(cage-manifold-tracking §5.1).
 
 Eq. (4) sums the distance field of the target over the model's vertices. The tracker
 (:mod:`meshmocap.trackers.cage.tracker`) evaluates it on a sample of the template and adds a
@@ -41,7 +43,13 @@ from meshmocap.trackers.cage.kernels import silhouette_residuals
 #: Pixels between views in :class:`SilhouetteCoverage`'s k-d tree (no image is this wide).
 _VIEW_GAP = 1e12
 
-__all__ = ["HullCoverage", "SilhouetteCoverage", "placement_errors", "surface_sample"]
+__all__ = [
+    "Articulation",
+    "HullCoverage",
+    "SilhouetteCoverage",
+    "placement_errors",
+    "surface_sample",
+]
 
 
 def surface_sample(V: np.ndarray, F: np.ndarray, n: int, *, seed: int) -> np.ndarray:
