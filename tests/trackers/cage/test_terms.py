@@ -157,7 +157,7 @@ def test_the_energy_is_the_term_list_and_its_total_the_sum_over_it():
     """A term is on when it is in ``CageOptions.terms``; the list keeps its order, each
     term takes its weight from its option, and a problem's energy is Σ coefficient ×
     value over the list's terms of that problem."""
-    o = CageOptions(variance_weight=2e-5, coverage_weight=0.4, local_damping=1e-4)
+    o = CageOptions(variance_weight=2e-5, coverage_weight=0.4, anchor_weight=1e-4)
     terms = energy_terms(o)
     assert tuple(t.name for t in terms) == ALL_TERMS
     weights = {t.name: t.coefficient for t in terms}

@@ -38,7 +38,7 @@ def energy_terms(o: CageOptions) -> tuple[Term, ...]:
         "variance": lambda: VarianceTerm(o.variance_weight),
         "coverage": lambda: CoverageTerm(o.coverage_weight),
         "silhouette": lambda: SilhouetteTerm(o.silhouette_weight),
-        "anchor": lambda: AnchorTerm(o.local_damping),
+        "anchor": lambda: AnchorTerm(o.anchor_weight),
         "articulation": lambda: ArticulationTerm(o.articulation),
     }
     return tuple(make[name]() for name in o.terms)

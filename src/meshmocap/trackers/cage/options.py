@@ -74,7 +74,7 @@ class CageOptions:
     local_iters : int
         Levenberg–Marquardt iterations of the local adjustment in quad space (Eq. 12; 0:
         none).
-    local_damping : float
+    anchor_weight : float
         Weight of the ``"anchor"`` term: the pull of the local adjustment towards the
         manifold's configuration (half its squared distance, metres and unit axis vectors):
         weak, the adjustment tracks from the previous frame
@@ -161,7 +161,7 @@ class CageOptions:
     space: Space = "latent"
     variance_weight: float = 1e-5
     local_iters: int = 3
-    local_damping: float = 3e-5
+    anchor_weight: float = 3e-5
     articulation: float = 10.0
     off_manifold: float = 4.0
     alternations: int = 3
@@ -194,7 +194,7 @@ class CageOptions:
         "space": Options(get_args(Space)),
         "variance_weight": Interval(Real, 0, None, closed="neither"),
         "local_iters": Interval(Integral, 0, None),
-        "local_damping": Interval(Real, 0, None, closed="neither"),
+        "anchor_weight": Interval(Real, 0, None, closed="neither"),
         "articulation": Interval(Real, 0, None, closed="neither"),
         "off_manifold": Interval(Real, 0, None),
         "alternations": Interval(Integral, 1, None),

@@ -52,7 +52,7 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
 - The local adjustment (Eq. 12) tracks: it starts from whichever fits the frame best
   (data and coverage terms) of the manifold's configuration and the previous frame's
   adjusted quads, still and moved on at their last velocity (each with its own pelvis
-  fit, Eq. 11); a weak pull (``local_damping``) towards the manifold and soft joints
+  fit, Eq. 11); a weak pull (``anchor_weight``) towards the manifold and soft joints
   between consecutive quads (``articulation``) replace the manifold's hold. A manifold
   learned on another subject (CMU 35 for 05's walk or 09's run) sits 0.1 m and more from
   the true quads; held to it, the adjustment restarted from it every frame never got
