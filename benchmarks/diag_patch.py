@@ -41,8 +41,8 @@ from meshmocap.errors import FitError
 from meshmocap.geometry.proximity import point_to_surface
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.patch.energy import Iterate
 from meshmocap.trackers.patch.solver import System
+from meshmocap.trackers.patch.terms import Iterate
 from meshmocap.trackers.patch.tracker import PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

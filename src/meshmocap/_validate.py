@@ -1,10 +1,155 @@
-"""Validation helpers shared by the public functions."""
+"""Validation helpers shared by the public functions.
+
+Options dataclasses state their constraints once, as data, in the spirit of
+scikit-learn's ``utils._param_validation``: a table maps each option to a constraint
+(:class:`Interval`, :class:`Options`, :class:`Boolean`, :class:`Names`, :class:`Strings`,
+or ``None``: the value None is allowed), or to a tuple of them (any one suffices), and
+:func:`check_options` walks the table. Its error is one line that names the options class,
+the option, what it must be and the value found.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from numbers import Integral, Real
+from typing import Any, Literal
 
 from meshmocap.errors import InputError
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A number of type ``kind`` (:class:`numbers.Integral` or :class:`numbers.Real`; bool
+    is neither) between ``low`` and ``high`` (None: unbounded on that side; then the
+    number must be finite there), ``closed`` on the ``"left"``, ``"right"``, ``"both"`` or
+    ``"neither"`` side. NaN never satisfies it; ±inf only as a closed bound."""
+
+    kind: type
+    low: float | None
+    high: float | None
+    closed: Literal["left", "right", "both", "neither"] = "left"
+
+    def __call__(self, value: Any) -> bool:
+        if isinstance(value, bool) or not isinstance(value, self.kind):
+            return False
+        if self.kind is Real and math.isnan(value):
+            return False
+        left, right = self.closed in ("left", "both"), self.closed in ("right", "both")
+        if self.low is None:
+            ok_low = value > -math.inf
+        else:
+            ok_low = value >= self.low if left else value > self.low
+        if self.high is None:
+            ok_high = value < math.inf
+        else:
+            ok_high = value <= self.high if right else value < self.high
+        return bool(ok_low and ok_high)
+
+    def __str__(self) -> str:
+        what = "an integer" if self.kind is Integral else "a number"
+        left, right = self.closed in ("left", "both"), self.closed in ("right", "both")
+        if self.high is None and self.low is not None:
+            return f"{what} {'≥' if left else '>'} {self.low:g}"
+        if self.low is None and self.high is not None:
+            return f"{what} {'≤' if right else '<'} {self.high:g}"
+        if self.low is None:
+            return f"a finite {what.split()[-1]}"
+        return f"{what} in {'[' if left else '('}{self.low:g}, {self.high:g}{']' if right else ')'}"
+
+
+@dataclass(frozen=True)
+class Options:
+    """One of ``choices`` (a Literal's values)."""
+
+    choices: tuple
+
+    def __call__(self, value: Any) -> bool:
+        return isinstance(value, str) and value in self.choices
+
+    def __str__(self) -> str:
+        return f"one of {list(self.choices)}"
+
+
+@dataclass(frozen=True)
+class Boolean:
+    """True or False."""
+
+    def __call__(self, value: Any) -> bool:
+        return isinstance(value, bool)
+
+    def __str__(self) -> str:
+        return "True or False"
+
+
+@dataclass(frozen=True)
+class Names:
+    """A list or tuple of distinct names from ``choices`` that holds every name of
+    ``required``."""
+
+    choices: tuple
+    required: tuple = ()
+
+    def __call__(self, value: Any) -> bool:
+        if not isinstance(value, list | tuple):
+            return False
+        names = list(value)
+        return (
+            all(isinstance(n, str) and n in self.choices for n in names)
+            and len(set(names)) == len(names)
+            and all(r in names for r in self.required)
+        )
+
+    def __str__(self) -> str:
+        held = f" holding {list(self.required)}" if self.required else ""
+        return f"distinct names from {list(self.choices)}{held}"
+
+
+@dataclass(frozen=True)
+class Strings:
+    """A list or tuple of strings (not one string)."""
+
+    what: str = "names"
+
+    def __call__(self, value: Any) -> bool:
+        return isinstance(value, list | tuple) and all(isinstance(v, str) for v in value)
+
+    def __str__(self) -> str:
+        return f"a sequence of {self.what}"
+
+
+#: A table row: a constraint, None (the value None is allowed), or a tuple of them (any).
+Constraint = Interval | Options | Boolean | Names | Strings | None
+
+
+def satisfies(value: Any, constraint: Constraint | tuple) -> bool:
+    """Whether ``value`` satisfies ``constraint`` (a tuple: any one of them)."""
+    if isinstance(constraint, tuple):
+        return any(satisfies(value, c) for c in constraint)
+    return value is None if constraint is None else constraint(value)
+
+
+def describe(constraint: Constraint | tuple) -> str:
+    """What ``constraint`` asks, in words (``a number ≥ 0 or None``)."""
+    if isinstance(constraint, tuple):
+        return " or ".join(describe(c) for c in constraint)
+    return "None" if constraint is None else str(constraint)
+
+
+def check_options(owner: str, options: Any, table: Mapping[str, Constraint | tuple]) -> None:
+    """Check every option of ``options`` (a dataclass instance) that ``table`` names.
+
+    Raises
+    ------
+    InputError
+        One line: ``"{owner}: {option} must be {constraint}, found {value!r}"`` for the
+        first option, in table order, whose value does not satisfy its row.
+    """
+    for name, constraint in table.items():
+        value = getattr(options, name)
+        if not satisfies(value, constraint):
+            raise InputError(f"{owner}: {name} must be {describe(constraint)}, found {value!r}")
 
 
 def check_choice(func: str, name: str, value: object, choices: Sequence[str]) -> None:

@@ -10,7 +10,6 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.articulated import (
     MAX_STEP_ANGLE,
     POINT_MIX,
-    RIDGE,
     add_pose_pull,
     apply_increment,
     articulated_model,
@@ -25,6 +24,7 @@ from meshmocap.body.articulated import (
 )
 from meshmocap.body.template import load_template
 from meshmocap.errors import FitError
+from meshmocap.geometry.levenberg_marquardt import DAMPING
 from meshmocap.geometry.rotations import so3_exp
 
 
@@ -80,7 +80,8 @@ def test_damped_solve_is_marquardt_and_fails_with_fit_error():
     A = rng.normal(size=(6, 6))
     H, g = A @ A.T, rng.normal(size=6)
     x = damped_solve(H, g, damping=0.1)
-    assert np.allclose((H + 0.1 * np.diag(np.diag(H)) + RIDGE * np.eye(6)) @ x, -g, atol=1e-12)
+    eps = DAMPING["articulated"].floor * np.median(np.diag(H))
+    assert np.allclose((H + 0.1 * np.diag(np.diag(H)) + eps * np.eye(6)) @ x, -g, atol=1e-12)
     with pytest.raises(FitError, match="singular normal equations"):
         damped_solve(H, np.full(6, np.nan), damping=0.1)
     with pytest.raises(FitError, match="singular normal equations"):

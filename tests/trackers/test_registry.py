@@ -1,14 +1,27 @@
-"""The registry of methods: every registered variant is a distinct configuration."""
+"""The registry of methods: every registered variant is a distinct configuration, every
+option of every method is checked against its constraint, and ``patch_paper`` minimises
+the paper's energy with the paper's coefficients."""
 
 import dataclasses
+import importlib
 import itertools
 
+import numpy as np
 import pytest
 
+from meshmocap._validate import Boolean, Interval, Names, Options, Strings, describe
 from meshmocap.errors import InputError
-from meshmocap.trackers.patch.energy import energy_terms
+from meshmocap.trackers.patch.energy import energy_terms, paper_terms, total_energy
 from meshmocap.trackers.patch.options import PAPER, PatchOptions
-from meshmocap.trackers.registry import METHODS, PATCH_ABLATIONS, resolved_options
+from meshmocap.trackers.patch.solver import System, normal_pattern
+from meshmocap.trackers.patch.terms import Correspondences, FrameData, Iterate
+from meshmocap.trackers.registry import (
+    METHODS,
+    PATCH_ABLATIONS,
+    make_tracker,
+    method_options,
+    resolved_options,
+)
 
 
 def _configuration(method: str) -> tuple:
@@ -55,3 +68,82 @@ def test_patch_paper_is_eq1_and_the_svm_alone():
 def test_resolved_options_rejects_an_unknown_method():
     with pytest.raises(InputError, match="method must be one of"):
         resolved_options("nope")
+
+
+def _options_class(method: str) -> type:
+    module, _, opts_cls, _ = METHODS[method]
+    return getattr(importlib.import_module(module), opts_cls)
+
+
+def _invalid(constraint):
+    """A value that breaks ``constraint`` (of a tuple: all of them)."""
+    if isinstance(constraint, tuple):
+        return _invalid(next(c for c in constraint if c is not None))
+    if isinstance(constraint, Interval):
+        if constraint.low is not None:
+            left = constraint.closed in ("left", "both")
+            return constraint.low - 1 if left else constraint.low
+        return constraint.high + 1
+    return {Options: "not-an-option", Boolean: "yes", Names: ("not-a-term",), Strings: "abc"}[
+        type(constraint)
+    ]
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_every_option_of_every_method_is_checked_with_a_one_line_error(method):
+    """Each options class states a constraint for every option (a new option without one
+    fails here), and for every option a method takes, an invalid value is refused by
+    ``make_tracker`` in one line that names the method, the option, its constraint and the
+    value found (options a variant fixes cannot be given)."""
+    cls = _options_class(method)
+    table = cls.constraints
+    assert {f.name for f in dataclasses.fields(cls)} == set(table), cls.__name__
+    for option in method_options(method):
+        bad = _invalid(table[option])
+        with pytest.raises(InputError) as info:
+            make_tracker(method, **{option: bad})
+        message = str(info.value)
+        assert "\n" not in message
+        assert f"method {method!r}" in message and f"{cls.__name__}: {option} must be" in message
+        assert describe(table[option]) in message and f"found {bad!r}" in message, message
+
+
+@pytest.fixture(scope="module")
+def patch_iterate(patch_problem):
+    """The shared patch problem (conftest) as the terms' inputs."""
+    m, mom, R, c, X, (patch, v, y, w) = patch_problem
+    corr = Correspondences(patch, v, w, y, np.zeros_like(y))
+    none = np.zeros(0, int)
+    fd = FrameData(m, mom, y, y, [], None, X, none.reshape(0, 2), none, none, none, 0.01, 0.0)
+    Rl = R[m.labels]
+    V = np.einsum("nij,nj->ni", Rl, m.V0 - m.centres0[m.labels]) + c[m.labels]
+    N = np.einsum("nij,nj->ni", Rl, m.N0)
+    return normal_pattern(m, 15), Iterate(fd, R, c, X, V, N, corr)
+
+
+@pytest.mark.parametrize(
+    ("method", "expected"),
+    [("patch_paper", (10.0, 1.0, 1.0)), ("patch", (10.0, 10.0, 100.0))],
+)
+def test_the_paper_row_minimises_the_papers_coefficients(patch_iterate, method, expected):
+    """The coefficient each term of Eq. (1) actually puts in the normal equations and in the
+    total energy: ``patch_paper`` λd : λr : λb = 10 : 1 : 1 (the paper's, §III-C), our
+    ``patch`` 10 : 10 : 100 (its rigidity and bone scales)."""
+    pattern, it = patch_iterate
+    terms = paper_terms(resolved_options(method))
+    values = {}
+    for t, coef in zip(terms, expected, strict=True):
+        sys, unit = System.empty(pattern), System.empty(pattern)
+        values[t.name] = t.add(sys, it)
+        scaled = "scale" in {f.name for f in dataclasses.fields(t)}
+        unit_term = dataclasses.replace(t, weight=1.0, **({"scale": 1.0} if scaled else {}))
+        assert unit_term.add(unit, it) == pytest.approx(values[t.name], rel=1e-12)
+        used = np.linalg.lstsq(unit.g[:, None], sys.g, rcond=None)[0][0]  # sys = coef × unit
+        assert used == pytest.approx(coef, rel=1e-9), t.name
+        np.testing.assert_allclose(
+            sys.D, coef * unit.D, rtol=1e-9, atol=1e-12 * np.abs(sys.D).max()
+        )
+    total = total_energy(terms, values)
+    assert total == pytest.approx(
+        sum(c * values[t.name] for t, c in zip(terms, expected, strict=True)), rel=1e-12
+    )

@@ -11,7 +11,8 @@ automatic rigging (:mod:`meshmocap.body.autorig`) and the shape fit
 (closest pairs both ways, :func:`closest_pairs`; their point-to-plane plus point-to-point
 system, :func:`closest_point_system`; the pull towards a reference pose,
 :func:`add_pose_pull`) and take :func:`articulated_step`: one Levenberg–Marquardt damping
-(:func:`damped_solve`, :data:`DAMPING`, :data:`RIDGE`) and one step limit
+(:func:`damped_solve`, :data:`DAMPING`: the rule of
+:mod:`meshmocap.geometry.levenberg_marquardt`) and one step limit
 (:func:`limit_step`, :data:`MAX_STEP_ANGLE`). Everything is in metres and radians, world
 frame Z up.
 
@@ -42,7 +43,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
-from meshmocap.errors import FitError
+from meshmocap.geometry import levenberg_marquardt as lm
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import cross, so3_exp, so3_log
 
@@ -51,7 +52,6 @@ __all__ = [
     "FIXED_JOINTS",
     "MAX_STEP_ANGLE",
     "POINT_MIX",
-    "RIDGE",
     "ArticulatedModel",
     "Residual",
     "add_pose_pull",
@@ -74,12 +74,10 @@ Residual = Literal["point_to_plane", "point_to_point"]
 #: Largest rotation (radians) of any joint in one Gauss–Newton step: the step is
 #: linearised in the rotations, and a longer one overshoots (:func:`limit_step`).
 MAX_STEP_ANGLE = 0.3
-#: Added to the damped diagonal of every articulated Gauss–Newton system
-#: (:func:`damped_solve`), so that a parameter nothing constrains stays at zero.
-RIDGE = 1e-9
-#: Levenberg–Marquardt damping of the articulated fits (relative to the diagonal,
-#: :func:`damped_solve`); the ICP tracker makes it an option.
-DAMPING = 1e-2
+#: Levenberg–Marquardt λ of the articulated fits (relative to the diagonal,
+#: :func:`damped_solve`; :data:`~meshmocap.geometry.levenberg_marquardt.DAMPING`
+#: ``"articulated"``); the ICP tracker makes it an option.
+DAMPING = lm.DAMPING["articulated"].lam
 #: Weight of the point-to-point pull added to the point-to-plane closest-point residuals
 #: (:func:`closest_point_system`): it holds a body part where its surface is flat.
 POINT_MIX = 0.1
@@ -278,26 +276,17 @@ def add_pose_pull(
 
 
 def damped_solve(H: np.ndarray, g: np.ndarray, *, damping: float) -> np.ndarray:
-    """The Levenberg–Marquardt increment ``x = −(H + damping·diag(H) + RIDGE·I)⁻¹ g``
-    (Marquardt's scaling of the damping by the diagonal; :data:`RIDGE` keeps a parameter
-    that nothing constrains at zero). ``H`` (n, n) and ``g`` (n,) float64 are not changed.
+    """The Levenberg–Marquardt increment ``x`` of ``(H + damping·diag(H) + ε·I) x = −g``
+    (:func:`~meshmocap.geometry.levenberg_marquardt.damped_solve` with the articulated
+    fits' floor ε, which keeps a parameter that nothing constrains at zero). ``H`` (n, n)
+    and ``g`` (n,) float64 are not changed.
 
     Raises
     ------
     FitError
         The system is singular or the increment not finite.
     """
-    A = np.array(H, dtype=np.float64)
-    diag = np.diag_indices(len(A))
-    A[diag] *= 1.0 + damping
-    A[diag] += RIDGE
-    try:
-        x = -np.linalg.solve(A, g)
-    except np.linalg.LinAlgError as exc:
-        raise FitError(f"singular normal equations ({exc})") from None
-    if not np.all(np.isfinite(x)):
-        raise FitError("singular normal equations (non-finite increment)")
-    return x
+    return lm.damped_solve(H, g, lam=damping, floor=lm.DAMPING["articulated"].floor)
 
 
 def articulated_step(

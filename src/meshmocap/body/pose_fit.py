@@ -39,6 +39,7 @@ from meshmocap.body.articulated import (
 )
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
+from meshmocap.geometry.levenberg_marquardt import DAMPING, AdaptiveDamping
 
 __all__ = [
     "PoseFit",
@@ -158,19 +159,18 @@ def _fit_frame(
             cost, H, g = cost + w * c, H + w * h, g + w * gg
         return cost, H, g
 
-    mu = 1e-6
+    mu = AdaptiveDamping(DAMPING["pose_fit"].lam)
     cost, H, g = system(R, root)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
-        delta = damped_solve(H, g, damping=mu)
+        delta = damped_solve(H, g, damping=mu.lam)
         R_new, root_new = apply_increment(sk, R, root, delta)
         new, H_new, g_new = system(R_new, root_new)
-        if new > cost:  # reject, damp more
-            mu *= 10.0
-            if mu > 1e8:
+        if new > cost:  # reject, damp more (or give up)
+            if not mu.rejected():
                 break
             continue
-        mu = max(mu / 10.0, 1e-9)
+        mu.accepted()
         done = cost - new <= tol * max(cost, 1e-30) or np.abs(delta).max() < 1e-7
         R, root, cost, H, g = R_new, root_new, new, H_new, g_new
         if done:

@@ -44,12 +44,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
-from typing import Literal, get_args
+from numbers import Integral, Real
+from typing import ClassVar, Literal, get_args
 
 import numpy as np
 from pykdtree.kdtree import KDTree
 
-from meshmocap._validate import check_choice
+from meshmocap._validate import Boolean, Constraint, Interval, Options, Strings, check_options
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
     ArticulatedModel,
@@ -69,6 +70,7 @@ from meshmocap.body.articulated_system import (
 from meshmocap.body.template import Template
 from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.recovery.observe import frame_points
+from meshmocap.geometry.levenberg_marquardt import DAMPING
 from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
@@ -111,7 +113,8 @@ class ICPOptions:
     lambda_root : float
         Weight (dimensionless) of the squared root displacement from the previous frame's.
     damping : float
-        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
+        Levenberg–Marquardt λ of the Gauss–Newton steps, relative to the diagonal (the rule
+        and its floor: :mod:`meshmocap.geometry.levenberg_marquardt`).
     predict : bool
         Warm-start by constant-velocity extrapolation of the last two poses (else: the last).
     fixed_joints : tuple of str
@@ -133,45 +136,34 @@ class ICPOptions:
     tol: float = 1e-3
     lambda_pose: float = 1e-3
     lambda_root: float = 1e-4
-    damping: float = 1e-3
+    damping: float = DAMPING["icp"].lam
     predict: bool = False
     fixed_joints: tuple[str, ...] = FIXED_JOINTS
     seed: int = 0
 
+    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    constraints: ClassVar[dict[str, Constraint | tuple]] = {
+        "n_model_points": Interval(Integral, 1, None),
+        "max_points": Interval(Integral, 1, None),
+        "correspondences": Options(get_args(Correspondences)),
+        "residual": Options(get_args(Residual)),
+        "data_to_model_weight": Interval(Real, 0, None),
+        "max_distance": Interval(Real, 0, None, closed="neither"),
+        "normal_cos": Interval(Real, -1, 1, closed="left"),
+        "k_neighbours": Interval(Integral, 1, None),
+        "max_iter": Interval(Integral, 1, None),
+        "tol": Interval(Real, 0, None, closed="neither"),
+        "lambda_pose": Interval(Real, 0, None),
+        "lambda_root": Interval(Real, 0, None),
+        "damping": Interval(Real, 0, None),
+        "predict": Boolean(),
+        "fixed_joints": Strings("joint names"),
+        "seed": Interval(Integral, 0, None),
+    }
+
     def __post_init__(self) -> None:
-        name = "ICPOptions"
-        check_choice(name, "correspondences", self.correspondences, get_args(Correspondences))
-        check_choice(name, "residual", self.residual, get_args(Residual))
-        counts = {"n_model_points": 1, "max_points": 1, "k_neighbours": 1, "max_iter": 1, "seed": 0}
-        for key, low in counts.items():
-            v = getattr(self, key)
-            if not isinstance(v, int | np.integer) or isinstance(v, bool) or v < low:
-                raise InputError(f"{name}: {key} must be an integer ≥ {low}, found {v!r}")
-        bounds = {
-            "max_distance": (0, False),
-            "tol": (0, False),
-            "normal_cos": (-1, True),
-            "data_to_model_weight": (0, True),
-            "lambda_pose": (0, True),
-            "lambda_root": (0, True),
-            "damping": (0, True),
-        }
-        for key, (low, closed) in bounds.items():
-            v = getattr(self, key)
-            real = isinstance(v, int | float | np.floating) and not isinstance(v, bool)
-            if not real or not (v >= low if closed else v > low) or not np.isfinite(v):
-                rel = "≥" if closed else ">"
-                raise InputError(f"{name}: {key} must be a finite number {rel} {low}, found {v!r}")
-        if self.normal_cos >= 1:
-            raise InputError(f"{name}: normal_cos must be < 1, found {self.normal_cos}")
-        if not isinstance(self.predict, bool):
-            raise InputError(f"{name}: predict must be True or False, found {self.predict!r}")
-        fixed = self.fixed_joints
-        if isinstance(fixed, str) or not all(isinstance(j, str) for j in fixed):
-            raise InputError(
-                f"{name}: fixed_joints must be a sequence of joint names, found {fixed!r}"
-            )
-        object.__setattr__(self, "fixed_joints", tuple(fixed))
+        check_options("ICPOptions", self, self.constraints)
+        object.__setattr__(self, "fixed_joints", tuple(self.fixed_joints))
 
 
 # ---------------------------------------------------------------------- the tracker

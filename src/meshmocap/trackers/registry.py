@@ -125,6 +125,8 @@ def make_tracker(
         opts = getattr(mod, opts_cls)(**{**options, **fixed})
     except TypeError as exc:
         raise InputError(f"track: {exc}") from None
+    except InputError as exc:  # one line: the method, then the option and its constraint
+        raise InputError(f"track: method {method!r}: {exc}") from None
     if method not in MANIFOLD_METHODS:
         return getattr(mod, cls)(opts)
     from meshmocap.trackers.cage.body import cage_body

@@ -13,11 +13,11 @@ from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.models.gplvm import GPLVM
-from meshmocap.trackers.cage.energy import HullCoverage, SilhouetteCoverage
 from meshmocap.trackers.cage.oqr import build_oqr, configuration_vector, quads_from_pose
 from meshmocap.trackers.cage.quad_frames import pose_jacobian
+from meshmocap.trackers.cage.residuals import HullCoverage, SilhouetteCoverage
 from meshmocap.trackers.cage.surface import GreenSurface, SkinnedSurface
-from meshmocap.trackers.cage.terms import CoverageTerm, DistanceTerm
+from meshmocap.trackers.cage.terms import FrameData, Iterate
 from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, orthonormalised
 
 
@@ -86,9 +86,17 @@ def _silhouette(tr):
     return SilhouetteCoverage([Camera(K, R, t, 320, 240)], [mask], 60, 1.0, seed=0)
 
 
-def _activate(tr, field, *extra):
-    """The point terms of the tracker's problems: the data term (Eq. 4), then ``extra``."""
-    tr._active, tr._memo = (DistanceTerm.from_options(field, tr._data_w, tr.opts), *extra), []
+def _frame(tr, field, hull=None, silhouettes=None):
+    """What the tracker's terms read in a frame: the data term (Eq. 4) on ``field``, and a
+    hull or silhouette coverage term where given."""
+    return FrameData(
+        field=field,
+        point_weights=tr._data_w,
+        noise=tr.gp.Y_scale_**2 / tr.gp.beta_,
+        articulation=tr._articulation,
+        hull=hull,
+        silhouettes=silhouettes,
+    )
 
 
 @pytest.fixture(params=["data", "coverage", "silhouette"])
@@ -100,7 +108,7 @@ def terms(request, tracker):
     tr, field = tracker
     keep = np.ones(len(tr.sample), dtype=bool)
     P = tr.surface.points(tr.local, tr.pelvis_R, tr.pelvis_c)
-    extra: tuple = ()
+    extra: dict = {}
     if request.param == "coverage":
         rng = np.random.default_rng(7)
         H = rng.normal(size=(40, 3))
@@ -108,48 +116,48 @@ def terms(request, tracker):
         term = HullCoverage(H, margin=0.05)
         keep[::3] = False
         assert (term.residuals(P)[0] > 0).sum() >= 5
-        extra = (CoverageTerm(term, 0.3, name="coverage", local=True),)
+        extra = {"hull": term}
     elif request.param == "silhouette":
         term = _silhouette(tr)
         assert (term.residuals(P)[0] > 0).sum() >= 5
-        extra = (CoverageTerm(term, 0.3, name="silhouette", local=True),)
+        extra = {"silhouettes": term}
     tr._set_keep(keep)
-    _activate(tr, field, *extra)
-    yield tr, field
-    tr._active = ()
+    yield tr, _frame(tr, field, **extra)
     tr._set_keep(np.ones(len(tr.sample), dtype=bool))
 
 
 def test_pose_gradient(terms):
-    tr, field = terms
-    _check(tr._pose_problem(field, tr.local), (tr.pelvis_R, tr.pelvis_c), 6, seed=1)
+    tr, fd = terms
+    _check(tr._pose_problem(fd, tr.local), (tr.pelvis_R, tr.pelvis_c), 6, seed=1)
 
 
 def test_latent_shape_gradient_with_the_variance_term(terms):
-    tr, field = terms
-    _check(tr._shape_problem(field), tr.x, tr.x.size, seed=2, h=1e-5)
+    tr, fd = terms
+    _check(tr._shape_problem(fd), tr.x, tr.x.size, seed=2, h=1e-5)
 
 
 @pytest.mark.parametrize("anchored", [False, True])
 def test_local_adjustment_gradient(terms, anchored):
-    tr, field = terms
+    tr, fd = terms
     rng = np.random.default_rng(3)
     y = orthonormalised(tr.local + 0.02 * rng.normal(size=tr.local.size))
     anchor = orthonormalised(y + 0.05 * rng.normal(size=y.size)) if anchored else None
-    _check(tr._local_problem(field, anchor), (y, tr.pelvis_R, tr.pelvis_c), 126, seed=4)
+    _check(tr._local_problem(fd, anchor), (y, tr.pelvis_R, tr.pelvis_c), 126, seed=4)
 
 
 def test_pose_jacobian_is_the_rigid_motion_of_the_points(tracker):
     tr, field = tracker
-    _activate(tr, field)
-    _, g, P = tr._residuals(field, tr.local, tr.pelvis_R, tr.pelvis_c)
+    fd = _frame(tr, field)
+    data = tr.terms[0]  # the distance term (Eq. 4)
+    P = tr.surface.points(tr.local, tr.pelvis_R, tr.pelvis_c)
+    _, g = data.residuals(Iterate(fd, P))
     J = pose_jacobian(P, g, tr.pelvis_c)
     rng = np.random.default_rng(5)
     d, h = rng.normal(size=6), 1e-6
 
     def moved(s):
         R = so3_exp(s * d[:3])
-        return tr._distance(field, (P - tr.pelvis_c) @ R.T + tr.pelvis_c + s * d[3:])[0]
+        return data.residuals(Iterate(fd, (P - tr.pelvis_c) @ R.T + tr.pelvis_c + s * d[3:]))[0]
 
     np.testing.assert_allclose(J.T @ d, (moved(h) - moved(-h)) / (2 * h), rtol=0, atol=1e-7)
 

@@ -7,9 +7,9 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import so3_exp
-from meshmocap.trackers.cage.energy import SilhouetteCoverage
 from meshmocap.trackers.cage.oqr import build_oqr, quads_from_pose
 from meshmocap.trackers.cage.oqr_skinning import QuadSkinning
+from meshmocap.trackers.cage.residuals import SilhouetteCoverage
 
 
 def _views(rng, n_cameras):

@@ -122,17 +122,17 @@ def test_options_are_validated():
         PatchOptions(keep_fraction=0.0)
     with pytest.raises(InputError, match="part_matching must be one of"):
         PatchOptions(part_matching="some")
-    with pytest.raises(InputError, match="lambda_reverse must be ≥ 0, found nan"):
+    with pytest.raises(InputError, match="lambda_reverse must be a number ≥ 0, found nan"):
         PatchOptions(lambda_reverse=float("nan"))
-    with pytest.raises(InputError, match="reverse_cap must be > 0 metres, found 0"):
+    with pytest.raises(InputError, match="reverse_cap must be a number > 0, found 0"):
         PatchOptions(reverse_cap=0)
-    with pytest.raises(InputError, match="reverse_scale must be > 0 metres, found -1"):
+    with pytest.raises(InputError, match="reverse_scale must be a number > 0, found -1"):
         PatchOptions(reverse_scale=-1)
-    with pytest.raises(InputError, match=r"fast_iter_scale must be ≥ 1, found 0\.5"):
+    with pytest.raises(InputError, match=r"fast_iter_scale must be a number ≥ 1, found 0\.5"):
         PatchOptions(fast_iter_scale=0.5)
-    with pytest.raises(InputError, match="fast_motion must be > 0 metres, found 0"):
+    with pytest.raises(InputError, match="fast_motion must be a number > 0, found 0"):
         PatchOptions(fast_motion=0)
-    with pytest.raises(InputError, match="max_iter must be ≥ 1, found 0"):
+    with pytest.raises(InputError, match="max_iter must be an integer ≥ 1, found 0"):
         PatchOptions(max_iter=0)
 
 
@@ -214,8 +214,8 @@ def test_reverse_term_measures_vertex_to_data_distances(walk):
     1e-10 m²; beyond ``reverse_cap`` nothing."""
     from types import SimpleNamespace
 
-    from meshmocap.trackers.patch.energy import Correspondences, Iterate, ReverseTerm
     from meshmocap.trackers.patch.solver import System
+    from meshmocap.trackers.patch.terms import Correspondences, Iterate, ReverseTerm
 
     cap, t = walk
     tracker = PatchTracker(PatchOptions(n_patches=120))

@@ -29,6 +29,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
+    DAMPING,
     FIXED_JOINTS,
     add_pose_pull,
     articulated_model,
@@ -43,6 +44,7 @@ from meshmocap.body.template import Template
 from meshmocap.errors import FitError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.distance_field import DistanceGrid
+from meshmocap.geometry.levenberg_marquardt import DAMPING as RULES
 from meshmocap.geometry.silhouette import silhouette
 
 __all__ = [
@@ -54,7 +56,7 @@ __all__ = [
 
 #: Damping of :func:`pose_of_vertices` (known correspondences: a lighter one than the
 #: closest-point fits' :data:`~meshmocap.body.articulated.DAMPING`).
-VERTEX_DAMPING = 1e-3
+VERTEX_DAMPING = RULES["vertex"].lam
 #: Distances (metres) beyond which :meth:`PoseFitter.score` counts a point as unexplained.
 SCORE_CLIP = 0.15
 #: Distance outside the observed solid (metres) beyond which a model point costs no more.
@@ -158,7 +160,7 @@ class PoseFitter:
         lambda_pose: float | np.ndarray = 1e-4,
         joints: np.ndarray | None = None,
         move_root: bool = True,
-        damping: float = 1e-2,
+        damping: float = DAMPING,
         label: str = "",
     ) -> PoseFit:
         """Fit the pose from ``(R, root)``.

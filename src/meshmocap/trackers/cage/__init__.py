@@ -8,9 +8,11 @@ One method, one folder, read like its paper:
   procedural cage built on the quads and grown until it encloses the template (§3.2);
 * :mod:`~meshmocap.trackers.cage.training_poses` — the poses the manifold learns from;
 * :mod:`~meshmocap.trackers.cage.manifold` — the GPLVM pose manifold (§4);
-* :mod:`~meshmocap.trackers.cage.quad_frames`, :mod:`~meshmocap.trackers.cage.surface`,
-  :mod:`~meshmocap.trackers.cage.energy` — the quads' frames, the deformed surface and the
-  energy (§5);
+* :mod:`~meshmocap.trackers.cage.quad_frames`, :mod:`~meshmocap.trackers.cage.surface` —
+  the quads' frames and the deformed surface;
+* :mod:`~meshmocap.trackers.cage.residuals`, :mod:`~meshmocap.trackers.cage.terms`,
+  :mod:`~meshmocap.trackers.cage.energy` — the energy (§5): residuals, the term objects, the
+  energy assembled from a list of them;
 * :mod:`~meshmocap.trackers.cage.options` and :mod:`~meshmocap.trackers.cage.tracker` —
   :class:`CageTracker`, one frame at a time (§5–6);
 * :mod:`~meshmocap.trackers.cage.transfer` — motion transfer to another body (§7).

@@ -1,7 +1,7 @@
 """Compiled loops (numba) behind the cage tracker's two most frequent evaluations.
 
 * :func:`silhouette_residuals`, behind
-  :meth:`~meshmocap.trackers.cage.energy.SilhouetteCoverage.residuals`: every contour
+  :meth:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage.residuals`: every contour
   sample's nearest projected model point, found in a grid of cells half the outlier cap
   wide around the samples (a sample only looks at the cells within the cap; farther points
   are outliers, which cost nothing), then its residual and gradient, in one pass;
@@ -25,7 +25,7 @@ __all__ = ["quad_skinning_transforms", "silhouette_residuals"]
 @njit(cache=True, nogil=True)
 def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover - compiled
     """Residuals (n,) and directions (n, 3) of the silhouette coverage term (see
-    :meth:`~meshmocap.trackers.cage.energy.SilhouetteCoverage.residuals`) at model points
+    :meth:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage.residuals`) at model points
     ``P`` (n, 3) for views ``R`` (C, 3, 3), ``t`` (C, 3), ``K`` (C, 3, 3) and contour
     samples ``q`` (m, 2) grouped by view (view c's are ``q[ptr[c]:ptr[c + 1]]``); ``margin``
     and ``cap`` (> 0) in pixels. Ties of the nearest point go to the lowest index."""

@@ -4,13 +4,16 @@ identifies its pose manifold in :meth:`~meshmocap.trackers.cage.tracker.CageTrac
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass
-from typing import Literal, get_args
+from numbers import Integral, Real
+from typing import ClassVar, Literal, get_args
 
 import numpy as np
 
-from meshmocap._validate import check_choice
+from meshmocap._validate import Constraint, Interval, Names, Options, check_options
 from meshmocap.errors import InputError
+from meshmocap.geometry.levenberg_marquardt import DAMPING
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage.terms import ALL_TERMS, TermName
 
@@ -55,31 +58,36 @@ class CageOptions:
     Parameters
     ----------
     terms : tuple of {"distance", "variance", "coverage", "silhouette", "anchor", "articulation"}
-        The energy's terms (:mod:`~meshmocap.trackers.cage.terms`): the paper's distance
-        field sum (Eq. 4) and variance regulariser (Eq. 5); the hull and silhouette coverage
-        terms, the local adjustment's pull towards the manifold and its soft joints (ours).
-        Each term's weight is the option of the same role below. ``"distance"`` is needed.
+        The energy's terms (:mod:`~meshmocap.trackers.cage.terms`,
+        :func:`~meshmocap.trackers.cage.energy.energy_terms`): the paper's distance field sum
+        (Eq. 4) and variance regulariser (Eq. 5); the hull and silhouette coverage terms,
+        the local adjustment's pull towards the manifold and its soft joints (ours). A term
+        is on when it is in the list; its weight is the option of the same role below
+        (> 0). ``"distance"`` is needed.
     space : {"latent", "quads"}
         Optimise in the learned latent space (the method) or directly on the quads (the
         ablation of Fig. 5a, which collapses without the manifold).
     variance_weight : float
-        λσ of the variance regulariser (0: the ablation of Fig. 5b), against the mean
-        half squared distance in m² (~1e-4 on a fitted frame).
+        λσ of the variance regulariser (``"variance"``; without it in ``terms``: the
+        ablation of Fig. 5b, ``cage_noreg``), against the mean half squared distance in m²
+        (~1e-4 on a fitted frame).
     local_iters : int
         Levenberg–Marquardt iterations of the local adjustment in quad space (Eq. 12; 0:
         none).
-    local_damping : float
-        Pull of the local adjustment towards the manifold's configuration (weight of half
-        its squared distance, metres and unit axis vectors): weak, the adjustment tracks
-        from the previous frame (:mod:`~meshmocap.trackers.cage.tracker` notes).
+    anchor_weight : float
+        Weight of the ``"anchor"`` term: the pull of the local adjustment towards the
+        manifold's configuration (half its squared distance, metres and unit axis vectors):
+        weak, the adjustment tracks from the previous frame
+        (:mod:`~meshmocap.trackers.cage.tracker` notes).
     off_manifold : float
         A frame is off the manifold when the manifold's configuration fits it (data and
         silhouette terms) more than this many times worse than the best tracked start of the
         local adjustment; there the adjustment is not pulled towards the manifold and runs
         twice ``local_iters`` (0: never; energy ``off_manifold`` of each frame says).
     articulation : float
-        Weight of the local adjustment's soft joints between consecutive quads (half
-        their squared gaps, m²; :class:`~meshmocap.trackers.cage.energy.Articulation`).
+        Weight of the ``"articulation"`` term: the local adjustment's soft joints between
+        consecutive quads (half their squared gaps, m²;
+        :class:`~meshmocap.trackers.cage.residuals.Articulation`).
     alternations, pose_iters, shape_iters : int
         Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
     restarts : int
@@ -107,7 +115,7 @@ class CageOptions:
     max_model_error : float
         Sampled vertices that the cage places farther than this (metres) from their
         skinned position in the first frame's known pose get no data term (Eq. 4): the
-        cage cannot follow them (:mod:`~meshmocap.trackers.cage.energy`); ``inf``: keep
+        cage cannot follow them (:mod:`~meshmocap.trackers.cage.residuals`); ``inf``: keep
         all.
     outside_margin : float
         Distance, metres, outside the hull that the data term tolerates (0: none).
@@ -115,20 +123,20 @@ class CageOptions:
         Distance, metres, outside the hull beyond which a point costs nothing (truncated
         data term: the hull lost that part, a hole carved by a noisy silhouette; 0: none).
     coverage_weight : float
-        λc of the hull coverage term (0: none), against the data term: both are mean half
-        squared distances (m²). Used only in frames without a silhouette term (no cameras
-        or masks, or ``silhouette_weight`` 0): the hull's phantom volumes drag the model
-        (:class:`~meshmocap.trackers.cage.energy.SilhouetteCoverage`).
+        λc of the hull coverage term (``"coverage"``), against the data term: both are mean
+        half squared distances (m²). Used only in frames without a silhouette term (no
+        cameras or masks, or no ``"silhouette"`` in ``terms``): the hull's phantom volumes
+        drag the model (:class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`).
     coverage_margin : float
         Distance, metres, from a hull surface sample to the nearest sampled model point
         that the coverage term tolerates.
     n_coverage : int
         Hull surface samples of the coverage term per frame.
     silhouette_weight : float
-        Weight of the silhouette coverage term
-        (:class:`~meshmocap.trackers.cage.energy.SilhouetteCoverage`; 0: none), in every
-        step where the frame has cameras and silhouettes (as ``coverage_weight``: mean half
-        squared distances, m²).
+        Weight of the silhouette coverage term (``"silhouette"``,
+        :class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`), in every step where
+        the frame has cameras and silhouettes (as ``coverage_weight``: mean half squared
+        distances, m²).
     silhouette_margin : float
         Pixels a silhouette contour sample may lie from the nearest projected model point.
     silhouette_cap : float
@@ -143,7 +151,8 @@ class CageOptions:
         Spacing, metres, of the distance field's grid: the nearest multiple of the hull's
         voxel (:class:`~meshmocap.geometry.distance_field.LazyDistanceGrid` ``stride``).
     damping : float
-        Initial Levenberg–Marquardt damping (relative to the Hessian's diagonal).
+        Initial Levenberg–Marquardt λ, relative to the diagonal (the rule and its floor:
+        :mod:`meshmocap.geometry.levenberg_marquardt`).
     seed : int
         Seeds the choice of the sampled vertices.
     """
@@ -152,7 +161,7 @@ class CageOptions:
     space: Space = "latent"
     variance_weight: float = 1e-5
     local_iters: int = 3
-    local_damping: float = 3e-5
+    anchor_weight: float = 3e-5
     articulation: float = 10.0
     off_manifold: float = 4.0
     alternations: int = 3
@@ -176,45 +185,44 @@ class CageOptions:
     silhouette_clean: float = 0.02
     n_silhouette: int = 200
     field_spacing: float = 0.02
-    damping: float = 1e-3
+    damping: float = DAMPING["cage"].lam
     seed: int = 0
 
+    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    constraints: ClassVar[dict[str, Constraint | tuple]] = {
+        "terms": Names(ALL_TERMS, required=("distance",)),
+        "space": Options(get_args(Space)),
+        "variance_weight": Interval(Real, 0, None, closed="neither"),
+        "local_iters": Interval(Integral, 0, None),
+        "anchor_weight": Interval(Real, 0, None, closed="neither"),
+        "articulation": Interval(Real, 0, None, closed="neither"),
+        "off_manifold": Interval(Real, 0, None),
+        "alternations": Interval(Integral, 1, None),
+        "pose_iters": Interval(Integral, 0, None),
+        "shape_iters": Interval(Integral, 0, None),
+        "restarts": Interval(Integral, 0, None),
+        "inside_weight": Interval(Real, 0, 1, closed="right"),
+        "outside_margin": Interval(Real, 0, None),
+        "outside_cap": Interval(Real, 0, None),
+        "joints": Options(get_args(Joints)),
+        "surface": Options(get_args(Surface)),
+        "body": Options(get_args(Body)),
+        "n_sample": Interval(Integral, 10, None),
+        "max_model_error": Interval(Real, 0, math.inf, closed="right"),
+        "coverage_weight": Interval(Real, 0, None, closed="neither"),
+        "coverage_margin": Interval(Real, 0, None),
+        "n_coverage": Interval(Integral, 1, None),
+        "silhouette_weight": Interval(Real, 0, None, closed="neither"),
+        "silhouette_margin": Interval(Real, 0, None),
+        "silhouette_cap": Interval(Real, 0, None),
+        "silhouette_clean": Interval(Real, 0, 1, closed="left"),
+        "n_silhouette": Interval(Integral, 1, None),
+        "field_spacing": Interval(Real, 0, None, closed="neither"),
+        "damping": Interval(Real, 0, None),
+        "seed": Interval(Integral, 0, None),
+    }
+
     def __post_init__(self) -> None:
-        check_choice("CageOptions", "space", self.space, get_args(Space))
-        check_choice("CageOptions", "joints", self.joints, get_args(Joints))
-        check_choice("CageOptions", "surface", self.surface, get_args(Surface))
-        check_choice("CageOptions", "body", self.body, get_args(Body))
-        terms = tuple(self.terms) if isinstance(self.terms, list | tuple) else (self.terms,)
-        for t in terms:
-            check_choice("CageOptions", "terms", t, ALL_TERMS)
-        if "distance" not in terms or len(set(terms)) != len(terms):
-            raise InputError(
-                f"CageOptions: terms must hold 'distance' and no repeat, found {list(terms)}"
-            )
-        object.__setattr__(self, "terms", tuple(t for t in ALL_TERMS if t in terms))
-        if self.variance_weight < 0 or self.n_sample < 10:
-            raise InputError("CageOptions: variance_weight must be ≥ 0 and n_sample ≥ 10")
-        if not 0 < self.inside_weight <= 1 or self.restarts < 0:
-            raise InputError("CageOptions: inside_weight must lie in (0, 1] and restarts ≥ 0")
-        if not (
-            self.max_model_error > 0
-            and self.coverage_weight >= 0
-            and self.articulation >= 0
-            and self.coverage_margin >= 0
-            and self.n_coverage >= 1
-            and self.field_spacing > 0
-            and self.silhouette_weight >= 0
-            and self.silhouette_margin >= 0
-            and self.n_silhouette >= 1
-            and self.outside_margin >= 0
-            and self.off_manifold >= 0
-            and self.outside_cap >= 0
-            and self.silhouette_cap >= 0
-            and 0 <= self.silhouette_clean < 1
-        ):
-            raise InputError(
-                "CageOptions: max_model_error must be > 0, articulation, coverage_weight, "
-                "coverage_margin, silhouette_weight, silhouette_margin, silhouette_cap, "
-                "outside_margin, outside_cap and off_manifold ≥ 0, silhouette_clean in [0, 1), "
-                "n_coverage and n_silhouette ≥ 1 and field_spacing > 0"
-            )
+        check_options("CageOptions", self, self.constraints)
+        # the list in its canonical order (JSON lists and any order give the same options)
+        object.__setattr__(self, "terms", tuple(t for t in ALL_TERMS if t in self.terms))

@@ -1,32 +1,42 @@
-"""The cage tracker's energy as data: a list of weighted terms (cage-manifold-tracking §5).
+"""The cage tracker's energy terms (cage-manifold-tracking §5): one small frozen dataclass per
+term, all with one interface.
 
-Each term has a name and a weight, adds its value to the energy and its rows to the
-Gauss–Newton system of the problems it takes part in (:mod:`~meshmocap.trackers.cage.tracker`:
-the pose step Eq. (11), the latent shape step Eq. (5)–(6), the local adjustment Eq. (12)).
-Two kinds:
+A term has a ``name`` and a ``weight`` (its :attr:`~Term.coefficient` in the energy);
+:meth:`Term.add` adds its rows, times the coefficient, to one Levenberg–Marquardt
+:class:`System` and returns its value (m², or the log of a variance). The energy is a list of
+them (:mod:`~meshmocap.trackers.cage.energy`): a problem adds every term of the list that
+takes part in it (``stages``) to one system, and its total is the sum over the same terms
+of coefficient × value. The problems (:mod:`~meshmocap.trackers.cage.tracker`): the pelvis
+transform (``"pose"``, Eq. 11), the latent point (``"shape"``, Eq. 5–6), the choice of the
+local adjustment's start (``"start"``) and the local adjustment of the quads (``"local"``,
+Eq. 12).
 
-* **point terms**, functions of the sampled model points ``P`` (n, 3): ``residuals(P)``
-  returns residuals ``r`` and their gradients ``g`` (one row per point, ``½ Σ r²`` the
-  term's energy, weight included); every problem chains them through its own Jacobian of
-  the points. :class:`DistanceTerm` (Eq. 4, the paper's), :class:`CoverageTerm` (hull or
-  silhouette coverage, ours);
-* **configuration terms**, functions of the problem's own parameters:
-  :class:`VarianceTerm` (Eq. 5, the paper's, in the latent step), :class:`AnchorTerm`
+Two kinds of rows:
+
+* **point rows** (:class:`DistanceTerm`, Eq. 4, the paper's; :class:`CoverageTerm` and
+  :class:`SilhouetteTerm`, ours): one residual ``r_i`` and its gradient ``g_i`` with
+  respect to the sampled model point ``P_i``; every problem chains them through its own
+  Jacobian of the points;
+* **parameter rows**, added straight to the problem's gradient and Gauss–Newton matrix:
+  :class:`VarianceTerm` (Eq. 5, the paper's, over the latent point), :class:`AnchorTerm`
   and :class:`ArticulationTerm` (the local adjustment's pull towards the manifold and
-  soft joints, ours).
+  soft joints, ours, over the quads).
 
-A tracker variant is a term list plus options (:data:`PAPER_TERMS`, :data:`ALL_TERMS`,
-``CageOptions.terms``). Frames and units: world frame (Z up), metres; energies in m².
+What the terms read: :class:`FrameData` (fixed over a frame) and :class:`Iterate` (one
+problem's linearisation point). Frames and units: world frame (Z up), metres; energies in
+m².
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal, Protocol
 
 import numpy as np
 
 from meshmocap.geometry.rotations import skew
-from meshmocap.trackers.cage.energy import Articulation
+from meshmocap.trackers.cage.residuals import Articulation, HullCoverage, SilhouetteCoverage
 
 __all__ = [
     "ALL_TERMS",
@@ -35,6 +45,12 @@ __all__ = [
     "ArticulationTerm",
     "CoverageTerm",
     "DistanceTerm",
+    "FrameData",
+    "Iterate",
+    "SilhouetteTerm",
+    "Stage",
+    "System",
+    "Term",
     "TermName",
     "VarianceTerm",
 ]
@@ -42,7 +58,7 @@ __all__ = [
 TermName = Literal["distance", "variance", "coverage", "silhouette", "anchor", "articulation"]
 #: The paper's energy: the distance-field sum (Eq. 4) and the variance regulariser (Eq. 5).
 PAPER_TERMS: tuple[TermName, ...] = ("distance", "variance")
-#: Every term (the default tracker).
+#: Every term (the default tracker), in the order of the energy's list.
 ALL_TERMS: tuple[TermName, ...] = (
     "distance",
     "variance",
@@ -51,129 +67,307 @@ ALL_TERMS: tuple[TermName, ...] = (
     "anchor",
     "articulation",
 )
+#: The problems a term may take part in (module docstring).
+Stage = Literal["pose", "shape", "start", "local"]
+#: Points closer than this (metres, every coordinate) are the same points
+#: (:meth:`FrameData.point_rows`).
+SAME_POINTS = 1e-12
+#: Point rows kept per frame for reuse (:meth:`FrameData.point_rows`): the stages hand
+#: over the same points (the last pose step's to the first shape step, and so on).
+MEMO = 8
 
 
-class DistanceTerm:
-    """Eq. (4): ``½ Σ_i w_i d_DF(P_i)²`` over the sampled points (squared, signed; points
-    inside the hull weighted by ``inside_weight``, outside ones from ``outside_margin`` on
-    and up to ``outside_cap``: the tracker's module notes). ``point_weights`` (n,) are
-    ``√(w_i / kept)``, 0 for points left out."""
+@dataclass(eq=False)
+class FrameData:
+    """What the terms read that stays fixed over one frame.
 
-    name = "distance"
-    weight = 1.0
+    Attributes
+    ----------
+    field : the frame's distance field (``value_and_gradient(P)``, signed, metres:
+        :class:`~meshmocap.trackers.cage.field.HullDistanceField`)
+    point_weights : (n,) float64, ``√(1 / kept)`` for the sampled vertices in the data term,
+        0 for those left out
+    noise : float, the manifold's noise variance (the floor of σ², Eq. 5)
+    articulation : Articulation, the soft joints between consecutive quads
+    hull : HullCoverage or None, this frame's hull surface samples (``"coverage"``)
+    silhouettes : SilhouetteCoverage or None, this frame's contour samples (``"silhouette"``)
+    """
 
-    def __init__(self, field, point_weights, *, inside_weight, outside_margin, outside_cap):
-        self.field, self.w = field, point_weights
-        self.inside = np.sqrt(inside_weight)
-        self.margin, self.cap = outside_margin, outside_cap
+    field: object
+    point_weights: np.ndarray
+    noise: float
+    articulation: Articulation
+    hull: HullCoverage | None = None
+    silhouettes: SilhouetteCoverage | None = None
+    _memo: list = field(default_factory=list, repr=False)
+
+    def point_rows(
+        self, name: str, P: np.ndarray, sub: slice, compute: Callable[[], tuple]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``compute()`` (a term's residuals and gradients at the points ``P``, the sampled
+        vertices ``sub``), or its result for the same term, subset and points (to
+        :data:`SAME_POINTS`) if one of the last :data:`MEMO` calls of the frame had it."""
+        key = (name, str(sub))
+        for k, Q, out in self._memo:
+            if (
+                k == key
+                and abs(Q[0, 0] - P[0, 0]) < SAME_POINTS
+                and np.abs(Q - P).max() < SAME_POINTS
+            ):
+                return out
+        out = compute()
+        self._memo = [(key, P, out), *self._memo[: MEMO - 1]]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Iterate:
+    """One problem's linearisation point.
+
+    Attributes
+    ----------
+    frame : FrameData
+    P : (n, 3) float64, the sampled model points (the sampled vertices ``sub``), metres
+    sub : slice, which sampled vertices ``P`` holds (all, or a subset ranking candidates)
+    var : float or None, the latent point's predictive variance (Eq. 9), shape problem
+    dvar : (q,) float64 or None, its gradient with respect to the latent point
+    y : (9 · 20,) float64 or None, the quads' configuration (local adjustment)
+    anchor : (9 · 20,) float64 or None, the manifold's configuration ``y`` is pulled to
+    quads : tuple of (21, 3) centres and (21, 3, 3) rotations, pelvis-relative, or None:
+        where the soft joints hold
+    """
+
+    frame: FrameData
+    P: np.ndarray
+    sub: slice = field(default_factory=lambda: slice(None))
+    var: float | None = None
+    dvar: np.ndarray | None = None
+    y: np.ndarray | None = None
+    anchor: np.ndarray | None = None
+    quads: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass(eq=False)
+class System:
+    """The rows of one problem's Levenberg–Marquardt linearisation.
+
+    Attributes
+    ----------
+    grad : (n,) float64 and H : (n, n) float64
+        Gradient and Gauss–Newton matrix of the parameter rows over the problem's ``n``
+        parameters (the local adjustment: 6 per quad 1…20, then the pelvis's 6).
+    r, g : lists of (m,) and (m, 3) float64
+        Point rows, one block per point term (coefficients included): ``½ Σ r²`` is their
+        energy, ``g`` the gradients with respect to the points.
+    """
+
+    grad: np.ndarray
+    H: np.ndarray
+    r: list = field(default_factory=list)
+    g: list = field(default_factory=list)
 
     @classmethod
-    def from_options(cls, field, point_weights, opts) -> DistanceTerm:
-        """The term with a :class:`~meshmocap.trackers.cage.options.CageOptions`' settings."""
-        return cls(
-            field,
-            point_weights,
-            inside_weight=opts.inside_weight,
-            outside_margin=opts.outside_margin,
-            outside_cap=opts.outside_cap,
-        )
+    def empty(cls, n: int) -> System:
+        """No rows, over ``n`` parameters."""
+        return cls(np.zeros(n), np.zeros((n, n)))
 
-    def residuals(self, P: np.ndarray, sub=slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (n,) and point gradients (n, 3) at ``P``, the sampled points ``sub``."""
-        r, g = self.field.value_and_gradient(P)
-        if self.margin:  # outside: only beyond the margin
-            r = np.where(r > 0, np.maximum(r - self.margin, 0.0), r)
-        if self.cap:  # farther outside: the hull lost that part (a carved hole): no pull
-            far = r > self.cap
+    def add_points(self, r: np.ndarray, g: np.ndarray) -> None:
+        """Add a block of point rows ``r`` (m,) and gradients ``g`` (m, 3)."""
+        self.r.append(r)
+        self.g.append(g)
+
+    def point_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every point row, blocks in the order of the terms: ``r`` (k m,), ``g`` (k m, 3)."""
+        if len(self.r) == 1:
+            return self.r[0], self.g[0]
+        return np.concatenate(self.r), np.concatenate(self.g)
+
+
+class Term(Protocol):
+    """One term of the energy.
+
+    Attributes
+    ----------
+    name : str, its key in the term list (``CageOptions.terms``) and a frame's energies
+    weight : float, its coefficient in the energy
+    stages : tuple of Stage (class constant), the problems it takes part in
+    """
+
+    name: ClassVar[str]
+    stages: ClassVar[tuple[Stage, ...]]
+    weight: float
+
+    @property
+    def coefficient(self) -> float:
+        """The factor on :meth:`add`'s value in the total energy (``weight``)."""
+        ...
+
+    def add(self, sys: System, it: Iterate) -> float:
+        """Add ``coefficient · value``'s rows to ``sys`` and return the value at ``it``."""
+        ...
+
+
+class _Weighted:
+    """Mixin: :attr:`Term.coefficient` is ``weight``."""
+
+    weight: float
+
+    @property
+    def coefficient(self) -> float:
+        return self.weight
+
+
+# Eq. (4): E_d = ½ Σ_i w_i d_DF(M_i(x, Γ))² / kept over the sampled model points
+@dataclass(frozen=True)
+class DistanceTerm(_Weighted):
+    """Eq. (4): the distance field of the hull at the sampled points, squared and signed
+    (points inside the hull weighted by ``inside_weight``, outside ones counted from
+    ``outside_margin`` on and up to ``outside_cap``: the tracker's module notes), over the
+    points in the data term (:attr:`FrameData.point_weights`). Value: ``½ Σ w_i r_i²``, m²;
+    its weight is the energy's unit (Eq. 4 has no λ)."""
+
+    name: ClassVar[str] = "distance"
+    stages: ClassVar[tuple[Stage, ...]] = ("pose", "shape", "start", "local")
+    weight: ClassVar[float] = 1.0
+    inside_weight: float = 0.05
+    outside_margin: float = 0.0
+    outside_cap: float = 0.0
+
+    def residuals(self, it: Iterate) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (n,) and point gradients (n, 3) at ``it.P``, point weights included."""
+        r, g = it.frame.field.value_and_gradient(it.P)
+        if self.outside_margin:  # outside: only beyond the margin
+            r = np.where(r > 0, np.maximum(r - self.outside_margin, 0.0), r)
+        if self.outside_cap:  # farther outside: the hull lost that part (a hole): no pull
+            far = r > self.outside_cap
             r, g = np.where(far, 0.0, r), np.where(far[:, None], 0.0, g)
-        w = np.where(r < 0, self.inside, 1.0) * self.w[sub]
+        w = np.where(r < 0, np.sqrt(self.inside_weight), 1.0) * it.frame.point_weights[it.sub]
         return r * w, g * w[:, None]
 
-
-class CoverageTerm:
-    """The share of each model point in a coverage term (``HullCoverage`` or
-    ``SilhouetteCoverage`` of :mod:`~meshmocap.trackers.cage.energy`), weighted:
-    ``weight / m · ½ Σ_m ρ_m²`` over its ``m`` samples. ``local``: also in the local
-    adjustment (silhouettes; the hull's phantom volumes would drag free quads)."""
-
-    def __init__(self, coverage, weight: float, *, name: str, local: bool) -> None:
-        self.coverage, self.weight, self.name, self.local = coverage, float(weight), name, local
-        self._s = np.sqrt(self.weight / len(coverage))
-
-    def residuals(self, P: np.ndarray, sub=slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        r, a = self.coverage.residuals(P)
-        return self._s * r, self._s * a
-
-    def mean_squared(self, P: np.ndarray) -> float:
-        """Mean ρ² over the samples at ``P``, m² (the frame's reported value)."""
-        return float(np.sum(self.coverage.residuals(P)[0] ** 2)) / len(self.coverage)
+    def add(self, sys: System, it: Iterate) -> float:
+        r, g = it.frame.point_rows(self.name, it.P, it.sub, lambda: self.residuals(it))
+        sys.add_points(r, g)
+        return 0.5 * float(r @ r)
 
 
-class VarianceTerm:
-    """Eq. (5): ``λσ log σ²(x)`` of the latent point (sign and noise floor: the tracker's
-    module notes), σ² the GPLVM's predictive variance plus its noise variance."""
+class _Coverage(_Weighted):
+    """Mixin of the coverage terms: ``½ Σ_m ρ_m² / m`` over the ``m`` samples of this
+    frame's coverage (:meth:`coverage`), as point rows ``√(λ / m) r_i`` (the samples whose
+    nearest model point is ``i``: :meth:`HullCoverage.residuals`); nothing where the frame
+    has none."""
 
-    name = "variance"
+    name: ClassVar[str]
 
-    def __init__(self, weight: float, noise: float) -> None:
-        self.weight, self.noise = float(weight), float(noise)
+    def coverage(self, frame: FrameData) -> HullCoverage | SilhouetteCoverage | None:
+        raise NotImplementedError
 
-    def variance(self, var: float) -> float:
-        return max(var, 0.0) + self.noise
-
-    def value(self, var: float) -> float:
-        """The term at predictive variance ``var`` (before the noise floor)."""
-        return self.weight * np.log(self.variance(var))
-
-    def rows(self, var: float, dvar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Gradient (q,) and Gauss–Newton Hessian (q, q) at σ² ``var`` (floored), ``dvar``
-        Eq. (10): ``d log σ² = dσ² / σ²``."""
-        return self.weight * dvar / var, self.weight * np.outer(dvar, dvar) / var**2
+    def add(self, sys: System, it: Iterate) -> float:
+        cov = self.coverage(it.frame)
+        if cov is None or not len(cov):
+            return 0.0
+        r, a = it.frame.point_rows(self.name, it.P, it.sub, lambda: cov.residuals(it.P))
+        s = np.sqrt(self.coefficient / len(cov))
+        sys.add_points(s * r, s * a)
+        return 0.5 * float(r @ r) / len(cov)
 
 
-class AnchorTerm:
-    """``½ w Σ (ỹ − anchor)²``: the local adjustment's pull towards the manifold's
-    configuration (metres and unit axis vectors), along each quad's ``(dc, ω)``."""
+# ours: E_c = ½ Σ_m max(0, d_m − margin)² / m over hull surface samples h_m
+@dataclass(frozen=True)
+class CoverageTerm(_Coverage):
+    """Hull coverage (:class:`~meshmocap.trackers.cage.residuals.HullCoverage`): every hull
+    surface sample wants a model point within ``margin``. Not in the local adjustment: quads
+    free of the manifold would follow it into the hull's phantom volumes."""
 
-    name = "anchor"
+    name: ClassVar[str] = "coverage"
+    stages: ClassVar[tuple[Stage, ...]] = ("pose", "shape", "start")
+    weight: float = 0.3
 
-    def __init__(self, weight: float) -> None:
-        self.weight = float(weight)
+    def coverage(self, frame: FrameData) -> HullCoverage | None:
+        return frame.hull
 
-    def value(self, y: np.ndarray, anchor: np.ndarray) -> float:
-        e = y - anchor
-        return 0.5 * self.weight * float(np.sum(e * e))
 
-    def add_rows(self, grad, H, y: np.ndarray, anchor: np.ndarray) -> None:
-        """Add to the local adjustment's ``grad`` and ``H`` (quads first, 6 per quad):
-        ``dỹ/d(dc, ω) = [I; −[u]×; −[v]×]`` per quad."""
-        w = self.weight
-        Y, E = y.reshape(-1, 3, 3), (y - anchor).reshape(-1, 3, 3)
+# ours: E_s = ½ Σ_m (z/f · max(0, d_m − margin))² / m over silhouette contour samples
+@dataclass(frozen=True)
+class SilhouetteTerm(_Coverage):
+    """Silhouette coverage (:class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`):
+    every contour pixel wants a model point projecting within ``margin`` pixels; in every
+    problem (the silhouettes hold no phantom volume)."""
+
+    name: ClassVar[str] = "silhouette"
+    stages: ClassVar[tuple[Stage, ...]] = ("pose", "shape", "start", "local")
+    weight: float = 0.3
+
+    def coverage(self, frame: FrameData) -> SilhouetteCoverage | None:
+        return frame.silhouettes
+
+
+# Eq. (5): E_σ = λσ log σ²(x), σ² = Eq. (9) + the manifold's noise variance (sign: the
+# tracker's module notes)
+@dataclass(frozen=True)
+class VarianceTerm(_Weighted):
+    """Eq. (5): the log of the latent point's predictive variance. Value: ``log σ²``; rows
+    (where ``it.dvar`` is given) by Eq. (10) in ``d log σ² = dσ² / σ²``, Gauss–Newton
+    ``dσ² dσ²ᵀ / σ⁴``."""
+
+    name: ClassVar[str] = "variance"
+    stages: ClassVar[tuple[Stage, ...]] = ("shape",)
+    weight: float = 1e-5
+
+    def add(self, sys: System, it: Iterate) -> float:
+        if it.var is None:
+            return 0.0
+        var = max(it.var, 0.0) + it.frame.noise
+        if it.dvar is not None:
+            c = self.coefficient
+            sys.grad += c * it.dvar / var
+            sys.H += c * np.outer(it.dvar, it.dvar) / var**2
+        return float(np.log(var))
+
+
+# ours: E_a = ½ Σ (ỹ − ȳ)² (ȳ: the manifold's configuration; metres and unit axis vectors)
+@dataclass(frozen=True)
+class AnchorTerm(_Weighted):
+    """The local adjustment's pull towards the manifold's configuration ``it.anchor``,
+    along each quad's ``(dc, ω)``: ``dỹ/d(dc, ω) = [I; −[u]×; −[v]×]`` per quad. Nothing
+    where ``it.anchor`` is None (off the manifold, or no manifold)."""
+
+    name: ClassVar[str] = "anchor"
+    stages: ClassVar[tuple[Stage, ...]] = ("local",)
+    weight: float = 3e-5
+
+    def add(self, sys: System, it: Iterate) -> float:
+        if it.anchor is None:
+            return 0.0
+        w = self.coefficient
+        y = it.y
+        Y, E = y.reshape(-1, 3, 3), (y - it.anchor).reshape(-1, 3, 3)
         nq = len(Y)
         Hq = np.zeros((nq, 6, 6))
         Hq[:, :3, :3] = np.eye(3)
         Hq[:, 3:, 3:] = sum(skew(Y[:, i]).transpose(0, 2, 1) @ skew(Y[:, i]) for i in (1, 2))
         gq = np.concatenate([E[:, 0], sum(np.cross(Y[:, i], E[:, i]) for i in (1, 2))], axis=1)
         idx = np.arange(6 * nq).reshape(nq, 6)
-        H[idx[:, :, None], idx[:, None, :]] += w * Hq
-        grad[: 6 * nq] += w * gq.ravel()
+        sys.H[idx[:, :, None], idx[:, None, :]] += w * Hq
+        sys.grad[: 6 * nq] += w * gq.ravel()
+        return 0.5 * float(np.sum(E * E))
 
 
-class ArticulationTerm:
-    """``½ w Σ a²``: soft joints between consecutive quads (:class:`Articulation`)."""
+# ours: E_j = ½ Σ_q ‖e_q‖² soft joints between consecutive quads (Articulation)
+@dataclass(frozen=True)
+class ArticulationTerm(_Weighted):
+    """Soft joints between consecutive quads
+    (:class:`~meshmocap.trackers.cage.residuals.Articulation`) at ``it.quads``; rows over
+    the quads' ``(dc, ω)`` (6 per quad 1…20). Nothing where ``it.quads`` is None."""
 
-    name = "articulation"
+    name: ClassVar[str] = "articulation"
+    stages: ClassVar[tuple[Stage, ...]] = ("local",)
+    weight: float = 10.0
 
-    def __init__(self, articulation: Articulation, weight: float) -> None:
-        self.articulation, self.weight = articulation, float(weight)
-
-    def value(self, c: np.ndarray, R: np.ndarray) -> float:
-        a = self.articulation.residuals(c, R)
-        return 0.5 * self.weight * float(a @ a)
-
-    def add_rows(self, grad, H, c: np.ndarray, R: np.ndarray) -> None:
-        """Add ``w JᵀJ`` and ``w Jᵀa`` to the quads' block (6 per quad 1…20)."""
-        a, Ja = self.articulation.residuals(c, R, jacobian=True)
+    def add(self, sys: System, it: Iterate) -> float:
+        if it.quads is None:
+            return 0.0
+        a, Ja = it.frame.articulation.residuals(*it.quads, jacobian=True)
         k = Ja.shape[1]
-        H[:k, :k] += self.weight * Ja.T @ Ja
-        grad[:k] += self.weight * Ja.T @ a
+        sys.H[:k, :k] += self.coefficient * Ja.T @ Ja
+        sys.grad[:k] += self.coefficient * Ja.T @ a
+        return 0.5 * float(a @ a)

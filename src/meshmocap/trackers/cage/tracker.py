@@ -52,7 +52,7 @@ Choices where the paper is silent or ambiguous (each stated where it is coded):
 - The local adjustment (Eq. 12) tracks: it starts from whichever fits the frame best
   (data and coverage terms) of the manifold's configuration and the previous frame's
   adjusted quads, still and moved on at their last velocity (each with its own pelvis
-  fit, Eq. 11); a weak pull (``local_damping``) towards the manifold and soft joints
+  fit, Eq. 11); a weak pull (``anchor_weight``) towards the manifold and soft joints
   between consecutive quads (``articulation``) replace the manifold's hold. A manifold
   learned on another subject (CMU 35 for 05's walk or 09's run) sits 0.1 m and more from
   the true quads; held to it, the adjustment restarted from it every frame never got
@@ -83,18 +83,13 @@ from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.estimate.recovery.observe import frame_hull
 from meshmocap.geometry.green import GreenDeformer
+from meshmocap.geometry.levenberg_marquardt import DAMPING, AdaptiveDamping, damped_solve
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage.body import cage_body
-from meshmocap.trackers.cage.energy import (
-    Articulation,
-    HullCoverage,
-    SilhouetteCoverage,
-    placement_errors,
-    surface_sample,
-)
+from meshmocap.trackers.cage.energy import assemble, energy_terms, stage_terms, total_energy
 from meshmocap.trackers.cage.field import HullDistanceField
 from meshmocap.trackers.cage.manifold import learn_manifold
 from meshmocap.trackers.cage.options import CageOptions, Joints, Space, manifold_digest
@@ -115,14 +110,15 @@ from meshmocap.trackers.cage.quad_frames import (
     pose_jacobian,
     rig,
 )
-from meshmocap.trackers.cage.surface import GreenSurface, SkinnedSurface
-from meshmocap.trackers.cage.terms import (
-    AnchorTerm,
-    ArticulationTerm,
-    CoverageTerm,
-    DistanceTerm,
-    VarianceTerm,
+from meshmocap.trackers.cage.residuals import (
+    Articulation,
+    HullCoverage,
+    SilhouetteCoverage,
+    placement_errors,
+    surface_sample,
 )
+from meshmocap.trackers.cage.surface import GreenSurface, SkinnedSurface
+from meshmocap.trackers.cage.terms import FrameData, Iterate, System
 
 __all__ = ["STAGES", "CageOptions", "CageTracker", "Joints", "Space", "learn_manifold"]
 #: Stages of :attr:`CageTracker.stage_seconds`.
@@ -133,10 +129,11 @@ _MAX_STEP = 1.0  # no step moves a parameter by more (metres, radians, latent un
 _CONVERGED = 1e-4  # stop when a step promises less than this relative energy decrease
 _TINY = 1e-9  # ... or than this (m²: ½ mean r² of a fitted frame is ~3e-5)
 _LM_KEYS = (0, 1, 2, None)  # _lm's problems: pose, shape, re-posed starts, local
-_SAME, _MEMO = 1e-12, 4  # metres, entries: _distance's results reused for the same points
 _SUB = slice(None, None, 4)  # sampled vertices that rank the latent restarts
 _JOINT_GAP = 0.005  # metres: soft-joint gaps this small count as closed (Articulation)
 _RETRIES = 4  # Levenberg–Marquardt: at most this many λ × 10 retries of a step
+#: The floor of the damped solves (:mod:`meshmocap.geometry.levenberg_marquardt`).
+_FLOOR = DAMPING["cage"].floor
 
 
 class CageTracker:
@@ -187,22 +184,14 @@ class CageTracker:
         surface = SkinnedSurface if o.surface == "skinned" else GreenSurface
         self.surface = surface(self.oqr, template, self.sample)
         self._set_keep(self.surface.fitted)
-        self._active: tuple = ()  # the point terms of this stage (DistanceTerm first)
-        self._memo: list = []  # _distance's last results
+        self.terms = energy_terms(o)  # the energy: a list of terms (CageOptions.terms)
+        self._stages = {s: stage_terms(self.terms, s) for s in ("pose", "shape", "start", "local")}
         q, sk = self.oqr.quads, self.body.skeleton
         self._articulation = Articulation(
             q.centres, q.rotations, q.joint_indices, sk.rest_positions, sk.parents
         )
         c, R = configuration_from_vector(self.gp.Y_ * self.gp.Y_scale_ + self.gp.Y_mean_)
         self._articulation.calibrate(c, R, _JOINT_GAP)  # pairs the training poses hold
-        # the configuration terms of this variant (CageOptions.terms), None where left out
-        on = set(o.terms)
-        noise = self.gp.Y_scale_**2 / self.gp.beta_  # the manifold's noise variance
-        self._variance = VarianceTerm(o.variance_weight, noise) if "variance" in on else None
-        self._anchor = AnchorTerm(o.local_damping) if "anchor" in on else None
-        self._joints_term = (
-            ArticulationTerm(self._articulation, o.articulation) if "articulation" in on else None
-        )
         self.joint_deformer: GreenDeformer | None = None
         # joints="quads": the quad following each evaluation joint's rig joint, and the
         # joint in that quad's frame (constant: quads follow their joints rigidly)
@@ -318,36 +307,14 @@ class CageTracker:
         :func:`~meshmocap.trackers.cage.quad_frames.rig`."""
         return rig(y, Rp, cp, self.oqr.vertex_quad, self.oqr.vertex_local, derivatives)
 
-    def _residuals(self, field, y, Rp, cp):
-        """:meth:`_distance` at the sampled template vertices of configuration ``y`` with
-        the pelvis at ``Rp, cp``, and the points."""
-        P = self.surface.points(y, Rp, cp)
-        return (*self._distance(field, P), P)
-
-    def _distance(self, field, P, sub=slice(None)):
-        """Residuals (s n,) of the distance terms at the points ``P`` (n, 3), scaled so that
-        the terms are ½ Σ r², and their gradients (s n, 3) with respect to the points: the
-        data term √(w_i / kept) d_DF(P_i) (Eq. 4; w_i: module notes) then, with a coverage
-        term this frame (s = 2), each point's share √(λc / m) r_i of it
-        (:meth:`~meshmocap.trackers.cage.energy.HullCoverage.residuals`). ``sub``: the
-        sampled vertices ``P`` holds, when not all (comparing candidates). The last few
-        results are kept: the stages hand over the same points (to rounding)."""
-        key = (tuple(id(t) for t in self._active), str(sub))  # emptied each frame
-        for k, Q, out in self._memo:
-            if k == key and abs(Q[0, 0] - P[0, 0]) < _SAME and np.abs(Q - P).max() < _SAME:
-                return out
-        parts = [t.residuals(P, sub) for t in self._active]
-        out = parts[0] if len(parts) == 1 else tuple(map(np.concatenate, zip(*parts, strict=True)))
-        self._memo = [(key, P, out), *self._memo[: _MEMO - 1]]
-        return out
-
-    def _coverage_terms(self, frame, field) -> list[CoverageTerm]:
-        """This frame's coverage terms (:class:`~meshmocap.trackers.cage.terms.CoverageTerm`):
-        the silhouettes' (in every step) where the frame has cameras and masks and the
-        variant has a ``"silhouette"`` term, else the hull's (``"coverage"``: pose and shape
-        steps only); samples seeded by the frame (the same on a resumed run)."""
-        o, out, on = self.opts, [], set(self.opts.terms)
-        if o.silhouette_weight > 0 and "silhouette" in on:
+    def _frame_data(self, frame: CaptureFrame, field: HullDistanceField) -> FrameData:
+        """What the terms read this frame: the distance field, the data term's point weights
+        and, where the term list has them, the coverage samples: the silhouettes' where the
+        frame has cameras and masks and the list a ``"silhouette"`` term, else the hull's
+        (``"coverage"``); samples seeded by the frame (the same on a resumed run)."""
+        o, on = self.opts, set(self.opts.terms)
+        sil = hull = None
+        if "silhouette" in on:
             try:
                 cams, masks = frame.cameras, frame.silhouettes
             except (MeshmocapFileNotFoundError, FormatError):
@@ -362,57 +329,75 @@ class CageTracker:
                     cap=o.silhouette_cap,
                     min_component=o.silhouette_clean,
                 )
-                if len(sil):
-                    out.append(
-                        CoverageTerm(sil, o.silhouette_weight, name="silhouette", local=True)
-                    )
-        if o.coverage_weight > 0 and "coverage" in on and not out:  # hull surface samples
+                sil = sil if len(sil) else None
+        if "coverage" in on and sil is None:  # hull surface samples
             B = field.boundary
             pick = np.random.default_rng([o.seed, frame.index]).choice(
                 len(B), min(o.n_coverage, len(B)), replace=False
             )
             hull = HullCoverage(B[pick], o.coverage_margin)
-            out.append(CoverageTerm(hull, o.coverage_weight, name="coverage", local=False))
-        return out
+        return FrameData(
+            field=field,
+            point_weights=self._data_w,
+            noise=self.gp.Y_scale_**2 / self.gp.beta_,  # the manifold's noise variance
+            articulation=self._articulation,
+            hull=hull,
+            silhouettes=sil,
+        )
+
+    def _evaluate(self, stage: str, it: Iterate, n: int) -> tuple[float, System, dict]:
+        """The terms of problem ``stage`` at ``it`` over ``n`` parameters: the energy, the
+        system of their rows and each term's value by name."""
+        terms = self._stages[stage]
+        sys = System.empty(n)
+        values = assemble(terms, sys, it)
+        return total_energy(terms, values), sys, values
 
     # -------------------------------------------------------------- optimisation
     def _lm(self, state, n_iter, evaluate, linearise, update, key=None):
-        """Levenberg–Marquardt on ``E = ½ Σ r² + priors``: ``evaluate(state) -> (E,
-        cache)``, ``linearise(state, cache) -> (gradient, Gauss–Newton Hessian)``,
-        ``update(state, d) -> state``. A step is kept only if it does not raise ``E``
-        (else λ × 10 and retry, at most ``_RETRIES`` times, then stop: a trust region);
-        λ starts where the last call with the same ``key`` left it (÷ 10 at each new frame,
-        never below ``damping``: the latent problem's first steps were rejected three times
-        a frame from a fresh ``damping``) and ÷ 10 after each kept step; steps whose
-        quadratic model
-        promises less than ``_CONVERGED`` relative decrease end it. Returns the state, its
-        energy and cache, and the number of linearisations."""
+        """Levenberg–Marquardt on a problem's energy: ``evaluate(state) -> (E, cache)``,
+        ``linearise(state, cache) -> (gradient, Gauss–Newton matrix)``, ``update(state, d)
+        -> state``; each step solves the damped normal equations by the rule of
+        :mod:`meshmocap.geometry.levenberg_marquardt`. A step is kept only if it does not
+        raise ``E`` (else λ × 10 and retry, at most ``_RETRIES`` times, then stop: a trust
+        region); λ starts where the last call with the same ``key`` left it (÷ 10 at each
+        new frame, never below ``damping``: the latent problem's first steps were rejected
+        three times a frame from a fresh ``damping``) and ÷ 10 after each kept step
+        (:class:`~meshmocap.geometry.levenberg_marquardt.AdaptiveDamping`); steps whose
+        quadratic model promises less than ``_CONVERGED`` relative decrease end it. Returns
+        the state, its energy and cache, and the number of linearisations.
+
+        Raises
+        ------
+        FitError
+            Singular normal equations even with more damping.
+        """
         E, cache = evaluate(state)
-        lam, it = self._lam.get(key, self.opts.damping), 0
+        lam, it = AdaptiveDamping(self._lam.get(key, self.opts.damping)), 0
         for _ in range(n_iter):
             g, H = linearise(state, cache)
             it += 1
-            Hd = np.diag(H) + 1e-6 * np.mean(np.diag(H)) + 1e-15
             kept = None
             for k in range(_RETRIES + 1):
-                d = np.linalg.solve(H + np.diag(lam * Hd), -g)
+                d = damped_solve(H, g, lam=lam.lam, floor=_FLOOR, what="cage normal equations")
                 if k == 0 and -(g @ d + 0.5 * d @ H @ d) <= _CONVERGED * abs(E) + _TINY:
                     break  # the model promises no real decrease: converged
-                if np.all(np.isfinite(d)) and np.abs(d).max() < _MAX_STEP:
+                if np.abs(d).max() < _MAX_STEP:
                     new = update(state, d)
                     E_new, c_new = evaluate(new)
                     if E_new <= E:
                         kept = new, E_new, c_new
                         break
-                lam *= 10.0
+                if not lam.rejected():
+                    break
             if kept is None:
                 break
             state, E, cache = kept
-            lam = max(lam / 10.0, 1e-9)
-        self._lam[key] = lam
+            lam.accepted()
+        self._lam[key] = lam.lam
         return state, E, cache, it
 
-    def _pose_problem(self, field, y):
+    def _pose_problem(self, fd: FrameData, y):
         """Eq. (11): the pelvis transform ``(R, c)`` with the quads at ``y``. Green
         coordinates follow rigid motions of the cage exactly, so the points are deformed
         once in the pelvis frame and then moved rigidly."""
@@ -420,75 +405,64 @@ class CageTracker:
 
         def evaluate(s):
             P = P0 @ s[0].T + s[1]
-            r, g = self._distance(field, P)
-            return 0.5 * r @ r, (r, g, P)
+            E, sys, _ = self._evaluate("pose", Iterate(fd, P), 6)
+            return E, (sys, P)
 
         def linearise(s, cache):
-            r, g, P = cache
+            sys, P = cache
+            r, g = sys.point_rows()
             J = pose_jacobian(np.tile(P, (len(r) // len(P), 1)), g, s[1])
-            return J @ r, J @ J.T
+            return J @ r + sys.grad, J @ J.T + sys.H
 
         return evaluate, linearise, move_pelvis
 
-    def _shape_problem(self, field):
-        """Eq. (5)–(6): the latent point ``x`` (quads at its mean pose), pelvis fixed."""
-        vt = self._variance
+    def _shape_problem(self, fd: FrameData):
+        """Eq. (5)–(6): the latent point ``x`` (quads at its mean pose), pelvis fixed. The
+        variance term (Eq. 5, sign: module notes) sees σ² with the manifold's noise variance:
+        Eq. (9) alone vanishes at training points, where its log is a singular well of
+        rounding noise (K near singular) trapping the point."""
+        q = len(self.x)
 
         def evaluate(x):
             mean, dmean, var, dvar = self.gp.predict_with_gradient(x)
-            r, g, _ = self._residuals(field, mean, self.pelvis_R, self.pelvis_c)
-            E = 0.5 * r @ r
-            if vt is not None:
-                # + λσ log σ²: penalise unlikely poses (sign: module notes). σ² includes the
-                # noise variance: Eq. (9) alone vanishes at training points, where its log
-                # is a singular well of rounding noise (K near singular) trapping the point
-                E = E + vt.value(var)
-                var = vt.variance(var)
-            return E, (r, g, mean, dmean, var, dvar)
+            P = self.surface.points(mean, self.pelvis_R, self.pelvis_c)
+            E, sys, _ = self._evaluate("shape", Iterate(fd, P, var=var, dvar=dvar), q)
+            return E, (sys, mean, dmean)
 
         def linearise(x, cache):
-            r, g, mean, dmean, var, dvar = cache
+            sys, mean, dmean = cache
+            r, g = sys.point_rows()
             dx = self.surface.directions(mean, self.pelvis_R, self.pelvis_c, dmean)  # Eq. (6)
             J = np.einsum("kpa,spa->ksp", dx, g.reshape(-1, *dx.shape[1:])).reshape(len(dx), -1)
-            grad, H = J @ r, J @ J.T
-            if vt is not None:  # Eq. (10) in d log σ² = dσ² / σ²
-                gv, Hv = vt.rows(var, dvar)
-                grad, H = grad + gv, H + Hv
-            return grad, H
+            return J @ r + sys.grad, J @ J.T + sys.H
 
         return evaluate, linearise, lambda x, d: x + d
 
-    def _local_problem(self, field, anchor, *, pull=True):
+    def _local_problem(self, fd: FrameData, anchor, *, pull=True, stage="local"):
         """Eq. (12): every quad's centre and orientation (6 numbers: no Gram–Schmidt gauge)
-        and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration,
-        weight ``local_damping``; not when ``pull`` is False: off the manifold) and held
-        together by soft joints (``articulation``,
-        :class:`~meshmocap.trackers.cage.energy.Articulation`); ``anchor`` None: free, the
-        quads ablation."""
-        at = self._anchor if anchor is not None and pull and self._anchor is not None else None
-        jt = self._joints_term if anchor is not None else None
-        at = at if at is not None and at.weight else None
-        jt = jt if jt is not None and jt.weight else None
+        and the pelvis transform, pulled towards ``anchor`` (orthonormal configuration, the
+        ``"anchor"`` term; not when ``pull`` is False: off the manifold) and held together by
+        soft joints (the ``"articulation"`` term); ``anchor`` None: free, the quads
+        ablation. ``stage="start"``: the point terms that choose the adjustment's start."""
         I0 = np.eye(3)[None]
+        n = len(self.local) // 9 * 6 + 6
 
         def evaluate(s):
             y, Rp, cp = s
-            Y = y.reshape(-1, 3, 3)
-            R = gram_schmidt(Y[:, 1], Y[:, 2])  # pelvis-relative quad rotations
-            r, g, P = self._residuals(field, y, Rp, cp)
-            E = 0.5 * r @ r + (at.value(y, anchor) if at is not None else 0.0)
+            P = self.surface.points(y, Rp, cp)
             quads = None
-            if jt is not None:  # pelvis-relative quads, the pelvis's included
-                quads = (
-                    np.concatenate([np.zeros((1, 3)), y.reshape(-1, 3, 3)[:, 0]]),
-                    np.concatenate([I0, R]),
-                )
-                E += jt.value(*quads)
-            return E, (r, g, P, quads)
+            if anchor is not None:  # pelvis-relative quads, the pelvis's included
+                Y = y.reshape(-1, 3, 3)
+                R = gram_schmidt(Y[:, 1], Y[:, 2])  # pelvis-relative quad rotations
+                quads = (np.concatenate([np.zeros((1, 3)), Y[:, 0]]), np.concatenate([I0, R]))
+            it = Iterate(fd, P, y=y, anchor=anchor if pull else None, quads=quads)
+            E, sys, _ = self._evaluate(stage, it, n)
+            return E, (sys, P)
 
         def linearise(s, cache):
             y, Rp, cp = s
-            r, g, P, quads = cache
+            sys, P = cache
+            r, g = sys.point_rows()
             G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
             J = np.concatenate(
                 [
@@ -496,12 +470,7 @@ class CageTracker:
                     pose_jacobian(np.tile(P, (len(G), 1)), g, cp),
                 ]
             )
-            grad, H = J @ r, J @ J.T
-            if at is not None:  # the pull towards the manifold's configuration
-                at.add_rows(grad, H, y, anchor)
-            if quads is not None:  # soft joints along the quads
-                jt.add_rows(grad, H, *quads)
-            return grad, H
+            return J @ r + sys.grad, J @ J.T + sys.H
 
         def update(s, d):
             y, Rp, cp = s
@@ -526,27 +495,21 @@ class CageTracker:
             hull.occupancy, hull.origin, hull.voxel_size, pad=k, stride=stride
         )
         clock.lap("distance")
-        it, anchor, off, self._memo = 0, None, False, []
+        it, anchor, off = 0, None, False
         # LM damping per problem (_LM_KEYS): a tenth of where the last frame left it
         self._lam = {k: max(v / 10.0, o.damping) for k, v in self._lam.items()}
-        data = DistanceTerm.from_options(field, self._data_w, o)
-        terms = self._coverage_terms(frame, field)
-        self._active = (data, *terms)  # pose and shape steps, the starts: every point term
+        fd = self._frame_data(frame, field)
         pelvis = (self.pelvis_R, self.pelvis_c)
         previous = (orthonormalised(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
-            self.x = self._restart(field)
+            self.x = self._restart(fd)
             for _ in range(o.alternations):
                 y = self.gp.predict(self.x[None])[0]
-                pelvis, _, _, n = self._lm(
-                    pelvis, o.pose_iters, *self._pose_problem(field, y), key=0
-                )
+                pelvis, _, _, n = self._lm(pelvis, o.pose_iters, *self._pose_problem(fd, y), key=0)
                 self.pelvis_R, self.pelvis_c = pelvis
                 it += n
                 clock.lap("pose")
-                self.x, _, _, n = self._lm(
-                    self.x, o.shape_iters, *self._shape_problem(field), key=1
-                )
+                self.x, _, _, n = self._lm(self.x, o.shape_iters, *self._shape_problem(fd), key=1)
                 it += n
                 clock.lap("shape")
             anchor = orthonormalised(self.gp.predict(self.x[None])[0])
@@ -565,27 +528,24 @@ class CageTracker:
                 previous,
                 (orthonormalised(previous[0] + dy), so3_exp(dw) @ previous[1], previous[2] + dc),
             ][: 1 + bool(np.any(dy))]:
-                moved, _, _, n = self._lm(
-                    (R, c), o.pose_iters, *self._pose_problem(field, y), key=2
-                )
+                moved, _, _, n = self._lm((R, c), o.pose_iters, *self._pose_problem(fd, y), key=2)
                 starts.append((y, *moved))
                 it += n
-            fit = self._local_problem(field, None)[0]
-            E = [(r := fit(s)[1][0]) @ r for s in starts]
+            fit = self._local_problem(fd, None, stage="start")[0]
+            E = [fit(s)[0] for s in starts]
             state, best = starts[int(np.argmin(E))], min(E)
             # off the manifold: its configuration explains the frame far worse than the
             # tracked quads do; then no pull back to it and a wider adjustment
             off = o.off_manifold > 0 and E[0] > o.off_manifold * best
             for base, quads in _LIMBS:  # the manifold's limbs, each tried on that start
                 y = graft(state[0], anchor, base, quads)
-                r = fit((y, *state[1:]))[1][0]
-                if r @ r < best:
-                    state, best = (y, *state[1:]), r @ r
+                e = fit((y, *state[1:]))[0]
+                if e < best:
+                    state, best = (y, *state[1:]), e
         if off:
             n_local *= 2
-        self._active = (data, *(t for t in terms if t.local))  # local: silhouettes only
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
-            state, n_local, *self._local_problem(field, anchor, pull=not off)
+            state, n_local, *self._local_problem(fd, anchor, pull=not off)
         )
         U, _, Vt = np.linalg.svd(self.pelvis_R)  # no rounding drift from a rotation
         self.pelvis_R = U @ Vt
@@ -595,22 +555,25 @@ class CageTracker:
             self.pelvis_c - previous[2],
         )
         it += n
-        P = cache[2]
-        r = cache[0][: len(P)]
+        # the point terms at the final fit: Eq. (4)'s Σ w r² and each coverage term's mean
+        # ρ² (m²) where the frame has one
+        _, _, values = self._evaluate("start", Iterate(fd, cache[1]), 0)
         var = float(self.gp.predict(self.x[None], return_var=True)[1][0])
-        energies = {"distance": float(r @ r), "variance": var, "off_manifold": float(off)}
-        for t in terms:  # mean ρ² (m²) of the final fit
-            energies[t.name] = t.mean_squared(P)
+        energies = {"distance": 2 * values["distance"], "variance": var, "off_manifold": float(off)}
+        for name, cov in (("silhouette", fd.silhouettes), ("coverage", fd.hull)):
+            if cov is not None:
+                energies[name] = 2 * values[name]
         clock.lap("local")
         out = self._result(frame.index, energies, it)
         clock.lap("output")
         self.n_steps += 1
         return out
 
-    def _restart(self, field) -> np.ndarray:
-        """The latent starting point of a frame: the lowest shape energy among the previous
-        latent point, the back-constraint's image of the previous frame's quads and the
-        ``restarts`` training poses nearest to those quads (module notes)."""
+    def _restart(self, fd: FrameData) -> np.ndarray:
+        """The latent starting point of a frame: the lowest shape energy (the ``"shape"``
+        terms on a quarter of the sampled vertices) among the previous latent point, the
+        back-constraint's image of the previous frame's quads and the ``restarts`` training
+        poses nearest to those quads (module notes)."""
         gp = self.gp
         cands = [self.x, gp.transform(self.local[None])[0]]
         if self.opts.restarts:
@@ -621,8 +584,8 @@ class CageTracker:
         X = np.array(cands)
         Y, var = gp.predict(X, return_var=True)
         P = self.surface.points_batch(Y, self.pelvis_R, self.pelvis_c)
-        r = [self._distance(field, p[_SUB], _SUB)[0] for p in P]  # a quarter suffices to rank
-        noise = gp.Y_scale_**2 / gp.beta_
-        lam = self._variance.weight if self._variance is not None else 0.0
-        E = 0.5 * np.array([v @ v for v in r]) + lam * np.log(var + noise)
+        E = [  # a quarter of the points suffices to rank
+            self._evaluate("shape", Iterate(fd, p[_SUB], _SUB, var=float(v)), 0)[0]
+            for p, v in zip(P, var, strict=True)
+        ]
         return X[np.argmin(E)].copy()

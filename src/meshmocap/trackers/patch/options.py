@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, get_args
+from numbers import Integral, Real
+from typing import ClassVar, Literal, get_args
 
-from meshmocap._validate import check_choice
-from meshmocap.errors import InputError
+from meshmocap._validate import Constraint, Interval, Options, check_options
+from meshmocap.geometry.levenberg_marquardt import DAMPING
 
 Classifier = Literal["logistic", "svc", "none"]
 Residual = Literal["point_to_point", "point_to_plane"]
@@ -27,6 +28,8 @@ PAPER: dict[str, object] = {
     "lambda_data": 10.0,  # Eq. (1): λd = 10, λr = 1, λb = 1
     "lambda_rigid": 1.0,
     "lambda_bone": 1.0,
+    "rigidity_scale": 1.0,  # the paper's coefficients as they are (no scale of ours)
+    "bone_scale": 1.0,
     "joint_rigidity": 1.0,  # Eq. (2) as printed, across joints too
     "residual": "point_to_point",  # Eq. (7)
     "lambda_reverse": 0.0,
@@ -62,12 +65,20 @@ class PatchOptions:
         patches together through their shared joint.
     lambda_data, lambda_rigid, lambda_bone : float
         λd, λr, λb of Eq. (1) (the paper's 10, 1, 1): the weights of
-        :class:`~meshmocap.trackers.patch.energy.DataTerm`,
-        :class:`~meshmocap.trackers.patch.energy.RigidityTerm` and
-        :class:`~meshmocap.trackers.patch.energy.BoneTerm`.
+        :class:`~meshmocap.trackers.patch.terms.DataTerm`,
+        :class:`~meshmocap.trackers.patch.terms.RigidityTerm` and
+        :class:`~meshmocap.trackers.patch.terms.BoneTerm`.
+    rigidity_scale, bone_scale : float
+        Factors on ``lambda_rigid`` and ``lambda_bone`` (ours; 1 in the paper's row,
+        :data:`PAPER`). Each term is a mean squared residual (normalised by its total
+        weight), and neighbouring patches' predictions and the bone points stay within
+        millimetres where the data stay within centimetres: with the paper's λr = λb = 1
+        against λd = 10 on those means, patches drift apart. The defaults (10 and 100,
+        tuned on synthetic walks, ``benchmarks/bench_patch.py``) make the coefficients
+        10 : 10 : 100.
     lambda_reverse : float
         Weight of the reverse data term (not in the paper; 0 leaves it out,
-        :class:`~meshmocap.trackers.patch.energy.ReverseTerm`): mean squared distance from
+        :class:`~meshmocap.trackers.patch.terms.ReverseTerm`): mean squared distance from
         sampled template vertices (:data:`~meshmocap.trackers.patch.tracker.REVERSE_SAMPLES`)
         to their nearest compatible kept observation. Eq. (7) only pulls patches that
         observations pick as candidates, so a limb that moved further than its neighbours'
@@ -81,7 +92,7 @@ class PatchOptions:
         the tunnels that silhouette holes carve into the hull.
     lambda_length : float
         Weight of the bone-length prior (not in the paper; 0 leaves it out,
-        :class:`~meshmocap.trackers.patch.energy.LengthTerm`): mean squared change of each
+        :class:`~meshmocap.trackers.patch.terms.LengthTerm`): mean squared change of each
         bone's length (and of the hip-to-hip and shoulder-to-shoulder distances,
         :data:`~meshmocap.trackers.patch.tracker.RIGID_PAIRS`) from the first tracked
         frame, metres². Without it the joints drift with the patches over a long walk.
@@ -136,7 +147,8 @@ class PatchOptions:
         Candidate vertices per observed point (its nearest ones, among which the E-step
         keeps the nearest compatible vertex of each patch).
     damping : float
-        Levenberg–Marquardt damping of the Gauss–Newton steps (relative to the diagonal).
+        Levenberg–Marquardt λ of the Gauss–Newton steps, relative to the diagonal (the rule
+        and its floor: :mod:`meshmocap.geometry.levenberg_marquardt`).
     prediction : {"bones", "patches", "none"}
         Warm start of each frame: constant-velocity extrapolation of the joints, each patch
         carried rigidly by its bone ("bones"); of every patch transform and joint on its
@@ -179,17 +191,17 @@ class PatchOptions:
         skeleton's bone lengths (and the hip and shoulder spans) of the first frame.
     lambda_silhouette : float
         Weight of the silhouette coverage term (not in the paper; 0 leaves it out,
-        :class:`~meshmocap.trackers.patch.energy.SilhouetteTerm`; used where the capture
+        :class:`~meshmocap.trackers.patch.terms.SilhouetteTerm`; used where the capture
         has cameras and silhouettes): silhouette pixels that no model vertex covers pull
         their nearest projected vertex onto their viewing ray
-        (:mod:`~meshmocap.trackers.patch.terms`). The hull's points cannot tell a limb on
+        (:mod:`~meshmocap.trackers.patch.residuals`). The hull's points cannot tell a limb on
         the true surface from one in a phantom wedge beside it; the silhouettes can.
     silhouette_scale : float
         Cauchy scale (metres) of the coverage term's weights: a pixel that far from the
         model pulls half as hard (spurious blobs far from the body pull little).
     lambda_temporal : float
         Weight of the temporal prior (not in the paper; 0 leaves it out,
-        :class:`~meshmocap.trackers.patch.energy.TemporalTerm`): mean squared distance of
+        :class:`~meshmocap.trackers.patch.terms.TemporalTerm`): mean squared distance of
         the joints from their constant-velocity prediction (an acceleration penalty), so
         that a limb coasts through a few frames without data.
     seed : int
@@ -201,6 +213,8 @@ class PatchOptions:
     lambda_data: float = 10.0
     lambda_rigid: float = 1.0
     lambda_bone: float = 1.0
+    rigidity_scale: float = 10.0
+    bone_scale: float = 100.0
     lambda_reverse: float = 10.0
     reverse_cap: float = 0.3
     reverse_scale: float = 0.03
@@ -225,7 +239,7 @@ class PatchOptions:
     interior_scale: float = 0.0
     normal_cos: float = 0.0
     residual: Residual = "point_to_point"
-    damping: float = 1e-4
+    damping: float = DAMPING["patch"].lam
     prediction: Prediction = "bones"
     accel_gate: float = 0.0
     joint_readout: JointReadout = "blend"
@@ -234,47 +248,48 @@ class PatchOptions:
     lambda_temporal: float = 0.0
     seed: int = 0
 
+    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    constraints: ClassVar[dict[str, Constraint | tuple]] = {
+        "n_patches": Interval(Integral, 1, None),
+        "joint_rigidity": Interval(Real, 0, None),
+        "lambda_data": Interval(Real, 0, None),
+        "lambda_rigid": Interval(Real, 0, None),
+        "lambda_bone": Interval(Real, 0, None),
+        "rigidity_scale": Interval(Real, 0, None, closed="neither"),
+        "bone_scale": Interval(Real, 0, None, closed="neither"),
+        "lambda_reverse": Interval(Real, 0, None),
+        "reverse_cap": Interval(Real, 0, None, closed="neither"),
+        "reverse_scale": Interval(Real, 0, None, closed="neither"),
+        "lambda_length": Interval(Real, 0, None),
+        "classifier": Options(get_args(Classifier)),
+        "keep_fraction": Interval(Real, 0, 1, closed="right"),
+        "part_matching": Options(get_args(PartMatching)),
+        "on_bone": Interval(Real, 0, 1, closed="both"),
+        "outlier": Interval(Real, 0, 1, closed="both"),
+        "max_distance": (Interval(Real, 0, None, closed="neither"), None),
+        "max_points": Interval(Integral, 1, None),
+        "max_iter": Interval(Integral, 1, None),
+        "fast_iter_scale": Interval(Real, 1, None),
+        "fast_motion": Interval(Real, 0, None, closed="neither"),
+        "tol": Interval(Real, 0, None),
+        "sigma0": Interval(Real, 0, None, closed="neither"),
+        "sigma_min": Interval(Real, 0, None, closed="neither"),
+        "sigma_max": Interval(Real, 0, None, closed="neither"),
+        "outlier_sigmas": Interval(Real, 0, None, closed="neither"),
+        "coarse_iter": Interval(Integral, 0, None),
+        "k_neighbours": Interval(Integral, 1, None),
+        "interior_scale": Interval(Real, 0, None),
+        "normal_cos": Interval(Real, -1, 1, closed="left"),
+        "residual": Options(get_args(Residual)),
+        "damping": Interval(Real, 0, None),
+        "prediction": Options(get_args(Prediction)),
+        "accel_gate": Interval(Real, 0, None),
+        "joint_readout": Options(get_args(JointReadout)),
+        "lambda_silhouette": Interval(Real, 0, None),
+        "silhouette_scale": Interval(Real, 0, None, closed="neither"),
+        "lambda_temporal": Interval(Real, 0, None),
+        "seed": Interval(Integral, 0, None),
+    }
+
     def __post_init__(self) -> None:
-        check_choice("PatchOptions", "classifier", self.classifier, get_args(Classifier))
-        check_choice("PatchOptions", "residual", self.residual, get_args(Residual))
-        check_choice("PatchOptions", "prediction", self.prediction, get_args(Prediction))
-        check_choice("PatchOptions", "part_matching", self.part_matching, get_args(PartMatching))
-        check_choice("PatchOptions", "joint_readout", self.joint_readout, get_args(JointReadout))
-        if self.n_patches < 1:
-            raise InputError(f"PatchOptions: n_patches must be ≥ 1, found {self.n_patches}")
-        if self.coarse_iter < 0:
-            raise InputError(f"PatchOptions: coarse_iter must be ≥ 0, found {self.coarse_iter}")
-        if self.max_iter < 1:
-            raise InputError(f"PatchOptions: max_iter must be ≥ 1, found {self.max_iter}")
-        if not self.fast_iter_scale >= 1:
-            raise InputError(
-                f"PatchOptions: fast_iter_scale must be ≥ 1, found {self.fast_iter_scale}"
-            )
-        for name in (
-            "lambda_data",
-            "lambda_rigid",
-            "lambda_bone",
-            "lambda_reverse",
-            "lambda_length",
-            "lambda_silhouette",
-            "lambda_temporal",
-            "accel_gate",
-            "interior_scale",
-        ):
-            if not getattr(self, name) >= 0:  # also rejects NaN
-                raise InputError(f"PatchOptions: {name} must be ≥ 0, found {getattr(self, name)}")
-        for name, unit in (
-            ("outlier_sigmas", ""),
-            ("fast_motion", " metres"),
-            ("reverse_cap", " metres"),
-            ("reverse_scale", " metres"),
-            ("silhouette_scale", " metres"),
-        ):
-            if not getattr(self, name) > 0:  # also rejects NaN
-                raise InputError(
-                    f"PatchOptions: {name} must be > 0{unit}, found {getattr(self, name)}"
-                )
-        if not 0 < self.keep_fraction <= 1:
-            raise InputError(
-                f"PatchOptions: keep_fraction must be in (0, 1], found {self.keep_fraction}"
-            )
+        check_options("PatchOptions", self, self.constraints)

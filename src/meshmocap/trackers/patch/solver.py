@@ -25,10 +25,19 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from meshmocap.errors import FitError
+from meshmocap.geometry.levenberg_marquardt import (
+    DAMPING,
+    damped_diagonal,
+    damped_solve,
+    solve_damped,
+)
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.patch.kernels import point_moments, rotated_moments
 from meshmocap.trackers.patch.model import PatchModel
+
+#: ε of the damped solves, relative to the median diagonal entry
+#: (:data:`~meshmocap.geometry.levenberg_marquardt.DAMPING` ``"patch"``).
+FLOOR = DAMPING["patch"].floor
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,8 +226,8 @@ class System:
         idx = ru[:, None] + np.arange(G.shape[1])
         self.g += np.bincount(idx.ravel(), G.ravel(), minlength=self.n)
 
-    def _damped(self, damping: float) -> np.ndarray:
-        """Stored entries of ``H + μ diag(H) + ε I`` in the pattern's order (see :meth:`solve`)."""
+    def _values(self) -> np.ndarray:
+        """Stored entries of ``H`` in the pattern's order."""
         vals = np.concatenate(
             [
                 self.D.ravel(),
@@ -229,55 +238,65 @@ class System:
                 self.JJ.ravel(),
             ]
         )
-        data = vals[self.pattern.gather]
-        d = data[self.pattern.diag]
-        floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
-        data[self.pattern.diag] += damping * d + floor
-        return data
+        return vals[self.pattern.gather]
 
-    def matrix(self, damping: float = 0.0) -> sp.csc_matrix:
-        """The damped ``H`` (n, n) of :meth:`solve`, unknowns in their own order."""
+    def matrix(self, damping: float | None = None) -> sp.csc_matrix:
+        """``H`` (n, n), damped as in :meth:`solve` with λ = ``damping`` (None: undamped),
+        unknowns in their own order."""
         pt = self.pattern
-        H = sp.csc_matrix((self._damped(damping), pt.indices, pt.indptr), shape=(self.n, self.n))
+        data = self._values()
+        if damping is not None:
+            data[pt.diag] += damped_diagonal(data[pt.diag], damping, FLOOR)
+        H = sp.csc_matrix((data, pt.indices, pt.indptr), shape=(self.n, self.n))
         inv = np.argsort(pt.order)
         return H[inv][:, inv].tocsc()
 
     def solve(self, damping: float) -> np.ndarray:
-        """Solve ``(H + μ diag(H) + ε I) δ = −g`` (Levenberg–Marquardt damping).
+        """Solve ``(H + μ diag(H) + ε I) δ = −g`` (Levenberg–Marquardt, the rule of
+        :mod:`meshmocap.geometry.levenberg_marquardt`: μ = ``damping``, ε a thousandth of
+        the median diagonal entry, :data:`FLOOR`, which keeps weakly observed unknowns,
+        the spin of a small patch about its own centre, from taking huge steps).
 
-        ``ε`` is a thousandth of the median diagonal entry: it keeps weakly observed
-        unknowns (the spin of a small patch about its own centre) from taking huge steps.
+        Raises
+        ------
+        FitError
+            Singular normal equations (after the rule's retries with more damping).
         """
         pt = self.pattern
-        H = sp.csc_matrix((self._damped(damping), pt.indices, pt.indptr), shape=(self.n, self.n))
-        # H is symmetric positive definite and sparse (each patch couples with its ~6
-        # neighbours and its bone's joints): SuperLU in symmetric mode with diagonal pivots,
-        # on the pattern's minimum-degree order, is a sparse Cholesky in all but name:
-        # exact, and faster here than block-Jacobi conjugate gradients (docs/patch.rst).
-        try:
-            lu = spla.splu(
-                H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-            )
-        except RuntimeError as exc:  # "Factor is exactly singular": the driver flags the frame
-            raise FitError(f"singular normal equations ({exc})") from None
-        delta = np.empty(self.n)
-        delta[pt.order] = lu.solve(-self.g[pt.order])
-        return delta
+        data = self._values()
+        d = data[pt.diag].copy()
+        rhs = -self.g[pt.order]
+
+        def factor_and_solve(add: np.ndarray) -> np.ndarray:
+            # H is symmetric positive definite and sparse (each patch couples with its ~6
+            # neighbours and its bone's joints): SuperLU in symmetric mode with diagonal
+            # pivots, on the pattern's minimum-degree order, is a sparse Cholesky in all but
+            # name: exact, and faster here than block-Jacobi conjugate gradients
+            # (docs/patch.rst).
+            vals = data.copy()
+            vals[pt.diag] += add
+            H = sp.csc_matrix((vals, pt.indices, pt.indptr), shape=(self.n, self.n))
+            try:
+                lu = spla.splu(
+                    H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+                )
+            except RuntimeError as exc:  # "Factor is exactly singular"
+                raise np.linalg.LinAlgError(str(exc)) from None
+            delta = np.empty(self.n)
+            delta[pt.order] = lu.solve(rhs)
+            return delta
+
+        return solve_damped(factor_and_solve, d, lam=damping, floor=FLOOR)
 
     def solve_grouped(self, damping: float, S: sp.spmatrix) -> np.ndarray:
         """Solve the damped normal equations restricted to steps ``δ = S δ_r`` (``S``
         (n, r), e.g. :func:`group_basis`): ``(SᵀHS + μ diag + ε I) δ_r = −Sᵀg``, dense
-        (r is small). Returns δ (n,)."""
-        H = self.matrix(0.0)
+        (r is small), by the same rule as :meth:`solve`. Returns δ (n,)."""
+        H = self.matrix()
         Hr = np.asarray((S.T @ H @ S).todense())
-        gr = S.T @ self.g
-        d = np.diag(Hr).copy()
-        floor = 1e-3 * float(np.median(d[d > 0])) if np.any(d > 0) else 1e-12
-        Hr[np.diag_indices_from(Hr)] += damping * d + floor
-        try:
-            dr = np.linalg.solve(Hr, -gr)
-        except np.linalg.LinAlgError as exc:
-            raise FitError(f"singular grouped normal equations ({exc})") from None
+        dr = damped_solve(
+            Hr, S.T @ self.g, lam=damping, floor=FLOOR, what="grouped normal equations"
+        )
         return S @ dr
 
 

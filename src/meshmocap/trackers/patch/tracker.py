@@ -26,18 +26,12 @@ from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.errors import FitError
 from meshmocap.estimate.recovery.observe import frame_points
+from meshmocap.geometry.levenberg_marquardt import DAMPING, damped_solve
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 from meshmocap.models.bodyparts import ON_BONE, BodyPartClassifier, partition
-from meshmocap.trackers.patch.energy import (
-    Correspondences,
-    FrameData,
-    Iterate,
-    assemble,
-    energy_terms,
-    total_energy,
-)
+from meshmocap.trackers.patch.energy import assemble, energy_terms, total_energy
 from meshmocap.trackers.patch.kernels import assign_kernel, patch_points
 from meshmocap.trackers.patch.model import (
     PatchModel,
@@ -55,6 +49,7 @@ from meshmocap.trackers.patch.solver import (
     normal_pattern,
     rigidity_moments,
 )
+from meshmocap.trackers.patch.terms import Correspondences, FrameData, Iterate
 
 #: Divergence guards (metres): no joint moves this far in one frame (10 m/s at 60 fps) ...
 MAX_JOINT_JUMP = 0.5
@@ -75,6 +70,8 @@ DEFAULT_FPS = 60.0
 #: classification (training and prediction), E-steps, building the normal equations,
 #: solving them, and the output mesh with the frame's result.
 STAGES = ("observations", "classify", "assign", "system", "solve", "output")
+#: The damped solve of ``_held_lengths``: none (its system is positive definite).
+UNDAMPED = DAMPING["none"]
 #: Joint pairs of the evaluation skeleton held at their first-frame distance by the length
 #: prior besides the bones: the pelvis and the shoulder girdle move as rigid triangles.
 RIGID_PAIRS = (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
@@ -375,8 +372,6 @@ class PatchTracker:
             else:
                 delta = sys.solve(o.damping)
             self._lap("solve")
-            if not np.all(np.isfinite(delta)):
-                raise FitError("singular normal equations")
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
             self.sigma = float(np.clip(np.sqrt(values["data"] / 3), o.sigma_min, o.sigma_max))
@@ -561,9 +556,9 @@ def _held_lengths(
         u, r = length_residuals(X, pairs, lengths)
         J = np.zeros((m, 3 * K))
         J[rows, cols] = np.concatenate([u, -u], axis=1).ravel()
-        H = np.eye(3 * K) + mu * J.T @ J
+        H = np.eye(3 * K) + mu * J.T @ J  # positive definite: no damping
         g = (X - B).ravel() + mu * J.T @ r
-        X = X - np.linalg.solve(H, g).reshape(K, 3)
+        X = X + damped_solve(H, g, lam=UNDAMPED.lam, floor=UNDAMPED.floor).reshape(K, 3)
     return X
 
 

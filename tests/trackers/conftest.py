@@ -1,5 +1,5 @@
 """A small patch model in a perturbed pose with random correspondences, shared by the
-tests of the normal equations and of the energy's terms."""
+tests of the normal equations, of the energy's terms and of the registry's coefficients."""
 
 import numpy as np
 import pytest

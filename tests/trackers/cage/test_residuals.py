@@ -1,11 +1,12 @@
-"""The cage tracker's energy sampling and hull coverage term (trackers/cage_energy.py)."""
+"""The residuals of the cage tracker's terms: the energy's vertex sample, the hull coverage
+residuals and the soft joints (trackers/cage/residuals.py)."""
 
 import numpy as np
 import pytest
 
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.trackers.cage.energy import (
+from meshmocap.trackers.cage.residuals import (
     HullCoverage,
     SilhouetteCoverage,
     placement_errors,
@@ -67,7 +68,6 @@ def test_coverage_energy_and_gradient_match_brute_force_and_finite_differences()
 def test_articulation_gaps_jacobian_and_calibration():
     from meshmocap.body.procedural import walk
     from meshmocap.geometry.rotations import so3_exp
-    from meshmocap.trackers.cage.energy import Articulation
     from meshmocap.trackers.cage.oqr import (
         QUAD_NAMES,
         build_oqr,
@@ -75,6 +75,7 @@ def test_articulation_gaps_jacobian_and_calibration():
         configuration_vector,
         quads_from_pose,
     )
+    from meshmocap.trackers.cage.residuals import Articulation
 
     t = load_template("neutral_5k")
     oqr, sk = build_oqr(t), t.skeleton
