@@ -156,7 +156,7 @@ def test_user_mistakes_give_one_line_and_status_2(setup, tmp_path, capsys):
 @pytest.mark.slow
 def test_cage_tracks_a_folder_of_meshes_in_millimetres(setup, tmp_path, capsys):
     # ~15 s: the automatic first pose (a mesh folder has no truth); the cage needs a distance
-    # field, made from each mesh (estimate.observe)
+    # field, made from each mesh (estimate.recovery.observe)
     _, t, manifold, cap = setup
     folder = tmp_path / "meshes"
     folder.mkdir()

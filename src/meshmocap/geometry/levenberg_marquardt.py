@@ -71,10 +71,10 @@ class Damping:
 #: Every damped solve's λ and floor, by caller (the module docstring gives the rule).
 DAMPING: dict[str, Damping] = {
     # articulated fits with closest-point pairs (trackers.articulated_icp's default is
-    # "icp"; estimate.fit's first-pose search, body.autorig, estimate.shape_fit)
+    # "icp"; estimate.pose.fit's first-pose search, body.autorig, estimate.performer.shape_fit)
     "articulated": Damping(1e-2, 1e-9),
     "icp": Damping(1e-3, 1e-9),
-    # known correspondences: a lighter λ (estimate.fit.pose_of_vertices)
+    # known correspondences: a lighter λ (estimate.pose.fit.pose_of_vertices)
     "vertex": Damping(1e-3, 1e-9),
     # body.pose_fit: adaptive, from this λ
     "pose_fit": Damping(1e-6, 1e-9),

@@ -270,7 +270,7 @@ class ArticulatedICP:
         o = self.opts
         V, F = frame.hull_mesh
         V = np.asarray(V, dtype=np.float64)
-        if F is None:  # a point cloud: its own normals, or estimated (estimate.observe)
+        if F is None:  # a point cloud: its own normals, or estimated (estimate.recovery.observe)
             V, N = frame_points(frame)
         pick = np.arange(len(V))
         if len(V) > o.max_points:
