@@ -11,7 +11,7 @@ def _cmd_subject(args: argparse.Namespace) -> int:
 
     from meshmocap.body.template import save_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
-    from meshmocap.estimate.plausibility import body_warnings
+    from meshmocap.estimate.plausibility import body_warnings, check_observations
     from meshmocap.estimate.subject import estimate_subject
     from meshmocap.io.capture import open_capture
 
@@ -20,7 +20,8 @@ def _cmd_subject(args: argparse.Namespace) -> int:
         bad = MeshmocapFileNotFoundError if out.suffix == ".npz" else InputError
         raise bad(f"subject: --out must be a .npz file in an existing folder, found {out}")
     capture = open_capture(args.capture, up=args.up) if args.up else open_capture(args.capture)
-    for line in body_warnings(capture):  # a sphere is no performer: say so first
+    # one person? dense (slow, as for track)? a sphere is no performer: said first
+    for line in [*check_observations(capture, command="subject"), *body_warnings(capture)]:
         print(f"meshmocap: warning: {line}", file=sys.stderr)
     est = estimate_subject(
         capture,
