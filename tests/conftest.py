@@ -1,15 +1,23 @@
-"""Shared fixtures: the real third-party data in ../shared/data (skipped where absent), and
-a posed body made in code."""
+"""Shared fixtures: the real third-party data in ../shared/data (skipped where absent, and
+counted in one line at the end of the run: :func:`pytest_terminal_summary`), and a posed
+body made in code."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+#: The data set's folder: ../shared/data beside the project (``MESHMOCAP_SHARED_DATA``
+#: names another).
+SHARED_DATA = Path(os.environ.get("MESHMOCAP_SHARED_DATA") or ROOT.parent / "shared" / "data")
+
+
+#: Where a reader of a fresh clone learns what the data set is and where it comes from.
+DATA_DOC = "docs/reference.rst, 'Test data'"
 
 
 @pytest.fixture(scope="session")
@@ -18,6 +26,26 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data not available: {SHARED_DATA} is absent")
     return SHARED_DATA
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """One line saying how many tests skipped because the third-party data set they read is
+    absent, and where it comes from (each skip's own reason names the file it needed)."""
+    skipped = terminalreporter.stats.get("skipped", [])
+    data = [r for r in skipped if str(SHARED_DATA) in _skip_reason(r)]
+    if data:
+        terminalreporter.write_line(
+            f"meshmocap: {len(data)} tests skipped: they read real third-party data (CMU "
+            f"motion capture, the MIT crane sequence) from {SHARED_DATA}, which is absent "
+            f"here and not shipped with the project (licences); see {DATA_DOC}",
+            yellow=True,
+        )
+
+
+def _skip_reason(report) -> str:
+    """The reason of a skipped test's report (``(file, line, reason)``), or ''."""
+    longrepr = getattr(report, "longrepr", None)
+    return str(longrepr[2]) if isinstance(longrepr, tuple) and len(longrepr) == 3 else ""
 
 
 @pytest.fixture(scope="session")

@@ -18,9 +18,9 @@ SCRIPTS = ROOT / "tests" / "apps" / "scripts"
 
 #: How each optional program installs.
 INSTALL = {
-    "blender": 'pip install "meshmocap[blender]" (bpy; Python 3.11, NumPy < 2)',
-    "opensim": 'pip install "meshmocap[opensim]"',
-    "rerun": 'pip install "meshmocap[view]"',
+    "blender": 'pip install -e ".[blender]" (bpy; Python 3.11, NumPy < 2)',
+    "opensim": 'pip install -e ".[opensim]"',
+    "rerun": 'pip install -e ".[view]"',
 }
 
 

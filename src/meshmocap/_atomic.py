@@ -60,10 +60,14 @@ LOCK_NAME = ".meshmocap.lock"
 def folder_lock(folder: str | os.PathLike, what: str) -> Iterator[None]:
     """Hold an exclusive lock on ``folder`` while writing into it.
 
-    The lock is ``fcntl.flock`` on ``folder/.meshmocap.lock``: the kernel releases it when
-    the process ends, however it ends (``kill -9`` included), so a crashed run never leaves
-    a stuck lock; the file stays, holding the last writer's process id. Where ``fcntl`` is
-    not available (Windows) nothing is locked.
+    The lock is ``fcntl.flock`` on ``folder/.meshmocap.lock``, holding the writer's
+    process id. The kernel releases it when the process ends, however it ends (``kill -9``
+    included), so a crashed run never leaves a stuck lock (only the file, which the next
+    run takes over); when the ``with`` block ends, the file is removed while still locked,
+    so a folder left by a finished run holds no lock file. A process that opened the file
+    before it was removed finds, once it holds the lock, that the name now points to
+    another file (or none) and tries again. Where ``fcntl`` is not available (Windows)
+    nothing is locked.
 
     Raises
     ------
@@ -76,18 +80,37 @@ def folder_lock(folder: str | os.PathLike, what: str) -> Iterator[None]:
         yield
         return
     path = Path(folder) / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             pid = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
             raise FolderBusyError(
                 f"{what}: {folder} is being written by another meshmocap process (pid {pid}); "
                 "wait for it to finish or write to another folder"
             ) from None
+        if _same_file(fd, path):
+            break
+        os.close(fd)  # the holder removed it as we opened it: lock the new one
+    try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         yield
     finally:
-        os.close(fd)  # releases the lock
+        try:
+            if _same_file(fd, path):
+                path.unlink()  # still locked: nobody else holds this file
+        finally:
+            os.close(fd)  # releases the lock
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether ``path`` still names the open file ``fd``."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return False
+    own = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (own.st_dev, own.st_ino)

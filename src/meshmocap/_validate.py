@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any, Literal
 
-from meshmocap.errors import InputError
+from meshmocap.errors import ArgumentTypeError, InputError
 
 
 @dataclass(frozen=True)
@@ -156,6 +156,22 @@ def check_choice(func: str, name: str, value: object, choices: Sequence[str]) ->
     """Raise :class:`InputError` unless ``value`` is one of ``choices`` (a Literal's values)."""
     if not isinstance(value, str) or value not in choices:
         raise InputError(f"{func}: {name} must be one of {list(choices)}, found {value!r}")
+
+
+def check_type(
+    func: str, name: str, value: object, types: type | tuple[type, ...], expected: str
+) -> None:
+    """Raise :class:`~meshmocap.errors.ArgumentTypeError` unless ``value`` is an instance
+    of ``types`` (a bool is not taken for a number unless ``types`` names ``bool``), in one
+    line: ``func: name must be EXPECTED, found TYPE VALUE``."""
+    types = types if isinstance(types, tuple) else (types,)
+    if isinstance(value, types) and not (isinstance(value, bool) and bool not in types):
+        return
+    shown = repr(value)
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    raise ArgumentTypeError(
+        f"{func}: {name} must be {expected}, found {type(value).__name__} {shown}"
+    )
 
 
 def frame_slice(text: str, *, what: str = "frames") -> slice:

@@ -22,18 +22,21 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
-from meshmocap.analysis.evaluate import Evaluation, summary
+from meshmocap._validate import check_choice, check_type
+from meshmocap.analysis.evaluate import Evaluation
 from meshmocap.analysis.evaluate import evaluate as evaluate_track
+from meshmocap.analysis.evaluate import summary as evaluation_summary
 from meshmocap.analysis.gait import Gait, track_gait
 from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
 from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
-from meshmocap.estimate.performer.tracking_template import tracking_template
+from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
+from meshmocap.io.axes import UNITS as UNIT_METRES
 from meshmocap.io.axes import Axes, open_oriented
 from meshmocap.io.capture import (
     Capture,
@@ -45,8 +48,10 @@ from meshmocap.io.capture import (
     write_truth_faces,
 )
 from meshmocap.io.guards import check_track_capture
+from meshmocap.io.live import LiveCapture
 from meshmocap.io.meshes import frame_files, write_mesh
 from meshmocap.io.results import (
+    FrameResult,
     Track,
     input_meta,
     open_tracked_capture,
@@ -54,6 +59,7 @@ from meshmocap.io.results import (
     tracked_template,
 )
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.follow import body_capture, open_live
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
 __all__ = [
@@ -71,6 +77,37 @@ __all__ = [
 #: quoted glob or archive, or several mesh files and folders.
 Source = str | os.PathLike | Sequence[str | os.PathLike]
 
+#: What the functions below take as a capture: one opened, or what :func:`open_capture` opens.
+AnyCapture = Capture | SequenceCapture | LiveCapture
+
+_PATH = (str, os.PathLike)
+_NUMBER = (int, float, np.integer, np.floating)
+
+
+def _check_source(func: str, name: str, source: object) -> list:
+    """``source`` as a list of paths, or one line naming what it is instead."""
+    if isinstance(source, _PATH):
+        return [source]
+    what = "a path (str or os.PathLike) or a sequence of paths"
+    if isinstance(source, bytes) or not isinstance(source, Sequence | np.ndarray):
+        check_type(func, name, source, _PATH, what)
+    items = list(source)
+    for k, item in enumerate(items):
+        check_type(func, f"{name}[{k}]", item, _PATH, "a path (str or os.PathLike)")
+    return items
+
+
+def _check_optional(func: str, name: str, value: object, types, expected: str) -> None:
+    if value is not None:
+        check_type(func, name, value, types, f"{expected} or None")
+
+
+def _check_rate(func: str, name: str, value: object) -> None:
+    """``value``: None or a positive finite number of frames (or seconds) per second."""
+    _check_optional(func, name, value, _NUMBER, "a number")
+    if value is not None and not (np.isfinite(value) and value > 0):
+        raise InputError(f"{func}: {name} must be a positive number, found {value!r}")
+
 
 def capture_and_axes(
     source: Source,
@@ -78,12 +115,30 @@ def capture_and_axes(
     up: Literal["auto", "z", "y"] = "auto",
     units: Literal["auto", "m", "cm", "mm"] = "auto",
     fps: float | None = None,
-) -> tuple[Capture | SequenceCapture, Axes | None]:
+    follow: bool = False,
+    idle: float | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> tuple[AnyCapture, Axes | None]:
     """:func:`open_capture`, and the up axis and units it read from a mesh sequence's first
     frame (None for a capture folder, which is metres and Z up by its format)."""
-    sources = [source] if isinstance(source, str | os.PathLike) else list(source)
+    func = "open_capture"
+    sources = _check_source(func, "source", source)
+    check_choice(func, "up", up, ("auto", "z", "y"))
+    check_choice(func, "units", units, ("auto", *UNIT_METRES))
+    _check_rate(func, "fps", fps)
+    check_type(func, "follow", follow, bool, "True or False")
+    _check_rate(func, "idle", idle)
+    _check_optional(func, "stop", stop, Callable, "a callable")
     if not sources:
         raise InputError("open_capture: expected a capture folder or mesh files, found none")
+    if follow:
+        if len(sources) != 1:
+            raise InputError(
+                f"track --follow: give one folder (a capture or meshes), found {len(sources)}"
+            )
+        return open_live(sources[0], up=up, units=units, fps=fps, idle=idle, stop=stop)
+    if idle is not None or stop is not None:
+        raise InputError("open_capture: idle and stop go with follow=True")
     if len(sources) == 1:
         return open_oriented(sources[0], up=up, units=units, fps=fps)
     folders = [
@@ -103,7 +158,10 @@ def open_capture(
     up: Literal["auto", "z", "y"] = "auto",
     units: Literal["auto", "m", "cm", "mm"] = "auto",
     fps: float | None = None,
-) -> Capture | SequenceCapture:
+    follow: bool = False,
+    idle: float | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> AnyCapture:
     """Open what ``meshmocap track`` tracks, in metres with Z up.
 
     Parameters
@@ -118,13 +176,26 @@ def open_capture(
         Mesh files: their length unit (default: detected from the body's size).
     fps : float, optional
         Mesh files: their frame rate (default: 30, recorded as assumed).
+    follow : bool
+        ``source`` is one folder that a studio is still writing frames into (live mode,
+        ``track --follow``): wait for its first frame with a body and return a
+        :class:`~meshmocap.io.live.LiveCapture`, whose length grows as frames appear;
+        :func:`track` tracks each as it comes (:mod:`meshmocap.trackers.follow`).
+    idle : float, optional
+        With ``follow``: the capture ends after this many seconds without a new frame
+        (default: never; Ctrl-C stops).
+    stop : callable, optional
+        With ``follow``: asked while waiting for frames; the capture ends when it returns
+        True.
 
     Returns
     -------
-    Capture or SequenceCapture
+    Capture, SequenceCapture or LiveCapture
         ``len(capture)`` frames; ``capture[k]`` reads frame ``k`` when asked.
     """
-    return capture_and_axes(source, up=up, units=units, fps=fps)[0]
+    return capture_and_axes(
+        source, up=up, units=units, fps=fps, follow=follow, idle=idle, stop=stop
+    )[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,25 +262,31 @@ class TrackResult:
     ) -> ExportResult:
         """Write the track as ``out`` (``.bvh``, ``.glb``, ``.gltf``, ``.c3d``, ``.trc``,
         ``.csv``): :func:`meshmocap.apps.export.export_track`, options included."""
+        check_type("TrackResult.export", "out", out, _PATH, "a file path (str or os.PathLike)")
+        if format is not None:
+            check_choice("TrackResult.export", "format", format, get_args(ExportFormat))
         options.setdefault("template", self.template)
         return export_track(self.path, out, format=format, **options)
 
     def to_bvh(self, out: str | os.PathLike, **options) -> ExportResult:
         """Write the template's rig and its motion as a BVH file (Y up, centimetres)."""
+        check_type("TrackResult.to_bvh", "out", out, _PATH, "a file path (str or os.PathLike)")
         return self.export(out, format="bvh", **options)
 
     def to_glb(self, out: str | os.PathLike, **options) -> ExportResult:
         """Write the template as a skinned, animated mesh (binary glTF, Y up, metres)."""
+        check_type("TrackResult.to_glb", "out", out, _PATH, "a file path (str or os.PathLike)")
         return self.export(out, format="glb", **options)
 
     def gait(self, *, fps: float | None = None) -> Gait:
         """Gait events, cycles and flexion curves (:func:`~meshmocap.analysis.gait.
         track_gait`) at ``fps`` (default: :attr:`fps`)."""
+        _check_rate("TrackResult.gait", "fps", fps)
         return track_gait(self.data, fps or self.fps)
 
 
 def track(
-    capture: Capture | SequenceCapture | Source,
+    capture: AnyCapture | Source,
     *,
     method: str = "patch",
     out: str | os.PathLike | None = None,
@@ -223,13 +300,18 @@ def track(
     vertices: bool = True,
     show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
+    on_frame: Callable[[FrameResult], object] | None = None,
     **options,
 ) -> TrackResult:
     """Track a capture, as ``meshmocap track`` does.
 
     Parameters
     ----------
-    capture : Capture, SequenceCapture or what :func:`open_capture` opens
+    capture : Capture, SequenceCapture, LiveCapture or what :func:`open_capture` opens
+        A :class:`~meshmocap.io.live.LiveCapture` (``open_capture(folder, follow=True)``)
+        is tracked as its frames appear, until it stops growing (live mode, ``track
+        --follow``); the performer's body is then estimated from its first frames
+        (:func:`~meshmocap.trackers.follow.body_capture`).
     method : str
         A tracker of :data:`meshmocap.trackers.registry.METHODS`: ``patch`` (default),
         ``cage``, ``articulated_icp`` and their variants.
@@ -258,6 +340,9 @@ def track(
         few seconds).
     log : callable, optional
         Called with one line on how the template was chosen (the CLI prints it).
+    on_frame : callable, optional
+        Called with each frame's :class:`~meshmocap.io.results.FrameResult` once it is
+        written (live mode prints them).
     **options
         Options of the method's tracker (``n_patches``, ``max_iter``, ...).
 
@@ -265,14 +350,17 @@ def track(
     -------
     TrackResult
     """
-    if method not in METHODS:
-        raise InputError(f"track: method must be one of {sorted(METHODS)}, found {method!r}")
-    if not isinstance(capture, Capture | SequenceCapture):
+    _check_track_arguments(locals())
+    if not isinstance(capture, AnyCapture):
         capture = open_capture(capture)
-    if isinstance(frames, slice):
-        frames = range(len(capture))[frames]
+    live = isinstance(capture, LiveCapture)
+    frames = _check_frames(capture, frames)
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="meshmocap-track-"))
-    choice = tracking_template(capture, template, folder, refresh=not resume)
+    # a live capture's body is estimated from its first frames, as an ordinary capture
+    shown = capture
+    if live and _estimates(capture, template, folder, resume):
+        shown = body_capture(capture)
+    choice = tracking_template(shown, template, folder, refresh=not resume)
     say = log or (lambda line: None)
     say(choice.note)
     start = choice.start  # a template made from a frame starts in that frame's pose
@@ -304,8 +392,58 @@ def track(
         template_info={**choice.info, **input_meta(capture)},
         light=light,
         start=start,
+        on_frame=on_frame,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
+
+
+def _check_track_arguments(given: dict) -> None:
+    """:func:`track`'s arguments, each of its type (one line naming the first that is not)."""
+    func = "track"
+    if not isinstance(given["capture"], AnyCapture):
+        _check_source(func, "capture", given["capture"])
+    check_type(func, "method", given["method"], str, "a method name (str)")
+    if given["method"] not in METHODS:
+        raise InputError(
+            f"track: method must be one of {sorted(METHODS)}, found {given['method']!r}"
+        )
+    for name in ("out", "template", "manifold"):
+        _check_optional(func, name, given[name], _PATH, "a path or name (str or os.PathLike)")
+    check_choice(func, "init", given["init"], ("auto", "truth"))
+    for name in ("resume", "recover", "reseat", "vertices"):
+        check_type(func, name, given[name], bool, "True or False")
+    _check_optional(func, "show_progress", given["show_progress"], bool, "True or False")
+    for name in ("log", "on_frame"):
+        _check_optional(func, name, given[name], Callable, "a callable")
+
+
+def _check_frames(capture: AnyCapture, frames: object) -> list[int] | None:
+    """``frames`` as positions in ``capture`` (a slice of them, or a sequence), checked."""
+    if frames is None:
+        return None
+    if isinstance(capture, LiveCapture):
+        raise InputError("track: a live capture is tracked whole, as its frames come; no frames")
+    n = len(capture)
+    if isinstance(frames, slice):
+        return list(range(n)[frames])
+    if isinstance(frames, str) or not isinstance(frames, Sequence | np.ndarray):
+        check_type("track", "frames", frames, (slice, Sequence), "a slice or a sequence of int")
+    out = list(frames)
+    for k, v in enumerate(out):
+        check_type("track", f"frames[{k}]", v, (int, np.integer), "a frame position (int)")
+        if not 0 <= v < n:
+            raise InputError(f"track: frames[{k}] must be a position from 0 to {n - 1}, found {v}")
+    return [int(v) for v in out]
+
+
+def _estimates(capture, template, folder: Path, resume: bool) -> bool:
+    """Whether :func:`tracking_template` will estimate the performer's body of ``capture``
+    (no template given or named by ``capture.json``, none kept in ``folder`` to resume)."""
+    if template is not None and os.fspath(template) != "auto":
+        return False
+    if template is None and (capture.meta.get("spec") or {}).get("template"):
+        return False
+    return not (resume and (folder / SUBJECT_FILE).is_file())
 
 
 def open_track(path: str | os.PathLike, *, template: Template | str | None = None) -> TrackResult:
@@ -313,6 +451,10 @@ def open_track(path: str | os.PathLike, *, template: Template | str | None = Non
 
     ``template`` is needed only for a template that is neither bundled nor saved in the
     folder (an estimated body is saved there)."""
+    check_type("open_track", "path", path, _PATH, "a track folder (str or os.PathLike)")
+    _check_optional(
+        "open_track", "template", template, (Template, *_PATH), "a Template, name or path"
+    )
     data = read_track(path)
     if template is None:
         body = tracked_template(path, data.meta)
@@ -326,7 +468,7 @@ def open_track(path: str | os.PathLike, *, template: Template | str | None = Non
 
 
 def evaluate(
-    capture: Capture | SequenceCapture | Source,
+    capture: AnyCapture | Source,
     track: TrackResult | Track | str | os.PathLike,
     *,
     silhouettes: bool = True,
@@ -357,6 +499,17 @@ def evaluate(
         Absent parts (no truth, no cameras) are None; :func:`summary` gives the table
         ``meshmocap eval`` prints.
     """
+    func = "evaluate"
+    if not isinstance(capture, AnyCapture):
+        _check_source(func, "capture", capture)
+    check_type(func, "track", track, (TrackResult, Track, *_PATH), "a TrackResult, Track or path")
+    check_type(func, "silhouettes", silhouettes, bool, "True or False")
+    check_type(func, "surface_frames", surface_frames, (int, np.integer), "an int")
+    if surface_frames < 0:
+        raise InputError(f"evaluate: surface_frames must be ≥ 0, found {surface_frames}")
+    check_type(func, "force", force, bool, "True or False")
+    if isinstance(capture, LiveCapture):  # the frames it holds now
+        capture = capture.snapshot()
     if isinstance(track, TrackResult):
         label, track = str(track.path), track.data
     elif isinstance(track, Track):
@@ -369,8 +522,15 @@ def evaluate(
     return evaluate_track(track, capture, silhouettes=silhouettes, surface_frames=surface_frames)
 
 
+def summary(evaluation: Evaluation) -> str:
+    """The table ``meshmocap eval`` prints of an :func:`evaluate` result
+    (:func:`meshmocap.analysis.evaluate.summary`)."""
+    check_type("summary", "evaluation", evaluation, Evaluation, "an Evaluation (evaluate())")
+    return evaluation_summary(evaluation)
+
+
 #: Metres per unit of :func:`example_capture`'s mesh files.
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+UNITS = UNIT_METRES
 
 
 def example_capture(
@@ -400,12 +560,15 @@ def example_capture(
     from meshmocap.body.procedural import procedural_motion
     from meshmocap.body.template import load_template
 
-    if units not in UNITS or up not in ("y", "z"):
-        raise InputError(
-            f"example_capture: units must be one of {list(UNITS)} and up 'y' or 'z', "
-            f"found {units!r}, {up!r}"
-        )
-    if not (isinstance(n_frames, int) and 1 <= n_frames <= 10_000 and fps > 0):
+    func = "example_capture"
+    check_type(func, "out", out, _PATH, "a folder path (str or os.PathLike)")
+    check_type(func, "motion", motion, str, "a motion name (str)")
+    check_type(func, "n_frames", n_frames, (int, np.integer), "an int")
+    check_type(func, "fps", fps, _NUMBER, "a number")
+    check_type(func, "performer", performer, str, "a template name (str)")
+    check_choice(func, "units", units, tuple(UNITS))
+    check_choice(func, "up", up, ("y", "z"))
+    if not (1 <= n_frames <= 10_000 and np.isfinite(fps) and fps > 0):
         raise InputError(
             f"example_capture: expected 1 to 10000 frames at a positive rate, found "
             f"{n_frames!r} at {fps!r}"

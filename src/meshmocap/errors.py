@@ -17,6 +17,12 @@ class InputError(MeshmocapError, ValueError):
     """An argument has the wrong shape, dtype, value or option name."""
 
 
+class ArgumentTypeError(MeshmocapError, TypeError):
+    """An argument of a public function is of the wrong type (a number where a path is
+    expected); the message names the function, the argument, what was expected and what
+    was found."""
+
+
 class MeshError(MeshmocapError, ValueError):
     """A mesh or template is malformed (NaN vertices, bad faces, non-manifold, ...)."""
 

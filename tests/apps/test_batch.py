@@ -160,7 +160,7 @@ def test_without_dask_it_runs_serially_and_says_how_to_get_the_cluster(
     lines = []
     res = run_batch(items, tmp_path / "b", show_progress=False, log=lines.append)
     assert res.mode == "serial" and res.summaries[0].status == "ok"
-    assert 'pip install "meshmocap[cluster]" runs them in parallel' in lines[0]
+    assert 'pip install -e ".[cluster]" runs them in parallel' in lines[0]
     _same_frames(tmp_path / "b" / "walk" / "track", alone / "walk")
     assert lines[-1].startswith("done walk: 5 frames, 0 flagged")
 

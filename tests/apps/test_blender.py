@@ -1,4 +1,4 @@
-"""Exports opened in Blender (the ``bpy`` module, ``pip install "meshmocap[blender]"``) by
+"""Exports opened in Blender (the ``bpy`` module, ``pip install -e ".[blender]"``) by
 the script of the documentation's Blender page, run as a user runs it.
 
 ``bpy`` pins NumPy below 2, so CI runs these tests in a virtual environment of their own

@@ -1,4 +1,4 @@
-"""Marker exports in OpenSim (``pip install "meshmocap[opensim]"``): the documentation's
+"""Marker exports in OpenSim (``pip install -e ".[opensim]"``): the documentation's
 OpenSim script reads a gait track's TRC and C3D and runs inverse kinematics; its hip and
 knee flexion agree with ``meshmocap gait``'s. Skips without ``opensim`` unless
 ``MESHMOCAP_REQUIRE`` names it (CI)."""

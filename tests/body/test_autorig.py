@@ -173,8 +173,9 @@ def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
 
     from meshmocap.apps.bench import run_bench
 
-    if not (shared_data / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz").is_file():
-        pytest.skip("crane archive not available")
+    archive = shared_data / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz"
+    if not archive.is_file():
+        pytest.skip(f"crane archive not available: {archive} is absent")
     res = run_bench(
         tmp_path / "out",
         captures=["crane+humaneva4"],

@@ -822,42 +822,77 @@ def test_an_out_that_cannot_be_written_is_refused_before_any_work(
     assert (tmp_path / "plain.txt").read_text() == "a file"
 
 
-#: Writes into a track folder's own files, refused: (id, argv, expected message)
+#: Writes in a track folder, refused: (id, argv, expected message). Only ``track`` writes
+#: there: over its own files, and beside them too. One case per command that writes.
+INSIDE = (
+    "lies in the track folder TRK, which only 'meshmocap track' writes; expected a path outside it"
+)
 PROTECTED: list[tuple[str, list[str], str]] = [
     (
         "export_over_track_json",
         ["export", T, "--out", "TRK/track.json", "--format", "csv"],
-        "export: --out TRK/track.json: is a file of TRK, which only 'meshmocap track' writes",
+        f"export: --out TRK/track.json: {INSIDE}",
     ),
     (
         "export_into_frames",
         ["export", T, "--out", "TRK/frames/00000.npz", "--format", "csv"],
-        "is a file of TRK, which only 'meshmocap track' writes",
+        f"export: --out TRK/frames/00000.npz: {INSIDE}",
     ),
-    (
-        "export_over_faces",
-        ["export", T, "--out", "TRK/faces.npy", "--format", "csv"],
-        "is a file of TRK",
-    ),
+    ("export_beside", ["export", T, "--out", "TRK/x.bvh"], f"export: --out TRK/x.bvh: {INSIDE}"),
     ("synth_into_track", ["synth", "TRK", "--template", "neutral_5k"], "OUT TRK: is the track"),
+    ("synth_beside", ["synth", "TRK/cap"], f"synth: OUT TRK/cap: {INSIDE}"),
     ("eval_into_track", ["eval", C, T, "--out", "TRK"], "eval: --out TRK: is the track folder TRK"),
-    ("report_over_track", ["report", C, T, "--out", "TRK/track.json"], "is a file of TRK"),
-    ("subject_over_subject", ["subject", C, "--out", "TRK/subject.npz"], "is a file of TRK"),
+    ("eval_beside", ["eval", C, T, "--out", "TRK/e"], f"eval: --out TRK/e: {INSIDE}"),
+    ("report_over_track", ["report", C, T, "--out", "TRK/track.json"], INSIDE),
+    (
+        "report_beside",
+        ["report", C, T, "--out", "TRK/r.html"],
+        f"report: --out TRK/r.html: {INSIDE}",
+    ),
+    ("subject_over_subject", ["subject", C, "--out", "TRK/subject.npz"], INSIDE),
+    ("subject_beside", ["subject", C, "--out", "TRK/s.npz"], f"subject: --out TRK/s.npz: {INSIDE}"),
+    ("learn_beside", ["learn", "walk", "--out", "TRK/m.npz"], f"learn: --out TRK/m.npz: {INSIDE}"),
+    (
+        "learn_plot_beside",
+        ["learn", "walk", "--out", "TMP/m.npz", "--plot", "TRK/l.png"],
+        f"learn: --plot TRK/l.png: {INSIDE}",
+    ),
+    ("gait_beside", ["gait", T, "--out", "TRK/g"], f"gait: --out TRK/g: {INSIDE}"),
+    ("retarget_beside", ["retarget", "walk", "--out", "TRK/w.bvh"], f"--out TRK/w.bvh: {INSIDE}"),
+    ("render_beside", ["render", "walk", "--out", "TRK/r"], f"render: --out TRK/r: {INSIDE}"),
+    ("batch_beside", ["batch", C, "--out", "TRK/b"], f"batch: --out TRK/b: {INSIDE}"),
+    ("bench_beside", ["bench", "--out", "TRK/b"], f"bench: --out TRK/b: {INSIDE}"),
+    (
+        "bench_work_beside",
+        ["bench", "--out", "TMP/b", "--work", "TRK/w"],
+        f"bench: --work TRK/w: {INSIDE}",
+    ),
+    ("demo_beside", ["demo", "--out", "TRK/d"], f"demo: --out TRK/d: {INSIDE}"),
     (
         "track_into_another_track",
         ["track", C, "--out", "TRK/frames", "--method", "articulated_icp"],
-        "track: --out TRK/frames: is a file of TRK",
+        f"track: --out TRK/frames: {INSIDE}",
+    ),
+    (
+        "track_recording_in_another_track",
+        ["track", C, "--follow", "--recording", "TRK/x.rrd", "--out", "TMP/t"],
+        f"track: --recording TRK/x.rrd: {INSIDE}",
     ),
     (
         "transfer_into_track",
         ["transfer", T, "heavy_male", "--out", "TRK"],
         "transfer: --out TRK: is the track folder TRK",
     ),
+    (
+        "transfer_beside",
+        ["transfer", T, "heavy_male", "--out", "TRK/x"],
+        f"transfer: --out TRK/x: {INSIDE}",
+    ),
 ]
 
 
 @pytest.mark.parametrize(("name", "argv", "message"), PROTECTED, ids=[p[0] for p in PROTECTED])
-def test_no_command_but_track_writes_a_track_folders_own_files(
+def test_no_command_but_track_writes_in_a_track_folder(
     tmp_path, cap, trk, capsys, name, argv, message
 ):
     before = {p: p.read_bytes() for p in sorted(trk.rglob("*")) if p.is_file()}
@@ -865,16 +900,25 @@ def test_no_command_but_track_writes_a_track_folders_own_files(
     assert main(_fill(argv, tmp_path, cap, trk)) == 2
     _one_error_line(capsys, message.replace("TRK", str(trk)), tmp_path)
     assert {p: p.read_bytes() for p in sorted(trk.rglob("*")) if p.is_file()} == before
+    assert not list(tmp_path.iterdir())  # nothing written elsewhere either
 
 
-def test_a_new_file_beside_a_tracks_own_files_is_written(tmp_path, trk, capsys):
-    out = trk / "walk.csv"
-    try:
-        assert main(["export", str(trk), "--out", str(out)]) == 0
-        assert main(["export", str(trk), "--out", str(out)]) == 0  # and overwritten
-        assert len(out.read_text().splitlines()) == 3
-    finally:
-        out.unlink(missing_ok=True)
+def test_every_writing_command_has_a_case_above():
+    from meshmocap.cli import OTHER_OUTPUTS, OUTPUTS
+
+    cases = {a[0] for _, a, _ in PROTECTED}
+    assert set(OUTPUTS) <= cases and set(OTHER_OUTPUTS) <= cases
+    flags = {f for _, a, _ in PROTECTED for f in a if f.startswith("--")}
+    assert {f for outs in OTHER_OUTPUTS.values() for _, f, _ in outs} <= flags
+
+
+def test_the_live_recording_goes_in_the_track_folder_written(tmp_path, cap, capsys):
+    """``track --recording OUT/x.rrd`` writes in the track folder it makes: allowed."""
+    from meshmocap.cli import build_parser, check_outputs
+
+    out = tmp_path / "t"
+    argv = ["track", str(cap), "--follow", "--recording", str(out / "x.rrd"), "--out", str(out)]
+    check_outputs(build_parser().parse_args(argv))  # no error
 
 
 @pytest.mark.parametrize("command", ["eval", "report"])

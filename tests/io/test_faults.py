@@ -271,6 +271,29 @@ def test_one_writer_per_folder_and_a_killed_run_leaves_no_stuck_lock(tmp_path):
         holder.stdout.close()
     with folder_lock(tmp_path, "track"):  # the kernel released it with the process
         assert (tmp_path / ".meshmocap.lock").read_text().strip() == str(os.getpid())
+    assert not (tmp_path / ".meshmocap.lock").exists()  # a clean exit leaves no lock file
+
+
+def test_a_lock_file_removed_as_it_was_opened_is_not_taken(tmp_path, monkeypatch):
+    """The last writer removes its lock file between another's open and lock: the other
+    then holds a file no name points to, so it opens the folder's lock file again."""
+    import fcntl
+
+    from meshmocap._atomic import folder_lock
+
+    real, calls = fcntl.flock, []
+
+    def flock(fd, op):
+        calls.append(os.fstat(fd).st_ino)
+        if len(calls) == 1:  # the holder finishes now and removes the file
+            (tmp_path / ".meshmocap.lock").unlink()
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    with folder_lock(tmp_path, "track"):
+        held = (tmp_path / ".meshmocap.lock").stat().st_ino
+        assert len(calls) == 2 and calls[1] == held  # the second try locks the named file
+    assert not (tmp_path / ".meshmocap.lock").exists()
 
 
 def test_long_runs_log_progress_lines_when_stderr_is_not_a_terminal(monkeypatch, capsys):
@@ -622,6 +645,27 @@ def test_subject_says_a_sphere_is_not_a_performer(tmp_path, capsys):
     t = load_template("neutral_5k")
     assert body_problem(t.V, t.F) is None  # the bundled body is human-like
     assert body_problem(0.3 * t.V, t.F) == "it is 0.53 m tall (a person: 0.8–2.5 m)"
+
+
+def test_subject_warns_on_a_dense_mesh_as_track_does(tmp_path, capsys, monkeypatch):
+    """The size warning comes first, before the long estimate (a 1.28M-vertex mesh ran
+    229 s without it)."""
+    from meshmocap.body.template import load_template
+    from meshmocap.estimate import plausibility
+    from meshmocap.io.meshes import write_mesh
+
+    t = load_template("neutral_5k")
+    (tmp_path / "m").mkdir()
+    write_mesh(tmp_path / "m" / "body_0.ply", t.V, t.F)
+    monkeypatch.setattr(plausibility, "MAX_OBSERVED_VERTICES", t.n_vertices - 1)  # as if 1.28M
+    assert main(["subject", str(tmp_path / "m"), "--out", str(tmp_path / "s.npz")]) == 0
+    out, err = capsys.readouterr()
+    assert err == (
+        f"meshmocap: warning: subject: frame 0 of {tmp_path / 'm'} has {t.n_vertices:,} "
+        f"vertices; above {t.n_vertices - 1:,} tracking is less accurate (decimate the meshes "
+        "first: docs/guide/faults.rst)\n"
+    )
+    assert out.startswith("estimated the performer from frame(s) 0 (mesh")
 
 
 @pytest.mark.slow

@@ -330,7 +330,7 @@ def available_cores() -> int:
 
 
 def have_dask() -> bool:
-    """Whether ``dask.distributed`` is installed (``pip install "meshmocap[cluster]"``)."""
+    """Whether ``dask.distributed`` is installed (``pip install -e ".[cluster]"``)."""
     try:
         import distributed  # noqa: F401
     except ImportError:
@@ -445,7 +445,7 @@ def run_batch(
         if not serial and not have_dask():
             log(
                 "batch: Dask is not installed, running the captures one after another in this "
-                'process; pip install "meshmocap[cluster]" runs them in parallel'
+                'process; pip install -e ".[cluster]" runs them in parallel'
             )
         bar = iter(progress(range(total), total=total, label="batch", enabled=show_progress))
         for it in todo:

@@ -55,7 +55,7 @@ from meshmocap.io.bvh import LengthUnit, write_bvh
 from meshmocap.io.c3d import write_c3d
 from meshmocap.io.gltf import skinned_gltf, write_gltf
 from meshmocap.io.joints_csv import write_joints_csv
-from meshmocap.io.results import Track, read_track, tracked_template
+from meshmocap.io.results import Track, planned_frames, read_track, tracked_template
 from meshmocap.io.trc import write_trc
 
 __all__ = [
@@ -240,7 +240,7 @@ def export_frames(track: Track, frames: slice | None = None) -> ExportFrames:
     (:data:`GAP_FLAGS`)."""
     rows = track_rows(track, frames)
     done = track.frames[rows]
-    planned = np.unique(np.asarray(track.meta.get("frames") or [], dtype=np.int64))
+    planned = np.unique(np.asarray(planned_frames(track.meta), dtype=np.int64))
     if frames is not None and len(planned):
         stop = int(max(planned.max(), track.frames.max())) + 1
         planned = planned[np.isin(planned, np.arange(*frames.indices(stop)))]

@@ -31,7 +31,7 @@ def _rerun():
         import rerun
     except ImportError:
         raise InputError(
-            'track --view: the live view needs rerun-sdk: pip install "meshmocap[view]"'
+            'track --view: the live view needs rerun-sdk: pip install -e ".[view]"'
         ) from None
     return rerun
 

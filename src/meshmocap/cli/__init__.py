@@ -9,9 +9,10 @@ printed as one line ``meshmocap: error: ...`` with exit status 2, never a traceb
 memory) also ends in one line, naming the path or the inputs and the cause, with exit
 status 1.
 
-Before a command runs, its ``--out`` is checked (:func:`meshmocap.io.guards.check_output_path`):
-a file where a folder is expected or the reverse, a read-only or unwritable place, and a
-track folder's own files (only ``track`` writes those) are refused.
+Before a command runs, every path it writes (``--out``, and ``learn --plot``, ``bench
+--work``, ``track --recording``) is checked (:func:`meshmocap.io.guards.check_output_path`):
+a file where a folder is expected or the reverse, a read-only or unwritable place, and any
+path in a track folder (only ``track`` writes there) are refused.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import os
 import sys
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 from meshmocap import __version__
@@ -32,15 +34,17 @@ from meshmocap.cli import (
     evaluation,
     export,
     gait,
+    learn,
     motion,
     subject,
     track,
+    transfer,
 )
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
 from meshmocap.io.guards import OutputKind, check_output_path
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
-COMMANDS = (demo, motion, capture, subject, track, evaluation, batch, export, gait)
+COMMANDS = (demo, motion, capture, subject, track, learn, transfer, evaluation, batch, export, gait)
 
 #: What each writing command's ``out`` argument names: a file or a folder.
 OUTPUTS: dict[str, OutputKind] = {
@@ -90,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a parse error already printed
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        _check_out(args)
+        check_outputs(args)
         # one BLAS thread while the command runs (MESHMOCAP_THREADS), and the library's
         # warnings in one line each, on stderr
         with blas_threads(), warnings.catch_warnings():
@@ -115,16 +119,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
 
 
-def _check_out(args: argparse.Namespace) -> None:
-    """Refuse an ``out`` the command could not write, or a track folder's own files
-    (``track`` may name a track folder: its own, to resume)."""
-    kind = OUTPUTS.get(args.command)
+#: Other paths a command writes, besides its ``out``: (argument, flag, file or folder).
+OTHER_OUTPUTS: dict[str, tuple[tuple[str, str, OutputKind], ...]] = {
+    "learn": (("plot", "--plot", "file"),),
+    "bench": (("work", "--work", "folder"),),
+    "track": (("recording", "--recording", "file"),),
+}
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse a path the command would write but cannot, or one in a track folder: only
+    ``track`` writes there (into its own ``--out``: a track folder it resumes, and the
+    live view's ``--recording``). One check for every path every command writes."""
     out = getattr(args, "out", None)
-    if kind is None or out is None:
-        return
-    flag = "OUT" if args.command == "synth" else "--out"
-    track_ok = args.command == "track"  # resumed, or refused there if made otherwise
-    check_output_path(out, kind=kind, command=args.command, flag=flag, track_folder_ok=track_ok)
+    kind = OUTPUTS.get(args.command)
+    paths = [] if kind is None or out is None else [("--out", out, kind)]
+    if args.command == "synth":
+        paths = [("OUT", out, kind)]
+    for name, flag, what in OTHER_OUTPUTS.get(args.command, ()):
+        if getattr(args, name, None) is not None:
+            paths.append((flag, getattr(args, name), what))
+    for flag, path, what in paths:
+        own = args.command == "track" and flag != "--out" and _inside(path, out)
+        if own:  # the live view's recording, in the track folder this run writes
+            continue
+        track_ok = args.command == "track"  # resumed, or refused there if made otherwise
+        check_output_path(
+            path, kind=what, command=args.command, flag=flag, track_folder_ok=track_ok
+        )
+
+
+def _inside(path: str, folder: str | None) -> bool:
+    """Whether ``path`` lies in ``folder``."""
+    if folder is None:
+        return False
+    return Path(os.path.abspath(folder)) in Path(os.path.abspath(path)).parents
 
 
 def os_error_line(exc: OSError) -> str:

@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="track many captures at once (Dask: local cores or a cluster)",
         description="Carve missing hulls, track and evaluate many captures as Dask tasks; "
         "write one folder per capture and summary.csv / summary.md. Rerunning redoes only "
-        "what is missing. Without dask (pip install 'meshmocap[cluster]') the captures run "
+        "what is missing. Without dask (pip install -e '.[cluster]') the captures run "
         "one after another.",
     )
     b.add_argument(

@@ -48,6 +48,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 def _cmd_hull(args: argparse.Namespace) -> int:
     from meshmocap._validate import frame_positions
+    from meshmocap.apps.export import frame_ranges
     from meshmocap.errors import InputError
     from meshmocap.io.cameras import read_cameras
     from meshmocap.studio.hulls import camera_file, compute_hulls, silhouette_frames
@@ -67,8 +68,10 @@ def _cmd_hull(args: argparse.Namespace) -> int:
         args.capture, voxel_size=args.voxel_size, overwrite=args.restart, frames=frames
     )
     cap = run.capture
+    made = cap.indices if frames is None else frames  # the frames asked for, not the folder's
+    which = f"{len(made)} frames" + (f" ({frame_ranges(made)})" if frames is not None else "")
     print(
-        f"hulls of {len(cap)} frames in {cap.path / 'hulls'} ({run.carved} carved by this run, "
+        f"hulls of {which} in {cap.path / 'hulls'} ({run.carved} carved by this run, "
         f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "
         f"{time.perf_counter() - t0:.1f} s)"
     )

@@ -13,14 +13,15 @@ def _cmd_subject(args: argparse.Namespace) -> int:
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
     from meshmocap.estimate.performer.subject import estimate_subject
     from meshmocap.io.capture import open_capture
-    from meshmocap.io.plausibility import body_warnings
+    from meshmocap.io.plausibility import body_warnings, check_observations
 
     out = Path(args.out)
     if out.suffix != ".npz" or not out.parent.is_dir():  # fail before the work
         bad = MeshmocapFileNotFoundError if out.suffix == ".npz" else InputError
         raise bad(f"subject: --out must be a .npz file in an existing folder, found {out}")
     capture = open_capture(args.capture, up=args.up) if args.up else open_capture(args.capture)
-    for line in body_warnings(capture):  # a sphere is no performer: say so first
+    # one person? dense (slow, as for track)? a sphere is no performer: said first
+    for line in [*check_observations(capture, command="subject"), *body_warnings(capture)]:
         print(f"meshmocap: warning: {line}", file=sys.stderr)
     est = estimate_subject(
         capture,

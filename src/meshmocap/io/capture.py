@@ -296,6 +296,46 @@ def _load_npz(
         return {k: z[k] for k in (*keys, *optional) if k in z}
 
 
+def read_meta(folder: str | os.PathLike) -> dict:
+    """The contents of the capture folder's ``capture.json`` (empty when it has none).
+
+    Raises
+    ------
+    FormatError
+        Not UTF-8 JSON, not an object, or not of this format.
+    """
+    meta_path = Path(folder) / "capture.json"
+    if not meta_path.is_file():
+        return {}
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"{meta_path}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+    except UnicodeDecodeError:
+        raise FormatError(f"{meta_path}: not UTF-8 text, expected JSON") from None
+    if not isinstance(meta, dict):
+        raise FormatError(f"{meta_path}: expected a JSON object")
+    if meta.get("format") != FORMAT:
+        raise FormatError(f"{meta_path}: expected format {FORMAT!r}, found {meta.get('format')!r}")
+    return meta
+
+
+def meta_fps(meta: dict, folder: str | os.PathLike) -> float:
+    """Frames per second that ``capture.json``'s contents ``meta`` say (30 when they do
+    not); ``folder`` is named in the error.
+
+    Raises
+    ------
+    FormatError
+        A rate that is not a positive number.
+    """
+    fps = meta.get("fps", 30.0)
+    ok = isinstance(fps, int | float) and not isinstance(fps, bool) and 0 < fps < 1e5
+    if not ok:
+        raise FormatError(f"{Path(folder) / 'capture.json'}: fps must be a positive number")
+    return float(fps)
+
+
 @dataclass(frozen=True, eq=False)
 class CaptureFrame:
     """One frame of a capture folder; heavy parts are read on access.
@@ -360,23 +400,7 @@ class Capture:
         self.path = Path(path)
         if not self.path.is_dir():
             raise MeshmocapFileNotFoundError(f"capture: {self.path} is not a folder")
-        meta_path = self.path / "capture.json"
-        self.meta: dict = {}
-        if meta_path.is_file():
-            try:
-                self.meta = json.loads(meta_path.read_text(encoding="utf-8"))
-            except json.JSONDecodeError as exc:
-                raise FormatError(
-                    f"{meta_path}: not valid JSON ({exc.msg}, line {exc.lineno})"
-                ) from None
-            except UnicodeDecodeError:
-                raise FormatError(f"{meta_path}: not UTF-8 text, expected JSON") from None
-            if not isinstance(self.meta, dict):
-                raise FormatError(f"{meta_path}: expected a JSON object")
-            if self.meta.get("format") != FORMAT:
-                raise FormatError(
-                    f"{meta_path}: expected format {FORMAT!r}, found {self.meta.get('format')!r}"
-                )
+        self.meta: dict = read_meta(self.path)
         self.indices = self._frames()
 
     def _frames(self) -> list[int]:
@@ -429,11 +453,7 @@ class Capture:
     @property
     def fps(self) -> float:
         """Frames per second (``capture.json``; 30 when unknown)."""
-        fps = self.meta.get("fps", 30.0)
-        ok = isinstance(fps, int | float) and not isinstance(fps, bool) and 0 < fps < 1e5
-        if not ok:
-            raise FormatError(f"{self.path / 'capture.json'}: fps must be a positive number")
-        return float(fps)
+        return meta_fps(self.meta, self.path)
 
     def notes(self) -> dict[int, str]:
         """Frames carved from fewer cameras or without hull, and why (frame number → note)."""

@@ -1,5 +1,5 @@
 """Checks a command makes before it writes or scores: is the output place writable and of
-the right kind, does it leave a track folder's own files alone, is the capture the track's.
+the right kind, does it stay out of track folders, is the capture the track's.
 
 Each check raises one error whose message is one line naming the path, what was expected
 and what was found, so a run that would fail at its last step (an unwritable ``--out``
@@ -29,6 +29,7 @@ from meshmocap.errors import (
     OutputPathError,
     ProtectedPathError,
 )
+from meshmocap.io.results import planned_frames
 
 __all__ = [
     "TRACK_OWN_FILES",
@@ -39,9 +40,19 @@ __all__ = [
     "track_folder",
 ]
 
-#: What a track folder is made of (:mod:`meshmocap.io.results`): only ``meshmocap track``
-#: writes these (``subject.npz``: the estimated body; ``.meshmocap.lock``: its lock).
-TRACK_OWN_FILES = ("track.json", "faces.npy", "frames", "subject.npz", ".meshmocap.lock")
+#: What a track folder is made of (:mod:`meshmocap.io.results`; ``subject.npz``: the
+#: estimated body; ``live.rrd``: the recording of ``--follow --view``; ``.meshmocap.lock``:
+#: the lock held while it is written): only ``meshmocap track`` writes in a track folder.
+TRACK_OWN_FILES = (
+    "track.json",
+    "faces.npy",
+    "frames",
+    "light.npz",
+    "subject.npz",
+    "subject_pose.npz",
+    "live.rrd",
+    ".meshmocap.lock",
+)
 
 OutputKind = Literal["file", "folder"]
 
@@ -59,16 +70,14 @@ def track_folder(path: str | os.PathLike) -> bool:
 
 
 def protected_track_file(path: str | os.PathLike) -> Path | None:
-    """The track folder whose own files ``path`` is or lies in (the folder itself, its
-    ``track.json``, ``faces.npy``, ``frames/``, ...: :data:`TRACK_OWN_FILES`), or None.
-    A new file beside them (``TRACK/walk.bvh``) is not protected."""
+    """The track folder that ``path`` is or lies in (at any depth), or None: only
+    ``meshmocap track`` writes inside a track folder, its own files
+    (:data:`TRACK_OWN_FILES`) and anything else (``TRACK/walk.bvh`` too), so a track
+    folder holds what the track wrote and nothing a later command put there."""
     p = Path(os.path.abspath(path))
-    if track_folder(p):
-        return p
-    for parent in p.parents:
-        if track_folder(parent):
-            first = p.relative_to(parent).parts[0]
-            return parent if first in TRACK_OWN_FILES else None
+    for folder in (p, *p.parents):
+        if track_folder(folder):
+            return folder
     return None
 
 
@@ -92,7 +101,7 @@ def check_output_path(
     ``kind`` is what the command writes there: a ``"file"`` or a ``"folder"`` (made with its
     parents when absent). ``command`` and ``flag`` name the argument in the message.
     ``track_folder_ok``: ``path`` may be a track folder itself (``meshmocap track``
-    resuming its own), though still none of a track folder's files.
+    resuming its own), though still nothing inside a track folder.
 
     Raises
     ------
@@ -101,7 +110,7 @@ def check_output_path(
         a folder of its path should be, or the nearest existing folder is on a read-only
         file system or not writable by this user.
     ProtectedPathError
-        ``path`` is a track folder's own file (:func:`protected_track_file`).
+        ``path`` is or lies in a track folder (:func:`protected_track_file`).
     """
     p = Path(path)
     head = f"{command}: {flag} {p}"
@@ -125,10 +134,10 @@ def check_output_path(
     track = protected_track_file(p)
     itself = track is not None and Path(os.path.abspath(p)) == track
     if track is not None and not (itself and track_folder_ok):
-        what = "is the track folder" if itself else "is a file of"
+        what = "is the track folder" if itself else "lies in the track folder"
         raise ProtectedPathError(
             f"{head}: {what} {track}, which only 'meshmocap track' writes; "
-            f"expected a path outside its own files ({', '.join(TRACK_OWN_FILES[:3])})"
+            "expected a path outside it"
         )
 
 
@@ -183,7 +192,7 @@ def check_track_capture(
     here = Path(os.path.abspath(capture.path))
     if Path(os.path.abspath(named)) == here:
         return None
-    frames = [int(i) for i in meta.get("frames") or []]
+    frames = planned_frames(meta)  # none for a live track
     absent = sorted(set(frames) - {int(i) for i in capture.indices})
     if absent:
         why = f"{len(absent)} of its {len(frames)} frames are not in it (first {absent[0]})"

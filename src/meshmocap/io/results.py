@@ -214,6 +214,19 @@ def input_meta(capture) -> dict:
     return {"input": info, **({"fps": float(capture.fps)} if given else {})}
 
 
+def planned_frames(meta: dict) -> list[int]:
+    """The frame numbers a track's ``track.json`` contents ``meta`` planned to track
+    (``frames``); empty for a live track, which tracks frames as they come (``"live":
+    true``; tracks written by older versions said ``"frames": "follow"``)."""
+    frames = meta.get("frames")
+    if not isinstance(frames, list):
+        return []
+    try:
+        return [int(i) for i in frames]
+    except (TypeError, ValueError) as exc:
+        raise FormatError(f"track.json: 'frames' must be frame numbers ({exc})") from None
+
+
 def input_frame(meta: dict) -> InputFrame:
     """The :class:`InputFrame` a track's ``track.json`` contents ``meta`` record (tracks
     written before it was recorded: Z up, metres, the ``fps`` they hold, if any).

@@ -32,7 +32,7 @@ from __future__ import annotations
 import functools
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Literal, get_args
@@ -58,6 +58,7 @@ from meshmocap.estimate.pose.start import search_start, start_flags, start_messa
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.capture import Capture
+from meshmocap.io.live import LiveCapture
 from meshmocap.io.results import (
     FrameResult,
     Track,
@@ -105,6 +106,7 @@ def track_sequence(
     light: int | None = LIGHT_VERTICES,
     init_options: dict | None = None,
     start: Start | None = None,
+    on_frame: Callable[[FrameResult], object] | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -113,8 +115,11 @@ def track_sequence(
     tracker : Tracker
     template : Template
         The tracking template.
-    capture : Capture
-        Frames to track (a capture folder or a sequence of meshes or point clouds).
+    capture : Capture, SequenceCapture or LiveCapture
+        Frames to track (a capture folder or a sequence of meshes or point clouds), or a
+        capture being written (:class:`~meshmocap.io.live.LiveCapture`: each frame is
+        tracked as it appears, until the capture stops growing; ``track.json`` records
+        ``"live": true`` instead of the frames).
     out : path
         Track folder (:mod:`meshmocap.io.results`).
     frames : sequence of int, optional
@@ -151,12 +156,17 @@ def track_sequence(
         The pose of its frame (:attr:`~meshmocap.io.start.Start.frame`) when it is already
         known (a template made from that very frame): with ``init="auto"``, the track
         starts there without a search.
+    on_frame : callable, optional
+        Called with each frame's result once it is written (live mode reports them).
 
     Returns
     -------
     Track
         Every frame's result, read back from ``out``.
     """
+    live = isinstance(capture, LiveCapture)
+    if live and frames is not None:
+        raise InputError("track: a live capture is tracked whole, as its frames come; no frames")
     positions = list(range(len(capture))) if frames is None else list(frames)
     if not positions:
         raise InputError("track: no frames to track")
@@ -166,7 +176,7 @@ def track_sequence(
         "method": tracker.name,
         "template": template.name,
         "capture": str(Path(capture.path).resolve()),
-        "frames": indices,
+        **({"live": True} if live else {"frames": indices}),
         "eval_names": list(template.eval_skeleton.names),
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
@@ -178,31 +188,47 @@ def track_sequence(
     body = tracking_body(template, n_vertices=light)
     meta["tracked_vertices"] = body.light.n_vertices
     Path(out).mkdir(parents=True, exist_ok=True)
+    report = on_frame or (lambda r: None)
     # one BLAS thread while tracking; a second run into the same folder is refused
     with blas_threads(), folder_lock(out, "track"):
         done = set(start_track(out, meta, template.F, resume=resume))
         if body.binding is not None:  # frames hold the light body; read_track reads out
             write_light_binding(out, body.binding)
         if indices[0] not in done:
+            # a live capture starts from the frames there now, as an ordinary capture
+            first = capture.snapshot() if live else capture
             initialise_tracker(
-                tracker, body, capture, out, positions, init, init_options, start=start
+                tracker,
+                body,
+                first,
+                out,
+                list(range(len(first))) if live else positions,
+                init,
+                init_options,
+                start=start,
             )
-            done = set(done_frames(out))
-        todo = [k for k in positions[1:] if capture.indices[k] not in done]
-        if todo:
-            last = max(
-                (i for i in indices if i in done and i < capture.indices[todo[0]]),
-                default=indices[0],
-            )
-            resume_tracker(tracker, body.light, out, last)
-            recovery = None
-            if recover:
-                pose = _last_pose(out, [i for i in indices if i in done and i <= last])
-                excl = (init_options or {}).get("exclude_trials", ())
-                recovery = Recovery(body.light, *pose, exclude_trials=excl)
-            good = last
-            for k in progress(todo, label=tracker.name, enabled=show_progress):
-                index = int(capture.indices[k])
+            started = set(done_frames(out))
+            for i in sorted(started - done):
+                report(read_track_frame(out, i))
+            done = started
+        todo: Iterable[int]
+        if live:  # frames that appear while tracking join a live capture's positions
+            todo = (k for k in _growing(capture, 1) if capture.indices[k] not in done)
+        else:
+            todo = [k for k in positions[1:] if capture.indices[k] not in done]
+        pool = capture.indices if live else indices
+        recovery, good = None, None
+        for k in progress(todo, label=tracker.name, enabled=show_progress):
+            index = int(capture.indices[k])
+            if good is None:  # the first frame to track: from the state of the one before
+                last = max((i for i in pool if i in done and i < index), default=indices[0])
+                resume_tracker(tracker, body.light, out, last)
+                if recover:
+                    pose = _last_pose(out, [i for i in pool if i in done and i <= last])
+                    excl = (init_options or {}).get("exclude_trials", ())
+                    recovery = Recovery(body.light, *pose, exclude_trials=excl)
+                good = last
+            while True:
                 r = track_frame(
                     tracker,
                     functools.partial(capture.__getitem__, k),  # a mesh sequence reads here
@@ -211,10 +237,24 @@ def track_sequence(
                     good,
                     recovery=recovery,
                     reseat=reseat,
+                    retry=functools.partial(capture.young, k) if live else None,
                 )
-                good = index if r.healthy else good
-                write_frame(out, r)
+                if r is not None:
+                    break
+                time.sleep(capture.poll)  # a live file still being written: read it again
+            good = index if r.healthy else good
+            write_frame(out, r)
+            report(r)
     return read_track(out, vertices=vertices)
+
+
+def _growing(capture: LiveCapture, start: int) -> Iterator[int]:
+    """Positions ``start``, ``start + 1``, ... of a live capture, each once it has appeared;
+    ends when the capture stops growing (:meth:`~meshmocap.io.live.LiveCapture.wait`)."""
+    k = start
+    while capture.wait(k + 1):
+        yield k
+        k += 1
 
 
 def resume_tracker(tracker: Tracker, template: Template, out, last: int) -> None:

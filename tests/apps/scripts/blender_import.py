@@ -1,6 +1,6 @@
 """Open a meshmocap export (.bvh, .glb or .gltf) in Blender, check it, render a frame.
 
-Runs with Blender's Python module (``pip install "meshmocap[blender]"``, which installs
+Runs with Blender's Python module (``pip install -e ".[blender]"``, which installs
 ``bpy``, Blender 4.2 to 5.0 on Python 3.11)::
 
     python blender_import.py walk.glb --render walk.png --blend walk.blend

@@ -1,6 +1,6 @@
 """Inverse kinematics of a meshmocap marker export (.trc or .c3d) in OpenSim.
 
-Runs with OpenSim's Python package (``pip install "meshmocap[opensim]"``, OpenSim 4.6)::
+Runs with OpenSim's Python package (``pip install -e ".[opensim]"``, OpenSim 4.6)::
 
     meshmocap export walk-patch --out walk.trc
     python opensim_ik.py walk.trc --out walk_ik.mot --model walk.osim

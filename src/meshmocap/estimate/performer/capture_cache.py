@@ -101,7 +101,10 @@ def _files(capture) -> list[Path]:
     return sorted(
         p
         for p in root.rglob("*")
-        if p.is_file() and p.relative_to(root).parts[0] not in skip and p.suffix != ".lock"
+        if p.is_file()
+        and p.relative_to(root).parts[0] not in skip
+        and p.suffix != ".lock"
+        and not p.name.startswith(".")  # a file being written (live), renamed away anytime
     )
 
 
