@@ -651,7 +651,7 @@ def test_subject_warns_on_a_dense_mesh_as_track_does(tmp_path, capsys, monkeypat
     """The size warning comes first, before the long estimate (a 1.28M-vertex mesh ran
     229 s without it)."""
     from meshmocap.body.template import load_template
-    from meshmocap.estimate import plausibility
+    from meshmocap.io import plausibility
     from meshmocap.io.meshes import write_mesh
 
     t = load_template("neutral_5k")
@@ -670,7 +670,7 @@ def test_subject_warns_on_a_dense_mesh_as_track_does(tmp_path, capsys, monkeypat
 
 @pytest.mark.slow
 def test_a_dense_mesh_folder_is_tracked_with_a_warning(cap, tmp_path, capsys, monkeypatch):
-    from meshmocap.estimate import plausibility
+    from meshmocap.io import plausibility
     from meshmocap.io.meshes import write_mesh
 
     seq = tmp_path / "seq"

@@ -141,7 +141,7 @@ class ICPOptions:
     fixed_joints: tuple[str, ...] = FIXED_JOINTS
     seed: int = 0
 
-    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    #: Each option's constraint (checked by ``check_options`` in ``meshmocap._validate``).
     constraints: ClassVar[dict[str, Constraint | tuple]] = {
         "n_model_points": Interval(Integral, 1, None),
         "max_points": Interval(Integral, 1, None),

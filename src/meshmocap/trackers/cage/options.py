@@ -188,7 +188,7 @@ class CageOptions:
     damping: float = DAMPING["cage"].lam
     seed: int = 0
 
-    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    #: Each option's constraint (checked by ``check_options`` in ``meshmocap._validate``).
     constraints: ClassVar[dict[str, Constraint | tuple]] = {
         "terms": Names(ALL_TERMS, required=("distance",)),
         "space": Options(get_args(Space)),

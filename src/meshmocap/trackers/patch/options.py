@@ -248,7 +248,7 @@ class PatchOptions:
     lambda_temporal: float = 0.0
     seed: int = 0
 
-    #: Each option's constraint (:func:`~meshmocap._validate.check_options`).
+    #: Each option's constraint (checked by ``check_options`` in ``meshmocap._validate``).
     constraints: ClassVar[dict[str, Constraint | tuple]] = {
         "n_patches": Interval(Integral, 1, None),
         "joint_rigidity": Interval(Real, 0, None),
