@@ -38,6 +38,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "_validate",
         "_progress",
         "_threads",
+        "_timing",
         "_version",
     ),  # base
     ("geometry",),

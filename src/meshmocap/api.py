@@ -26,10 +26,12 @@ from typing import Literal
 
 import numpy as np
 
+from meshmocap._timing import StageTimer
 from meshmocap.analysis.evaluate import Evaluation, summary
 from meshmocap.analysis.evaluate import evaluate as evaluate_track
 from meshmocap.analysis.gait import Gait, track_gait
 from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
+from meshmocap.apps.kernels import kernels_of, start_compiling
 from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
@@ -223,6 +225,7 @@ def track(
     vertices: bool = True,
     show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
+    timer: StageTimer | None = None,
     **options,
 ) -> TrackResult:
     """Track a capture, as ``meshmocap track`` does.
@@ -258,6 +261,9 @@ def track(
         few seconds).
     log : callable, optional
         Called with one line on how the template was chosen (the CLI prints it).
+    timer : StageTimer, optional
+        Records each frame's seconds per stage (read, observe, step, checks, write;
+        :mod:`meshmocap._timing`): ``timer.summary()`` says where a frame's time goes.
     **options
         Options of the method's tracker (``n_patches``, ``max_iter``, ...).
 
@@ -272,6 +278,9 @@ def track(
     if isinstance(frames, slice):
         frames = range(len(capture))[frames]
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="meshmocap-track-"))
+    # a fresh install's kernels compile in the background while the body is estimated and
+    # the first pose found (meshmocap.apps.kernels)
+    start_compiling(kernels_of(method))
     choice = tracking_template(capture, template, folder, refresh=not resume)
     say = log or (lambda line: None)
     say(choice.note)
@@ -304,6 +313,7 @@ def track(
         template_info={**choice.info, **input_meta(capture)},
         light=light,
         start=start,
+        timer=timer,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 

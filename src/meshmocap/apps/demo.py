@@ -29,6 +29,7 @@ from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.export import export_track
 from meshmocap.apps.gait_files import gait_of, write_gait
+from meshmocap.apps.kernels import start_compiling
 from meshmocap.apps.player import player_from_tracks
 from meshmocap.apps.render import render_motion
 from meshmocap.apps.report import (
@@ -121,6 +122,8 @@ def run_demo(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    if frames is not None:  # a fresh install's kernels compile in the background while the
+        start_compiling()  # motions render, the capture is made, the body estimated
     neutral = load_template("neutral")
     files: list[tuple[str, Path]] = []
     walk = procedural_motion("walk", neutral, duration=seconds, fps=30.0)

@@ -58,6 +58,7 @@ def _capture_source(
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap import api
+    from meshmocap._timing import StageTimer
     from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
     from meshmocap.errors import InputError
@@ -100,6 +101,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     for line in check_observations(capture, frames):  # one person? dense? partial hulls?
         print(f"meshmocap: warning: {line}", file=sys.stderr)
     before = set() if args.restart else set(done_frames(args.out))
+    timer = StageTimer()
     result = api.track(
         capture,
         method=args.method,
@@ -113,6 +115,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         manifold=args.manifold,
         vertices=False,
         log=print,
+        timer=timer,
         **options,
     )
     track, dt = result.data, result.seconds
@@ -129,6 +132,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
         f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
         f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}"
     )
+    if len(timer.frames) > 1:  # where a frame's time goes (frame 1 compiles and warms up)
+        print(f"time {timer.summary()}")
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
         print(

@@ -40,6 +40,7 @@ import numpy as np
 from meshmocap._atomic import folder_lock
 from meshmocap._progress import progress
 from meshmocap._threads import blas_threads
+from meshmocap._timing import StageTimer, touched
 from meshmocap._validate import check_choice
 from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
 from meshmocap.body.template import Template
@@ -100,6 +101,7 @@ def track_sequence(
     light: int | None = LIGHT_VERTICES,
     init_options: dict | None = None,
     start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
+    timer: StageTimer | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -144,6 +146,10 @@ def track_sequence(
     start : (frame number, R (J, 3, 3), root (3,), message), optional
         The pose of that frame when it is already known (a template made from that very
         frame): with ``init="auto"``, the track starts there without a search.
+    timer : StageTimer, optional
+        Records the seconds of each frame tracked (not the first) per stage: read,
+        observe, the tracker's step and its own stages, the checks, the write
+        (:mod:`meshmocap._timing`). None records nothing.
 
     Returns
     -------
@@ -204,9 +210,12 @@ def track_sequence(
                     good,
                     recovery=recovery,
                     reseat=reseat,
+                    timer=timer,
                 )
                 good = index if r.healthy else good
                 write_frame(out, r)
+                if timer is not None:
+                    timer.lap("write")
     return read_track(out, vertices=vertices)
 
 
@@ -228,6 +237,7 @@ def track_frame(
     recovery: Recovery | None = None,
     reseat: bool = False,
     retry: Callable[[], bool] | None = None,
+    timer: StageTimer | None = None,
 ) -> FrameResult | None:
     """Track one frame: the per-frame step of the driver and of live mode
     (:mod:`meshmocap.trackers.follow`).
@@ -242,6 +252,9 @@ def track_frame(
     retry : callable, optional
         Asked when the frame cannot be read: True means "not yet" (live mode: a file still
         being written), and None is returned for the caller to try again later.
+    timer : StageTimer, optional
+        Starts a frame's record and books read, observe, step (and the tracker's own
+        stages) and checks to it (:mod:`meshmocap._timing`); the caller books the write.
 
     Returns
     -------
@@ -251,16 +264,25 @@ def track_frame(
         observation) a copy of frame ``good``'s result, the tracker reset to its state.
     """
     t0 = time.perf_counter()
+    if timer is not None:
+        timer.start()
     try:
-        frame = read()
-        reason = missing_reason(frame)
+        raw = read()
+        reason = missing_reason(raw)
         if reason is None:
-            frame = observed(frame)  # points, normals, occupancy: made once
-            r = tracker.step(frame)
+            frame = observed(raw)  # points, normals, occupancy: made once
+            if timer is not None:
+                _read_and_observe(timer, raw, frame)
+            r = _step(tracker, frame, timer)
             if not is_finite_result(r):
                 raise FitError("non-finite joints or vertices")
             if recovery is not None:
                 r = recovered(tracker, recovery, frame, r, reseat=reseat)
+                if timer is not None:
+                    timer.lap("checks")
+            if timer is not None:  # what this frame read and derived, the next reads first
+                timer.reads = touched(raw, FRAME_READS)
+                timer.derived = touched(frame, FRAME_DERIVED)
             return replace(r, index=index, seconds=time.perf_counter() - t0)
     except NUMERICAL_ERRORS as exc:
         return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
@@ -269,6 +291,39 @@ def track_frame(
             return None
         reason = failure_reason(exc)
     return coast_frame(tracker, out, good, index, t0, "missing", reason)
+
+
+#: A capture frame's lazily read files, and what its observed wrapper derives from them
+#: once (cached properties of :class:`~meshmocap.io.capture.CaptureFrame` and
+#: :class:`~meshmocap.estimate.observe.ObservedFrame`). With a timer, the driver computes
+#: up front those the frame before used (:func:`_read_and_observe`).
+FRAME_READS = ("hull_mesh", "hull")
+FRAME_DERIVED = ("points", "field")
+
+
+def _read_and_observe(timer: StageTimer, raw, frame) -> None:
+    """Read the frame's files and derive its observations as the frame before used them
+    (the same work the step and the checks would ask for), booked to ``read`` and
+    ``observe``."""
+    for name in timer.reads:
+        getattr(raw, name)
+    timer.lap("read")
+    for name in timer.derived:
+        getattr(frame, name)
+    timer.lap("observe")
+
+
+def _step(tracker: Tracker, frame, timer: StageTimer | None) -> FrameResult:
+    """``tracker.step(frame)``; with a timer, booked to ``step`` and the tracker's own
+    stages (its ``stage_seconds``, where it keeps them) to ``step.NAME``."""
+    if timer is None:
+        return tracker.step(frame)
+    before = dict(getattr(tracker, "stage_seconds", {}))
+    r = tracker.step(frame)
+    timer.lap("step")
+    for name, total in getattr(tracker, "stage_seconds", {}).items():
+        timer.add(f"step.{name}", total - before.get(name, 0.0))
+    return r
 
 
 #: Errors reading one frame's observation (an absent, empty or corrupt hull or mesh file):
