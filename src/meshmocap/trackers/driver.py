@@ -38,7 +38,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from meshmocap._atomic import folder_lock
-from meshmocap._progress import progress
+from meshmocap._progress import phase, progress
 from meshmocap._threads import blas_threads
 from meshmocap._timing import StageTimer, touched
 from meshmocap._validate import check_choice
@@ -184,7 +184,15 @@ def track_sequence(
             write_light_binding(out, body.binding)
         if indices[0] not in done:
             initialise_tracker(
-                tracker, body, capture, out, positions, init, init_options, start=start
+                tracker,
+                body,
+                capture,
+                out,
+                positions,
+                init,
+                init_options,
+                start=start,
+                show_progress=show_progress,
             )
             done = set(done_frames(out))
         todo = [k for k in positions[1:] if capture.indices[k] not in done]
@@ -370,11 +378,13 @@ def initialise_tracker(
     init_options: dict | None = None,
     *,
     start: tuple[int, np.ndarray, np.ndarray, str] | None = None,
+    show_progress: bool | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds for the full body (its message says how), or at ``start``'s where that is this
     frame (:func:`track_sequence`), the tracker on ``body.light``. Frames before it are
-    written as copies of it, flagged ``missing``."""
+    written as copies of it, flagged ``missing``. A placement of more than a few seconds
+    says so (``show_progress`` False: nothing)."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -392,7 +402,10 @@ def initialise_tracker(
                     R, root, how = first_pose(
                         body.template, frame, init, capture=capture, options=init_options
                     )
-                r = tracker.init(body.light, frame, R, root)
+                with phase(
+                    f"placing the {tracker.name} tracker on frame {index}", enabled=show_progress
+                ):
+                    r = tracker.init(body.light, frame, R, root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:
