@@ -15,6 +15,7 @@ a user clip (BVH/AMC) can be added.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import time
@@ -47,7 +48,7 @@ from meshmocap.errors import InputError
 from meshmocap.estimate.tracking_template import SUBJECT_FILE, tracking_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
-from meshmocap.io.results import done_frames, frame_path
+from meshmocap.io.results import LIGHT_FILE, done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -187,6 +188,8 @@ def run_demo(
             )
         with phase("dropping the hull meshes (rebuilt when read)", enabled=show_progress):
             drop_hull_meshes(cap.path)
+        shared = [f / n for f in folders for n in (SUBJECT_FILE, LIGHT_FILE, "faces.npy")]
+        link_duplicates([*shared, *sorted((cap.path / ".meshmocap").glob("*.npz"))])
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     with phase("writing the report"):
         report = _report(out, players, evaluations, sections, sheets, notes)
@@ -294,6 +297,35 @@ def drop_hull_meshes(capture: str | os.PathLike) -> int:
     which reading the capture rebuilds the same mesh by marching cubes
     (:func:`~meshmocap.io.capture.read_hull_mesh`). Returns the files rewritten."""
     return sum(_drop_arrays(p, "mesh_") for p in sorted((Path(capture) / "hulls").glob("*.npz")))
+
+
+def link_duplicates(paths) -> int:
+    """Make each of the files ``paths`` whose bytes equal an earlier one's a hard link to
+    it (the demo's tracks each keep the estimated body, its light copy and the faces, the
+    same files), atomically; where a link cannot be made the copy stays. Returns the bytes
+    no longer stored twice."""
+    first: dict[tuple[int, bytes], Path] = {}
+    saved = 0
+    for p in map(Path, paths):
+        if not p.is_file():
+            continue
+        data = p.read_bytes()
+        key = (len(data), hashlib.sha256(data).digest())
+        if key not in first:
+            first[key] = p
+            continue
+        if os.path.samefile(first[key], p):
+            continue
+        tmp = p.with_name(f".{p.name}.link")
+        try:
+            tmp.unlink(missing_ok=True)
+            os.link(first[key], tmp)
+            os.replace(tmp, p)
+        except OSError:  # a file system without hard links: the copy stays
+            tmp.unlink(missing_ok=True)
+            continue
+        saved += len(data)
+    return saved
 
 
 def _drop_arrays(path: Path, prefix: str) -> bool:
