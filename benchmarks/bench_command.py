@@ -165,7 +165,7 @@ def run(command: str, argv: list[str], env: dict, log: Path) -> dict:
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines, last, gaps = [], (0.0, 0.0, "(start)"), []
-    with log.open("w") as f:
+    with log.open("w", buffering=1) as f:  # line by line, to follow a long run
         for line in p.stdout:
             now, cpu = time.perf_counter() - t0, _cpu_of(p.pid)
             text = line.rstrip()
