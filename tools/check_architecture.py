@@ -35,6 +35,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "errors",
         "_atomic",
         "_npz",
+        "_numba",
         "_validate",
         "_progress",
         "_threads",

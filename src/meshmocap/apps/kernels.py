@@ -142,13 +142,17 @@ def kernels_of(method: str) -> tuple[str, ...]:
 
 def uncached_kernels(modules=None) -> list[str]:
     """The kernels of :data:`KERNELS` (of ``modules``) that numba's cache holds fewer
-    compiled signatures of than listed, ``"module:function"`` (imports the modules)."""
+    compiled signatures of than listed, ``"module:function"`` (imports the modules); a
+    kernel numba cannot cache (:mod:`meshmocap._numba`) is not among them."""
     out = []
     for name in modules or KERNELS:
         module = importlib.import_module(name)
         for function, signatures in KERNELS[name].items():
+            cache = getattr(getattr(module, function), "_cache", None)
+            if not hasattr(cache, "_cache_file"):  # uncached (meshmocap._numba): none to fill
+                continue
             try:  # numba's cache index of the kernel (its source's time stamp checked)
-                n = len(getattr(module, function)._cache._cache_file._load_index())
+                n = len(cache._cache_file._load_index())
             except Exception:  # numba's internals changed: assume none
                 n = 0
             if n < len(signatures):
