@@ -48,6 +48,16 @@ def run_child(script: str, args: list[str], env: dict[str, str], out: Path) -> d
     return json.loads(out.read_text())
 
 
+def python_in(env: dict[str, str], code: str) -> str:
+    """Run ``python -c CODE`` with ``env`` (a tree's, :func:`tree_env`); its last line of
+    output. Inputs both trees read are made by the oldest (a newer tree reads older files;
+    the reverse is not promised)."""
+    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"python -c {code!r} failed:\n{p.stderr[-2000:]}")
+    return p.stdout.strip().splitlines()[-1]
+
+
 def load() -> str:
     """The load averages, to print beside any timing."""
     a, b, c = os.getloadavg()

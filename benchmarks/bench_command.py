@@ -37,7 +37,7 @@ import sys
 import time
 from pathlib import Path
 
-from _trees import add_tree_args, load, tree_env
+from _trees import add_tree_args, load, python_in, tree_env
 
 #: Phases of each command: ``module:function`` → label, the label formatted with the
 #: call's arguments (``{0}``: the first). A function the tree lacks is left out (noted).
@@ -207,12 +207,16 @@ def _argv(command: str, args, work: Path, tree: str) -> list[str]:
 
 
 def _walk(args, work: Path) -> Path:
-    """The synthetic walk ``track`` tracks (made once, by this process's tree)."""
-    from meshmocap.studio.synth import SynthSpec, synthesize
-
+    """The synthetic walk ``track`` tracks, made once by the first tree (the old one: a
+    newer tree reads older captures)."""
     path = work / f"walk{args.frames}@neutral"
-    spec = SynthSpec(motion="walk", template="neutral", subject="neutral", stop=args.frames)
-    return synthesize(path, spec, show_progress=False).path
+    code = (
+        "from meshmocap.studio.synth import SynthSpec, synthesize; "
+        f"spec = SynthSpec(motion='walk', template='neutral', stop={args.frames}); "
+        f"print(synthesize({str(path)!r}, spec, show_progress=False).path)"
+    )
+    first = args.trees[0]
+    return Path(python_in(tree_env(getattr(args, first), work, first), code))
 
 
 def table(command: str, runs: dict[str, list[dict]]) -> str:

@@ -58,10 +58,11 @@ from pathlib import Path
 
 import numpy as np
 
-from _trees import add_tree_args, load, run_child, tree_env
+from _trees import add_tree_args, load, python_in, run_child, tree_env
 from meshmocap.analysis.metrics import correspondence_error
 from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_capture
 from meshmocap.body.template import load_template
+from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
@@ -154,7 +155,6 @@ def child_stages(args) -> dict:
     CPU) of the driver tracking the walk, and the mean joint error (mm)."""
     import meshmocap.trackers.driver as driver
     from meshmocap.body.light import tracking_body
-    from meshmocap.io.capture import Capture
 
     template = load_template(args.templates[0])
     capture = Capture(args.capture)
@@ -204,10 +204,16 @@ STAGE_ORDER = ("read", "observe", "step", "checks", "write")
 
 
 def stages_table(args, work: Path) -> None:
-    spec = parse_capture("walk", frames=args.frames)
     for name in args.templates:
         template = load_template(name)
-        capture = make_capture(spec, work, template=name, show_progress=False)
+        # made by the first tree (the old one): a newer tree reads older captures
+        code = (
+            "from meshmocap.apps.bench_captures import make_capture, parse_capture; "
+            f"print(make_capture(parse_capture('walk', frames={args.frames}), "
+            f"{str(work / args.trees[0])!r}, template={name!r}, show_progress=False).path)"
+        )
+        first = args.trees[0]
+        capture = Capture(python_in(tree_env(getattr(args, first), work, first), code))
         print(
             f"\n### whole frame: {name} ({template.n_vertices} vertices, tracked on its light "
             f"body), {args.frames}-frame walk, humaneva4 hulls, init truth, default checks; "
