@@ -11,7 +11,9 @@ evaluation, the plots, the player, the report...), wall and CPU seconds of its o
 process, each phase without the phases inside it; what no phase covers is ``other``
 (importing, loading templates). The parent stamps every line the command prints: a gap
 of more than 2 s with nothing printed is a **silent phase** (issue 38 item 5), listed with
-the lines before and after it and the CPU seconds it took.
+the lines before and after it and the CPU seconds it took (a gap between two lines of a
+progress bar, which logs every few seconds, or inside a phase that said what it does, is
+not silent).
 
 ``--cold``: every run starts without compiled kernels (``NUMBA_CACHE_DIR`` and the
 meshmocap cache, ``MESHMOCAP_CACHE``, emptied: a fresh machine's first run); without it the
@@ -31,6 +33,7 @@ import argparse
 import importlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -170,7 +173,7 @@ def run(command: str, argv: list[str], env: dict, log: Path) -> dict:
             now, cpu = time.perf_counter() - t0, _cpu_of(p.pid)
             text = line.rstrip()
             f.write(f"{now:8.1f} cpu {cpu:7.1f} | {text}\n")
-            if now - last[0] > SILENT_SECONDS:
+            if now - last[0] > SILENT_SECONDS and not _said(last[2], text):
                 gaps.append((now - last[0], cpu - last[1], last[2], text))
             last = (now, cpu, text)
             lines.append(text)
@@ -181,6 +184,16 @@ def run(command: str, argv: list[str], env: dict, log: Path) -> dict:
     res["gaps"] = gaps
     res["children_cpu"] = _children_cpu()
     return res
+
+
+def _said(before: str, after: str) -> bool:
+    """Whether a gap between two lines is covered by what the first said: two lines of
+    the same progress bar (logged every few seconds), or a phase's start and its end."""
+    bar = re.compile(r"([\w ]+): \d+/\d+")
+    a, b = bar.match(before), bar.match(after)
+    if a and b and a[1] == b[1]:
+        return True
+    return before.endswith(" ...") and after.startswith(before[:-4] + ": done")
 
 
 _CHILDREN = [0.0]

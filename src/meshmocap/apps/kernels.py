@@ -170,7 +170,8 @@ _RUNNING: list[subprocess.Popen] = []
 
 def start_compiling(modules=None) -> subprocess.Popen | None:
     """Start compiling the kernels of ``modules`` (default all of :data:`KERNELS`) that
-    numba has not cached, in a background process (niced, silent), and return it; None
+    numba has not cached, in a background process (silent; at the command's own priority:
+    it is work the command would otherwise do itself), and return it; None
     when every kernel is cached already, when one is compiling them already, or where it
     cannot start (the command then compiles as it goes). It runs on after this call
     returns, and ends with it, or when this process exits (:func:`stop_compiling`)."""
@@ -189,7 +190,6 @@ def start_compiling(modules=None) -> subprocess.Popen | None:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
-            preexec_fn=_lower_priority if os.name == "posix" else None,
         )
     except OSError:
         return None
@@ -197,10 +197,6 @@ def start_compiling(modules=None) -> subprocess.Popen | None:
         atexit.register(_stop_all)
     _RUNNING.append(proc)
     return proc
-
-
-def _lower_priority() -> None:  # pragma: no cover - runs in the child
-    os.nice(5)
 
 
 def stop_compiling(proc: subprocess.Popen | None) -> None:
