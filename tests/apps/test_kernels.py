@@ -19,7 +19,7 @@ MESH = "meshmocap.geometry._mesh_kernels"
 
 
 def _types(sig: str) -> tuple:
-    return sigutils.normalize_signature(f"({sig},)")[0]
+    return tuple(sigutils.normalize_signature(f"({sig},)")[0])
 
 
 def test_every_listed_kernel_exists_and_its_types_parse():
@@ -47,18 +47,21 @@ def _python(code: str, cache) -> str:
 
 def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
     """A fresh cache (a fresh install) lacks the kernel; ``python -m meshmocap.apps.kernels``
-    compiles it; the next process finds it cached and loads it instead of compiling."""
+    compiles it; the next process finds it cached, and a call of the kernel with the
+    library's argument types loads it from there instead of compiling it."""
     check = (
         f"from meshmocap.apps.kernels import uncached_kernels; print(uncached_kernels([{MESH!r}]))"
     )
     assert _python(check, tmp_path) == f"['{MESH}:normals_at_kernel']"
     _python(f"from meshmocap.apps.kernels import main; main(['--quiet', {MESH!r}])", tmp_path)
     assert _python(check, tmp_path) == "[]"
-    load = (
-        "import time; from meshmocap.apps.kernels import compile_kernels; "
-        f"print(compile_kernels([{MESH!r}])['{MESH}:normals_at_kernel'])"
+    call = (
+        "import numpy as np; from meshmocap.geometry._mesh_kernels import normals_at_kernel as k; "
+        "V = np.eye(3); F = np.array([[0, 1, 2]]); "
+        "print(k(V, F, np.arange(3), 3).shape, sum(k.stats.cache_hits.values()), "
+        "sum(k.stats.cache_misses.values()))"
     )
-    assert float(_python(load, tmp_path)) < 1.0  # loaded, not compiled (seconds)
+    assert _python(call, tmp_path) == "(3, 3) 1 0"  # loaded by the call: one hit, no miss
 
 
 @pytest.mark.slow

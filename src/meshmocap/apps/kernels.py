@@ -106,6 +106,16 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 
 
+def argument_types(signature: str) -> tuple:
+    """The numba types (a tuple) of one of :data:`KERNELS`' signatures. A kernel is
+    compiled for this tuple, as a call compiles it: numba's cache files a compilation
+    under the signature object it was asked for, so one asked for by a string would never
+    be found by a call."""
+    from numba.core import sigutils
+
+    return tuple(sigutils.normalize_signature(f"({signature},)")[0])
+
+
 def compile_kernels(modules=None) -> dict[str, float]:
     """Compile every kernel of :data:`KERNELS` (of ``modules``, default all) with its
     argument types, or load it from numba's cache; returns the CPU seconds each took
@@ -120,7 +130,7 @@ def compile_kernels(modules=None) -> dict[str, float]:
         for function, signatures in KERNELS[name].items():
             t0 = time.process_time()
             for sig in signatures:
-                getattr(module, function).compile(f"({sig},)")
+                getattr(module, function).compile(argument_types(sig))
             out[f"{name}:{function}"] = time.process_time() - t0
     return out
 
