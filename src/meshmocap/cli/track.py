@@ -57,7 +57,10 @@ def _capture_source(
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from meshmocap import api
+    from meshmocap._progress import phase
+
+    with phase("loading meshmocap's modules"):  # scipy, matplotlib, scikit-learn...: seconds
+        from meshmocap import api
     from meshmocap._timing import StageTimer
     from meshmocap._validate import frame_positions
     from meshmocap.analysis.evaluate import track_init
