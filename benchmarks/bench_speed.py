@@ -1,15 +1,26 @@
-"""Speed end to end per frame, stage by stage, and against trimesh's non-rigid ICP (issue 21).
+"""Speed end to end per frame, stage by stage, and against trimesh's non-rigid ICP (issues 21, 38).
 
-**Part 1, stages** (``--templates``, ``--methods``): a ``--frames``-frame procedural walk
-(``humaneva4`` hulls at 1 cm) of each template (``neutral_5k``, 5,000 vertices, and
-``neutral``, 12k), tracked by each method from the true pose of frame 0, ``--repeats``
-times. Per frame: ``read`` (inflating the tracker's input: the hull's surface mesh, or the
-cage tracker's occupancy), then ``step`` with the tracker's own stage breakdown
-(``STAGES`` of each tracker module, median per frame); the total is read + step, wall
-clock and CPU time of this process (the CPU time says what the frame costs when the
-machine is shared). Medians
-over frames 1…, then the median run (min–max of the runs' medians beside it); the mean
-joint error (mm, 15 joints against the truth) shows the speed is not bought with accuracy.
+**Part 1, the whole frame** (``--templates``, ``--methods``): what a user waits for per
+frame, measured on the tracking driver's own path (:func:`~meshmocap.trackers.driver.
+track_sequence`, as ``meshmocap track`` runs it: the light body, the default checks on),
+old tree and new in the same run (``--old``, ``--new``: ``src/`` folders; by default the
+main this checkout started from, ``../base/src``, and this checkout). A ``--frames``-frame
+procedural walk (``humaneva4`` hulls at 1 cm) of each template (default ``neutral``, 12k
+vertices), the first pose from the truth (``init="truth"``), each method, each tree in a
+child process of its own, trees alternating, ``--repeats`` times. Per frame, the driver's
+stages (:mod:`meshmocap._timing`): ``read`` (the frame's files as the driver reads them),
+``observe`` (points, normals, the distance's set-up), ``step`` with the tracker's own
+stages, ``checks`` (the lost-limb assessment and any re-seat) and ``write`` (the frame's
+result file). The new tree's driver records them itself (``timer=``); a tree whose driver
+cannot is timed by wrapping the functions its driver calls (``observed``, the tracker's
+``step``, ``recovered``, ``write_frame``: the same stages, ``--wrap`` forces it on both
+trees to check they agree). Medians over frames 2… (frame 1 learns what a frame reads,
+:class:`~meshmocap._timing.StageTimer`), then the median run; wall ms and CPU ms of the
+child (CPU says what a frame costs when the machine is shared; the trackers clock their
+own stages in wall time only, shown in CPU as ``≈`` their share of the step's CPU); the
+mean joint error (mm, 15 joints against the truth) says the speed is not bought with
+accuracy. The tables are
+markdown, to paste into a change's note.
 
 **Part 2, against trimesh** (``--crane``): the MIT crane (``../shared/data``), ``ring8``
 hulls at 1 cm as ``meshmocap bench`` makes them, the tracking template frame 0's true mesh
@@ -32,83 +43,234 @@ template's vertices against the truth's), and the ratios.
 
 Wall times on a shared machine are noisy: the load average is printed with every table.
 Run: ``python benchmarks/bench_speed.py [--frames 30] [--repeats 3] [--templates ...]
-[--methods ...] [--no-crane] [--nricp-every 1] [--light] [--work /tmp/meshmocap-speed]``.
+[--methods ...] [--old SRC] [--new SRC] [--trees old new] [--wrap] [--no-crane]
+[--nricp-every 1] [--light] [--work /tmp/meshmocap-speed]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import importlib.util
-import os
+import inspect
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from _trees import add_tree_args, load, python_in, run_child, tree_env
 from meshmocap.analysis.metrics import correspondence_error
 from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_capture
 from meshmocap.body.template import load_template
+from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 METHODS = ("cage", "patch", "articulated_icp")
-MODULES = {"cage": "cage.tracker", "patch": "patch.tracker", "articulated_icp": "articulated_icp"}
 
 
 def _load() -> str:
-    return f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
+    return load()
 
 
-def stage_run(method: str, template, capture, n: int):
-    """One run: per-frame (wall, cpu, read) seconds (frames 1…n−1), the median seconds
-    per frame of each stage, mean joint error (mm)."""
-    tracker = make_tracker(method, template=template)
-    f0 = capture[0]
-    truth = f0.truth
-    tracker.init(template, f0, truth.rotations, truth.root)
-    wall, cpu, read, err, stages = [], [], [], [], []
-    for k in range(1, n):
-        frame = capture[k]  # a fresh frame: nothing read yet
-        before = dict(tracker.stage_seconds)
-        w0, c0 = time.perf_counter(), time.process_time()
-        _ = frame.hull if method.startswith("cage") else frame.hull_mesh  # cached for step
-        w1 = time.perf_counter()
-        r = tracker.step(frame)
-        wall.append(time.perf_counter() - w0)
-        cpu.append(time.process_time() - c0)
-        read.append(w1 - w0)
-        stages.append({k: v - before[k] for k, v in tracker.stage_seconds.items()})
-        err.append(1000 * np.linalg.norm(r.joints - frame.truth.joints, axis=1).mean())
-    st = {k: float(np.median([s[k] for s in stages])) for k in stages[0]}
-    return np.array(wall), np.array(cpu), np.array(read), st, float(np.mean(err))
+class WrapTimer:
+    """The driver's stages for a tree whose driver records none: the functions it calls
+    wrapped in the child process (``track_frame`` starts a frame; ``observed`` ends the
+    read, reads and derives what the frame before used, as the new driver does, and ends
+    the observation; the tracker's ``step`` and its ``stage_seconds``; ``recovered``: the
+    checks; ``write_frame``: the write). Per-frame dicts like
+    :class:`~meshmocap._timing.StageTimer`'s."""
+
+    def __init__(self, driver, tracker) -> None:
+        self.frames: list[dict] = []
+        self.cpu: list[dict] = []
+        self.reads: tuple = ()
+        self.derived: tuple = ()
+        self.frame = None
+        on = {k: getattr(driver, k) for k in ("track_frame", "observed", "recovered")}
+        write, step = driver.write_frame, tracker.step
+
+        def track_frame(*a, **k):
+            self.frames.append({})
+            self.cpu.append({})
+            self.t, self.c, self.frame = time.perf_counter(), time.process_time(), ()
+            return on["track_frame"](*a, **k)
+
+        def observed(raw):
+            if self.frame is None:  # the first pose's search, not a tracked frame
+                return on["observed"](raw)
+            for name in self.reads:
+                getattr(raw, name)
+            self.lap("read")
+            obs = on["observed"](raw)
+            for name in self.derived:
+                getattr(obs, name)
+            self.lap("observe")
+            self.frame = (raw, obs)
+            return obs
+
+        def timed_step(frame):
+            before = dict(getattr(tracker, "stage_seconds", {}))
+            r = step(frame)
+            if self.frame is not None:
+                self.lap("step")
+                for k, v in getattr(tracker, "stage_seconds", {}).items():
+                    self.frames[-1][f"step.{k}"] = v - before.get(k, 0.0)
+            return r
+
+        def recovered(*a, **k):
+            r = on["recovered"](*a, **k)
+            self.lap("checks")
+            return r
+
+        def write_frame(out, r):
+            write(out, r)
+            if self.frame is not None:
+                self.lap("write")
+                if self.frame:
+                    raw, obs = self.frame
+                    self.reads = tuple(n for n in ("hull_mesh", "hull") if n in vars(raw))
+                    self.derived = tuple(n for n in ("points", "field") if n in vars(obs))
+                self.frame = None
+
+        for name, fn in (
+            ("track_frame", track_frame),
+            ("observed", observed),
+            ("recovered", recovered),
+            ("write_frame", write_frame),
+        ):
+            setattr(driver, name, fn)
+        tracker.step = timed_step
+
+    def lap(self, stage: str) -> None:
+        t, c = time.perf_counter(), time.process_time()
+        self.frames[-1][stage] = self.frames[-1].get(stage, 0.0) + t - self.t
+        self.cpu[-1][stage] = self.cpu[-1].get(stage, 0.0) + c - self.c
+        self.t, self.c = t, c
+
+
+def child_stages(args) -> dict:
+    """One run in this process (the tree on ``PYTHONPATH``): per-frame stage seconds (wall,
+    CPU) of the driver tracking the walk, and the mean joint error (mm)."""
+    import meshmocap.trackers.driver as driver
+    from meshmocap.body.light import tracking_body
+
+    template = load_template(args.templates[0])
+    capture = Capture(args.capture)
+    tracker = make_tracker(args.methods[0], template=tracking_body(template).light)
+    kw: dict = {}
+    if not args.wrap and "timer" in inspect.signature(driver.track_sequence).parameters:
+        from meshmocap._timing import StageTimer
+
+        timer = kw["timer"] = StageTimer()
+    else:
+        timer = WrapTimer(driver, tracker)
+    c0 = time.process_time()
+    track = driver.track_sequence(
+        tracker,
+        template,
+        capture,
+        Path(args.work) / "tracks" / f"stages-{args.methods[0]}",
+        resume=False,
+        show_progress=False,
+        init="truth",
+        **kw,
+    )
+    truth = np.stack([f.truth.joints for f in capture])
+    err = 1000 * np.linalg.norm(track.joints - truth, axis=2).mean()
+    return {
+        "frames": timer.frames,
+        "cpu": timer.cpu,
+        "error_mm": float(err),
+        "cpu_s": time.process_time() - c0,
+        "timer": type(timer).__name__,
+    }
+
+
+def _medians(frames: list[dict]) -> dict[str, float]:
+    """Median ms per frame of each stage over frames 2… (a frame without it: 0), and of
+    the driver's stages' sum (``total``)."""
+    rows = frames[1:] or frames
+    keys = {k for f in rows for k in f}
+    out = {k: 1000 * float(np.median([f.get(k, 0.0) for f in rows])) for k in keys}
+    out["total"] = 1000 * float(
+        np.median([sum(v for k, v in f.items() if "." not in k) for f in rows])
+    )
+    return out
+
+
+STAGE_ORDER = ("read", "observe", "step", "checks", "write")
 
 
 def stages_table(args, work: Path) -> None:
-    spec = parse_capture("walk", frames=args.frames)
     for name in args.templates:
         template = load_template(name)
-        capture = make_capture(spec, work, template=name, show_progress=False)
+        # made by the first tree (the old one): a newer tree reads older captures
+        code = (
+            "from meshmocap.apps.bench_captures import make_capture, parse_capture; "
+            f"print(make_capture(parse_capture('walk', frames={args.frames}), "
+            f"{str(work / args.trees[0])!r}, template={name!r}, show_progress=False).path)"
+        )
+        first = args.trees[0]
+        capture = Capture(python_in(tree_env(getattr(args, first), work, first), code))
         print(
-            f"\n### {name} ({template.n_vertices} vertices), {args.frames}-frame walk, "
-            f"humaneva4 hulls; {args.repeats} runs; {_load()}"
+            f"\n### whole frame: {name} ({template.n_vertices} vertices, tracked on its light "
+            f"body), {args.frames}-frame walk, humaneva4 hulls, init truth, default checks; "
+            f"{args.repeats} runs per tree, alternating; {_load()}",
+            flush=True,
         )
         for method in args.methods:
-            runs = [stage_run(method, template, capture, args.frames) for _ in range(args.repeats)]
-            meds = [float(np.median(r[0])) for r in runs]
-            i = int(np.argsort(meds)[len(meds) // 2])  # the median run
-            wall, cpu, read, st, err = runs[i]
-            names = importlib.import_module(f"meshmocap.trackers.{MODULES[method]}").STAGES
-            parts = " ".join(f"{k} {1000 * st[k]:.1f}" for k in names)
-            print(
-                f"- **{method}**: {1000 * np.median(wall):.0f} ms/frame wall "
-                f"(runs {1000 * min(meds):.0f}–{1000 * max(meds):.0f}), "
-                f"{1000 * np.median(cpu):.0f} ms CPU; read {1000 * np.median(read):.1f} ms, "
-                f"step stages (ms): {parts}; joint error {err:.1f} mm",
-                flush=True,
-            )
+            runs: dict[str, list[dict]] = {t: [] for t in args.trees}
+            for _ in range(args.repeats):
+                for tree in args.trees:
+                    child = [
+                        *("--templates", name, "--methods", method, "--frames", str(args.frames)),
+                        *("--capture", str(capture.path), "--work", str(work / tree)),
+                        *(["--wrap"] if args.wrap else []),
+                    ]
+                    env = tree_env(getattr(args, tree), work, tree)
+                    res = run_child(__file__, child, env, work / f"stages-{tree}.json")
+                    res["wall_ms"], res["cpu_ms"] = _medians(res["frames"]), _medians(res["cpu"])
+                    runs[tree].append(res)
+            print(f"\n**{method}** (ms per frame, median of frames 2…{args.frames - 1}; {_load()})")
+            print(_stage_markdown(runs))
     print(f"(after: {_load()})")
+
+
+def _stage_markdown(runs: dict[str, list[dict]]) -> str:
+    """The markdown table of one method: a row per stage, wall and CPU ms per tree (the
+    median run by total wall time)."""
+    pick = {}
+    for tree, rs in runs.items():
+        order = np.argsort([r["wall_ms"]["total"] for r in rs])
+        pick[tree] = rs[int(order[len(rs) // 2])]
+    keys = list(dict.fromkeys(k for r in pick.values() for f in r["frames"] for k in f))
+    rows = []
+    for s in STAGE_ORDER:  # the driver's stages, each with its parts in the tracker's order
+        rows += [s] * (s in keys) + [k for k in keys if k.startswith(f"{s}.")]
+    rows.append("total")
+    head = " | ".join(f"{t} wall | {t} CPU" for t in pick)
+    out = [f"| stage | {head} |", "|---" + "|---:" * (2 * len(pick)) + "|"]
+    for k in rows:
+        cells = []
+        for r in pick.values():
+            w, c = r["wall_ms"].get(k), r["cpu_ms"].get(k)
+            if c is None and w is not None and "." in k:  # a tracker's stage: wall only
+                share = r["cpu_ms"].get("step", 0.0) / max(r["wall_ms"].get("step", 0.0), 1e-9)
+                cells += [f"{w:.1f}", f"≈{w * share:.1f}"]
+                continue
+            cells += [f"{w:.1f}" if w is not None else "", f"{c:.1f}" if c is not None else ""]
+        label = f"&nbsp;&nbsp;{k.split('.', 1)[1]}" if "." in k else k
+        out.append(f"| {label} | {' | '.join(cells)} |")
+    errs = " | ".join(f"{r['error_mm']:.1f} mm | " for r in pick.values())
+    out.append(f"| joint error | {errs.rstrip()} |".replace("|  |", "| |"))
+    spread = "; ".join(
+        f"{t}: runs {min(r['wall_ms']['total'] for r in rs):.0f}–"
+        f"{max(r['wall_ms']['total'] for r in rs):.0f} ms wall ({pick[t]['timer']})"
+        for t, rs in runs.items()
+    )
+    return "\n".join(out) + f"\n\n({spread})"
 
 
 def nricp(template, capture, positions: list[int]) -> tuple[np.ndarray, list[float]]:
@@ -223,7 +385,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--templates", nargs="+", default=["neutral_5k", "neutral"])
+    ap.add_argument("--templates", nargs="+", default=["neutral"])
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--no-stages", action="store_true", help="only the crane table")
     ap.add_argument("--no-crane", action="store_true", help="only the stage tables")
@@ -231,8 +393,15 @@ def main() -> None:
     ap.add_argument("--light-template", default="neutral", help="the light table's body")
     ap.add_argument("--nricp-every", type=int, default=1, help="nricp on every k-th frame")
     ap.add_argument("--work", default="/tmp/meshmocap-speed")
+    ap.add_argument("--wrap", action="store_true", help="time by wrapping on every tree")
+    ap.add_argument("--child", help=argparse.SUPPRESS)  # a run in this process: JSON here
+    ap.add_argument("--capture", help=argparse.SUPPRESS)
+    add_tree_args(ap)
     args = ap.parse_args()
     work = Path(args.work)
+    if args.child:
+        Path(args.child).write_text(json.dumps(child_stages(args)))
+        return
     if args.light:
         light_table(args, work)
         return

@@ -38,9 +38,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "errors",
         "_atomic",
         "_npz",
+        "_numba",
         "_validate",
         "_progress",
         "_threads",
+        "_timing",
         "_version",
     ),  # base
     ("geometry",),

@@ -26,12 +26,14 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from meshmocap._timing import StageTimer
 from meshmocap._validate import check_choice, check_type
 from meshmocap.analysis.evaluate import Evaluation
 from meshmocap.analysis.evaluate import evaluate as evaluate_track
 from meshmocap.analysis.evaluate import summary as evaluation_summary
 from meshmocap.analysis.gait import Gait, track_gait
 from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
+from meshmocap.apps.kernels import kernels_of, start_compiling
 from meshmocap.body.light import LIGHT_VERTICES, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
@@ -301,6 +303,7 @@ def track(
     show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
     on_frame: Callable[[FrameResult], object] | None = None,
+    timer: StageTimer | None = None,
     **options,
 ) -> TrackResult:
     """Track a capture, as ``meshmocap track`` does.
@@ -343,6 +346,9 @@ def track(
     on_frame : callable, optional
         Called with each frame's :class:`~meshmocap.io.results.FrameResult` once it is
         written (live mode prints them).
+    timer : StageTimer, optional
+        Records each frame's seconds per stage (read, observe, step, checks, write;
+        :mod:`meshmocap._timing`): ``timer.summary()`` says where a frame's time goes.
     **options
         Options of the method's tracker (``n_patches``, ``max_iter``, ...).
 
@@ -356,6 +362,9 @@ def track(
     live = isinstance(capture, LiveCapture)
     frames = _check_frames(capture, frames)
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="meshmocap-track-"))
+    # a fresh install's kernels compile in the background while the body is estimated and
+    # the first pose found (meshmocap.apps.kernels)
+    start_compiling(kernels_of(method))
     # a live capture's body is estimated from its first frames, as an ordinary capture
     shown = capture
     if live and _estimates(capture, template, folder, resume):
@@ -393,6 +402,7 @@ def track(
         light=light,
         start=start,
         on_frame=on_frame,
+        timer=timer,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 
@@ -415,6 +425,7 @@ def _check_track_arguments(given: dict) -> None:
     _check_optional(func, "show_progress", given["show_progress"], bool, "True or False")
     for name in ("log", "on_frame"):
         _check_optional(func, name, given[name], Callable, "a callable")
+    _check_optional(func, "timer", given["timer"], StageTimer, "a StageTimer")
 
 
 def _check_frames(capture: AnyCapture, frames: object) -> list[int] | None:

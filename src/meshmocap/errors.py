@@ -58,6 +58,10 @@ class MeshmocapWarning(UserWarning):
     """Base class of the warnings meshmocap emits."""
 
 
+class KernelCacheWarning(MeshmocapWarning):
+    """numba cannot cache the compiled kernels: they compile again in every process."""
+
+
 class GreyMaskWarning(MeshmocapWarning):
     """A silhouette image is not binary (grey levels) and was thresholded."""
 

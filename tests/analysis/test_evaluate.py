@@ -9,6 +9,7 @@ from meshmocap.analysis.evaluate import evaluate, summary
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.cli import main
 from meshmocap.errors import InputError
+from meshmocap.io.capture import read_truth, write_truth
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 from meshmocap.studio.synth import SynthSpec, synthesize
 
@@ -109,11 +110,8 @@ def test_frames_out_of_the_cameras_view_are_not_scored(capture, tmp_path):
     shutil.copytree(capture.path, copy)
     track = _track(capture, tmp_path / "tr", 0.0)
     truth = sorted((copy / "truth").glob("*.npz"))[1]
-    with np.load(truth) as z:
-        arrays = dict(z)
-    arrays["vertices"] = arrays["vertices"] + np.array([20.0, 0.0, 0.0], np.float32)
-    with open(truth, "wb") as f:
-        np.savez(f, **arrays)
+    t = read_truth(truth)
+    write_truth(truth, replace(t, vertices=t.vertices + np.array([20.0, 0.0, 0.0])))
     moved = open_capture(copy)
     ev = evaluate(track, moved, silhouettes=False, surface_frames=0)
     assert ev.out_of_view.tolist() == [track.frames[1]]

@@ -52,3 +52,24 @@ def test_resume_state_is_dropped_but_the_last(tmp_path):
     assert after.energies["data"].tolist() == [1.0, 2.0, 3.0, 4.0]
     assert read_state(tmp_path, 2) == {} and set(read_state(tmp_path, 3)) == {"R", "c"}
     assert drop_resume_state(tmp_path) == 0
+
+
+def test_files_the_tracks_share_are_stored_once(tmp_path):
+    """Equal files become hard links to the first (its bytes stored once, each folder still
+    holding its own readable file); a different file is left alone; a rewrite of one
+    (atomic: a new file) leaves the others as they were."""
+    import os
+
+    from meshmocap._atomic import write_bytes_atomic
+    from meshmocap.apps.demo import link_duplicates
+
+    a, b, c, d = (tmp_path / n / "subject.npz" for n in "abcd")
+    for p, data in ((a, b"body" * 100), (b, b"body" * 100), (c, b"body" * 100), (d, b"other")):
+        p.parent.mkdir()
+        p.write_bytes(data)
+    assert link_duplicates([a, b, c, d, tmp_path / "absent.npz"]) == 800
+    assert os.path.samefile(a, b) and os.path.samefile(a, c) and not os.path.samefile(a, d)
+    assert b.read_bytes() == b"body" * 100 and d.read_bytes() == b"other"
+    assert link_duplicates([a, b, c, d]) == 0  # linked already
+    write_bytes_atomic(b, b"new body")
+    assert a.read_bytes() == c.read_bytes() == b"body" * 100 and b.read_bytes() == b"new body"

@@ -160,3 +160,14 @@ def test_a_clean_4d_capture_starts_in_its_first_frames_pose(cap, tmp_path, capsy
     per = ev.correspondence.per_frame
     assert per[0] < 2.0 and np.all(per < 40.0)  # mm: frame 0 starts where it is
     assert np.abs(t.vertices[0] - truth[0]).max() < 0.01
+
+
+def test_track_ends_with_where_a_frames_time_goes(cap, tmp_path, capsys):
+    """The last line of ``track``: the median milliseconds per frame of each stage."""
+    out = tmp_path / "t"
+    assert main(["track", str(cap), *ICP, "--init", "truth", "--out", str(out)]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("time per frame (median of 2): read ")
+    for stage in ("observe", "step", "checks", "write"):
+        assert f", {stage} " in last
+    assert last.endswith(" ms in all")

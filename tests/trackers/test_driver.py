@@ -89,3 +89,32 @@ def test_the_start_record_sets_the_first_frames_flag_and_message(walk, tmp_path,
         tracker, t, walk, tmp_path / "truth", frames=[0], init="truth", show_progress=False
     )
     assert truth_track.start.source == "truth" and truth_track.flags == ((),)
+
+
+def test_a_timer_records_every_frames_stages_and_changes_no_result(walk, tmp_path):
+    """With a timer the driver books each tracked frame's read, observation, step (and the
+    tracker's own stages), checks and write; the track is the one it writes without."""
+    from meshmocap._timing import FRAME_STAGES, StageTimer
+    from meshmocap.trackers.articulated_icp import STAGES
+
+    t = load_template("neutral_5k")
+
+    def run(out, timer):
+        tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+        return track_sequence(
+            tracker, t, walk, out, init="truth", show_progress=False, light=None, timer=timer
+        )
+
+    timer = StageTimer()
+    timed, plain = run(tmp_path / "timed", timer), run(tmp_path / "plain", None)
+    np.testing.assert_array_equal(timed.joints, plain.joints)
+    np.testing.assert_array_equal(timed.vertices, plain.vertices)
+    assert len(timer.frames) == len(timer.cpu) == N - 1  # every frame after the first
+    for rec in timer.frames:
+        assert set(FRAME_STAGES) <= set(rec) and all(v >= 0 for v in rec.values())
+        assert {f"step.{s}" for s in STAGES} <= set(rec)
+        # the tracker's stages are parts of the step
+        assert sum(rec[f"step.{s}"] for s in STAGES) <= rec["step"] * 1.01 + 1e-4
+    # from frame 2 the hull is read and its points derived before the step asks for them
+    assert timer.reads and "points" in timer.derived
+    assert "in all" in timer.summary()

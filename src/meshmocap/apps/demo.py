@@ -15,6 +15,7 @@ a user clip (BVH/AMC) can be added.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import time
@@ -29,6 +30,7 @@ from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.export import export_track
 from meshmocap.apps.gait_files import gait_of, write_gait
+from meshmocap.apps.kernels import start_compiling
 from meshmocap.apps.player import player_from_tracks
 from meshmocap.apps.render import render_motion
 from meshmocap.apps.report import (
@@ -46,7 +48,7 @@ from meshmocap.errors import InputError
 from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.clips import clip_on
-from meshmocap.io.results import done_frames, frame_path
+from meshmocap.io.results import LIGHT_FILE, done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -121,8 +123,85 @@ def run_demo(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    if frames is not None:  # a fresh install's kernels compile in the background while the
+        start_compiling()  # motions render, the capture is made, the body estimated
     neutral = load_template("neutral")
     files: list[tuple[str, Path]] = []
+    with phase("rendering the motions (contact sheets)", enabled=show_progress):
+        _render_motions(out, neutral, seconds, clip, files, show_progress)
+    scores: list[TrackerScore] = []
+    players, sections, evaluations, tracks, notes = [], [], [], [], []
+    if frames is not None:
+        spec = SynthSpec(
+            motion="walk",
+            template="neutral_5k",
+            subject=subject,
+            rig="humaneva4",
+            start=frames.start,
+            stop=frames.stop,
+            step=frames.step,
+        )
+        cap = synthesize(out / "capture", spec, show_progress=show_progress)
+        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
+        folders = [out / f"track_{method}" for method in DEMO_METHODS]
+        choice = tracking_template(cap, template, folders[0])
+        notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
+        for method, folder in zip(DEMO_METHODS, folders, strict=True):
+            if "template_file" in choice.info and folder != folders[0]:
+                folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
+                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+            # the light body the driver tracks (meshmocap.body.light)
+            with phase(f"setting up the {method} tracker", enabled=show_progress):
+                tracker = make_tracker(method, template=tracking_body(choice.template).light)
+            track = track_sequence(
+                tracker,
+                choice.template,
+                cap,
+                folder,
+                show_progress=show_progress,
+                template_info=choice.info,
+            )
+            with phase(f"scoring the {method} track, plotting", enabled=show_progress):
+                ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
+                written = write_evaluation(ev, out / f"eval_{method}")
+                drop_resume_state(folder)
+            files.append((f"{method} track and evaluation", out / f"eval_{method}"))
+            worst = float(ev.joints.per_frame.max())
+            scores.append(TrackerScore(method, ev.joints.overall.mean, worst, ev.seconds.mean))
+            tracks.append(track)
+            evaluations.append(ev)
+            plots = [p for p in written if p.suffix == ".png"]
+            sections.append(evaluation_section(ev, images=plots, track=track))
+        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
+        with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
+            notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
+        with phase("comparing the tracks' gaits", enabled=show_progress):
+            sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
+        title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
+        # the report holds the player's frames: a budget that keeps it under 10 MB
+        templates = [choice.template] * len(tracks)
+        with phase("building the 3D player", enabled=show_progress):
+            players.append(
+                player_from_tracks(
+                    cap, tracks, title=title, templates=templates, max_megabytes=PLAYER_MB
+                )
+            )
+        with phase("dropping the hull meshes (rebuilt when read)", enabled=show_progress):
+            drop_hull_meshes(cap.path)
+        shared = [f / n for f in folders for n in (SUBJECT_FILE, LIGHT_FILE, "faces.npy")]
+        cached = sorted((cap.path / ".meshmocap").glob("*.npz"))
+        link_duplicates([*shared, cap.path / "truth" / "faces.npy", *cached])
+    sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
+    with phase("writing the report"):
+        report = _report(out, players, evaluations, sections, sheets, notes)
+    files.append(("report (tables, plots, 3D player; open in a browser)", report))
+    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
+
+
+def _render_motions(out: Path, neutral, seconds: float, clip, files: list, show_progress) -> None:
+    """The demo's motions: the procedural walk as BVH, retargeted onto ``heavy_male``, a
+    user ``clip``, every procedural motion on ``neutral``, rendered as contact sheets into
+    ``out``; what was written appended to ``files``."""
     walk = procedural_motion("walk", neutral, duration=seconds, fps=30.0)
     bvh = write_bvh(out / "walk.bvh", walk)
     files.append(("walk.bvh (procedural walk, CMU MotionBuilder skeleton)", bvh))
@@ -151,65 +230,6 @@ def run_demo(
         m = procedural_motion(name, neutral, duration=3.0, fps=20.0)
         res = render_motion(neutral, m, out / name, frames=False, show_progress=show_progress)
         files.append((f"{name} on neutral", res.sheet))
-    scores: list[TrackerScore] = []
-    players, sections, evaluations, tracks, notes = [], [], [], [], []
-    if frames is not None:
-        spec = SynthSpec(
-            motion="walk",
-            template="neutral_5k",
-            subject=subject,
-            rig="humaneva4",
-            start=frames.start,
-            stop=frames.stop,
-            step=frames.step,
-        )
-        cap = synthesize(out / "capture", spec, show_progress=show_progress)
-        files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
-        folders = [out / f"track_{method}" for method in DEMO_METHODS]
-        choice = tracking_template(cap, template, folders[0])
-        notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
-        for method, folder in zip(DEMO_METHODS, folders, strict=True):
-            if "template_file" in choice.info and folder != folders[0]:
-                folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
-                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
-            # the light body the driver tracks (meshmocap.body.light)
-            tracker = make_tracker(method, template=tracking_body(choice.template).light)
-            track = track_sequence(
-                tracker,
-                choice.template,
-                cap,
-                folder,
-                show_progress=show_progress,
-                template_info=choice.info,
-            )
-            ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
-            written = write_evaluation(ev, out / f"eval_{method}")
-            files.append((f"{method} track and evaluation", out / f"eval_{method}"))
-            worst = float(ev.joints.per_frame.max())
-            scores.append(TrackerScore(method, ev.joints.overall.mean, worst, ev.seconds.mean))
-            tracks.append(track)
-            evaluations.append(ev)
-            plots = [p for p in written if p.suffix == ".png"]
-            sections.append(evaluation_section(ev, images=plots, track=track))
-            drop_resume_state(folder)
-        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
-        with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
-            notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
-        sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
-        title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
-        # the report holds the player's frames: a budget that keeps it under 10 MB
-        templates = [choice.template] * len(tracks)
-        players.append(
-            player_from_tracks(
-                cap, tracks, title=title, templates=templates, max_megabytes=PLAYER_MB
-            )
-        )
-        drop_hull_meshes(cap.path)
-    sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
-    with phase("writing the report"):
-        report = _report(out, players, evaluations, sections, sheets, notes)
-    files.append(("report (tables, plots, 3D player; open in a browser)", report))
-    return DemoResult(tuple(files), tuple(scores), time.perf_counter() - t0, tuple(notes))
 
 
 def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:
@@ -278,6 +298,35 @@ def drop_hull_meshes(capture: str | os.PathLike) -> int:
     which reading the capture rebuilds the same mesh by marching cubes
     (:func:`~meshmocap.io.capture.read_hull_mesh`). Returns the files rewritten."""
     return sum(_drop_arrays(p, "mesh_") for p in sorted((Path(capture) / "hulls").glob("*.npz")))
+
+
+def link_duplicates(paths) -> int:
+    """Make each of the files ``paths`` whose bytes equal an earlier one's a hard link to
+    it (the demo's tracks each keep the estimated body, its light copy and the faces, the
+    same files), atomically; where a link cannot be made the copy stays. Returns the bytes
+    no longer stored twice."""
+    first: dict[tuple[int, bytes], Path] = {}
+    saved = 0
+    for p in map(Path, paths):
+        if not p.is_file():
+            continue
+        data = p.read_bytes()
+        key = (len(data), hashlib.sha256(data).digest())
+        if key not in first:
+            first[key] = p
+            continue
+        if os.path.samefile(first[key], p):
+            continue
+        tmp = p.with_name(f".{p.name}.link")
+        try:
+            tmp.unlink(missing_ok=True)
+            os.link(first[key], tmp)
+            os.replace(tmp, p)
+        except OSError:  # a file system without hard links: the copy stays
+            tmp.unlink(missing_ok=True)
+            continue
+        saved += len(data)
+    return saved
 
 
 def _drop_arrays(path: Path, prefix: str) -> bool:

@@ -10,7 +10,8 @@ numpy functions' own, in the same order (``tests/trackers/test_articulated_icp.p
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from meshmocap._numba import njit
 
 
 @njit(cache=True, nogil=True)

@@ -8,7 +8,10 @@ from meshmocap.cli._args import frame_range, number
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from meshmocap.apps.demo import run_demo
+    from meshmocap._progress import phase
+
+    with phase("loading meshmocap's modules"):  # scipy, matplotlib, scikit-learn...: seconds
+        from meshmocap.apps.demo import run_demo
 
     frames = args.frames
     if args.track_frames is not None:  # the old spelling: a count from frame 0, 0 skips

@@ -11,6 +11,7 @@ from meshmocap.cli._args import number
 
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap import api
+    from meshmocap._progress import phase
     from meshmocap.apps.evaluation_files import write_evaluation
     from meshmocap.io.plausibility import partial_hulls
     from meshmocap.io.results import input_frame, open_tracked_capture, read_track
@@ -22,16 +23,18 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     note = partial_hulls(capture, track.frames.tolist(), command="eval")
     if note:  # scored on hulls from fewer cameras: say so
         print(f"meshmocap: warning: {note}", file=sys.stderr)
-    ev = api.evaluate(
-        capture,
-        args.track,
-        silhouettes=not args.no_silhouettes,
-        surface_frames=args.surface_frames,
-        force=args.force,
-    )
+    with phase("scoring the track against the truth"):
+        ev = api.evaluate(
+            capture,
+            args.track,
+            silhouettes=not args.no_silhouettes,
+            surface_frames=args.surface_frames,
+            force=args.force,
+        )
     print(api.summary(ev))
     if args.out:
-        files = write_evaluation(ev, args.out)
+        with phase(f"writing the tables and plots into {args.out}"):
+            files = write_evaluation(ev, args.out)
         print(f"\nwrote {len(files)} files to {args.out}")
     return 0
 

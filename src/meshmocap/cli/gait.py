@@ -6,12 +6,14 @@ import argparse
 
 
 def _cmd_gait(args: argparse.Namespace) -> int:
+    from meshmocap._progress import phase
     from meshmocap.analysis.tables import format_table
     from meshmocap.apps.gait_files import SUMMARY_HEADERS, gait_of, summary_rows, write_gait
 
-    run = gait_of(args.source, fps=args.fps, truth=not args.no_truth)
-    g = run.gait
-    files = write_gait(g, args.out, reference=run.reference, title=run.what)  # raises: no gait
+    with phase(f"analysing the gait of {args.source}"):
+        run = gait_of(args.source, fps=args.fps, truth=not args.no_truth)
+        g = run.gait
+        files = write_gait(g, args.out, reference=run.reference, title=run.what)  # no gait: raises
     print(
         f"gait of {run.what}: {len(g.steps)} step(s), {len(g.cycles)} full cycle(s) "
         f"(walking speed {g.progression_speed:.2f} m/s)"

@@ -45,7 +45,11 @@ def _tracker_options(args: argparse.Namespace) -> dict:
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from meshmocap import api
+    from meshmocap._progress import phase
+
+    with phase("loading meshmocap's modules"):  # scipy, matplotlib, scikit-learn...: seconds
+        from meshmocap import api
+    from meshmocap._timing import StageTimer
     from meshmocap._validate import frame_positions
     from meshmocap.errors import InputError
     from meshmocap.io.plausibility import check_observations
@@ -63,6 +67,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"following {args.capture[0]} with {args.method} (Ctrl-C stops){idle}", flush=True)
     before = set() if args.restart else set(done_frames(args.out))
     run = _Run(args)
+    timer = StageTimer()
     try:
         capture, axes = api.capture_and_axes(
             args.capture, up=args.up, units=args.units, fps=args.fps, follow=live, idle=args.idle
@@ -116,6 +121,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
             show_progress=False if live else None,
             log=print,
             on_frame=run.frame if live else None,
+            timer=None if live else timer,
             **options,
         )
     except KeyboardInterrupt:
@@ -124,12 +130,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
         return run.stopped("Ctrl-C")
     if live:
         return run.stopped(f"no new frame for {args.idle:g} s" if args.idle else "stopped")
-    _summary(args, result, before)
+    _summary(args, result, before, timer)
     return 0
 
 
-def _summary(args: argparse.Namespace, result, before: set[int]) -> None:
-    """What ``track`` did: frames tracked and resumed, time, the start, the flags."""
+def _summary(args: argparse.Namespace, result, before: set[int], timer) -> None:
+    """What ``track`` did: frames tracked and resumed, time, the start, the flags, and where
+    a frame's time goes (``timer``: :class:`~meshmocap._timing.StageTimer`)."""
     from meshmocap.analysis.evaluate import track_init
 
     track, dt = result.data, result.seconds
@@ -146,6 +153,8 @@ def _summary(args: argparse.Namespace, result, before: set[int]) -> None:
         f"{done} with {args.method} in {dt:.1f} s ({per:.3f} s per frame); "
         f"init {track_init(track)}; {flagged}{_lost(track)}; results in {args.out}"
     )
+    if len(timer.frames) > 1:  # where a frame's time goes (frame 1 compiles and warms up)
+        print(f"time {timer.summary()}")
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
         print(

@@ -4,7 +4,8 @@ that importing the geometry layer does not import numba)."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from meshmocap._numba import njit
 
 
 @njit(cache=True, nogil=True)

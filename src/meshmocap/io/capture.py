@@ -10,8 +10,9 @@ Layout (``capture.json`` holds ``"format": "meshmocap-capture-1"``)::
                                        voxel size and surface mesh (compact, lossless), or
                                        the reason the frame has none (``missing``)
       truth/NNNNN.npz                  ground truth of synthetic captures: posed vertices
-                                       (n, 3), evaluation joints (K, 3), local rotations
-                                       (J, 3, 3), root position (3,)
+                                       (n, 3) float32 (byte-shuffled, vertices.f4s), evaluation
+                                       joints (K, 3), local rotations (J, 3, 3), root
+                                       position (3,)
       truth/faces.npy                  triangles (m, 3) of the true surface
 
 Every file is written atomically; a synthetic frame is complete when its truth file exists,
@@ -33,7 +34,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 
 from meshmocap._atomic import atomic_open, write_text_atomic
-from meshmocap._npz import open_npz
+from meshmocap._npz import SHUFFLED, open_npz, shuffled_float32
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import VoxelHull, hull_mesh
@@ -71,8 +72,9 @@ class Truth:
 
 
 def write_truth(path: str | os.PathLike, truth: Truth) -> None:
-    """Write ``truth`` to ``path`` (``.npz``) atomically."""
-    arrays = {"vertices": truth.vertices.astype(np.float32)}
+    """Write ``truth`` to ``path`` (``.npz``) atomically, the vertices float32 stored
+    byte-shuffled (``vertices.f4s``, :func:`meshmocap._npz.shuffled_float32`)."""
+    arrays = {f"vertices{SHUFFLED}": shuffled_float32(truth.vertices)}
     for key in ("joints", "rotations", "root"):
         if getattr(truth, key) is not None:
             arrays[key] = getattr(truth, key)

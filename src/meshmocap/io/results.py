@@ -6,8 +6,10 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
       track.json        method, template, capture, evaluation-joint names and parents, options,
                         and once the first frame is done, how it started ("start": a Start)
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
-      frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32, energy
-                        terms, iterations, seconds, health flag, flags and message
+      frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32 (stored
+                        byte-shuffled as vertices.f4s, meshmocap._npz; older files hold
+                        them plain), energy terms, iterations, seconds, health flag, flags
+                        and message
       light.npz         only for a track of a light body (meshmocap.body.light): the frames
                         hold the light body's vertices, and this binding reads the
                         template's out of them (read_track does)
@@ -31,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
-from meshmocap._npz import read_npz
+from meshmocap._npz import SHUFFLED, read_npz, shuffled_float32
 from meshmocap.body.light import SurfaceBinding, bound_vertices
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
@@ -359,7 +361,7 @@ def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
             f,
             index=r.index,
             joints=r.joints,
-            vertices=r.vertices.astype(np.float32),
+            **{f"vertices{SHUFFLED}": shuffled_float32(r.vertices)},
             n_iter=r.n_iter,
             seconds=r.seconds,
             healthy=r.healthy,

@@ -40,8 +40,9 @@ from typing import Literal, get_args
 import numpy as np
 
 from meshmocap._atomic import folder_lock
-from meshmocap._progress import progress
+from meshmocap._progress import phase, progress
 from meshmocap._threads import blas_threads
+from meshmocap._timing import StageTimer, touched
 from meshmocap._validate import check_choice
 from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
 from meshmocap.body.template import Template
@@ -107,6 +108,7 @@ def track_sequence(
     init_options: dict | None = None,
     start: Start | None = None,
     on_frame: Callable[[FrameResult], object] | None = None,
+    timer: StageTimer | None = None,
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -158,6 +160,10 @@ def track_sequence(
         starts there without a search.
     on_frame : callable, optional
         Called with each frame's result once it is written (live mode reports them).
+    timer : StageTimer, optional
+        Records the seconds of each frame tracked (not the first) per stage: read,
+        observe, the tracker's step and its own stages, the checks, the write
+        (:mod:`meshmocap._timing`). None records nothing.
 
     Returns
     -------
@@ -206,6 +212,7 @@ def track_sequence(
                 init,
                 init_options,
                 start=start,
+                show_progress=show_progress,
             )
             started = set(done_frames(out))
             for i in sorted(started - done):
@@ -238,12 +245,15 @@ def track_sequence(
                     recovery=recovery,
                     reseat=reseat,
                     retry=functools.partial(capture.young, k) if live else None,
+                    timer=timer,
                 )
                 if r is not None:
                     break
                 time.sleep(capture.poll)  # a live file still being written: read it again
             good = index if r.healthy else good
             write_frame(out, r)
+            if timer is not None:
+                timer.lap("write")
             report(r)
     return read_track(out, vertices=vertices)
 
@@ -275,6 +285,7 @@ def track_frame(
     recovery: Recovery | None = None,
     reseat: bool = False,
     retry: Callable[[], bool] | None = None,
+    timer: StageTimer | None = None,
 ) -> FrameResult | None:
     """Track one frame: the per-frame step of the driver and of live mode
     (:mod:`meshmocap.trackers.follow`).
@@ -289,6 +300,9 @@ def track_frame(
     retry : callable, optional
         Asked when the frame cannot be read: True means "not yet" (live mode: a file still
         being written), and None is returned for the caller to try again later.
+    timer : StageTimer, optional
+        Starts a frame's record and books read, observe, step (and the tracker's own
+        stages) and checks to it (:mod:`meshmocap._timing`); the caller books the write.
 
     Returns
     -------
@@ -298,16 +312,25 @@ def track_frame(
         observation) a copy of frame ``good``'s result, the tracker reset to its state.
     """
     t0 = time.perf_counter()
+    if timer is not None:
+        timer.start()
     try:
-        frame = read()
-        reason = missing_reason(frame)
+        raw = read()
+        reason = missing_reason(raw)
         if reason is None:
-            frame = observed(frame)  # points, normals, occupancy: made once
-            r = tracker.step(frame)
+            frame = observed(raw)  # points, normals, occupancy: made once
+            if timer is not None:
+                _read_and_observe(timer, raw, frame)
+            r = _step(tracker, frame, timer)
             if not is_finite_result(r):
                 raise FitError("non-finite joints or vertices")
             if recovery is not None:
                 r = recovered(tracker, recovery, frame, r, reseat=reseat)
+                if timer is not None:
+                    timer.lap("checks")
+            if timer is not None:  # what this frame read and derived, the next reads first
+                timer.reads = touched(raw, FRAME_READS)
+                timer.derived = touched(frame, FRAME_DERIVED)
             return replace(r, index=index, seconds=time.perf_counter() - t0)
     except NUMERICAL_ERRORS as exc:
         return coast_frame(tracker, out, good, index, t0, "failed", failure_reason(exc))
@@ -316,6 +339,39 @@ def track_frame(
             return None
         reason = failure_reason(exc)
     return coast_frame(tracker, out, good, index, t0, "missing", reason)
+
+
+#: A capture frame's lazily read files, and what its observed wrapper derives from them
+#: once (cached properties of :class:`~meshmocap.io.capture.CaptureFrame` and
+#: :class:`~meshmocap.estimate.recovery.observe.ObservedFrame`). With a timer, the driver computes
+#: up front those the frame before used (:func:`_read_and_observe`).
+FRAME_READS = ("hull_mesh", "hull")
+FRAME_DERIVED = ("points", "field")
+
+
+def _read_and_observe(timer: StageTimer, raw, frame) -> None:
+    """Read the frame's files and derive its observations as the frame before used them
+    (the same work the step and the checks would ask for), booked to ``read`` and
+    ``observe``."""
+    for name in timer.reads:
+        getattr(raw, name)
+    timer.lap("read")
+    for name in timer.derived:
+        getattr(frame, name)
+    timer.lap("observe")
+
+
+def _step(tracker: Tracker, frame, timer: StageTimer | None) -> FrameResult:
+    """``tracker.step(frame)``; with a timer, booked to ``step`` and the tracker's own
+    stages (its ``stage_seconds``, where it keeps them) to ``step.NAME``."""
+    if timer is None:
+        return tracker.step(frame)
+    before = dict(getattr(tracker, "stage_seconds", {}))
+    r = tracker.step(frame)
+    timer.lap("step")
+    for name, total in getattr(tracker, "stage_seconds", {}).items():
+        timer.add(f"step.{name}", total - before.get(name, 0.0))
+    return r
 
 
 #: Errors reading one frame's observation (an absent, empty or corrupt hull or mesh file):
@@ -362,6 +418,7 @@ def initialise_tracker(
     init_options: dict | None = None,
     *,
     start: Start | None = None,
+    show_progress: bool | None = None,
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds for the full body, or at ``start``'s where that is this frame
@@ -369,7 +426,8 @@ def initialise_tracker(
     ``track.json`` (:func:`~meshmocap.io.results.write_start`); the frame's message and
     flags (``lost`` for an uncertain start) are made from it
     (:mod:`~meshmocap.estimate.pose.start`). Frames before it are written as copies of
-    it, flagged ``missing``."""
+    it, flagged ``missing``. A placement of more than a few seconds says so
+    (``show_progress`` False: nothing)."""
     skipped: list[tuple[int, str]] = []
     for k in positions:
         index = int(capture.indices[k])
@@ -387,7 +445,10 @@ def initialise_tracker(
                     found = first_pose(
                         body.template, frame, init, capture=capture, options=init_options
                     )
-                r = tracker.init(body.light, frame, found.R, found.root)
+                with phase(
+                    f"placing the {tracker.name} tracker on frame {index}", enabled=show_progress
+                ):
+                    r = tracker.init(body.light, frame, found.R, found.root)
             except FRAME_ERRORS as exc:
                 reason = failure_reason(exc)
         if reason is not None:

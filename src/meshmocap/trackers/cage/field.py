@@ -20,8 +20,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from numba import njit
 
+from meshmocap._numba import njit
 from meshmocap.errors import InputError
 
 __all__ = ["HullDistanceField"]

@@ -17,7 +17,8 @@ few hundred points, where numpy's per-call overhead was most of the cost.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from meshmocap._numba import njit
 
 __all__ = ["quad_skinning_transforms", "silhouette_residuals"]
 

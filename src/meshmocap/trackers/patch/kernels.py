@@ -15,7 +15,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from meshmocap._numba import njit
 
 
 @njit(cache=True, nogil=True)

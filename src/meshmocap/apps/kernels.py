@@ -1,0 +1,246 @@
+"""The numba kernels, compiled ahead in a background process while a command does work it
+must do anyway, so that a fresh install's first run does not wait for them.
+
+numba compiles a kernel at its first call and caches the machine code (``cache=True``):
+beside the source in ``__pycache__``, or, where the installed package is read-only, in the
+user's cache folder (``~/.cache/numba``); ``NUMBA_CACHE_DIR`` overrides both. The cache is
+keyed by the source file's time stamp, so a fresh install or clone starts without it, and
+the first command that tracks compiles every kernel it meets (about a minute in all,
+:data:`KERNELS`; ``benchmarks/bench_compile.py`` measures each). :func:`start_compiling`
+compiles them in a child process instead, each with the argument types the library calls
+it with, in the order a command meets them; a kernel the command reaches before the child
+has cached it is compiled by the command as before (the same result, only the time is
+lost). With a warm cache the child only loads them (about a second of its own CPU).
+
+``python -m meshmocap.apps.kernels`` compiles them in the foreground and prints the CPU
+seconds each took.
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib
+import os
+import subprocess
+import sys
+import time
+
+#: Every kernel and the argument types it is called with (numba's signature notation:
+#: ``float64[:, ::1]`` a C-contiguous 2D array, ``int64[:]`` any 1D layout; read-only
+#: arrays spelled out), by module, in the order the demo first meets them.
+#: ``tests/apps/test_kernels.py`` checks that tracking compiles nothing else.
+KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
+    "meshmocap.geometry._mesh_kernels": {
+        "normals_at_kernel": ("float64[:, ::1], int64[:, ::1], int64[::1], int64",),
+    },
+    "meshmocap.body._articulated_kernels": {
+        "posed_kernel": (
+            "float64[:, :, ::1], float64[::1], int64[::1], "
+            "Array(float64, 2, 'C', readonly=True), Array(float64, 2, 'C', readonly=True), "
+            "int64[::1], int64[::1], float64[::1], float64[:, ::1], float64[:, ::1]",
+        ),
+        "pair_moments_kernel": (
+            "float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1], float64[::1], boolean",
+        ),
+        "weight_moments_kernel": (
+            "int64[::1], int64[::1], float64[::1], float64[:, ::1], float64[:, :, ::1], "
+            "float64[:, ::1], int64",
+        ),
+        "normal_equations_kernel": (
+            "int64[::1], int64[::1], float64[::1], float64[:, ::1], float64[:, :, ::1], "
+            "float64[:, ::1], float64[:, ::1], int64[::1]",
+        ),
+        "point_motion_kernel": (
+            "float64[::1], float64[:, ::1], float64[:, ::1], int64[::1], int64[::1], "
+            "float64[::1], int64[::1]",
+        ),
+        "rotation_error_kernel": (
+            "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1]",
+        ),
+        "compatible_kernel": ("int64[::1], float64[:, ::1], float64[:, ::1], float64, int64",),
+        "first_compatible_kernel": (
+            "int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], float64, int64, "
+            "int64[::1]",
+        ),
+    },
+    "meshmocap.trackers.patch.kernels": {
+        "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
+        "stale_rows": (
+            "float64[:, ::1], float64[:], float64[::1], int64[::1], float64[:, ::1], "
+            "float64[:, ::1], float64[::1]",
+        ),
+        "assign_kernel": (
+            "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
+            "int64[::1], int64[::1], float64, float64, float64",
+        ),
+        "point_moments": ("int64[::1], float64[:, ::1], float64[:, ::1], float64[::1], int64",),
+        "rotated_moments": ("float64[:, :, ::1], int64[:], int64[:], float64[:, :, :, :, ::1]",),
+        "patch_points": (
+            "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
+        ),
+    },
+    "meshmocap.trackers.cage.kernels": {
+        "quad_skinning_transforms": (
+            "float64[:, ::1], float64[:, :, ::1], Array(float64, 2, 'C', readonly=True), "
+            "Array(int64, 1, 'C', readonly=True), int64[::1], int64[::1], float64[:, :, ::1], "
+            "float64[:, ::1], int64[:, ::1], int64[::1]",
+        ),
+        "silhouette_residuals": (
+            "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], "
+            "float64[:, ::1], int64[::1], float64, float64",
+        ),
+    },
+    "meshmocap.trackers.cage.field": {
+        "_boundary_buckets": ("Array(boolean, 3, 'C', readonly=True), int64",),
+        "_nearest": ("int64, int64, int64, int64[:, ::1], int64[::1], int64[::1], int64",),
+        "_evaluate": (
+            "int64, float64[::1], boolean[::1], Array(boolean, 3, 'C', readonly=True), "
+            "int64[:, ::1], int64[::1], int64[::1], int64, int64[::1], int64, int64, float64",
+        ),
+        "_lookup": (
+            "float64[:, ::1], float64[::1], float64, int64[::1], float64[::1], boolean[::1], "
+            "Array(boolean, 3, 'C', readonly=True), int64[:, ::1], int64[::1], int64[::1], "
+            "int64, int64, int64, float64",
+        ),
+    },
+}
+
+
+def argument_types(signature: str) -> tuple:
+    """The numba types (a tuple) of one of :data:`KERNELS`' signatures. A kernel is
+    compiled for this tuple, as a call compiles it: numba's cache files a compilation
+    under the signature object it was asked for, so one asked for by a string would never
+    be found by a call."""
+    from numba.core import sigutils
+
+    return tuple(sigutils.normalize_signature(f"({signature},)")[0])
+
+
+def compile_kernels(modules=None) -> dict[str, float]:
+    """Compile every kernel of :data:`KERNELS` (of ``modules``, default all) with its
+    argument types, or load it from numba's cache; returns the CPU seconds each took
+    (compiling is single-threaded: on a quiet machine its wall time),
+    ``"module:function"`` → s, and ``"module"`` → s for importing each module. A
+    signature the kernel has already costs nothing."""
+    out = {}
+    for name in modules or KERNELS:
+        t0 = time.process_time()
+        module = importlib.import_module(name)
+        out[name] = time.process_time() - t0
+        for function, signatures in KERNELS[name].items():
+            t0 = time.process_time()
+            for sig in signatures:
+                getattr(module, function).compile(argument_types(sig))
+            out[f"{name}:{function}"] = time.process_time() - t0
+    return out
+
+
+#: The kernel modules every tracking run meets (normals; the articulated body's fits: the
+#: first pose, the checks, the ICP tracker), and those of each method's folder.
+SHARED = ("meshmocap.geometry._mesh_kernels", "meshmocap.body._articulated_kernels")
+METHOD_KERNELS = {
+    "patch": ("meshmocap.trackers.patch.kernels",),
+    "cage": ("meshmocap.trackers.cage.kernels", "meshmocap.trackers.cage.field"),
+}
+
+
+def kernels_of(method: str) -> tuple[str, ...]:
+    """The kernel modules (:data:`KERNELS`) that tracking with ``method`` (a registry name:
+    ``patch``, ``cage_quads``, ``articulated_icp``...) meets."""
+    return SHARED + METHOD_KERNELS.get(method.split("_")[0], ())
+
+
+def uncached_kernels(modules=None) -> list[str]:
+    """The kernels of :data:`KERNELS` (of ``modules``) that numba's cache holds fewer
+    compiled signatures of than listed, ``"module:function"`` (imports the modules); a
+    kernel numba cannot cache (:mod:`meshmocap._numba`) is not among them."""
+    out = []
+    for name in modules or KERNELS:
+        module = importlib.import_module(name)
+        for function, signatures in KERNELS[name].items():
+            cache = getattr(getattr(module, function), "_cache", None)
+            if not hasattr(cache, "_cache_file"):  # uncached (meshmocap._numba): none to fill
+                continue
+            try:  # numba's cache index of the kernel (its source's time stamp checked)
+                n = len(cache._cache_file._load_index())
+            except Exception:  # numba's internals changed: assume none
+                n = 0
+            if n < len(signatures):
+                out.append(f"{name}:{function}")
+    return out
+
+
+#: One thread for every pool in the compiling child: it must not compete with the command.
+_CHILD_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
+#: The background compilations started by this process (ended when it exits).
+_RUNNING: list[subprocess.Popen] = []
+
+
+def start_compiling(modules=None) -> subprocess.Popen | None:
+    """Start compiling the kernels of ``modules`` (default all of :data:`KERNELS`) that
+    numba has not cached, in a background process (silent; at the command's own priority:
+    it is work the command would otherwise do itself), and return it; None
+    when every kernel is cached already, when one is compiling them already, or where it
+    cannot start (the command then compiles as it goes). It runs on after this call
+    returns, and ends with it, or when this process exits (:func:`stop_compiling`)."""
+    modules = tuple(modules or KERNELS)
+    if any(p.poll() is None for p in _RUNNING):
+        return None
+    missing = {k.split(":")[0] for k in uncached_kernels(modules)}
+    if not missing:
+        return None
+    env = {**os.environ, **_CHILD_ENV}
+    todo = [m for m in modules if m in missing]  # in the order a command meets them
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshmocap.apps.kernels", "--quiet", *todo],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    except OSError:
+        return None
+    if not _RUNNING:
+        atexit.register(_stop_all)
+    _RUNNING.append(proc)
+    return proc
+
+
+def stop_compiling(proc: subprocess.Popen | None) -> None:
+    """End the background compilation ``proc`` if it still runs (whatever it compiled is
+    cached; numba writes each kernel's cache atomically)."""
+    if proc is None:
+        return
+    if proc.poll() is None:
+        proc.terminate()
+    proc.wait()
+    if proc in _RUNNING:
+        _RUNNING.remove(proc)
+
+
+def _stop_all() -> None:
+    for proc in list(_RUNNING):
+        stop_compiling(proc)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m meshmocap.apps.kernels [--quiet] [MODULE...]``: compile the kernels (of
+    those modules of :data:`KERNELS`, default all), print the CPU seconds each took
+    (nothing with ``--quiet``)."""
+    args = sys.argv[1:] if argv is None else argv
+    quiet = "--quiet" in args
+    modules = [a for a in args if a in KERNELS]
+    t0 = time.process_time()
+    seconds = compile_kernels(modules)
+    if not quiet:
+        for name, s in seconds.items():
+            print(f"{s:7.2f} s  {'importing ' * (':' not in name)}{name}")
+        print(f"{time.process_time() - t0:7.2f} s  in all (CPU)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

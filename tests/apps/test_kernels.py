@@ -1,0 +1,96 @@
+"""The kernels compiled ahead: the list names every kernel with the argument types tracking
+calls it with, a background process compiles what numba has not cached, and a cached
+kernel is not compiled again."""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import os
+import subprocess
+import sys
+
+import pytest
+from numba.core import sigutils
+
+from meshmocap.apps.kernels import KERNELS, SHARED, kernels_of, uncached_kernels
+
+MESH = "meshmocap.geometry._mesh_kernels"
+
+
+def _types(sig: str) -> tuple:
+    return tuple(sigutils.normalize_signature(f"({sig},)")[0])
+
+
+def test_every_listed_kernel_exists_and_its_types_parse():
+    for name, kernels in KERNELS.items():
+        module = importlib.import_module(name)
+        for function, signatures in kernels.items():
+            assert hasattr(getattr(module, function), "compile"), function  # a numba kernel
+            for sig in signatures:
+                assert len(_types(sig)) >= 2
+    patch, cage = "meshmocap.trackers.patch.kernels", "meshmocap.trackers.cage.field"
+    assert kernels_of("patch_svc") == (*SHARED, patch)
+    assert kernels_of("articulated_icp") == SHARED
+    assert kernels_of("cage_quads")[-1] == cage and patch not in kernels_of("cage")
+    assert set(KERNELS) == {*kernels_of("patch"), *kernels_of("cage")}
+
+
+def _python(code: str, cache) -> str:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    p = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert p.returncode == 0, p.stderr[-2000:]
+    return p.stdout.strip()
+
+
+def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
+    """A fresh cache (a fresh install) lacks the kernel; ``python -m meshmocap.apps.kernels``
+    compiles it; the next process finds it cached, and a call of the kernel with the
+    library's argument types loads it from there instead of compiling it."""
+    check = (
+        f"from meshmocap.apps.kernels import uncached_kernels; print(uncached_kernels([{MESH!r}]))"
+    )
+    assert _python(check, tmp_path) == f"['{MESH}:normals_at_kernel']"
+    _python(f"from meshmocap.apps.kernels import main; main(['--quiet', {MESH!r}])", tmp_path)
+    assert _python(check, tmp_path) == "[]"
+    call = (
+        "import numpy as np; from meshmocap.geometry._mesh_kernels import normals_at_kernel as k; "
+        "V = np.eye(3); F = np.array([[0, 1, 2]]); "
+        "print(k(V, F, np.arange(3), 3).shape, sum(k.stats.cache_hits.values()), "
+        "sum(k.stats.cache_misses.values()))"
+    )
+    assert _python(call, tmp_path) == "(3, 3) 1 0"  # loaded by the call: one hit, no miss
+
+
+@pytest.mark.slow
+def test_tracking_compiles_only_the_listed_signatures(tmp_path):
+    """Each tracker follows a short walk with the checks on: every signature its kernels
+    were compiled or loaded with in this process is one :data:`KERNELS` lists (a kernel
+    called with other types would compile at first use, in the foreground)."""
+    from meshmocap.body.procedural import walk
+    from meshmocap.body.template import load_template
+    from meshmocap.studio.synth import SynthSpec, synthesize
+    from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, learn_manifold
+    from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.registry import make_tracker
+
+    t = load_template("neutral_5k")
+    cap = synthesize(
+        tmp_path / "cap",
+        SynthSpec(motion="walk", template="neutral_5k", stop=3),
+        show_progress=False,
+    )
+    gp = learn_manifold(t, [walk(t, duration=1.0, fps=30.0)], n_components=2, n_samples=30)
+    run = functools.partial(track_sequence, show_progress=False, init="truth", light=None)
+    run(make_tracker("patch", template=t), t, cap, tmp_path / "patch")
+    run(make_tracker("articulated_icp", template=t), t, cap, tmp_path / "icp")
+    run(CageTracker(gp, CageOptions(local_iters=1, alternations=1)), t, cap, tmp_path / "cage")
+    assert not uncached_kernels()  # every kernel met and cached
+    for name, kernels in KERNELS.items():
+        module = importlib.import_module(name)
+        for function, signatures in kernels.items():
+            listed = {_types(s) for s in signatures}
+            used = set(getattr(module, function).signatures)
+            assert used and used <= listed, (function, used - listed)
