@@ -44,16 +44,19 @@ COLUMNS = (
 
 
 def _inits(rows) -> str:
-    """How the rows' first poses were found, in words (rows without one: ground truth)."""
-    kinds = {
-        ("truth" if not r.init or r.init == "truth" else "auto") for r in rows if r.status == "ok"
-    }
-    if kinds == {"auto"}:
+    """How the rows' first poses were found, in words, from their start records (a row
+    whose track records none counts as from ground truth)."""
+    from_capture = {r.capture for r in rows if r.status == "ok" and r.start in CAPTURE_STARTS}
+    from_truth = {r.capture for r in rows if r.status == "ok" and r.start not in CAPTURE_STARTS}
+    if from_capture and not from_truth:
         return "from the capture alone (automatic initialisation)"
-    if kinds == {"truth", "auto"}:
-        auto = sorted({r.capture for r in rows if r.init and r.init != "truth"})
-        return f"from ground truth ({', '.join(auto)}: from the capture alone)"
+    if from_capture:
+        return f"from ground truth ({', '.join(sorted(from_capture))}: from the capture alone)"
     return "from ground truth"
+
+
+#: Start sources (:attr:`~meshmocap.io.start.Start.source`) found from the capture alone.
+CAPTURE_STARTS = ("search", "subject-rest", "subject-fit")
 
 
 def _csv(path: Path, headers: Sequence[str], rows: Sequence[Sequence[object]]) -> Path:

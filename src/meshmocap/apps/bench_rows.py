@@ -38,7 +38,10 @@ class BenchRow:
     frame_numbers : (T,) int, frames of ``per_frame_mm``; per_frame_mm : (T,) float, mm
     bone_names : tuple of B str; bone_mean_mm, bone_std_mm : (B,) float, mm
     track : str, the track folder
-    init : str, how the first pose was found (``truth``, or ``auto`` and the winner)
+    init : str, how the first pose was found, in words
+        (:func:`~meshmocap.estimate.pose.start.start_description`)
+    start : str, the start record's source (:attr:`~meshmocap.io.start.Start.source`:
+        ``search``, ``truth``, ...; ``""`` where the track records none)
     lost : int, frames flagged ``lost`` (a limb or the body off the observations)
     template : str, the tracking template and how it was chosen (``io.results.template_label``)
     """
@@ -64,6 +67,7 @@ class BenchRow:
     bone_std_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     track: str = ""
     init: str = ""
+    start: str = ""
     lost: int = 0
     template: str = ""
 
@@ -130,6 +134,7 @@ def row_from_evaluation(capture: str, method: str, ev: Evaluation, *, track: Pat
         bone_std_mm=bones.std if bones is not None else np.zeros(0),
         track=str(track),
         init=ev.init,
+        start=ev.start.source if ev.start is not None else "",
         lost=ev.lost,
         template=ev.template,
     )

