@@ -62,7 +62,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.analysis.evaluate import _out_of_view
+from meshmocap.analysis.evaluate import out_of_view_frames
 from meshmocap.apps.bench_captures import DEGRADED
 from meshmocap.body.template import load_template
 from meshmocap.studio.degrade import Degradation
@@ -133,7 +133,7 @@ def main() -> None:
             n = len(cap) if args.frames is None else min(args.frames, len(cap))
             truths = [cap[i].truth for i in range(n)]
             true = np.stack([t.joints for t in truths])
-            hidden = _out_of_view(truths, cap.cameras)  # not scored, as meshmocap evaluate
+            hidden = out_of_view_frames(truths, cap.cameras)  # not scored, as meshmocap evaluate
             true[hidden] = np.nan
             for v in args.variants:
                 vname, _, rest = v.partition(":")

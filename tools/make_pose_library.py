@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.body.pose_library import _QSCALE, LIBRARY_FORMAT
+from meshmocap.body.pose_library import LIBRARY_FORMAT, QUATERNION_SCALE
 from meshmocap.body.retarget import retarget
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import load_template
@@ -155,7 +155,7 @@ def main() -> None:
         format=np.str_(LIBRARY_FORMAT),
         skeleton=np.str_(SKELETON),
         joint_names=np.array(sk.names),
-        quaternions=np.rint(q * _QSCALE).astype(np.int16),
+        quaternions=np.rint(q * QUATERNION_SCALE).astype(np.int16),
         categories=np.array(cats),
         category=cat_of,
         trials=np.array(names),

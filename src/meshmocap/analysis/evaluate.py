@@ -127,7 +127,7 @@ def evaluate(
     truths = [f.truth for f in frames]
     if all(t is None for t in truths):  # a 4D mesh sequence: its files are the truth
         truths = _file_truths(frames, track) or truths
-    hidden = _out_of_view(truths, capture.cameras) if in_view_only else np.zeros(0, np.int64)
+    hidden = out_of_view_frames(truths, capture.cameras) if in_view_only else np.zeros(0, np.int64)
     for k in hidden:  # scored as skipped frames (truth NaN): the cameras did not see it all
         truths[k] = replace(
             truths[k],
@@ -223,9 +223,9 @@ def _surface_frames(frames: list, truths: list, against: str) -> np.ndarray:
     return np.flatnonzero(ok)
 
 
-def _out_of_view(truths: list, cameras: list) -> np.ndarray:
-    """Positions in ``truths`` of frames whose true surface leaves an image of ``cameras``
-    (or passes behind one): a hull of a partly seen subject is not a fair test."""
+def out_of_view_frames(truths: list, cameras: list) -> np.ndarray:
+    """(k,) int64: positions in ``truths`` of frames whose true surface leaves an image of
+    ``cameras`` (or passes behind one): a hull of a partly seen subject is not a fair test."""
     if not cameras:
         return np.zeros(0, np.int64)
     out = [

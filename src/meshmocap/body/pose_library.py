@@ -53,10 +53,11 @@ from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import quat_to_matrix
 
-__all__ = ["LIBRARY_FORMAT", "PoseLibrary", "library_path", "load_pose_library"]
+__all__ = ["LIBRARY_FORMAT", "QUATERNION_SCALE", "PoseLibrary", "library_path", "load_pose_library"]
 
 LIBRARY_FORMAT = "meshmocap-pose-library-1"
-_QSCALE = 32767.0
+#: The library stores unit quaternions as int16: each component times this.
+QUATERNION_SCALE = 32767.0
 
 
 def library_path() -> Path:
@@ -138,7 +139,7 @@ def _load(path: str, stamp: float) -> PoseLibrary:
             raise ValueError(
                 f"quaternions must be (N, {len(names)}, 4) int16, found {q.shape} {q.dtype}"
             )
-        qf = q.astype(np.float64) / _QSCALE
+        qf = q.astype(np.float64) / QUATERNION_SCALE
         norm = np.linalg.norm(qf, axis=-1, keepdims=True)
         if np.abs(norm - 1).max() > 1e-3:
             raise ValueError("quaternions are not unit")
