@@ -26,7 +26,7 @@ import numpy as np
 
 from meshmocap._atomic import atomic_open
 from meshmocap._progress import phase
-from meshmocap.analysis.evaluate import evaluate
+from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.export import export_track
 from meshmocap.apps.gait_files import gait_of, write_gait
@@ -45,10 +45,15 @@ from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
 from meshmocap.errors import InputError
-from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
+from meshmocap.estimate.performer.tracking_template import (
+    SUBJECT_FILE,
+    TemplateChoice,
+    tracking_template,
+)
 from meshmocap.io.bvh import read_bvh, write_bvh
+from meshmocap.io.capture import Capture
 from meshmocap.io.clips import clip_on
-from meshmocap.io.results import LIGHT_FILE, done_frames, frame_path
+from meshmocap.io.results import LIGHT_FILE, Track, done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -58,6 +63,8 @@ from meshmocap.trackers.registry import make_tracker
 DEMO_METHODS = ("patch", "cage", "articulated_icp")
 #: The demo capture's subject (performer): a bundled body the trackers are not told about.
 DEMO_SUBJECT = "heavy_male"
+#: Frame numbers (60 fps) of the synthetic walk the demo's trackers follow.
+DEMO_FRAMES = slice(0, 120)
 #: Budget of the player's per-frame data in the demo's report, MB (the plots and the
 #: meshes come on top).
 PLAYER_MB = 5.0
@@ -92,7 +99,7 @@ def run_demo(
     out: str | os.PathLike,
     *,
     seconds: float = 4.0,
-    frames: slice | None = slice(0, 120),
+    frames: slice | None = DEMO_FRAMES,
     clip: str | None = None,
     subject: str = DEMO_SUBJECT,
     template: str = "auto",
@@ -132,37 +139,13 @@ def run_demo(
     scores: list[TrackerScore] = []
     players, sections, evaluations, tracks, notes = [], [], [], [], []
     if frames is not None:
-        spec = SynthSpec(
-            motion="walk",
-            template="neutral_5k",
-            subject=subject,
-            rig="humaneva4",
-            start=frames.start,
-            stop=frames.stop,
-            step=frames.step,
-        )
-        cap = synthesize(out / "capture", spec, show_progress=show_progress)
+        cap = synthesize(out / "capture", demo_spec(frames, subject), show_progress=show_progress)
         files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
-        folders = [out / f"track_{method}" for method in DEMO_METHODS]
-        choice = tracking_template(cap, template, folders[0])
+        choice, done = demo_tracks(cap, out, template=template, show_progress=show_progress)
         notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
-        for method, folder in zip(DEMO_METHODS, folders, strict=True):
-            if "template_file" in choice.info and folder != folders[0]:
-                folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
-                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
-            # the light body the driver tracks (meshmocap.body.light)
-            with phase(f"setting up the {method} tracker", enabled=show_progress):
-                tracker = make_tracker(method, template=tracking_body(choice.template).light)
-            track = track_sequence(
-                tracker,
-                choice.template,
-                cap,
-                folder,
-                show_progress=show_progress,
-                template_info=choice.info,
-            )
-            with phase(f"scoring the {method} track, plotting", enabled=show_progress):
-                ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
+        folders = [folder for _, folder, _, _ in done]
+        for method, folder, track, ev in done:
+            with phase(f"plotting the {method} track's evaluation", enabled=show_progress):
                 written = write_evaluation(ev, out / f"eval_{method}")
                 drop_resume_state(folder)
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
@@ -230,6 +213,67 @@ def _render_motions(out: Path, neutral, seconds: float, clip, files: list, show_
         m = procedural_motion(name, neutral, duration=3.0, fps=20.0)
         res = render_motion(neutral, m, out / name, frames=False, show_progress=show_progress)
         files.append((f"{name} on neutral", res.sheet))
+
+
+def demo_spec(frames: slice = DEMO_FRAMES, subject: str = DEMO_SUBJECT) -> SynthSpec:
+    """The demo capture's recipe: the procedural walk performed by ``subject``, frames
+    ``frames`` at 60 fps, seen by the 4 cameras of ``humaneva4`` (:func:`run_demo`)."""
+    return SynthSpec(
+        motion="walk",
+        template="neutral_5k",
+        subject=subject,
+        rig="humaneva4",
+        start=frames.start,
+        stop=frames.stop,
+        step=frames.step,
+    )
+
+
+def demo_tracks(
+    cap: Capture,
+    out: str | os.PathLike,
+    *,
+    template: str = "auto",
+    methods: tuple[str, ...] = DEMO_METHODS,
+    show_progress: bool | None = None,
+) -> tuple[TemplateChoice, list[tuple[str, Path, Track, Evaluation]]]:
+    """Track the demo capture ``cap`` with each of ``methods`` into ``out/track_<method>``
+    as the demo does and score each against the truth the studio kept (joints only).
+
+    The tracking template is chosen once (:func:`tracking_template`: ``"auto"`` estimates the
+    performer's body, cached with the capture) and kept in every track folder; each method
+    runs on the default path: the light body the driver tracks (:mod:`meshmocap.body.light`),
+    default options, the automatic first pose (cached with the capture), the recovery
+    checks. ``benchmarks/bench_demo_guard.py`` guards these figures.
+
+    Returns
+    -------
+    choice : TemplateChoice
+    tracks : list of (method, track folder, Track, Evaluation)
+    """
+    out = Path(out)
+    folders = [out / f"track_{method}" for method in methods]
+    choice = tracking_template(cap, template, folders[0])
+    done = []
+    for method, folder in zip(methods, folders, strict=True):
+        if "template_file" in choice.info and folder != folders[0]:
+            folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
+            shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+        # the light body the driver tracks (meshmocap.body.light)
+        with phase(f"setting up the {method} tracker", enabled=show_progress):
+            tracker = make_tracker(method, template=tracking_body(choice.template).light)
+        track = track_sequence(
+            tracker,
+            choice.template,
+            cap,
+            folder,
+            show_progress=show_progress,
+            template_info=choice.info,
+        )
+        with phase(f"scoring the {method} track", enabled=show_progress):
+            ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
+        done.append((method, folder, track, ev))
+    return choice, done
 
 
 def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:

@@ -13,7 +13,12 @@ from meshmocap.errors import InputError
 from meshmocap.io.results import done_frames, read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.patch.tracker import STAGES, PatchOptions, PatchTracker
+from meshmocap.trackers.patch.tracker import (
+    STAGES,
+    PatchOptions,
+    PatchTracker,
+    surface_training_sample,
+)
 
 #: The papers' protocol (first pose from ground truth), no loss recovery: these tests are
 #: about the tracker itself.
@@ -304,3 +309,34 @@ def test_joint_readout_chooses_the_reported_joints(walk, readout):
 def test_joint_readout_option_is_validated():
     with pytest.raises(InputError, match=r"joint_readout must be one of \['blend'"):
         PatchOptions(joint_readout="mean")
+
+
+def test_classifier_trains_on_points_spread_by_area_not_by_vertices():
+    """A unit square meshed finely on its left half (45 vertices) and as one quad on its
+    right half (2 more): half of the training points on each half, each labelled by its
+    face's nearest corner; the same points again from the same seed."""
+    n = 8  # the left half: an (n/2 + 1) x (n + 1) grid of spacing 1/n
+    cols = n // 2 + 1
+    V = [(x / n, y / n, 0.0) for y in range(n + 1) for x in range(cols)]
+    V = np.array([*V, (1.0, 0.0, 0.0), (1.0, 1.0, 0.0)])
+    F = []
+    for y in range(n):
+        for x in range(cols - 1):
+            a = cols * y + x
+            F += [(a, a + 1, a + cols + 1), (a, a + cols + 1, a + cols)]
+    right = [cols - 1 + cols * y for y in range(n + 1)]  # the left half's right edge
+    lo, hi = len(V) - 2, len(V) - 1
+    F += [(right[k], lo, right[k + 1]) for k in range(n // 2)]
+    F += [(right[k], hi, right[k + 1]) for k in range(n // 2, n)]
+    F += [(right[n // 2], lo, hi)]
+    F = np.array(F)
+    cls = (V[:, 0] > 0.6).astype(np.int64)
+    faces, bary, labels = surface_training_sample(V, F, cls, seed=3)
+    X = np.einsum("nk,nka->na", bary, V[F[faces]])
+    assert len(X) == len(V)
+    share = float((X[:, 0] > 0.5).mean())  # the vertices: 2 of 47 there
+    # binomial, 47 draws of p = 1/2: the seeded draw is within 2 standard deviations
+    assert abs(share - 0.5) < 2 * np.sqrt(0.25 / len(V))
+    assert np.array_equal(labels, cls[F[faces, bary.argmax(axis=1)]])
+    again = surface_training_sample(V, F, cls, seed=3)
+    assert all(np.array_equal(a, b) for a, b in zip(again, (faces, bary, labels), strict=True))

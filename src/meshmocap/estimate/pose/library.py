@@ -22,9 +22,11 @@ from meshmocap.geometry.rotations import rotation_between
 __all__ = [
     "COARSE_POINTS",
     "DISTINCT",
+    "HANDS",
     "SEEDS",
     "LibraryPoses",
     "body_frame",
+    "hand_joints",
     "library_poses",
     "seed_pose",
 ]
@@ -128,6 +130,23 @@ class LibraryPoses:
 
 _LIBRARY_CACHE: dict[tuple, LibraryPoses] = {}
 
+#: Joints whose library rotations a candidate does not take, with every joint below them.
+#: A 1 cm hull seen by a few cameras resolves little of a hand's orientation, so the fits
+#: keep whatever hand a candidate brings, and the library's are other performers' hands in
+#: other actions; a tracker started from such a hand can lose the wrist
+#: (``docs/measurements.rst``). At rest, a hand starts from the middle of what hands do.
+HANDS = ("LeftHand", "RightHand")
+
+
+def hand_joints(template: Template) -> np.ndarray:
+    """(k,) int64: the joints of :data:`HANDS` and every joint they carry (fingers, thumbs)
+    in ``template``'s skeleton, ascending."""
+    sk = template.skeleton
+    below = np.zeros(sk.n_joints, dtype=bool)
+    for j in range(sk.n_joints):  # parents come before their children
+        below[j] = sk.names[j] in HANDS or (j > 0 and below[sk.parents[j]])
+    return np.flatnonzero(below).astype(np.int64)
+
 
 def library_poses(
     template: Template,
@@ -140,7 +159,8 @@ def library_poses(
     """The pose library's poses (default: the bundled CMU library, all of them or its
     first ``n``: a diverse subset) on ``template``'s skeleton, with their heading removed
     (:func:`~meshmocap.estimate.pose.pose_search.headings_removed`), plus the seed poses
-    ``seeds`` (:data:`SEEDS`). Poses of the trials ``exclude_trials`` are left out (a
+    ``seeds`` (:data:`SEEDS`), the hands of every library pose at rest (:data:`HANDS`).
+    Poses of the trials ``exclude_trials`` are left out (a
     motion that trains the prior must not be scored by it). Cached per template."""
     lib = load_pose_library() if library is None else library
     key = (
@@ -155,6 +175,7 @@ def library_poses(
     if key in _LIBRARY_CACHE:
         return _LIBRARY_CACHE[key]
     R = lib.on(template, n)
+    R[:, hand_joints(template)] = np.eye(3)  # hands at rest (HANDS)
     keep = ~np.isin(lib.trials[: len(R)], list(exclude_trials))
     labels = [f"{t}:{f}" for t, f in zip(lib.trials[: len(R)], lib.frames[: len(R)], strict=True)]
     front = body_frame(template)[:, 1]

@@ -150,6 +150,9 @@ class PatchTracker:
             self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
         )
         self.pairs = _held_pairs(template.eval_skeleton)
+        self.train_faces, self.train_bary, self.train_class = surface_training_sample(
+            template.V, template.F, m.vertex_class, seed=o.seed
+        )
         self.pattern = normal_pattern(self.model, len(template.eval_skeleton.names))
         n = len(self.model.V0)
         self.reverse_sample = np.arange(0, n, max(1, n // REVERSE_SAMPLES))
@@ -289,7 +292,11 @@ class PatchTracker:
         # trained on the previous fit (§III-B); logistic regression starts from the last
         # frame's solution (same optimum, a fifth of the iterations)
         coef, intercept = self.logits or (None, None)
-        clf.fit(self.vertices(), self.model.vertex_class, coef_init=coef, intercept_init=intercept)
+        # trained on points spread evenly over the fitted surface, as the observed points
+        # are, not on its vertices: a decimated body meshes flat parts (a forearm) sparsely
+        V_fit = self.vertices()
+        X = np.einsum("nk,nka->na", self.train_bary, V_fit[self.template.F[self.train_faces]])
+        clf.fit(X, self.train_class, coef_init=coef, intercept_init=intercept)
         if o.classifier == "logistic":
             self.logits = (clf.coef_, clf.intercept_)
         part = partition(
@@ -527,6 +534,30 @@ class PatchTracker:
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
+
+
+def surface_training_sample(
+    V: np.ndarray, F: np.ndarray, vertex_class: np.ndarray, *, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the body-part classifier's training points lie on a mesh: as many points as
+    vertices, spread uniformly over the rest surface ``V`` (n, 3), ``F`` (m, 3) (faces drawn
+    in proportion to their area, barycentric coordinates uniform in each), each labelled
+    with the class of its face's nearest corner (``vertex_class`` (n,)).
+
+    The observed points are spread over the hull's surface by area, and the classifier
+    should learn from the same spread: the vertices of a decimated body are not (quadric
+    decimation keeps few on flat parts, a forearm, and not as many on one side as on the
+    other: ``docs/patch.rst``), so trained on vertices a sparsely meshed part gets too
+    small a share of the labels. Returns the faces (k,) int64, the
+    barycentric coordinates (k, 3) float64 and the classes (k,) int64; the training points
+    of a posed mesh ``X`` are ``einsum("nk,nka->na", bary, X[F[faces]])``."""
+    E1, E2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(E1, E2), axis=1)
+    rng = np.random.default_rng(seed)
+    faces = rng.choice(len(F), size=len(V), p=area / area.sum())
+    bary = rng.dirichlet(np.ones(3), size=len(V))
+    labels = np.asarray(vertex_class)[F[faces, bary.argmax(axis=1)]]
+    return faces.astype(np.int64), bary, labels.astype(np.int64)
 
 
 def _held_pairs(ev: EvalSkeleton) -> np.ndarray:
