@@ -180,7 +180,7 @@ def main() -> None:
     ap.add_argument("--captures", nargs="+", required=True)
     ap.add_argument("--subjects", nargs="*", default=[])
     ap.add_argument("--work", default="/tmp/meshmocap-lost")
-    ap.add_argument("--good-rate", type=float, default=0.03, help="budget of good frames flagged")
+    ap.add_argument("--good-rate", type=float, default=0.04, help="budget of good frames flagged")
     ap.add_argument("--write", action="store_true", help="ship the rule fitted on all frames")
     args = ap.parse_args()
     args.subjects = args.subjects or [str(Path(t).parent / "subjects") for t in args.tracks]

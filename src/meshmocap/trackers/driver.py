@@ -560,9 +560,15 @@ def recovered(
     if q.lost:
         flags += ("lost",)
         message = f"lost {q.describe()}"
-    if q.lost and reseat:
-        found = recovery.reinitialise(frame, r.vertices, q)
-        held = [n for n in q.lost if n in recovery.missing]
+    # re-seating acts on the recovery's own suspects (past the fit quality's thresholds, or
+    # missed), not on the calibrated flag: it holds a limb the observations miss
+    suspect = recovery.suspect
+    if suspect.lost and reseat:
+        found = recovery.reinitialise(frame, r.vertices, suspect)
+        held = [n for n in suspect.lost if n in recovery.missing]
+        if found is not None or held:
+            flags += ("lost",) * ("lost" not in flags)
+            message = message or f"lost {suspect.describe()}"
         if found is not None:
             r = tracker.reseat(frame, found.R, found.root)
             flags += ("reinit",)

@@ -142,7 +142,7 @@ def fit_rule(
     evidence: list[np.ndarray],
     bad: list[np.ndarray],
     *,
-    good_rate: float = 0.03,
+    good_rate: float = 0.04,
     quantiles: np.ndarray | None = None,
 ) -> LostRule:
     """Thresholds that flag as many bad frames as possible while flagging at most

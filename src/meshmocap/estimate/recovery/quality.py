@@ -19,8 +19,11 @@ parts):
   explains: typically the real limb, while the model's is elsewhere. A hull's phantom
   volumes leave some such points on every frame, so the threshold sits above them.
 
-A limb is lost when any measure passes its threshold (:data:`OUTSIDE_LOST`,
-:data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`). Metres, world frame Z up.
+:func:`fit_quality` names a limb lost when any measure passes its threshold here
+(:data:`OUTSIDE_LOST`, :data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`): what the recovery
+holds and searches again. The ``lost`` flag a track carries comes from these measures and
+others through the calibrated rule of :mod:`~meshmocap.estimate.recovery.evidence`.
+Metres, world frame Z up.
 """
 
 from __future__ import annotations

@@ -158,6 +158,9 @@ class Recovery:
             for n, (js, _) in LIMBS.items()
         }
         self.held: np.ndarray | None = None
+        #: the last frame's quality with ``lost`` the limbs the re-seating acts on (past the
+        #: fit quality's own thresholds, or missed), whatever the calibrated flag says
+        self.suspect: FitQuality | None = None
         self._model = articulated_model(template, n_points=POSE_POINTS, seed=0)
         limbs = [k for k, n in enumerate(LIMB_PARTS) if n in self.limb_joints]
         self._limb_vertices = np.flatnonzero(np.isin(self.labels, limbs))
@@ -220,6 +223,7 @@ class Recovery:
                 self.missing.discard(n)
         # the limbs held as last seen: past the fit quality's own thresholds, or missed
         held = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
+        self.suspect = replace(q, lost=held)
         joints = forward_kinematics(self.template.skeleton, R, root)[1]
         evidence = self._evidence(q, V, R, root, joints)
         self.history = [*self.history[-2:], joints]
