@@ -125,3 +125,22 @@ def test_prefetch_moves_the_work_not_the_values():
     assert a.n_evaluated == b.n_evaluated  # the prefetched points were among those needed
     b.prefetch(P)  # nothing new to compute
     assert b.n_evaluated == a.n_evaluated
+
+
+def test_at_points_is_the_grid_value_at_grid_points_and_close_between():
+    occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
+    lazy = LazyDistanceGrid(occ, origin, h, pad=pad)
+    rng = np.random.default_rng(7)
+    ijk = np.stack([rng.integers(0, n, 300) for n in lazy.shape], axis=1)
+    G = lazy.origin + ijk * h  # grid points: the same computation, exactly
+    np.testing.assert_allclose(lazy.at_points(G), lazy(G), rtol=0, atol=1e-12)
+    inside = lazy.origin + h + rng.uniform(0, 1, (500, 3)) * (lazy.upper - lazy.origin - 2 * h)
+    # between grid points: the point's own distance, which the trilinear lookup
+    # interpolates; both are within a voxel's diagonal of each other
+    d = np.abs(lazy.at_points(inside) - lazy(inside))
+    assert d.max() < np.sqrt(3) * h and np.median(d) < h / 2
+    far = lazy.upper + [1.0, 0.0, 0.0]  # beyond the box: the distance, not the box's
+    assert lazy.at_points(far[None])[0] > 1.0
+    assert lazy.at_points(inside.reshape(5, 100, 3)).shape == (5, 100)
+    with pytest.raises(InputError, match="expected finite coordinates"):
+        lazy.at_points(np.array([[np.nan, 0.0, 0.0]]))

@@ -118,3 +118,18 @@ def test_a_timer_records_every_frames_stages_and_changes_no_result(walk, tmp_pat
     # from frame 2 the hull is read and its points derived before the step asks for them
     assert timer.reads and "points" in timer.derived
     assert "in all" in timer.summary()
+
+
+def test_the_checks_start_the_pose_of_an_articulated_track_at_the_trackers_own(walk, tmp_path):
+    """The articulated ICP's state holds its pose on the recovery's skeleton: the pose of
+    the tracked mesh the checks fit starts there, and stays there (its mesh is that pose's)."""
+    t = load_template("neutral_5k")
+    tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+    out = tmp_path / "icp"
+    track = track_sequence(tracker, t, walk, out, init="truth", show_progress=False, light=None)
+    for i in track.frames[1:]:
+        z = read_frame_arrays(out, int(i))
+        R, root = z["state_pose_R"], z["state_pose_root"]
+        assert np.abs(t.pose(R, root).V - z["vertices"]).max() < 1e-3
+        assert np.abs(R - z["state_R"]).max() < 1e-3
+        assert np.abs(root - z["state_root"]).max() < 1e-4

@@ -555,14 +555,20 @@ def recovered(
     ``reseat``, where a better pose is found, the tracker re-seated there (flag ``reinit``).
     The frame's quality (``fit_outside``, ``fit_unexplained``) joins its energies, the
     articulated pose of the tracked mesh its state (``pose_R``, ``pose_root``)."""
-    q = recovery.assess(frame, r.vertices)
+    q = recovery.assess(frame, r.vertices, start=_tracker_pose(recovery, r))
     flags, message = tuple(r.flags), r.message
     if q.lost:
         flags += ("lost",)
         message = f"lost {q.describe()}"
-    if q.lost and reseat:
-        found = recovery.reinitialise(frame, r.vertices, q)
-        held = [n for n in q.lost if n in recovery.missing]
+    # re-seating acts on the recovery's own suspects (past the fit quality's thresholds, or
+    # missed), not on the calibrated flag: it holds a limb the observations miss
+    suspect = recovery.suspect
+    if suspect.lost and reseat:
+        found = recovery.reinitialise(frame, r.vertices, suspect)
+        held = [n for n in suspect.lost if n in recovery.missing]
+        if found is not None or held:
+            flags += ("lost",) * ("lost" not in flags)
+            message = message or f"lost {suspect.describe()}"
         if found is not None:
             r = tracker.reseat(frame, found.R, found.root)
             flags += ("reinit",)
@@ -575,6 +581,16 @@ def recovered(
     return replace(
         r, flags=flags, message=message, energies={**r.energies, **q.energies()}, state=state
     )
+
+
+def _tracker_pose(recovery: Recovery, r: FrameResult) -> tuple[np.ndarray, np.ndarray] | None:
+    """The tracker's own articulated pose of ``r`` (its state's ``R``, ``root``) where it is
+    one of the recovery's skeleton (the articulated ICP's): the pose fit of the tracked
+    mesh starts there, at its answer."""
+    R, root = r.state.get("R"), r.state.get("root")
+    if R is None or root is None or np.shape(R) != recovery.R.shape or np.shape(root) != (3,):
+        return None
+    return np.asarray(R, dtype=np.float64), np.asarray(root, dtype=np.float64)
 
 
 def _last_pose(out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:

@@ -25,3 +25,19 @@ def test_a_lost_arm_is_found_again_by_its_limb_search(walker):
     R0[0] = so3_exp(np.array([0.0, 0.0, 0.3])) @ R0[0]
     Rf, rootf = pose_of_vertices(t, V, R0, root + 0.05)
     assert np.abs(t.pose(Rf, rootf).V - V).max() < 0.002
+
+
+def test_pose_of_vertices_with_a_kept_model_and_a_tolerance(walker):
+    from meshmocap.body.articulated import articulated_model
+
+    t, R, root, posed = walker
+    R0 = R.copy()
+    R0[0] = so3_exp(np.array([0.0, 0.0, 0.05])) @ R0[0]  # a frame's motion off
+    a = pose_of_vertices(t, posed.V, R0, root + 0.01)
+    model = articulated_model(t, n_points=600, seed=0)
+    b = pose_of_vertices(t, posed.V, R0, root + 0.01, model=model)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))  # the same model
+    # stopped early, a tolerance of 2 mrad leaves the vertices within 1 mm of the fit's end
+    c = pose_of_vertices(t, posed.V, R0, root + 0.01, model=model, tol=2e-3, iterations=3)
+    assert np.abs(t.pose(*c).V - t.pose(*a).V).max() < 0.001
+    assert np.abs(t.pose(*c).V - posed.V).max() < 0.003

@@ -31,6 +31,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
+    ArticulatedModel,
     add_pose_pull,
     articulated_model,
     articulated_step,
@@ -266,6 +267,8 @@ def pose_of_vertices(
     iterations: int = 6,
     n_points: int = 600,
     fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+    tol: float = 1e-4,
+    model: ArticulatedModel | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The template pose whose skinned vertices are nearest to ``V`` (the template's own
     vertices, e.g. a tracker's output, in any deformation): Gauss–Newton on the
@@ -275,12 +278,22 @@ def pose_of_vertices(
     ----------
     V : (n, 3) float64, the template's vertices, metres, world frame
     R : (J, 3, 3) float64, ``root`` (3,) float64: the starting pose (e.g. the last one)
+    iterations : int
+        At most this many steps.
+    tol : float
+        Stop once a step moves the root by less than this (metres) and turns no joint by
+        more than this (radians): warm-started from the last frame's pose, the fit has
+        converged after a few steps.
+    model : ArticulatedModel, optional
+        ``articulated_model(template, n_points=n_points, seed=0)``, where the caller keeps
+        it (a fit on every frame: building it costs as much as a step).
 
     Returns
     -------
     R : (J, 3, 3) float64, local rotations; root : (3,) float64, metres
     """
-    model = articulated_model(template, n_points=n_points, seed=0)
+    if model is None:
+        model = articulated_model(template, n_points=n_points, seed=0)
     sk = template.skeleton
     target = np.asarray(V, dtype=np.float64)[model.sample]
     free = [j for j, n in enumerate(sk.names) if n not in fixed_joints]
@@ -292,9 +305,11 @@ def pose_of_vertices(
         r, Jr = residual_jacobian(v, a, i, target, np.zeros_like(target), "point_to_point")
         Ja = Jr[:, act]
         try:
-            R, root, _ = articulated_step(
+            R, root, delta = articulated_step(
                 sk, R, root, Ja.T @ Ja, Ja.T @ r, active=act, damping=VERTEX_DAMPING
             )
         except FitError:  # a singular system: keep the pose reached
+            break
+        if np.abs(delta).max() < tol:
             break
     return R, root

@@ -4,6 +4,9 @@
   check: points with outward normals, a voxel occupancy and its signed distance;
 * :mod:`~meshmocap.estimate.recovery.quality` — the fit-quality check, limb by limb: the
   evidence that flags a frame ``lost``;
+* :mod:`~meshmocap.estimate.recovery.evidence` — frame evidence → lost limbs: the one rule
+  (thresholds shipped as data, calibrated on motion categories left out) that flags a limb
+  ``lost`` for every tracker, the driver after every frame and any later pass alike;
 * :mod:`~meshmocap.estimate.recovery.limbs` — the search for a lost limb: the pose
   library's hypotheses for it, or its bones re-aimed over the sphere, each fitted with
   only that limb free (the first pose's search refines its candidates with it too);

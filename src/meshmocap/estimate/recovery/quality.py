@@ -19,8 +19,11 @@ parts):
   explains: typically the real limb, while the model's is elsewhere. A hull's phantom
   volumes leave some such points on every frame, so the threshold sits above them.
 
-A limb is lost when any measure passes its threshold (:data:`OUTSIDE_LOST`,
-:data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`). Metres, world frame Z up.
+:func:`fit_quality` names a limb lost when any measure passes its threshold here
+(:data:`OUTSIDE_LOST`, :data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`): what the recovery
+holds and searches again. The ``lost`` flag a track carries comes from these measures and
+others through the calibrated rule of :mod:`~meshmocap.estimate.recovery.evidence`.
+Metres, world frame Z up.
 """
 
 from __future__ import annotations
@@ -29,7 +32,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pykdtree.kdtree import KDTree
-from scipy import ndimage
 
 from meshmocap.body.template import Template
 from meshmocap.geometry.camera import Camera, project
@@ -112,6 +114,10 @@ class FitQuality:
     unseen : dict of limb → float, where known: fraction of the limb, posed as when last
         seen on the tracked trunk, outside the observations (the observations miss it:
         :class:`~meshmocap.estimate.recovery.reinit.Recovery`)
+    evidence : (L, E) float64 or None, where known: each limb's evidence
+        (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`), from which ``lost`` was
+        decided (:func:`~meshmocap.estimate.recovery.evidence.lost_limbs`)
+    reasons : dict of limb → str, where known: why each lost limb is lost
     """
 
     outside: dict[str, float]
@@ -119,6 +125,8 @@ class FitQuality:
     unexplained: dict[str, float]
     lost: tuple[str, ...]
     unseen: dict[str, float] = field(default_factory=dict)
+    evidence: np.ndarray | None = None
+    reasons: dict[str, str] = field(default_factory=dict)
 
     @property
     def total_unexplained(self) -> float:
@@ -138,6 +146,9 @@ class FitQuality:
         """One line naming each lost limb and why (empty when none is lost)."""
         parts = []
         for limb in self.lost:
+            if limb in self.reasons:
+                parts.append(f"{limb} ({self.reasons[limb]})")
+                continue
             why = []
             if self.outside[limb] > OUTSIDE_LOST:
                 why.append(f"{100 * self.outside[limb]:.0f}% outside the observations")
@@ -181,14 +192,23 @@ def uncovered_points(
     """
     hit = np.zeros(len(P), dtype=bool)
     for cam, mask in zip(cameras, masks, strict=True):
-        miss = ndimage.binary_erosion(mask) & ~silhouette(V, F, cam, assume_closed=True)
-        if not miss.any():
-            continue
-        uv, depth = project(P, cam.K, cam.R, cam.t)
+        todo = np.flatnonzero(~hit)
+        if todo.size == 0:
+            break
+        uv, depth = project(P[todo], cam.K, cam.R, cam.t)
         px = np.round(uv).astype(np.int64)
-        ok = (depth > 0) & (px[:, 0] >= 0) & (px[:, 0] < mask.shape[1])
-        ok &= (px[:, 1] >= 0) & (px[:, 1] < mask.shape[0])
-        hit[ok] |= miss[px[ok, 1], px[ok, 0]]
+        h, w = mask.shape
+        # inside the mask eroded by its 4-neighbours (ndimage.binary_erosion's default,
+        # border pixels eroded), looked up at the points' pixels only
+        ok = (depth > 0) & (px[:, 0] >= 1) & (px[:, 0] < w - 1)
+        ok &= (px[:, 1] >= 1) & (px[:, 1] < h - 1)
+        x, y = px[ok, 0], px[ok, 1]
+        core = mask[y, x] & mask[y - 1, x] & mask[y + 1, x] & mask[y, x - 1] & mask[y, x + 1]
+        sel = np.flatnonzero(ok)[core]
+        if sel.size == 0:  # no point images into the silhouette: nothing to render
+            continue
+        model = silhouette(V, F, cam, assume_closed=True)
+        hit[todo[sel]] = ~model[px[sel, 1], px[sel, 0]]
     return hit
 
 
@@ -203,6 +223,7 @@ def fit_quality(
     masks: list[np.ndarray] | None = None,
     max_points: int = 4000,
     seed: int = 0,
+    sdf: np.ndarray | None = None,
 ) -> FitQuality:
     """Score a tracked frame against its observations (module docstring).
 
@@ -226,6 +247,9 @@ def fit_quality(
         At most this many observed points are checked (a seeded subsample).
     seed : int
         Seed of that subsample.
+    sdf : (n,) float64, optional
+        The signed distance of the observed solid at ``V``, metres, where the caller has
+        it (default: ``field(V)``).
 
     Returns
     -------
@@ -234,12 +258,14 @@ def fit_quality(
     limbs = list(LIMB_PARTS)
     if len(P) > max_points:
         P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
-    sdf = field(V)
+    if sdf is None:
+        sdf = field(V)
     outside = limb_shares(labels, sdf > OUTSIDE_MARGIN)
     buried = limb_shares(labels, sdf < -BURIED_DEPTH)
     d, i = KDTree(np.ascontiguousarray(V)).query(np.ascontiguousarray(P), k=1)
     if cameras and masks is not None and F is not None:
-        far = (d > SILHOUETTE_DISTANCE) & uncovered_points(V, F, P, cameras, masks)
+        far = d > SILHOUETTE_DISTANCE  # only these can be unexplained: only they are imaged
+        far[far] = uncovered_points(V, F, P[far], cameras, masks)
     else:
         far = d > UNEXPLAINED_DISTANCE
     near = labels[np.asarray(i, dtype=np.int64)[far]]

@@ -36,12 +36,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from meshmocap.body.articulated import articulated_model
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.estimate.pose.first_pose import ranking_key, subsample_points
 from meshmocap.estimate.pose.fit import PoseFit, PoseFitter, pose_of_vertices
 from meshmocap.estimate.pose.library import library_poses
 from meshmocap.estimate.pose.pose_search import FrameScorer
+from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, lost_reasons
 from meshmocap.estimate.recovery.limbs import (
     LIMB_ROOTS,
     LIMBS,
@@ -78,6 +80,13 @@ MOTION_WEIGHT = 0.05
 #: Metres (RMS over the limb's joints) past which a re-seeded limb's distance from its
 #: predicted motion costs no more (:data:`MOTION_WEIGHT`).
 MOTION_REACH = 0.3
+#: Vertices the pose of the tracked mesh is fitted to (:meth:`Recovery.track_pose`).
+POSE_POINTS = 600
+#: Steps of that fit at most: warm-started from the last frame's pose it is within a
+#: fraction of a millimetre (joint positions) of where more steps take it after three.
+POSE_STEPS = 3
+#: Radians (and metres of root) of a step below which that fit stops earlier.
+POSE_TOL = 2e-3
 #: Frames only flagged after a search that found no better pose.
 COOLDOWN = 3
 #: Metres a tracked limb must stand from where it was last seen (mean over its vertices)
@@ -118,6 +127,9 @@ class Recovery:
     exclude_trials : tuple of str
         Pose-library trials the limb hypotheses leave out
         (:func:`~meshmocap.estimate.pose.first_pose.library_poses`).
+    rule : LostRule, optional
+        The rule that flags limbs lost from each frame's evidence
+        (:func:`~meshmocap.estimate.recovery.evidence.lost_limbs`; default: the shipped one).
     """
 
     def __init__(
@@ -127,8 +139,11 @@ class Recovery:
         root: np.ndarray,
         *,
         exclude_trials: tuple[str, ...] = (),
+        rule: LostRule | None = None,
     ):
         self.template = template
+        #: the rule that flags a limb lost from the frame's evidence (default: shipped)
+        self.rule = rule
         self.exclude_trials = tuple(exclude_trials)
         #: joint positions (J, 3) of the poses of the last frames assessed, oldest first
         self.history: list[np.ndarray] = []
@@ -143,6 +158,12 @@ class Recovery:
             for n, (js, _) in LIMBS.items()
         }
         self.held: np.ndarray | None = None
+        #: the last frame's quality with ``lost`` the limbs the re-seating acts on (past the
+        #: fit quality's own thresholds, or missed), whatever the calibrated flag says
+        self.suspect: FitQuality | None = None
+        self._model = articulated_model(template, n_points=POSE_POINTS, seed=0)
+        limbs = [k for k, n in enumerate(LIMB_PARTS) if n in self.limb_joints]
+        self._limb_vertices = np.flatnonzero(np.isin(self.labels, limbs))
         self.missing: set[str] = set()
         self.fits_well: dict[str, int] = {}
 
@@ -165,25 +186,31 @@ class Recovery:
             cameras=cameras,
             masks=masks,
             seed=int(frame.index),
+            sdf=_signed_distance(field, V),
         )
 
-    def assess(self, frame, V: np.ndarray) -> FitQuality:
+    def assess(
+        self, frame, V: np.ndarray, *, start: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> FitQuality:
         """The fit quality of ``V`` on ``frame`` (:meth:`check`), with each limb also posed
         as when last seen (its joints' rotations then, on the trunk tracked now) and
         checked against the observations. A limb is missed (``unseen``, lost however well
         the tracked mesh fits) when, posed as last seen, it stands outside the observations
         while the tracked limb has jumped away from there (the tracker put it where the
         observations have something else); it is seen again when, posed as last seen, it is
-        inside them again or the tracked limb is back there. Updates the pose estimate."""
+        inside them again or the tracked limb is back there. Updates the pose estimate
+        (:meth:`track_pose`, from ``start`` where given)."""
         q = self.check(frame, V)
-        R, root = self.track_pose(V)
+        R, root = self.track_pose(V, start)
         if self.held is None:  # the first frame checked: every limb as tracked
             self.held = R.copy()
-        Vc = self.coast_pose(R)
-        _, _, field, _, _ = self._inputs(frame)
-        out = field(self.template.pose(Vc, root).V) > UNSEEN_MARGIN
+        Vc = self.template.pose(self.coast_pose(R), root).V
+        out = np.zeros(len(Vc), dtype=bool)  # only the limbs' vertices are looked at
+        out[self._limb_vertices] = (
+            _signed_distance(observed(frame).field, Vc[self._limb_vertices]) > UNSEEN_MARGIN
+        )
         unseen = {n: v for n, v in limb_shares(self.labels, out).items() if n in self.limb_joints}
-        moved = self._limb_moves(V, self.template.pose(Vc, root).V)
+        moved = self._limb_moves(V, Vc)
         for n, v in unseen.items():  # hysteresis: missed until clearly seen again
             good = q.outside[n] < OUTSIDE_LOST / 2 and q.unexplained[n] < UNEXPLAINED_LOST / 2
             # frames in a row a missed limb, as tracked, has fitted the observations well
@@ -194,12 +221,54 @@ class Recovery:
                 self.missing.add(n)
             elif v < UNSEEN_LOST / 2 or moved[n] < JUMP / 2:
                 self.missing.discard(n)
-        lost = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
-        self.history = [*self.history[-2:], forward_kinematics(self.template.skeleton, R, root)[1]]
+        # the limbs held as last seen: past the fit quality's own thresholds, or missed
+        held = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
+        self.suspect = replace(q, lost=held)
+        joints = forward_kinematics(self.template.skeleton, R, root)[1]
+        evidence = self._evidence(q, V, R, root, joints)
+        self.history = [*self.history[-2:], joints]
         for n, idx in self.limb_joints.items():
-            if n not in lost:
+            if n not in held:
                 self.held[idx] = R[idx]
-        return replace(q, lost=lost, unseen={n: float(n in self.missing) for n in unseen})
+        lost = lost_limbs(evidence, self.rule)
+        reasons = lost_reasons(evidence, self.rule)
+        return replace(
+            q,
+            lost=lost,
+            unseen={n: float(n in self.missing) for n in unseen},
+            evidence=evidence,
+            reasons=reasons,
+        )
+
+    def _evidence(self, q: FitQuality, V, R, root, joints) -> np.ndarray:
+        """(L, E) the frame's evidence (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`,
+        limbs in :data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS` order): the fit
+        quality ``q``, the limbs missed, the RMS distance of the tracked vertices ``V`` from
+        the articulated pose ``(R, root)`` fitted to them, and each limb's joints' motion
+        relative to the pelvis since the last frame assessed (0 on the first)."""
+        n = len(LIMB_PARTS)
+        on = self.labels >= 0
+        d2 = np.sum((V - self.template.pose(R, root).V) ** 2, axis=1)
+        counts = np.maximum(np.bincount(self.labels[on], minlength=n), 1)
+        residual = np.sqrt(np.bincount(self.labels[on], d2[on], minlength=n) / counts)
+        speed = np.zeros(n)
+        if self.history:
+            move = np.linalg.norm(
+                (joints - joints[0]) - (self.history[-1] - self.history[-1][0]), axis=1
+            )
+            for k, name in enumerate(LIMB_PARTS):
+                idx = self.limb_joints.get(name)
+                if idx is not None and len(idx):
+                    speed[k] = move[idx].max()
+        cols = {
+            "outside": [q.outside[m] for m in LIMB_PARTS],
+            "buried": [q.buried[m] for m in LIMB_PARTS],
+            "unexplained": [q.unexplained[m] for m in LIMB_PARTS],
+            "unseen": [float(m in self.missing) for m in LIMB_PARTS],
+            "residual": residual,
+            "speed": speed,
+        }
+        return np.column_stack([np.asarray(cols[e], dtype=np.float64) for e in EVIDENCE])
 
     def coast_pose(self, R: np.ndarray | None = None) -> np.ndarray:
         """Local rotations (J, 3, 3): ``R`` (default: the pose estimate) with each limb's
@@ -233,9 +302,23 @@ class Recovery:
         rms = float(np.sqrt(np.mean(np.sum((P - (2 * b - a)) ** 2, axis=1))))
         return MOTION_WEIGHT * min(rms, MOTION_REACH)
 
-    def track_pose(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The articulated pose of the tracked vertices ``V``, warm-started from the last."""
-        self.R, self.root = pose_of_vertices(self.template, V, self.R, self.root)
+    def track_pose(
+        self, V: np.ndarray, start: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The articulated pose of the tracked vertices ``V``, warm-started from ``start``
+        (the tracker's own pose of this frame, where it has one on the same skeleton) or
+        else the last frame's (:data:`POSE_STEPS`, :data:`POSE_TOL`)."""
+        R, root = (self.R, self.root) if start is None else start
+        self.R, self.root = pose_of_vertices(
+            self.template,
+            V,
+            R,
+            root,
+            iterations=POSE_STEPS,
+            n_points=POSE_POINTS,
+            tol=POSE_TOL,
+            model=self._model,
+        )
         return self.R, self.root
 
     def reinitialise(self, frame, V: np.ndarray, quality: FitQuality) -> Reinit | None:
@@ -307,6 +390,14 @@ class Recovery:
                 self.held[self.limb_joints[n]] = best.R[self.limb_joints[n]]
                 self.missing.discard(n)
         return Reinit(best.R, best.root, tuple(changed), q)
+
+
+def _signed_distance(field, V: np.ndarray) -> np.ndarray:
+    """(n,) the signed distance of the observed solid at ``V`` (n, 3), metres: at the points
+    themselves where the field offers it (a frame's lazy field: one query per vertex instead
+    of every new cell's corners), else looked up."""
+    at = getattr(field, "at_points", None)
+    return at(V) if at is not None else field(V)
 
 
 def _evidence(q: FitQuality) -> set[str]:

@@ -1,0 +1,187 @@
+"""Frame evidence → lost limbs: the one rule that flags a limb ``lost``, for every tracker.
+
+Each tracked frame's evidence (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`
+computes it after every frame, the global pass after every frame it rewrites) is, per limb
+(:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`), the measures named in
+:data:`EVIDENCE`:
+
+* ``outside``, ``buried``, ``unexplained`` — the fit quality against the observations
+  (:func:`~meshmocap.estimate.recovery.quality.fit_quality`: fractions of the limb's
+  vertices outside or deep inside the observed solid, fraction of the observed points no
+  vertex explains that lie nearest to the limb);
+* ``unseen`` — 1 while the observations miss the limb where it was last seen and the
+  tracked limb has jumped away (:class:`~meshmocap.estimate.recovery.reinit.Recovery`), else 0;
+* ``residual`` — metres (RMS over the limb's vertices) between the tracked mesh and the
+  articulated pose fitted to it: a limb the tracker bent out of any pose of the skeleton;
+* ``speed`` — metres per frame the limb's joints moved relative to the pelvis since the
+  frame before (the largest over its joints): a limb that jumped.
+
+The rule (:class:`LostRule`) is a threshold per measure: a limb is lost when any of its
+measures exceeds its threshold. The thresholds ship as data
+(``data/lost_rule.json``, :data:`RULE_FILE`), fitted by ``benchmarks/bench_lost.py``
+(:func:`fit_rule`) on tracks of the pose library's motions by every tracker, and scored
+there leaving each motion category out of the fit in turn; the file's ``note`` says on
+which tracks it was fitted.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap.errors import FormatError, InputError
+from meshmocap.estimate.recovery.quality import LIMB_PARTS
+
+__all__ = [
+    "EVIDENCE",
+    "RULE_FILE",
+    "LostRule",
+    "fit_rule",
+    "lost_limbs",
+    "lost_reasons",
+    "shipped_rule",
+]
+
+#: The measures of a limb's evidence, in the order of the last axis of an evidence array.
+EVIDENCE = ("outside", "buried", "unexplained", "unseen", "residual", "speed")
+#: The shipped rule's file (in the package).
+RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "lost_rule.json"))
+
+
+@dataclass(frozen=True)
+class LostRule:
+    """A threshold per measure of :data:`EVIDENCE` (``inf``: the measure never flags).
+
+    Attributes
+    ----------
+    thresholds : tuple of float, one per :data:`EVIDENCE` measure (units as there)
+    """
+
+    thresholds: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.thresholds) != len(EVIDENCE):
+            raise InputError(
+                f"lost rule: expected {len(EVIDENCE)} thresholds ({', '.join(EVIDENCE)}), "
+                f"found {len(self.thresholds)}"
+            )
+
+    def limb_lost(self, evidence: np.ndarray) -> np.ndarray:
+        """(..., L) bool: each limb of ``evidence`` (..., L, E) lost."""
+        return np.any(np.asarray(evidence) > np.asarray(self.thresholds), axis=-1)
+
+    def flags(self, evidence: np.ndarray) -> np.ndarray:
+        """(T,) bool: the frames of ``evidence`` (T, L, E) with a limb lost."""
+        return self.limb_lost(evidence).any(axis=-1)
+
+    def describe(self) -> str:
+        """The thresholds used, one ``name > value`` each."""
+        return ", ".join(
+            f"{n} > {t:.3g}"
+            for n, t in zip(EVIDENCE, self.thresholds, strict=True)
+            if np.isfinite(t)
+        )
+
+    def write(self, path: str | Path, *, note: str = "") -> None:
+        """Save the rule as JSON (``inf`` as null)."""
+        th = {
+            n: (float(t) if np.isfinite(t) else None)
+            for n, t in zip(EVIDENCE, self.thresholds, strict=True)
+        }
+        Path(path).write_text(json.dumps({"thresholds": th, "note": note}, indent=1) + "\n")
+
+    @classmethod
+    def read(cls, path: str | Path) -> LostRule:
+        """A rule saved by :meth:`write`."""
+        try:
+            th = json.loads(Path(path).read_text())["thresholds"]
+            return cls(tuple(np.inf if th.get(n) is None else float(th[n]) for n in EVIDENCE))
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            raise FormatError(f"lost rule: {path} is not a rule file ({e})") from None
+
+
+@cache
+def shipped_rule() -> LostRule:
+    """The rule shipped with the package (:data:`RULE_FILE`)."""
+    return LostRule.read(RULE_FILE)
+
+
+def lost_limbs(evidence: np.ndarray, rule: LostRule | None = None) -> tuple[str, ...]:
+    """The limbs lost on a frame, in :data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`
+    order: those with a measure of ``evidence`` (L, E) (:data:`EVIDENCE`) over ``rule``'s
+    threshold (default :func:`shipped_rule`)."""
+    lost = (rule or shipped_rule()).limb_lost(evidence)
+    return tuple(n for n, k in zip(LIMB_PARTS, lost, strict=True) if k)
+
+
+def lost_reasons(evidence: np.ndarray, rule: LostRule | None = None) -> dict[str, str]:
+    """Per lost limb (:func:`lost_limbs`), why, in words: each measure over its threshold."""
+    rule = rule or shipped_rule()
+    words = {
+        "outside": lambda v: f"{100 * v:.0f}% outside the observations",
+        "buried": lambda v: f"{100 * v:.0f}% buried in the body",
+        "unexplained": lambda v: f"{100 * v:.1f}% of the points unexplained",
+        "unseen": lambda v: "not observed where it was last seen",
+        "residual": lambda v: f"{1000 * v:.0f} mm off any pose of the skeleton",
+        "speed": lambda v: f"moved {1000 * v:.0f} mm since the last frame",
+    }
+    out = {}
+    for n, row in zip(LIMB_PARTS, np.asarray(evidence), strict=True):
+        why = [words[m](v) for m, v, t in zip(EVIDENCE, row, rule.thresholds, strict=True) if v > t]
+        if why:
+            out[n] = ", ".join(why)
+    return out
+
+
+def fit_rule(
+    evidence: list[np.ndarray],
+    bad: list[np.ndarray],
+    *,
+    good_rate: float = 0.04,
+    quantiles: np.ndarray | None = None,
+) -> LostRule:
+    """Thresholds that flag as many bad frames as possible while flagging at most
+    ``good_rate`` of the good frames: greedily, the measure and threshold (a quantile of
+    that measure's frame maximum over the good frames) that flags the most bad frames not
+    yet flagged per good frame newly flagged, within the budget, until none adds any.
+
+    Parameters
+    ----------
+    evidence : list of (T, L, E) float64, one per track
+    bad : list of (T,) bool, the frames with a joint off (the label)
+    good_rate : float, the share of good frames the rule may flag
+    quantiles : (q,) float, candidate quantiles of the good frames' values
+
+    Returns
+    -------
+    LostRule
+    """
+    X = np.concatenate([e.max(axis=1) for e in evidence])  # (N, E): worst limb per frame
+    y = np.concatenate(bad).astype(bool)
+    q = np.linspace(0.9, 1.0, 101) if quantiles is None else np.asarray(quantiles)
+    good = X[~y]
+    th = np.full(X.shape[1], np.inf)
+    budget = good_rate * max(len(good), 1)
+    while True:
+        flagged = (th < X).any(axis=1)
+        best, gain = None, 0.0
+        for k in range(X.shape[1]):
+            for t in np.unique(np.quantile(good[:, k], q)):
+                if t >= th[k]:
+                    continue
+                f = flagged | (X[:, k] > t)
+                if np.count_nonzero(f & ~y) > budget:
+                    continue
+                new_bad = np.count_nonzero(f & y) - np.count_nonzero(flagged & y)
+                new_good = np.count_nonzero(f & ~y) - np.count_nonzero(flagged & ~y)
+                score = new_bad / (new_good + 1.0)
+                if new_bad > 0 and score > gain:
+                    best, gain = (k, t), score
+        if best is None:
+            return LostRule(tuple(float(v) for v in th))
+        th[best[0]] = best[1]
