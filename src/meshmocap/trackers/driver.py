@@ -193,6 +193,7 @@ def track_sequence(
     }
     body = tracking_body(template, n_vertices=light)
     meta["tracked_vertices"] = body.light.n_vertices
+    meta.update(_built_on(tracker, body.light))
     Path(out).mkdir(parents=True, exist_ok=True)
     report = on_frame or (lambda r: None)
     # one BLAS thread while tracking; a second run into the same folder is refused
@@ -256,6 +257,18 @@ def track_sequence(
                 timer.lap("write")
             report(r)
     return read_track(out, vertices=vertices)
+
+
+def _built_on(tracker: Tracker, template: Template) -> dict:
+    """``{"cage_body": "template" | "reference"}`` for a tracker that builds a rig on a
+    body (the cage: on the performer's template or on the reference body,
+    :mod:`meshmocap.trackers.cage.body`), set up for ``template`` first (its ``init``
+    would); empty for the others."""
+    if not hasattr(type(tracker), "built_on"):
+        return {}
+    if tracker.template is not template:
+        tracker.setup(template)
+    return {"cage_body": tracker.built_on}
 
 
 def _growing(capture: LiveCapture, start: int) -> Iterator[int]:
