@@ -180,7 +180,7 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
                 ]
             )
         if len(step) == 2:
-            rows[-1][1] = f"on (+{step['on'] - step['off']:.2f} s)"
+            rows[-1][1] = f"on ({step['on'] - step['off']:+.2f} s)"
     return rows
 
 
