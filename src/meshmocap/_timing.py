@@ -12,6 +12,8 @@ The stages of a frame, in the order the driver runs them (:data:`FRAME_STAGES`):
 * ``step``: the tracker's fit, with its own stages (``step.NAME``, the tracker's
   ``stage_seconds``) where it keeps them;
 * ``checks``: the fit-quality assessment of every frame, and any re-seat;
+* ``refine``: the output surface refined towards the frame's observations
+  (:class:`~meshmocap.geometry.refine.SurfaceRefiner`);
 * ``write``: the frame's result file.
 """
 
@@ -23,7 +25,7 @@ from collections.abc import Iterable
 import numpy as np
 
 #: The driver's stages of a frame, in order (module docstring).
-FRAME_STAGES = ("read", "observe", "step", "checks", "write")
+FRAME_STAGES = ("read", "observe", "step", "checks", "refine", "write")
 
 
 class StageTimer:

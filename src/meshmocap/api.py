@@ -298,6 +298,7 @@ def track(
     resume: bool = True,
     recover: bool = True,
     reseat: bool = False,
+    refine: Literal["auto", "on", "off"] = "auto",
     manifold: str | os.PathLike | None = None,
     vertices: bool = True,
     show_progress: bool | None = None,
@@ -333,6 +334,11 @@ def track(
     recover, reseat : bool
         Score frames and flag lost limbs; re-seat lost limbs
         (:func:`~meshmocap.trackers.driver.track_sequence`).
+    refine : {"auto", "on", "off"}
+        Refine each frame's output surface towards its observations
+        (:func:`~meshmocap.trackers.driver.track_sequence`: ``"auto"`` for mesh and
+        point-cloud files, not a capture folder's visual hulls); ``"off"`` outputs the
+        tracked skeleton's surface as it is.
     manifold : path, optional
         Cage methods: a pose manifold from ``meshmocap learn`` (default: learned once).
     vertices : bool
@@ -403,6 +409,7 @@ def track(
         start=start,
         on_frame=on_frame,
         timer=timer,
+        refine=refine,
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 
@@ -420,6 +427,7 @@ def _check_track_arguments(given: dict) -> None:
     for name in ("out", "template", "manifold"):
         _check_optional(func, name, given[name], _PATH, "a path or name (str or os.PathLike)")
     check_choice(func, "init", given["init"], ("auto", "truth"))
+    check_choice(func, "refine", given["refine"], ("auto", "on", "off"))
     for name in ("resume", "recover", "reseat", "vertices"):
         check_type(func, name, given[name], bool, "True or False")
     _check_optional(func, "show_progress", given["show_progress"], bool, "True or False")

@@ -120,3 +120,62 @@ def test_frames_out_of_the_cameras_view_are_not_scored(capture, tmp_path):
     assert "not scored" in summary(ev)
     everything = evaluate(track, moved, silhouettes=False, surface_frames=0, in_view_only=False)
     assert len(everything.out_of_view) == 0 and everything.correspondence.overall.max > 1e4
+
+
+def _mesh_folder_track(capture, folder, out, shift, *, cage_body=None):
+    """The capture's true surfaces written as a folder of PLY meshes (a clean 4D capture)
+    and a 'track' of it that is those surfaces moved by ``shift`` metres."""
+    from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
+    from meshmocap.io.capture import SequenceCapture
+    from meshmocap.io.meshes import write_mesh
+
+    folder.mkdir()
+    for f in capture:
+        write_mesh(folder / f"{f.index:05d}.ply", f.truth.vertices, capture.truth_faces)
+    meta = {
+        "method": "files+shift",
+        "template": "subject",
+        "capture": str(folder),
+        "eval_names": list(EVAL_NAMES),
+        "eval_parents": EVAL_PARENTS.tolist(),
+        **({"cage_body": cage_body} if cage_body else {}),
+    }
+    start_track(out, meta, capture.truth_faces, resume=False)
+    for f in capture:
+        write_frame(out, FrameResult(f.index, f.truth.joints + shift, f.truth.vertices + shift))
+    return read_track(out), SequenceCapture(folder)
+
+
+def test_a_clean_4d_capture_is_scored_per_vertex_per_frame_against_its_input_meshes(
+    capture, tmp_path
+):
+    shift = np.array([0.0, 0.006, 0.008])  # 10 mm
+    track, seq = _mesh_folder_track(
+        capture, tmp_path / "seq", tmp_path / "tr", shift, cage_body="reference"
+    )
+    ev = evaluate(track, seq, silhouettes=False, surface_frames=2)
+    assert ev.correspondence.overall.mean == pytest.approx(10.0, abs=1e-3)  # float32 files
+    assert ev.surface.against == "input meshes"
+    text = summary(ev)
+    assert "Surface distance to the input meshes" in text and "to the hull" not in text
+    assert "cage built on the reference body" in text
+    files = write_evaluation(ev, tmp_path / "ev")
+    per = tmp_path / "ev" / "vertex_errors_per_frame.csv"
+    assert per in files and (tmp_path / "ev" / "vertex_error_per_frame.png") in files
+    rows = per.read_text().splitlines()
+    assert rows[0] == "frame,status,mean_mm" and len(rows) == 1 + len(track.frames)
+    values = np.array([float(r.split(",")[2]) for r in rows[1:]])
+    np.testing.assert_allclose(values, 10.0, atol=1e-3)
+
+
+def test_a_track_that_failed_everywhere_is_scored_without_a_warning(capture, tmp_path):
+    """Every frame failed (NaN): the scores are n/a, and no numpy warning escapes
+    (filterwarnings=error turns one into a failure)."""
+    track, seq = _mesh_folder_track(capture, tmp_path / "seq", tmp_path / "tr", 0.0)
+    track = replace(track, vertices=np.full_like(track.vertices, np.nan))
+    ev = evaluate(track, seq, silhouettes=False, surface_frames=2)
+    assert len(ev.correspondence.frames) == 0 and np.isnan(ev.correspondence.overall.mean)
+    assert "cage built" not in summary(ev)
+    files = write_evaluation(ev, tmp_path / "ev")
+    rows = (tmp_path / "ev" / "vertex_errors_per_frame.csv").read_text().splitlines()
+    assert all(r.split(",")[1] == "failed" for r in rows[1:]) and all(p.is_file() for p in files)

@@ -82,7 +82,7 @@ def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
     assert main(["track", str(seq), *ICP, "--out", str(out)]) == 0
     html = build_report(tmp_path / "r.html", seq, [out], silhouettes=False, surface_frames=1)
     text = html.read_text()
-    assert "Surface distance to the hull" in text
+    assert "Surface distance to the input meshes" in text
     ev = evaluate(read_track(out), open_tracked_capture(read_track(out).meta, seq))
     # the surface of the tracked mesh is near the input's (mm, not the 786 of a Z-up reread)
     assert ev.surface is not None and ev.surface.mean.max() < 60.0

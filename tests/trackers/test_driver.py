@@ -133,3 +133,44 @@ def test_the_checks_start_the_pose_of_an_articulated_track_at_the_trackers_own(w
         assert np.abs(t.pose(R, root).V - z["vertices"]).max() < 1e-3
         assert np.abs(R - z["state_R"]).max() < 1e-3
         assert np.abs(root - z["state_root"]).max() < 1e-4
+
+
+def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tmp_path):
+    """``refine`` moves only the output surface, towards each frame's own observations:
+    the joints and everything the next frame starts from are the skeleton's."""
+    from meshmocap.estimate.recovery.observe import frame_points
+
+    t = load_template("neutral_5k")
+
+    def run(out, refine):
+        tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+        return track_sequence(
+            tracker,
+            t,
+            walk,
+            out,
+            init="truth",
+            show_progress=False,
+            light=None,
+            refine="on" if refine else "off",
+        )
+
+    refined, plain = run(tmp_path / "refined", True), run(tmp_path / "plain", False)
+    assert json.loads((tmp_path / "refined" / "track.json").read_text())["refine_surface"]
+    # by default a capture folder's visual hulls (larger than the body) are not followed
+    tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+    auto = track_sequence(
+        tracker, t, walk, tmp_path / "auto", init="truth", show_progress=False, light=None
+    )
+    assert auto.meta["refine_surface"] is False
+    np.testing.assert_array_equal(auto.vertices, plain.vertices)
+    np.testing.assert_array_equal(refined.joints, plain.joints)
+    moved = np.linalg.norm(refined.vertices - plain.vertices, axis=2)
+    assert moved[1:].max() > 1e-3 and moved.max() <= 0.05 + 1e-6  # never beyond reach
+    # each refined frame lies nearer its own hull's surface than the skeleton's skin
+    from pykdtree.kdtree import KDTree
+
+    for k in range(1, N):
+        P, _ = frame_points(walk[k])
+        near = [KDTree(P).query(V[k])[0].mean() for V in (refined.vertices, plain.vertices)]
+        assert near[0] < near[1]

@@ -5,7 +5,8 @@ and true evaluation joints (15 joints, and the 14-joint variant without the pelv
 patch-tracking paper); bone lengths are over the tracked skeleton; the silhouette overlap
 error re-projects the tracked mesh into every camera and compares it with the *input*
 silhouettes (Table II); surface distances compare the tracked mesh with the true surface
-(synthetic captures) or with the visual hull (real captures) on evenly spaced frames; the
+(synthetic captures), with the visual hull (a capture folder without truth) or with the
+input meshes themselves (a folder of mesh files: a 4D capture) on evenly spaced frames; the
 per-vertex error needs a template with the subject's connectivity (a synthetic capture's
 truth, or a mesh sequence of fixed connectivity whose own first frame was rigged: each
 tracked vertex against the same vertex of the file). Joints and vertices are
@@ -36,7 +37,7 @@ from meshmocap.analysis.tables import format_table, table
 from meshmocap.errors import InputError
 from meshmocap.estimate.pose.start import start_description
 from meshmocap.geometry.camera import in_view
-from meshmocap.io.capture import Capture, Truth
+from meshmocap.io.capture import Capture, SequenceCapture, Truth
 from meshmocap.io.results import Track, template_label
 from meshmocap.io.start import Start
 
@@ -47,7 +48,9 @@ class SurfaceErrors:
 
     Attributes
     ----------
-    frames : (S,) frame numbers; against : ``"truth"`` or ``"hull"``
+    frames : (S,) frame numbers
+    against : ``"truth"``, ``"hull"`` (a capture folder's visual hulls) or ``"input meshes"``
+        (the mesh files tracked: a 4D capture)
     mean, hausdorff : (S,) symmetric mean distance and sampled Hausdorff distance per frame
     """
 
@@ -80,6 +83,10 @@ class Evaluation:
     reinit: int = 0
     template: str = ""
     start: Start | None = None
+    #: What the cage was built on (``track.json``'s ``cage_body``: ``"template"``, the
+    #: performer's own surface, or ``"reference"``, the reference body bound to it); empty
+    #: for the other trackers.
+    cage_body: str = ""
 
 
 def track_init(track: Track) -> str:
@@ -155,7 +162,10 @@ def evaluate(
     surf = None
     F_true = capture.truth_faces
     against = "truth" if F_true is not None and all(t is not None for t in truths) else "hull"
+    if against == "hull" and isinstance(capture, SequenceCapture):
+        against = "input meshes"  # the files themselves, not a hull carved from images
     usable = _surface_frames(frames, truths, against)
+    usable = usable[np.isfinite(track.vertices[usable]).all(axis=(1, 2))]  # not a failed fit
     if surface_frames > 0 and len(usable):
         pick = np.linspace(0, len(frames) - 1, min(surface_frames, len(frames))).round()
         # a pick the cameras did not see (or without hull) moves to the nearest usable frame
@@ -188,6 +198,7 @@ def evaluate(
         lost=sum("lost" in f for f in track.flags),
         reinit=sum("reinit" in f for f in track.flags),
         template=template_label(track.meta),
+        cage_body=str(track.meta.get("cage_body", "")),
     )
 
 
@@ -234,6 +245,10 @@ def out_of_view_frames(truths: list, cameras: list) -> np.ndarray:
     return np.asarray(out, dtype=np.int64)
 
 
+#: ``track.json``'s ``cage_body`` in words.
+_BODIES = {"template": "performer's template", "reference": "reference body"}
+
+
 def summary(ev: Evaluation) -> str:
     """A short plain-text report of an evaluation."""
     out = [
@@ -243,6 +258,8 @@ def summary(ev: Evaluation) -> str:
     ]
     if ev.init:
         out[0] += f"; init {ev.init}"
+    if ev.cage_body:
+        out[0] += f"; cage built on the {_BODIES.get(ev.cage_body, ev.cage_body)}"
     if ev.lost:
         out[0] += f"; {ev.lost} frames with a limb lost ({ev.reinit} re-initialised)"
     if len(ev.out_of_view):

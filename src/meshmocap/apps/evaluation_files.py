@@ -45,6 +45,7 @@ def write_evaluation(ev: Evaluation, out: str | os.PathLike) -> list[Path]:
     if ev.correspondence is not None:
         written += [
             write_csv(out / "vertex_errors.csv", ev.correspondence),
+            write_csv(out / "vertex_errors_per_frame.csv", ev.correspondence, per_frame=True),
             plot_frame_errors(ev.correspondence, out / "vertex_error_per_frame.png"),
         ]
     return written

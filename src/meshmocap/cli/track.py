@@ -116,6 +116,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
             resume=not args.restart,
             recover=not args.no_recover,
             reseat=args.reseat,
+            refine=args.refine,
             manifold=args.manifold,
             vertices=False,
             show_progress=False if live else None,
@@ -333,6 +334,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="re-initialise a lost limb where a "
         "better pose is found and hold one the hulls miss as last seen (rescues a "
         "limb lost behind a hole; can mistake a fast limb for a lost one)",
+    )
+    k.add_argument(
+        "--refine",
+        default="auto",
+        choices=["auto", "on", "off"],
+        help="refine each frame's output surface towards its observations along its "
+        "normals (the joints are the skeleton's either way; default auto: on for mesh and "
+        "point-cloud files, off for a capture folder's visual hulls, which are larger "
+        "than the body)",
     )
     k.add_argument(
         "--no-recover",

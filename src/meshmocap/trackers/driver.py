@@ -58,6 +58,7 @@ from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.reinit import Recovery
+from meshmocap.geometry.refine import SurfaceRefiner
 from meshmocap.io.capture import Capture
 from meshmocap.io.live import LiveCapture
 from meshmocap.io.results import (
@@ -109,6 +110,7 @@ def track_sequence(
     start: Start | None = None,
     on_frame: Callable[[FrameResult], object] | None = None,
     timer: StageTimer | None = None,
+    refine: Refine = "auto",
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -164,6 +166,14 @@ def track_sequence(
         Records the seconds of each frame tracked (not the first) per stage: read,
         observe, the tracker's step and its own stages, the checks, the write
         (:mod:`meshmocap._timing`). None records nothing.
+    refine : {"auto", "on", "off"}
+        Refine each frame's output surface towards that frame's observations along its
+        normals (:class:`~meshmocap.geometry.refine.SurfaceRefiner`: what the skeleton's
+        skin cannot follow, clothing), from the tracked surface every frame: the joints and
+        the tracker's state stay the skeleton's, so nothing accumulates. ``"auto"``: on for
+        mesh or point-cloud files (a 4D capture: their surface is the performer's), off for
+        a capture folder carved from its cameras (a visual hull is larger than the body, and
+        the surface would swell into it). ``track.json`` records it (``refine_surface``).
 
     Returns
     -------
@@ -193,6 +203,11 @@ def track_sequence(
     }
     body = tracking_body(template, n_vertices=light)
     meta["tracked_vertices"] = body.light.n_vertices
+    meta.update(_built_on(tracker, body.light))
+    check_choice("track", "refine", refine, get_args(Refine))
+    on = refine == "on" or (refine == "auto" and not getattr(capture, "cameras", None))
+    meta["refine_surface"] = on
+    refiner = SurfaceRefiner(body.light.F, body.light.n_vertices) if on else None
     Path(out).mkdir(parents=True, exist_ok=True)
     report = on_frame or (lambda r: None)
     # one BLAS thread while tracking; a second run into the same folder is refused
@@ -246,6 +261,7 @@ def track_sequence(
                     reseat=reseat,
                     retry=functools.partial(capture.young, k) if live else None,
                     timer=timer,
+                    refiner=refiner,
                 )
                 if r is not None:
                     break
@@ -256,6 +272,22 @@ def track_sequence(
                 timer.lap("write")
             report(r)
     return read_track(out, vertices=vertices)
+
+
+#: When the output surface is refined towards the observations (:func:`track_sequence`).
+Refine = Literal["auto", "on", "off"]
+
+
+def _built_on(tracker: Tracker, template: Template) -> dict:
+    """``{"cage_body": "template" | "reference"}`` for a tracker that builds a rig on a
+    body (the cage: on the performer's template or on the reference body,
+    :mod:`meshmocap.trackers.cage.body`), set up for ``template`` first (its ``init``
+    would); empty for the others."""
+    if not hasattr(type(tracker), "built_on"):
+        return {}
+    if tracker.template is not template:
+        tracker.setup(template)
+    return {"cage_body": tracker.built_on}
 
 
 def _growing(capture: LiveCapture, start: int) -> Iterator[int]:
@@ -286,6 +318,7 @@ def track_frame(
     reseat: bool = False,
     retry: Callable[[], bool] | None = None,
     timer: StageTimer | None = None,
+    refiner: SurfaceRefiner | None = None,
 ) -> FrameResult | None:
     """Track one frame: the per-frame step of the driver and of live mode
     (:mod:`meshmocap.trackers.follow`).
@@ -303,6 +336,9 @@ def track_frame(
     timer : StageTimer, optional
         Starts a frame's record and books read, observe, step (and the tracker's own
         stages) and checks to it (:mod:`meshmocap._timing`); the caller books the write.
+    refiner : SurfaceRefiner, optional
+        Refines the result's vertices towards the frame's observed points (booked to
+        ``refine``); the tracker's state is left as the fit made it.
 
     Returns
     -------
@@ -328,6 +364,10 @@ def track_frame(
                 r = recovered(tracker, recovery, frame, r, reseat=reseat)
                 if timer is not None:
                     timer.lap("checks")
+            if refiner is not None:
+                r = replace(r, vertices=refiner.refine(r.vertices, *frame.points))
+            if timer is not None:
+                timer.lap("refine")
             if timer is not None:  # what this frame read and derived, the next reads first
                 timer.reads = touched(raw, FRAME_READS)
                 timer.derived = touched(frame, FRAME_DERIVED)

@@ -55,9 +55,18 @@ def test_cage_tracker_follows_a_walk_and_resumes(setup, tmp_path):
     # joints start exactly on the truth (their Green coordinates are taken there) and stay
     # within the 35 mm on this short walk (a manifold of the same generator)
     assert err[0] < 1e-6 and err.max() < 35.0
+    assert track.meta["cage_body"] == "template"  # a bundled body: its own cage
     (tmp_path / "tr" / "frames" / "00005.npz").unlink()
     again = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", show_progress=False)
     assert np.allclose(again.joints, track.joints, atol=1e-9)
+
+
+def test_the_body_the_cage_is_built_on_is_said(setup):
+    t, gp, _ = setup
+    tracker = CageTracker(gp, CageOptions(body="reference"))
+    assert tracker.built_on is None  # not set up yet
+    tracker.setup(t)
+    assert tracker.built_on == "reference" and tracker.body is not t
 
 
 def test_the_pelvis_stays_a_rotation_when_it_moves_on_at_its_velocity(setup, tmp_path):

@@ -174,6 +174,15 @@ class CageTracker:
             "manifold": manifold_digest(self.gp),
         }
 
+    @property
+    def built_on(self) -> str | None:
+        """What the cage is built on: ``"template"`` (the performer's own surface) or
+        ``"reference"`` (the reference body posed on its skeleton, the template bound to
+        its cage; :mod:`~meshmocap.trackers.cage.body`); None before :meth:`setup`."""
+        if self.template is None:
+            return None
+        return "template" if self.body is self.template else "reference"
+
     def setup(self, template: Template, *, rig: tuple[Template, OQR] | None = None) -> None:
         """Build the rig (on the body of :func:`~meshmocap.trackers.cage.body.cage_body`,
         or ``rig`` when given: that body and its OQR) and bind the template to it."""
