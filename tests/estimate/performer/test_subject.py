@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from meshmocap import _progress
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError
@@ -48,11 +49,20 @@ def stub_estimate(calls):
     return estimate
 
 
-def test_a_small_performer_is_found_from_one_frame_of_silhouettes(small):
+def test_a_small_performer_is_found_from_one_frame_of_silhouettes(small, monkeypatch, capsys):
     """One frame, 8 iterations (a quick version of the default 5 frames, 40 iterations; the
     benchmark measures those): the mean body is 27 cm too tall, the estimate within 3 cm.
-    About 10 s on 2 cores: the one end-to-end check of the hull fit."""
+    About 10 s on 2 cores: the one end-to-end check of the hull fit. Every stage says what
+    it does (all said at once with a phase threshold of 0)."""
+    monkeypatch.setattr(_progress, "PHASE_SECONDS", 0.0)
     est = estimate_subject(small, n_frames=1, iterations=8)
+    err = capsys.readouterr().err
+    for stage in (
+        "choosing 1 frames in different poses",
+        "a first guess of the body in frame 0 (1 of 1)",
+        "fitting the shape to the silhouettes (1 frames, iterations 1–8 of 8)",
+    ):
+        assert f"meshmocap: {stage} ...\n" in err and f"meshmocap: {stage}: done in" in err
     true = load_template("small_female")
     assert est.kind == "hull" and est.frames == (0,) and est.z.shape == (16,)
     assert abs(est.height - np.ptp(true.V[:, 2])) < 0.03

@@ -42,6 +42,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
+from meshmocap._progress import phase
 from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
@@ -68,6 +69,8 @@ HUBER = 0.02
 #: Largest change of any shape coefficient in one step (the joints' rotations are limited by
 #: :func:`~meshmocap.body.articulated.limit_step`).
 MAX_STEP_Z = 0.5
+#: Gauss–Newton iterations of :func:`fit_shape` per progress line.
+PROGRESS_EVERY = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -305,54 +308,70 @@ def fit_shape(
     root = np.array(root0, dtype=np.float64)
     z = np.zeros(K) if z0 is None else np.array(z0, dtype=np.float64)
     tmpl = space.template(z)
-    J = tmpl.skeleton.n_joints
     sample = articulated_model(tmpl, n_points=n_points, seed=seed).sample
     free = [j for j, name in enumerate(space.joint_names) if name not in fixed_joints]
     act_pose = np.r_[0:3, (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()]
-    n_pose = 3 + 3 * J
     rms = np.inf
-    for _ in range(iterations):
-        tmpl = space.template(z)
-        model = articulated_model(tmpl, n_points=tmpl.n_vertices)
-        n_par = K + n_f * n_pose
-        H = np.zeros((n_par, n_par))
-        g = np.zeros(n_par)
-        sq, cnt = 0.0, 0
-        frames = []
-        for f in range(n_f):
-            v, n, a = pose_points(model, R[f], root[f])
-            S = shape_jacobian(space, tmpl, R[f], root[f])
-            frames.append(frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
-        counts: dict[str, int] = {}
-        for t in frames:
-            for term, n_term in t.population.items():
-                counts[term] = counts.get(term, 0) + n_term
-        for f, t in enumerate(frames):
-            sl = slice(K + f * n_pose, K + (f + 1) * n_pose)
-            for term, r, Jp, Jz in t.rows:
-                w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12)) / counts[term]
-                H[sl, sl] += Jp.T @ (w[:, None] * Jp)
-                B = Jp.T @ (w[:, None] * Jz)
-                H[sl, :K] += B
-                H[:K, sl] += B.T
-                H[:K, :K] += Jz.T @ (w[:, None] * Jz)
-                g[sl] += Jp.T @ (w * r)
-                g[:K] += Jz.T @ (w * r)
-                sq, cnt = sq + float(r @ r), cnt + len(r)
-            # weak pull of every non-root joint towards the rest pose (world-frame error)
-            e = rotation_error(tmpl.skeleton, R[f], root[f])[1:]
-            add_pose_pull(H, g, e, lambda_pose, start=sl.start + 6)
-        H[:K, :K] += lambda_shape * np.eye(K)
-        g[:K] += lambda_shape * z
-        rms = float(np.sqrt(sq / max(cnt, 1)))
-        act = np.concatenate([np.arange(K)] + [K + f * n_pose + act_pose for f in range(n_f)])
-        delta = np.zeros(n_par)
-        try:
-            delta[act] = damped_solve(H[np.ix_(act, act)], g[act], damping=DAMPING)
-        except FitError as exc:
-            raise FitError(f"fit_shape: {exc}") from None
-        z = z + np.clip(delta[:K], -MAX_STEP_Z, MAX_STEP_Z)
-        for f in range(n_f):
-            d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose])
-            R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
+    for first in range(0, iterations, PROGRESS_EVERY):
+        last = min(first + PROGRESS_EVERY, iterations)
+        with phase(
+            f"fitting the shape to the silhouettes ({n_f} frames, iterations {first + 1}–"
+            f"{last} of {iterations})"
+        ):
+            for _ in range(first, last):
+                z, rms = _shape_step(
+                    space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match
+                )
     return ShapeFit(z, R, root, rms, int(iterations))
+
+
+def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match):
+    """One damped Gauss–Newton step of :func:`fit_shape`: returns the new ``z`` and the
+    residuals' RMS before the step; ``R`` and ``root`` are updated in place."""
+    n_f, K = len(views), space.n_components
+    tmpl = space.template(z)
+    J = tmpl.skeleton.n_joints
+    n_pose = 3 + 3 * J
+    model = articulated_model(tmpl, n_points=tmpl.n_vertices)
+    n_par = K + n_f * n_pose
+    H = np.zeros((n_par, n_par))
+    g = np.zeros(n_par)
+    sq, cnt = 0.0, 0
+    frames = []
+    for f in range(n_f):
+        v, n, a = pose_points(model, R[f], root[f])
+        S = shape_jacobian(space, tmpl, R[f], root[f])
+        frames.append(frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
+    counts: dict[str, int] = {}
+    for t in frames:
+        for term, n_term in t.population.items():
+            counts[term] = counts.get(term, 0) + n_term
+    for f, t in enumerate(frames):
+        sl = slice(K + f * n_pose, K + (f + 1) * n_pose)
+        for term, r, Jp, Jz in t.rows:
+            w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12)) / counts[term]
+            H[sl, sl] += Jp.T @ (w[:, None] * Jp)
+            B = Jp.T @ (w[:, None] * Jz)
+            H[sl, :K] += B
+            H[:K, sl] += B.T
+            H[:K, :K] += Jz.T @ (w[:, None] * Jz)
+            g[sl] += Jp.T @ (w * r)
+            g[:K] += Jz.T @ (w * r)
+            sq, cnt = sq + float(r @ r), cnt + len(r)
+        # weak pull of every non-root joint towards the rest pose (world-frame error)
+        e = rotation_error(tmpl.skeleton, R[f], root[f])[1:]
+        add_pose_pull(H, g, e, lambda_pose, start=sl.start + 6)
+    H[:K, :K] += lambda_shape * np.eye(K)
+    g[:K] += lambda_shape * z
+    rms = float(np.sqrt(sq / max(cnt, 1)))
+    act = np.concatenate([np.arange(K)] + [K + f * n_pose + act_pose for f in range(n_f)])
+    delta = np.zeros(n_par)
+    try:
+        delta[act] = damped_solve(H[np.ix_(act, act)], g[act], damping=DAMPING)
+    except FitError as exc:
+        raise FitError(f"fit_shape: {exc}") from None
+    z = z + np.clip(delta[:K], -MAX_STEP_Z, MAX_STEP_Z)
+    for f in range(n_f):
+        d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose])
+        R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
+    return z, rms

@@ -25,6 +25,7 @@ from typing import Literal, get_args
 import numpy as np
 from scipy import ndimage
 
+from meshmocap._progress import phase
 from meshmocap._validate import check_choice
 from meshmocap.body.autorig import fit_skeleton, rig_mesh
 from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
@@ -271,7 +272,8 @@ def estimate_subject(
             f"{func}: the hull kind needs cameras and silhouettes; {capture.path} has no cameras"
         )
     space = load_shape_space() if space is None else space
-    positions = choose_frames(capture, int(n_frames))
+    with phase(f"choosing {int(n_frames)} frames in different poses"):
+        positions = choose_frames(capture, int(n_frames))
     if not positions:
         raise InputError(
             f"{func}: the performer is cut by an image border in every frame "
@@ -279,11 +281,14 @@ def estimate_subject(
         )
     frames = [capture[k] for k in positions]
     mean = space.template(np.zeros(space.n_components))
-    inits = [initial_body_pose(mean, *_hull_surface(fr), seed=seed) for fr in frames]
+    inits = []
+    for k, fr in enumerate(frames, start=1):
+        with phase(f"a first guess of the body in frame {fr.index} ({k} of {len(frames)})"):
+            inits.append(initial_body_pose(mean, *_hull_surface(fr), seed=seed))
     scale = float(np.median([f.scale for f in inits]))
     z0 = space.model.transform(scale * space.model.mean_[None])[0]
     views = []
-    for fr in frames:
+    for fr in frames:  # a second or less
         masks = fr.silhouettes
         if not masks:
             raise InputError(f"{func}: frame {fr.index} has no silhouettes")

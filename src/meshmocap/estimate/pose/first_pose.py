@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._progress import phase
 from meshmocap.body.pose_library import PoseLibrary
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
@@ -300,9 +301,13 @@ def initial_pose(
         poses = library_poses(
             template, library=library, n=library_size, exclude_trials=exclude_trials, seeds=seeds
         )
-        starts = coarse_candidates(
-            template, poses, scorer, n_headings=n_headings, n_best=n_candidates
-        )
+        with phase(
+            f"searching the pose library ({len(poses.R) * n_headings} candidates: "
+            f"{len(poses.R)} poses × {n_headings} headings)"
+        ):
+            starts = coarse_candidates(
+                template, poses, scorer, n_headings=n_headings, n_best=n_candidates
+            )
     else:
         starts = []
         for name in seeds:
@@ -313,23 +318,27 @@ def initial_pose(
                 starts.append(
                     PoseFit(R, _centred_root(coarse, R, centre), 0.0, f"{name}@{deg:.0f}°")
                 )
-    fits = [_refit(coarse, f, coarse_iterations, (0.3, 0.1), 1e-3) for f in starts]
     rank = ranking_key(template, cameras, masks)
-    keys = [rank(f) for f in fits]
+    with phase(f"fitting the best {len(starts)} candidates"):
+        fits = [_refit(coarse, f, coarse_iterations, (0.3, 0.1), 1e-3) for f in starts]
+        keys = [rank(f) for f in fits]
     fits = [fits[i] for i in np.argsort(keys)]
     Pf, Nf = subsample_points(P, N, 5000, seed)
     fine = PoseFitter(template, Pf, Nf, n_model_points=1500, field=field, seed=seed)
     refined = []
-    for f in fits[:keep]:
-        if hull is not None:
-            f = refine_limbs_from_library(
-                coarse, f, poses, scorer, n_best=limb_hypotheses, key=rank
-            )
-        else:
-            f = refine_limbs(coarse, f, limbs=tuple(LIMBS), directions=limb_directions, key=rank)
-        f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
-        # then settle on the near surface, barely held (a long pull undoes small moves)
-        f = _refit(fine, f, iterations // 2, (0.04, 0.01), 1e-6)
+    for k, f in enumerate(fits[:keep], start=1):
+        with phase(f"refining the best {min(keep, len(fits))} candidates ({k} of them)"):
+            if hull is not None:  # limb by limb from the library
+                f = refine_limbs_from_library(
+                    coarse, f, poses, scorer, n_best=limb_hypotheses, key=rank
+                )
+            else:
+                f = refine_limbs(
+                    coarse, f, limbs=tuple(LIMBS), directions=limb_directions, key=rank
+                )
+            f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
+            # then settle on the near surface, barely held (a long pull undoes small moves)
+            f = _refit(fine, f, iterations // 2, (0.04, 0.01), 1e-6)
         refined.append(f)
     rk = [rank(f) for f in refined]
     order = np.argsort(rk)
@@ -345,7 +354,7 @@ def initial_pose(
             break
     mismatch = (rk[0] - best.score) / SILHOUETTE_WEIGHT if cameras and masks else float("nan")
     lost: tuple[str, ...] = ()
-    if field is not None:
+    if field is not None:  # about a second
         V = template.pose(best.R, best.root).V
         labels = limb_labels(template)
         q = fit_quality(V, labels, P, field, F=template.F, cameras=cameras, masks=masks, seed=seed)
