@@ -16,15 +16,17 @@ from meshmocap.estimate.performer.subject import SubjectEstimate
 from meshmocap.io.capture import open_capture
 from meshmocap.io.results import read_state
 from meshmocap.io.start import Start
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers import driver
 from meshmocap.trackers.registry import make_tracker
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=3)
-    return synthesize(tmp_path_factory.mktemp("walk") / "cap", spec, show_progress=False).path
+def walk(synth_capture, tmp_path_factory):
+    """A copy of the session's 3-frame walk: these tests fill its cache and count the calls
+    that fill it, so the capture is theirs alone."""
+    copy = tmp_path_factory.mktemp("walk") / "cap"
+    shutil.copytree(synth_capture("walk", stop=3).path, copy)
+    return copy
 
 
 def _counting(calls):
