@@ -22,10 +22,11 @@ from meshmocap.trackers.registry import make_tracker
 
 @pytest.fixture(scope="module")
 def walk(synth_capture, tmp_path_factory):
-    """A copy of the session's 3-frame walk: these tests fill its cache and count the calls
-    that fill it, so the capture is theirs alone."""
+    """A copy of the session's 3-frame walk without its cache (another test may have
+    tracked it): these tests fill the cache and count the calls that fill it."""
     copy = tmp_path_factory.mktemp("walk") / "cap"
-    shutil.copytree(synth_capture("walk", stop=3).path, copy)
+    ignore = shutil.ignore_patterns(cc.CACHE_FOLDER)
+    shutil.copytree(synth_capture("walk", stop=3).path, copy, ignore=ignore)
     return copy
 
 
