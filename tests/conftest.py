@@ -1,9 +1,27 @@
 """Shared fixtures: the real third-party data in ../shared/data (skipped where absent, and
-counted in one line at the end of the run: :func:`pytest_terminal_summary`), and a posed
-body made in code."""
+counted in one line at the end of the run: :func:`pytest_terminal_summary`), a posed body
+made in code, and the synthetic captures the tests track.
+
+The captures are one family, made once per session and shared by every file
+(:func:`synth_capture`): :func:`walk` (the neutral_5k walk at 60 fps, 1 cm hulls),
+:func:`small_walk` (at 30 fps, 2 cm hulls: the cheapest capture a command can track),
+:func:`walk_full` (the 12k-vertex ``neutral`` template's walk), :func:`jump` (jumping jacks)
+and :func:`mesh_folder` (a walk's true surfaces as PLY files, a clean 4D capture). They are
+read-only: a test that changes a capture copies it first.
+
+The automatic first-pose search is the slow step of every track that does not start from
+the truth (seconds per capture). Its answer depends only on the observations, the template
+and the options, so within a session a search on the same inputs is answered once
+(:func:`_first_pose_searched_once`), as the capture cache answers a user's second track
+of a capture. The search itself is tested in ``tests/estimate/pose/``.
+"""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -86,3 +104,128 @@ def walker():
     R[0] = so3_exp(np.array([0.0, 0.0, turn])) @ R[0]
     root = so3_exp(np.array([0.0, 0.0, turn])) @ root + shift
     return t, R, root, t.pose(R, root)
+
+
+def _fingerprint(h, value) -> bool:
+    """Feed ``value`` (an argument of the first-pose search) into the hash ``h``; False
+    when it is of a kind not known to be a pure value (the call is then not shared)."""
+    from meshmocap.body.template import Template
+    from meshmocap.estimate.performer.capture_cache import template_key
+    from meshmocap.geometry.distance_field import DistanceGrid, LazyDistanceGrid
+
+    if value is None or isinstance(value, (bool, int, float, str)):
+        h.update(repr(value).encode())
+    elif isinstance(value, np.ndarray):
+        h.update(f"{value.dtype}{value.shape}".encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, (tuple, list)):
+        h.update(f"{type(value).__name__}{len(value)}".encode())
+        return all(_fingerprint(h, v) for v in value)
+    elif isinstance(value, Template):
+        h.update(template_key(value).encode())
+    elif isinstance(value, LazyDistanceGrid):  # its values are filled in as looked up
+        h.update(b"lazy")
+        return all(_fingerprint(h, getattr(value, a)) for a in ("_occ", "_pad", "_stride", "_h"))
+    elif type(value) is DistanceGrid:
+        return all(_fingerprint(h, getattr(value, a)) for a in ("values", "origin", "spacing"))
+    elif (
+        dataclasses.is_dataclass(value)
+        and dataclasses.fields(value)
+        and value.__dataclass_params__.frozen
+    ):
+        h.update(type(value).__qualname__.encode())
+        fields = [f.name for f in dataclasses.fields(value) if f.init]  # not caches
+        return all(_fingerprint(h, getattr(value, name)) for name in fields)
+    else:
+        return False
+    return True
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _first_pose_searched_once():
+    """Within the session, :func:`~meshmocap.estimate.pose.first_pose.initial_pose` on the
+    same template, observations and options runs once; later calls get a copy of its
+    answer (the module docstring says why). A call with an argument that is not a plain
+    value (a pose library object, a callable) is always made."""
+    from meshmocap.estimate.pose import first_pose
+
+    search = first_pose.initial_pose
+    answers: dict[str, object] = {}
+
+    def initial_pose(*args, **kwargs):
+        h = hashlib.sha256()
+        if not (_fingerprint(h, args) and _fingerprint(h, sorted(kwargs.items()))):
+            return search(*args, **kwargs)
+        key = h.hexdigest()
+        if key not in answers:
+            answers[key] = search(*args, **kwargs)
+        return copy.deepcopy(answers[key])
+
+    initial_pose.__wrapped__ = search
+    mp = pytest.MonkeyPatch()
+    mp.setattr(first_pose, "initial_pose", initial_pose)
+    yield answers
+    mp.undo()
+
+
+@pytest.fixture(scope="session")
+def synth_capture(tmp_path_factory):
+    """``synth_capture(motion="walk", *, template="neutral_5k", stop=4, **spec)``: the
+    synthetic capture of that :class:`~meshmocap.studio.synth.SynthSpec`, written once per
+    session and shared (read-only: copy it before changing a file)."""
+    from meshmocap.studio.synth import SynthSpec, synthesize
+
+    made: dict[str, object] = {}
+
+    def make(motion: str = "walk", *, template: str = "neutral_5k", stop: int = 4, **spec):
+        s = SynthSpec(motion=motion, template=template, stop=stop, **spec)
+        key = json.dumps(s.as_dict(), sort_keys=True)
+        if key not in made:
+            out = tmp_path_factory.mktemp(f"{motion}_{template}") / "cap"
+            made[key] = synthesize(out, s, show_progress=False)
+        return made[key]
+
+    return make
+
+
+#: Frames of the shared captures: enough for a tracker to move and resume.
+WALK_FRAMES = 8
+
+
+@pytest.fixture(scope="session")
+def walk(synth_capture):
+    """The neutral_5k walk, :data:`WALK_FRAMES` frames at 60 fps, 4 cameras, 1 cm hulls
+    (:class:`~meshmocap.io.capture.Capture`, with truth)."""
+    return synth_capture("walk", stop=WALK_FRAMES)
+
+
+@pytest.fixture(scope="session")
+def small_walk(synth_capture):
+    """The neutral_5k walk at 30 fps with 2 cm hulls, 5 frames: the cheapest capture a
+    command can track (every other frame of :func:`walk`'s motion)."""
+    return synth_capture("walk", stop=5, fps=30.0, voxel_size=0.02)
+
+
+@pytest.fixture(scope="session")
+def walk_full(synth_capture):
+    """The walk of the full ``neutral`` template (12k vertices), 5 frames at 60 fps."""
+    return synth_capture("walk", template="neutral", stop=5)
+
+
+@pytest.fixture(scope="session")
+def jump(synth_capture):
+    """neutral_5k jumping jacks, 5 frames at 30 fps, 2 cm hulls."""
+    return synth_capture("jumping_jacks", stop=5, fps=30.0, voxel_size=0.02)
+
+
+@pytest.fixture(scope="session")
+def mesh_folder(small_walk, tmp_path_factory) -> Path:
+    """:func:`small_walk`'s true surfaces as ``00000.ply`` … (metres, Z up, neutral_5k's
+    connectivity): a clean 4D capture with no cameras."""
+    from meshmocap.io.meshes import write_mesh
+
+    out = tmp_path_factory.mktemp("mesh_folder") / "meshes"
+    out.mkdir()
+    for f in small_walk:
+        write_mesh(out / f"{f.index:05d}.ply", f.truth.vertices, small_walk.truth_faces)
+    return out

@@ -23,3 +23,34 @@ def test_absent_data_is_said_once_with_where_it_comes_from(tmp_path):
         "project (licences); see docs/reference.rst, 'Test data'"
     )
     assert line in res.stdout, res.stdout[-2000:]
+
+
+def test_first_pose_searches_are_shared_only_on_identical_plain_inputs():
+    """The session memo of the first-pose search (tests/conftest.py) keys a call by the
+    bytes of its arrays, its numbers and the template; an argument it cannot read as a
+    plain value makes the call run as usual."""
+    import hashlib
+
+    import numpy as np
+
+    from conftest import _fingerprint
+    from meshmocap.body.template import load_template
+    from meshmocap.geometry.carving import VoxelHull
+
+    def key(*args, **kwargs):
+        h = hashlib.sha256()
+        ok = _fingerprint(h, args) and _fingerprint(h, sorted(kwargs.items()))
+        return h.hexdigest() if ok else None
+
+    P = np.random.default_rng(0).normal(size=(50, 3))
+    t = load_template("neutral_5k")
+    hull = VoxelHull(np.ones((2, 3, 4), bool), np.zeros(3), 0.02)
+    same = key(t, P, P.copy(), hull=hull, n_headings=16)
+    assert same is not None and same == key(t, P.copy(), P, hull=hull, n_headings=16)
+    moved = P.copy()
+    moved[7, 2] += 1e-12
+    assert key(t, moved, P, hull=hull, n_headings=16) != same  # one coordinate differs
+    assert key(t, P, P, hull=hull, n_headings=8) != same  # another option
+    other = VoxelHull(np.ones((2, 3, 4), bool), np.zeros(3), 0.01)
+    assert key(t, P, P, hull=other, n_headings=16) != same  # another voxel size
+    assert key(t, P, P, library=object()) is None  # not a plain value: not shared

@@ -263,15 +263,6 @@ spine 0 0 0
 """
 
 
-def small_walk_capture(out, frames: int):
-    """A synthetic capture of ``frames`` frames written to ``out`` (the neutral_5k walk at
-    30 fps, hulls carved at 2 cm): the smallest capture a CLI test can track."""
-    from meshmocap.studio.synth import SynthSpec, synthesize
-
-    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=frames, voxel_size=0.02)
-    return synthesize(out, spec, show_progress=False)
-
-
 def observed_frame(V: np.ndarray, F: np.ndarray | None = None, index: int = 0):
     """Frame ``index`` of a mesh (``F`` given) or point cloud (``F`` None) sequence, its
     points, normals, occupancy and signed distance computed once

@@ -13,7 +13,12 @@ Walks ``src/meshmocap`` with :mod:`ast` (nothing is imported) and reports:
 * a private name (``_name``) imported from another module: what a module shares, it names
   publicly. The tests are held to it too (``tests/``, when given): a test reaches a module
   through what it shares, or the name is made public (a module itself, ``_atomic``, is not
-  a private name).
+  a private name);
+* a module without its mirrored test file (``meshmocap/a/b.py`` ↔ ``tests/a/test_b.py``; a
+  top-level module's is ``tests/test_b.py`` or, for the base layer, ``tests/base/test_b.py``;
+  a leading underscore is dropped) and not listed in :data:`UNTESTED` with the reason; a
+  listed module that has its file now, or no longer exists, is reported too, so the list
+  stays true. Packages' ``__init__`` files are not modules here.
 
 A module is as long as its one concept needs: there is no line limit.
 
@@ -25,6 +30,8 @@ The test suite runs the same check (``tests/tools/test_check_architecture.py``).
 from __future__ import annotations
 
 import ast
+import dataclasses
+import re
 import sys
 from collections import defaultdict
 from dataclasses import dataclass
@@ -63,6 +70,167 @@ LAZY_EXPORTS = {("meshmocap", "meshmocap.api")}
 #: The package whose sub-packages are methods (one folder each, never importing a sibling).
 METHODS_PACKAGE = "meshmocap.trackers"
 
+#: Modules without a mirrored test file, each with the reason: where its behaviour is
+#: tested instead, or why it needs no test of its own. A path named in a reason must exist.
+UNTESTED: dict[str, str] = {
+    "meshmocap._atomic": (
+        "atomic writes and the folder lock: tests/io/test_faults.py (one writer per folder, a"
+        " killed run's lock) and every writer's tests"
+    ),
+    "meshmocap._validate": (
+        "the option-constraint table: tests/trackers/test_registry.py feeds every registered "
+        "method an invalid value for every option"
+    ),
+    "meshmocap._version": "the version string, nothing to test",
+    "meshmocap.errors": (
+        "the error classes; each is raised and matched by the tests of the module that raises it"
+    ),
+    "meshmocap.analysis.gait_signals": "the gait signals: tests/analysis/test_gait.py",
+    "meshmocap.analysis.tables": (
+        "the score tables: tests/analysis/test_metrics.py and tests/analysis/test_evaluate.py"
+    ),
+    "meshmocap.apps.batch_items": "batch items: tests/apps/test_batch.py",
+    "meshmocap.apps.batch_report": (
+        "batch's report: tests/apps/test_batch.py (the batch command in process)"
+    ),
+    "meshmocap.apps.batch_summary": "batch's summary: tests/apps/test_batch.py",
+    "meshmocap.apps.bench_captures": "bench's captures: tests/apps/test_bench.py",
+    "meshmocap.apps.bench_plots": (
+        "bench's plots: tests/apps/test_bench.py (table, markdown and plots written)"
+    ),
+    "meshmocap.apps.bench_report": "bench's report: tests/apps/test_bench.py",
+    "meshmocap.apps.bench_rows": (
+        "bench's rows: tests/apps/test_bench.py and tests/trackers/patch/test_residuals.py"
+    ),
+    "meshmocap.apps.evaluation_files": "eval's files: tests/analysis/test_evaluate.py",
+    "meshmocap.apps.gait_files": "gait's files: tests/analysis/test_gait.py",
+    "meshmocap.apps.latent_plot": "the latent-space plot: tests/models/test_gplvm.py",
+    "meshmocap.apps.plots": "the evaluation plots: tests/analysis/test_metrics.py",
+    "meshmocap.apps.render": (
+        "contact sheets: tests/geometry/test_raster.py and the render command in "
+        "tests/cli/test_commands.py"
+    ),
+    "meshmocap.body._articulated_kernels": (
+        "numba loops of body/articulated_system: tests/body/test_articulated_system.py "
+        "(against NumPy and finite differences), signatures in tests/apps/test_kernels.py"
+    ),
+    "meshmocap.body.contact": (
+        "foot contact: tests/body/test_procedural.py and tests/body/test_retarget.py"
+    ),
+    "meshmocap.body.markers": (
+        "virtual markers: tests/apps/test_export.py and tests/io/test_exports.py"
+    ),
+    "meshmocap.body.motion": (
+        "the Motion record: tests/body/test_retarget.py and tests/body/test_skeleton.py"
+    ),
+    "meshmocap.body.names": (
+        "joint-name tables (data): used by tests/toys.py and every skeleton test"
+    ),
+    "meshmocap.body.shape_space": "the body shape space: tests/models/test_shape_space.py",
+    "meshmocap.body.skinning": "linear blend skinning: tests/body/test_template.py",
+    "meshmocap.cli._args": "argument types: the one-line refusals of tests/cli/test_bad_input.py",
+    "meshmocap.cli.batch": "the batch command in process: tests/apps/test_batch.py",
+    "meshmocap.cli.capture": (
+        "synth and hull in process: tests/io/test_faults.py, tests/studio/test_synth.py, "
+        "tests/cli/test_bad_input.py"
+    ),
+    "meshmocap.cli.demo": "the demo command in process: tests/cli/test_commands.py",
+    "meshmocap.cli.evaluation": (
+        "eval, report and bench in process: tests/analysis/test_evaluate.py, "
+        "tests/apps/test_report.py, tests/apps/test_bench.py"
+    ),
+    "meshmocap.cli.export": "the export command in process: tests/apps/test_export.py",
+    "meshmocap.cli.gait": "the gait command in process: tests/analysis/test_gait.py",
+    "meshmocap.cli.motion": "templates, retarget and render in process: tests/cli/test_commands.py",
+    "meshmocap.cli.subject": (
+        "the subject command in process: tests/estimate/performer/test_subject.py"
+    ),
+    "meshmocap.estimate.performer.tracking_template": (
+        "the template a track uses: tests/estimate/performer/test_capture_cache.py and "
+        "tests/estimate/performer/test_point_subject.py"
+    ),
+    "meshmocap.estimate.pose.library": (
+        "seed poses and the library search: tests/estimate/pose/test_pose_search.py and "
+        "tests/estimate/pose/test_first_pose.py"
+    ),
+    "meshmocap.geometry._mesh_kernels": (
+        "numba loops of geometry/mesh: tests/apps/test_kernels.py and the normals of "
+        "tests/geometry/test_raster.py"
+    ),
+    "meshmocap.geometry.camera": (
+        "the pinhole camera: tests/geometry/test_carving.py, tests/geometry/test_raster.py, "
+        "tests/io/test_cameras.py"
+    ),
+    "meshmocap.geometry.coverage": "camera coverage: tests/trackers/patch/test_residuals.py",
+    "meshmocap.geometry.mesh": (
+        "mesh helpers: tests/body/test_template.py and tests/estimate/pose/test_first_pose.py"
+    ),
+    "meshmocap.geometry.normals": (
+        "normals of point clouds: tests/io/test_faults.py (clouds without normals tracked)"
+    ),
+    "meshmocap.geometry.proximity": "nearest points on meshes: tests/analysis/test_metrics.py",
+    "meshmocap.io._labelled": "checks shared by the C3D and TRC writers: tests/io/test_exports.py",
+    "meshmocap.io._text": (
+        "tokenising for BVH and ASF/AMC: tests/io/test_bvh.py, tests/io/test_asf_amc.py, "
+        "tests/io/test_fuzz_loaders.py"
+    ),
+    "meshmocap.io.archives": "mesh archives: tests/io/test_meshes.py",
+    "meshmocap.io.c3d": "the C3D writer: tests/io/test_exports.py",
+    "meshmocap.io.clips": "motion clips: tests/body/test_pose_library.py",
+    "meshmocap.io.gltf": (
+        "the glTF writer: tests/io/test_exports.py and tests/apps/test_export.py (the Khronos"
+        " validator)"
+    ),
+    "meshmocap.io.guards": "output and track-folder checks: tests/cli/test_bad_input.py",
+    "meshmocap.io.joints_csv": "the joints CSV writer: tests/io/test_exports.py",
+    "meshmocap.io.live": "the growing capture: tests/trackers/test_follow.py",
+    "meshmocap.io.plausibility": "input plausibility: tests/io/test_faults.py",
+    "meshmocap.io.silhouettes": (
+        "mask files: tests/geometry/test_silhouette.py and tests/io/test_faults.py"
+    ),
+    "meshmocap.io.trc": "the TRC writer: tests/io/test_exports.py",
+    "meshmocap.models._kernels": (
+        "numba loops of models/gplvm: tests/models/test_gplvm.py (gradients by finite differences)"
+    ),
+    "meshmocap.studio.hulls": (
+        "hulls of silhouettes: tests/studio/test_synth.py and tests/io/test_faults.py"
+    ),
+    "meshmocap.studio.rigs": (
+        "camera rigs: tests/io/test_cameras.py and tests/geometry/test_silhouette.py"
+    ),
+    "meshmocap.trackers.base": (
+        "the tracker protocol: every tracker's tests and tests/trackers/test_registry.py"
+    ),
+    "meshmocap.trackers.cage.cage_mesh": "the cage mesh: tests/trackers/cage/test_oqr.py",
+    "meshmocap.trackers.cage.energy": "the cage energy: tests/trackers/cage/test_terms.py",
+    "meshmocap.trackers.cage.growth": (
+        "quad growth: tests/trackers/cage/test_oqr.py (cages enclose, tangles undone)"
+    ),
+    "meshmocap.trackers.cage.options": (
+        "the cage options: tests/trackers/cage/test_terms.py and tests/trackers/test_registry.py"
+    ),
+    "meshmocap.trackers.cage.oqr_placement": (
+        "quad placement: tests/trackers/cage/test_oqr.py (turned templates, closed cages)"
+    ),
+    "meshmocap.trackers.cage.oqr_skinning": (
+        "the rig's skinning: tests/trackers/cage/test_kernels.py"
+    ),
+    "meshmocap.trackers.cage.quad_frames": "quad frames: tests/trackers/cage/test_derivatives.py",
+    "meshmocap.trackers.cage.surface": "the cage surfaces: tests/trackers/cage/test_derivatives.py",
+    "meshmocap.trackers.patch.energy": "the patch energy: tests/trackers/patch/test_terms.py",
+    "meshmocap.trackers.patch.kernels": (
+        "numba loops of the patch tracker: tests/trackers/patch/test_assign.py (against the "
+        "NumPy E-step) and tests/trackers/patch/test_nearest.py"
+    ),
+    "meshmocap.trackers.patch.model": (
+        "the patch model: tests/trackers/patch/test_residuals.py and "
+        "tests/trackers/patch/test_nearest.py"
+    ),
+    "meshmocap.trackers.patch.options": (
+        "the patch options: tests/trackers/patch/test_terms.py and tests/trackers/test_registry.py"
+    ),
+}
+
 
 @dataclass(frozen=True)
 class Report:
@@ -73,6 +241,7 @@ class Report:
     package_cycles: list[list[str]]
     sibling_methods: list[str]
     private_imports: list[str]
+    untested: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -82,6 +251,7 @@ class Report:
             or self.package_cycles
             or self.sibling_methods
             or self.private_imports
+            or self.untested
         )
 
 
@@ -204,6 +374,45 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return sorted(found)
 
 
+def mirrored_tests(module: str, tests: Path) -> list[Path]:
+    """The test files that may mirror ``module`` (``meshmocap.a.b``): ``tests/a/test_b.py``;
+    for a top-level module also ``tests/base/test_b.py`` (the base layer's tests)."""
+    parts = module.split(".")[1:]
+    name = "test_" + parts[-1].lstrip("_") + ".py"
+    found = [tests.joinpath(*parts[:-1], name)]
+    if len(parts) == 1:
+        found.append(tests / "base" / name)
+    return found
+
+
+def untested_modules(
+    files: dict[str, Path], tests: Path, listed: dict[str, str] | None = None
+) -> list[str]:
+    """One line per module with neither a mirrored test file (:func:`mirrored_tests`) nor a
+    reason in ``listed`` (default :data:`UNTESTED`), per listed module that has its test
+    file or no longer exists, and per reason naming a ``tests/…`` or ``benchmarks/…`` path
+    that does not exist."""
+    listed = UNTESTED if listed is None else listed
+    root = tests.parent
+    found = []
+    for name, path in sorted(files.items()):
+        if path.name in ("__init__.py", "__main__.py"):
+            continue
+        has = any(p.is_file() for p in mirrored_tests(name, tests))
+        if not has and name not in listed:
+            where = mirrored_tests(name, tests)[0].relative_to(root).as_posix()
+            found.append(f"{name}: no {where} and no reason in UNTESTED")
+        elif has and name in listed:
+            found.append(f"{name}: has its test file; remove it from UNTESTED")
+    for name, reason in sorted(listed.items()):
+        if name not in files:
+            found.append(f"{name}: listed in UNTESTED but no such module")
+        for ref in re.findall(r"\b(?:tests|benchmarks)/[\w/]+\.py", reason):
+            if not (root / ref).is_file():
+                found.append(f"{name}: its reason names {ref}, which does not exist")
+    return found
+
+
 def check(src: Path, tests: Path | None = None) -> Report:
     """Check the package ``src/meshmocap`` (``src`` is the folder that holds it) and, given
     ``tests`` (the folder of the test suite), the tests' imports of private names."""
@@ -245,7 +454,8 @@ def check(src: Path, tests: Path | None = None) -> Report:
         for path in sorted(tests.rglob("*.py")):
             where = path.relative_to(tests.parent).as_posix()
             private += private_imports(path, where, known)
-    return Report(upward, cycles(graph), cycles(dict(packages)), sibling, sorted(private))
+    untested = untested_modules(files, tests) if tests is not None else []
+    return Report(upward, cycles(graph), cycles(dict(packages)), sibling, sorted(private), untested)
 
 
 def main(argv: list[str]) -> int:
@@ -263,10 +473,13 @@ def main(argv: list[str]) -> int:
         print("method imports method:", line)
     for line in report.private_imports:
         print("private import:", line)
+    for line in report.untested:
+        print("untested:", line)
     if report.ok:
         print(
             f"ok: {len(LAYERS)} layers, imports point down, no cycle, methods apart, "
-            "no private name imported across modules" + (" or by a test" if tests else "")
+            "no private name imported across modules"
+            + (" or by a test, every module tested or its reason listed" if tests else "")
         )
     return 0 if report.ok else 1
 

@@ -11,15 +11,11 @@ from meshmocap.cli import main
 from meshmocap.errors import InputError
 from meshmocap.io.capture import read_truth, write_truth
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
-from meshmocap.studio.synth import SynthSpec, synthesize
 
 
 @pytest.fixture(scope="module")
-def capture(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cap")
-    return synthesize(
-        out, SynthSpec(motion="walk", template="neutral_5k", stop=4), show_progress=False
-    )
+def capture(synth_capture):
+    return synth_capture("walk", stop=4)
 
 
 def _track(capture, out, shift):

@@ -65,23 +65,18 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
 
 
 @pytest.mark.slow
-def test_tracking_compiles_only_the_listed_signatures(tmp_path):
+def test_tracking_compiles_only_the_listed_signatures(synth_capture, tmp_path):
     """Each tracker follows a short walk with the checks on: every signature its kernels
     were compiled or loaded with in this process is one :data:`KERNELS` lists (a kernel
     called with other types would compile at first use, in the foreground)."""
     from meshmocap.body.procedural import walk
     from meshmocap.body.template import load_template
-    from meshmocap.studio.synth import SynthSpec, synthesize
     from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, learn_manifold
     from meshmocap.trackers.driver import track_sequence
     from meshmocap.trackers.registry import make_tracker
 
     t = load_template("neutral_5k")
-    cap = synthesize(
-        tmp_path / "cap",
-        SynthSpec(motion="walk", template="neutral_5k", stop=3),
-        show_progress=False,
-    )
+    cap = synth_capture("walk", stop=3)
     gp = learn_manifold(t, [walk(t, duration=1.0, fps=30.0)], n_components=2, n_samples=30)
     run = functools.partial(track_sequence, show_progress=False, init="truth", light=None)
     run(make_tracker("patch", template=t), t, cap, tmp_path / "patch")

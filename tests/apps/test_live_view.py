@@ -8,7 +8,6 @@ from pathlib import Path
 
 from external import require_module
 from meshmocap.cli import main
-from meshmocap.studio.synth import SynthSpec, synthesize
 
 
 def _rows(rrd: Path) -> dict[str, int]:
@@ -28,12 +27,12 @@ def _rows(rrd: Path) -> dict[str, int]:
     return rows
 
 
-def test_follow_view_records_every_frame(tmp_path, monkeypatch, capsys):
+def test_follow_view_records_every_frame(synth_capture, tmp_path, monkeypatch, capsys):
     require_module("rerun", "rerun")
     monkeypatch.delenv("DISPLAY", raising=False)  # headless: the recording is written
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setenv("RERUN_ANALYTICS", "false")
-    cap = synthesize(tmp_path / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=3))
+    cap = synth_capture("walk", stop=3)
     out = tmp_path / "track"
     args = ["track", str(cap.path), "--follow", "--idle", "1", "--view"]
     assert main([*args, "--method", "articulated_icp", "--out", str(out)]) == 0

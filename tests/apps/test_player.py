@@ -79,11 +79,9 @@ def test_without_its_template_file_the_meshes_play(long_track):
     assert capped.note.startswith("every 3rd of 150 tracked frames (--max-frames")
 
 
-def test_hull_points_thin_before_frames_drop(tmp_path):
+def test_hull_points_thin_before_frames_drop(synth_capture, tmp_path):
     """The hull layer gives way first: each frame keeps at least MIN_HULL_POINTS."""
-    from meshmocap.studio.synth import SynthSpec, synthesize
-
-    cap = synthesize(tmp_path / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=4))
+    cap = synth_capture("walk", stop=4)
     folder = tmp_path / "t"
     walk_track(folder, 4, cap.fps)
     track = read_track(folder)

@@ -21,7 +21,6 @@ from meshmocap.apps.report import Section, Table, report_html, write_report
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
-from meshmocap.studio.synth import SynthSpec, synthesize
 
 # the smallest valid PNG (1 x 1 grey pixel)
 PNG = bytes.fromhex(
@@ -31,10 +30,8 @@ PNG = bytes.fromhex(
 
 
 @pytest.fixture(scope="module")
-def capture(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cap")
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=3)
-    return synthesize(out, spec, show_progress=False)
+def capture(synth_capture):
+    return synth_capture("walk", stop=3)
 
 
 @pytest.fixture(scope="module")

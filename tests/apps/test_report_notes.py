@@ -11,16 +11,13 @@ from meshmocap.apps.report import comparison_table, evaluation_tables, table_htm
 from meshmocap.apps.report_notes import frame_ranges, frame_rows
 from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
-from meshmocap.studio.synth import SynthSpec, synthesize
 
 
 @pytest.fixture(scope="module")
-def scored(tmp_path_factory):
+def scored(synth_capture, tmp_path_factory):
     """A 4-frame capture and a track of its truth with flagged frames, evaluated."""
     root = tmp_path_factory.mktemp("notes")
-    cap = synthesize(
-        root / "cap", SynthSpec(motion="walk", template="neutral_5k", stop=4), show_progress=False
-    )
+    cap = synth_capture("walk", stop=4)
     meta = {
         "method": "patch",
         "template": "neutral_5k",

@@ -27,18 +27,10 @@ def _quiet_progress(monkeypatch):
 # ----------------------------------------------------------------------------- fixtures
 
 
-def _synth(root: Path, motion: str) -> Path:
-    """A 3-frame synthetic capture of ``motion`` (neutral_5k, 30 fps, 2 cm voxels)."""
-    from meshmocap.studio.synth import SynthSpec, synthesize
-
-    spec = SynthSpec(motion=motion, template="neutral_5k", fps=30.0, stop=3, voxel_size=0.02)
-    return synthesize(root / motion, spec, show_progress=False).path
-
-
 @pytest.fixture(scope="module")
-def cap(tmp_path_factory) -> Path:
-    """A 3-frame synthetic walk."""
-    return _synth(tmp_path_factory.mktemp("badcli"), "walk")
+def cap(synth_capture) -> Path:
+    """A 3-frame synthetic walk (neutral_5k, 30 fps, 2 cm voxels), the session's."""
+    return synth_capture("walk", stop=3, fps=30.0, voxel_size=0.02).path
 
 
 def _bytes(path: Path, data: bytes) -> str:
@@ -756,9 +748,9 @@ def trk(cap, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def jog(tmp_path_factory) -> Path:
+def jog(synth_capture) -> Path:
     """Another take: a 3-frame jog on the same rig."""
-    return _synth(tmp_path_factory.mktemp("badcli_jog"), "jog")
+    return synth_capture("jog", stop=3, fps=30.0, voxel_size=0.02).path
 
 
 T = "TRK"  # replaced by the track folder

@@ -16,15 +16,14 @@ from meshmocap.cli import main
 from meshmocap.io.capture import Capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import input_frame, open_tracked_capture, read_track
-from toys import small_walk_capture
 
 ICP = ["--method", "articulated_icp", "--max-iter", "2", "--template", "neutral_5k"]
 
 
 @pytest.fixture(scope="module")
-def cap(tmp_path_factory) -> Path:
+def cap(synth_capture) -> Path:
     """A 4-frame synthetic capture (neutral_5k walk at 30 fps, 2 cm voxels)."""
-    return small_walk_capture(tmp_path_factory.mktemp("track") / "cap", 4).path
+    return synth_capture("walk", stop=4, fps=30.0, voxel_size=0.02).path
 
 
 def _truth_files(cap: Path, folder: Path, numbers, *, up="y", mm=True) -> dict[int, np.ndarray]:

@@ -35,14 +35,9 @@ def _quiet_progress(monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def cap(tmp_path_factory) -> Path:
-    """A 5-frame synthetic capture (neutral_5k walk at 30 fps, 2 cm voxels)."""
-    from meshmocap.studio.synth import SynthSpec, synthesize
-
-    out = tmp_path_factory.mktemp("faults") / "cap"
-    spec = SynthSpec(motion="walk", template="neutral_5k", fps=30.0, stop=5, voxel_size=0.02)
-    synthesize(out, spec, show_progress=False)
-    return out
+def cap(small_walk) -> Path:
+    """A 5-frame synthetic capture (neutral_5k walk at 30 fps, 2 cm voxels), the session's."""
+    return small_walk.path
 
 
 def _real(cap: Path, tmp: Path) -> Path:

@@ -17,11 +17,8 @@ from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
 
 
 @pytest.fixture(scope="module")
-def walk_capture(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cap")
-    return synthesize(
-        out, SynthSpec(motion="walk", template="neutral_5k", stop=6), show_progress=False
-    )
+def walk_capture(synth_capture):
+    return synth_capture("walk", stop=6)
 
 
 def test_capture_layout_and_truth(walk_capture):

@@ -1,6 +1,6 @@
 """The package's architecture: imports point down, no import cycle, a method package never
-imports another, and no private name is imported across modules, by the package or its
-tests.
+imports another, no private name is imported across modules, by the package or its
+tests, and every module has its mirrored test file or a listed reason.
 
 The check itself is ``tools/check_architecture.py`` (an ``ast`` walk, nothing imported); the
 second test shows it catches each kind of fault on a small package written here.
@@ -30,6 +30,7 @@ def test_meshmocap_imports_only_point_down():
     assert report.package_cycles == []
     assert report.sibling_methods == []
     assert report.private_imports == []
+    assert report.untested == []
 
 
 def test_checker_finds_upward_imports_cycles_sibling_methods_and_private_names(tmp_path):
@@ -89,3 +90,36 @@ def test_checker_finds_upward_imports_cycles_sibling_methods_and_private_names(t
         "tests/io/test_bvh.py imports _read from meshmocap.io.bvh",
     ]
     assert not report.ok
+
+
+def test_every_module_has_its_test_file_or_a_true_reason(tmp_path):
+    """A module without ``tests/<package>/test_<module>.py`` is reported unless listed with
+    its reason; a top-level base module's file may live in ``tests/base/``; a listed module
+    that has its file, no longer exists, or whose reason names a missing test is reported."""
+    checker = _checker()
+    pkg = tmp_path / "src" / "meshmocap"
+    (pkg / "io").mkdir(parents=True)
+    for name in ("__init__.py", "_npz.py", "errors.py", "io/__init__.py", "io/bvh.py"):
+        (pkg / name).write_text("")
+    (pkg / "io" / "c3d.py").write_text("")
+    tests = tmp_path / "tests"
+    (tests / "io").mkdir(parents=True)
+    (tests / "base").mkdir()
+    (tests / "io" / "test_bvh.py").write_text("")
+    (tests / "base" / "test_npz.py").write_text("")  # meshmocap._npz's
+    files = {checker.module_name(p, pkg.parent): p for p in sorted(pkg.rglob("*.py"))}
+    assert checker.untested_modules(files, tests, {}) == [
+        "meshmocap.errors: no tests/test_errors.py and no reason in UNTESTED",
+        "meshmocap.io.c3d: no tests/io/test_c3d.py and no reason in UNTESTED",
+    ]
+    listed = {
+        "meshmocap.errors": "raised and matched by every module's tests",
+        "meshmocap.io.c3d": "the C3D writer: tests/io/test_exports.py",
+        "meshmocap.io.bvh": "tested",
+        "meshmocap.io.gone": "a module removed since",
+    }
+    assert checker.untested_modules(files, tests, listed) == [
+        "meshmocap.io.bvh: has its test file; remove it from UNTESTED",
+        "meshmocap.io.c3d: its reason names tests/io/test_exports.py, which does not exist",
+        "meshmocap.io.gone: listed in UNTESTED but no such module",
+    ]

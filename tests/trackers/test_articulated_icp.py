@@ -21,7 +21,6 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
@@ -116,13 +115,6 @@ def test_residual_jacobian_matches_finite_differences(template, posed, residual)
         return residual_jacobian(vd, ad, i, y, ny, residual)[0]
 
     assert np.abs(_numeric(res, Jr.shape[1]) - Jr).max() < 1e-7
-
-
-@pytest.fixture(scope="module")
-def walk(tmp_path_factory, template):
-    out = tmp_path_factory.mktemp("walk")
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=N_FRAMES)
-    return synthesize(out, spec, show_progress=False)
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,6 @@ from meshmocap.body.template import load_template
 from meshmocap.estimate.pose.start import start_description, start_message
 from meshmocap.io.results import LIGHT_FILE, read_frame_arrays
 from meshmocap.io.start import Start
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
@@ -22,9 +21,10 @@ N = 5
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    spec = SynthSpec(motion="walk", template="neutral", stop=N)
-    return synthesize(tmp_path_factory.mktemp("walk") / "cap", spec, show_progress=False)
+def walk(walk_full):
+    """The session's walk of the full neutral template (:data:`N` frames)."""
+    assert len(walk_full) == N
+    return walk_full
 
 
 def _track(walk, out, light):

@@ -16,7 +16,6 @@ from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import done_frames, read_track
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
@@ -24,11 +23,9 @@ N = 6  # frames of the walk
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    out = tmp_path_factory.mktemp("walk")
-    return synthesize(
-        out, SynthSpec(motion="walk", template="neutral_5k", stop=N), show_progress=False
-    )
+def walk(synth_capture):
+    """The session's neutral_5k walk, :data:`N` frames."""
+    return synth_capture("walk", stop=N)
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,12 @@ every capture of a named set; each (capture, method) pair is scored by
 :func:`~meshmocap.analysis.evaluate.evaluate` and written as ``results.csv``,
 ``results.md`` and plots (:mod:`meshmocap.apps.bench_report`).
 
+``meshmocap bench`` (this module and ``bench_captures``, ``bench_rows``,
+``bench_report``, ``bench_plots``) is the product's comparison of the methods, shipped and
+run by users. The scripts in the project's ``benchmarks/`` folder are developers' tools
+(speed, long runs, real-data acceptance, old tree against new), not shipped; one that
+reproduces a paper's table calls :func:`run_bench` (``benchmarks/README.md`` lists them).
+
 Protocol: synthetic captures from the studio at 60 fps, tracking template ``neutral_5k``,
 subject = template unless a variant names another body, first frame initialised from
 ground truth (``init="auto"``: found from the capture alone; the crane starts in its

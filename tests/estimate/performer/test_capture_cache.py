@@ -16,15 +16,18 @@ from meshmocap.estimate.performer.subject import SubjectEstimate
 from meshmocap.io.capture import open_capture
 from meshmocap.io.results import read_state
 from meshmocap.io.start import Start
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers import driver
 from meshmocap.trackers.registry import make_tracker
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=3)
-    return synthesize(tmp_path_factory.mktemp("walk") / "cap", spec, show_progress=False).path
+def walk(synth_capture, tmp_path_factory):
+    """A copy of the session's 3-frame walk without its cache (another test may have
+    tracked it): these tests fill the cache and count the calls that fill it."""
+    copy = tmp_path_factory.mktemp("walk") / "cap"
+    ignore = shutil.ignore_patterns(cc.CACHE_FOLDER)
+    shutil.copytree(synth_capture("walk", stop=3).path, copy, ignore=ignore)
+    return copy
 
 
 def _counting(calls):

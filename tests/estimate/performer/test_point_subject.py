@@ -15,16 +15,15 @@ from meshmocap.estimate.performer.point_subject import fit_body_to_points
 from meshmocap.estimate.performer.tracking_template import frames_kind
 from meshmocap.io.capture import Capture, SequenceCapture
 from meshmocap.io.meshes import write_mesh
-from toys import small_walk_capture
 
 #: Evaluation joints of the trunk and legs (no shoulder, elbow or wrist).
 TRUNK_AND_LEGS = [0, 1, 2, 9, 10, 11, 12, 13, 14]
 
 
 @pytest.fixture(scope="module")
-def cap(tmp_path_factory) -> Path:
+def cap(synth_capture) -> Path:
     """A 3-frame synthetic capture of neutral_5k (walk, 30 fps, 2 cm hulls)."""
-    return small_walk_capture(tmp_path_factory.mktemp("points") / "cap", 3).path
+    return synth_capture("walk", stop=3, fps=30.0, voxel_size=0.02).path
 
 
 def _write(cap: Path, folder: Path, what: str) -> SequenceCapture:

@@ -18,16 +18,12 @@ from meshmocap.estimate.performer.subject import SubjectEstimate, estimate_subje
 from meshmocap.io.capture import open_capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import template_label
-from meshmocap.studio.synth import SynthSpec, synthesize
 
 
 @pytest.fixture(scope="module")
-def small(tmp_path_factory):
+def small(synth_capture):
     """Two frames of the procedural walk by small_female (1.55 m), made for neutral_5k."""
-    spec = SynthSpec(
-        motion="walk", template="neutral_5k", subject="small_female", stop=2, voxel_size=0.02
-    )
-    return synthesize(tmp_path_factory.mktemp("small") / "cap", spec, show_progress=False)
+    return synth_capture("walk", subject="small_female", stop=2, voxel_size=0.02)
 
 
 @pytest.fixture

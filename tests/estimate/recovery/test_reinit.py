@@ -21,7 +21,7 @@ from meshmocap.io.capture import SequenceFrame, open_capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import read_track
 from meshmocap.studio.degrade import Degradation
-from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
+from meshmocap.studio.synth import SynthSpec, placed_motion
 from meshmocap.trackers.articulated_icp import ArticulatedICP
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.patch.tracker import PatchTracker
@@ -29,11 +29,10 @@ from toys import observed_frame
 
 
 @pytest.fixture(scope="module")
-def gap(tmp_path_factory):
+def gap(synth_capture):
     """A 5-frame procedural walk whose hulls miss the left forearm and hand on frames 2–3."""
     deg = Degradation(missed_limb=True, missed_limb_joint="left_elbow", missed_limb_frames=(2, 4))
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=5, degradation=deg)
-    return synthesize(tmp_path_factory.mktemp("gap"), spec, show_progress=False)
+    return synth_capture("walk", stop=5, degradation=deg)
 
 
 def test_heading_and_offset_turn_and_shift_the_whole_motion(tmp_path, capsys):
@@ -199,21 +198,15 @@ def test_inputs_that_cannot_be_tracked_as_given_are_refused_in_one_line(gap, tmp
 
 
 @pytest.mark.slow
-def test_a_capture_without_truth_or_template_is_tracked_from_itself(tmp_path, monkeypatch, capsys):
+def test_a_capture_without_truth_or_template_is_tracked_from_itself(
+    synth_capture, tmp_path, monkeypatch, capsys
+):
     """A user's default path, ``meshmocap track CAPTURE``: no ground truth, no capture.json,
     the performer turned 200° and 0.86 m from the origin. The body is estimated (1 frame, 8
     iterations here: the default's accuracy is bench_subject's) and the first pose found from
     the hull. About 20 s of CPU (the subject fit and the first-pose search on its 12k
     vertices): the one end-to-end check of track's defaults."""
-    spec = SynthSpec(
-        motion="walk",
-        template="neutral_5k",
-        stop=2,
-        heading=200.0,
-        offset=(0.7, -0.5),
-        voxel_size=0.02,
-    )
-    cap = synthesize(tmp_path / "cap", spec, show_progress=False)
+    cap = synth_capture("walk", stop=2, heading=200.0, offset=(0.7, -0.5), voxel_size=0.02)
     real, out = tmp_path / "real", tmp_path / "t"
     shutil.copytree(cap.path, real, ignore=shutil.ignore_patterns("truth", "capture.json"))
     quick = functools.partial(estimate_subject, n_frames=1, iterations=8)

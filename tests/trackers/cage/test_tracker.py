@@ -10,7 +10,6 @@ from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.models.gplvm import GPLVM
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.cage.options import manifold_digest
 from meshmocap.trackers.cage.quad_frames import gram_schmidt_forward
 from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, learn_manifold
@@ -37,13 +36,11 @@ def test_gram_schmidt_derivative_matches_finite_differences():
 
 
 @pytest.fixture(scope="module")
-def setup(tmp_path_factory):
+def setup(synth_capture):
     t = load_template("neutral_5k")
     motions = [walk(t, duration=2.0, fps=30.0, cadence=c) for c in (100.0, 120.0)]
     gp = learn_manifold(t, motions, n_components=2, n_samples=60)
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=6)
-    cap = synthesize(tmp_path_factory.mktemp("cap"), spec, show_progress=False)
-    return t, gp, cap
+    return t, gp, synth_capture("walk", stop=6)
 
 
 def test_cage_tracker_follows_a_walk_and_resumes(setup, tmp_path):

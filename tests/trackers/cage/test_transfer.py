@@ -12,7 +12,6 @@ from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapWarning
 from meshmocap.io.meshes import read_mesh
 from meshmocap.io.results import frame_path, read_track
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.cage import transfer as transfer_module
 from meshmocap.trackers.cage.manifold import fit_pose_manifold
 from meshmocap.trackers.cage.oqr import build_oqr
@@ -35,15 +34,14 @@ def rig():
 
 
 @pytest.fixture(scope="module")
-def tracked(rig, tmp_path_factory):
+def tracked(rig, synth_capture, tmp_path_factory):
     """A 4-frame cage track of a synthetic walk on neutral_5k (cheap tracker settings), its
     surface and joints through Green coordinates in the cage (the paper's model, which a
     transfer replays; the default skinned surface differs from it by centimetres)."""
     t, oqr = rig
     poses = load_pose_sources(["walk"], t, oqr=oqr, duration=1.2, fps=15.0)
     pm = fit_pose_manifold(poses, t, oqr=oqr, n_samples=18, max_iter=200)
-    spec = SynthSpec(motion="walk", template="neutral_5k", stop=8, step=2, voxel_size=0.02)
-    cap = synthesize(tmp_path_factory.mktemp("cap"), spec, show_progress=False)
+    cap = synth_capture("walk", stop=8, step=2, voxel_size=0.02)
     tr = make_tracker("cage_green", manifold=pm.gp, alternations=1, local_iters=1, n_sample=300)
     out = tmp_path_factory.mktemp("track")
     track = track_sequence(tr, t, cap, out, show_progress=False, init="truth", recover=False)

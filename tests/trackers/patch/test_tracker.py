@@ -11,7 +11,6 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
 from meshmocap.io.results import done_frames, read_track
-from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.patch.tracker import (
     STAGES,
@@ -26,12 +25,9 @@ track_sequence = functools.partial(track_sequence, init="truth", recover=False)
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    out = tmp_path_factory.mktemp("walk")
-    cap = synthesize(
-        out, SynthSpec(motion="walk", template="neutral_5k", stop=7), show_progress=False
-    )
-    return cap, load_template("neutral_5k")
+def walk(synth_capture):
+    """The session's neutral_5k walk, 7 frames, with its template."""
+    return synth_capture("walk", stop=7), load_template("neutral_5k")
 
 
 @pytest.fixture(scope="module")
