@@ -98,7 +98,6 @@ UNTESTED: dict[str, str] = {
     "meshmocap.apps.bench_plots": (
         "bench's plots: tests/apps/test_bench.py (table, markdown and plots written)"
     ),
-    "meshmocap.apps.bench_report": "bench's report: tests/apps/test_bench.py",
     "meshmocap.apps.bench_rows": (
         "bench's rows: tests/apps/test_bench.py and tests/trackers/patch/test_residuals.py"
     ),
@@ -148,10 +147,6 @@ UNTESTED: dict[str, str] = {
     "meshmocap.estimate.performer.tracking_template": (
         "the template a track uses: tests/estimate/performer/test_capture_cache.py and "
         "tests/estimate/performer/test_point_subject.py"
-    ),
-    "meshmocap.estimate.pose.library": (
-        "seed poses and the library search: tests/estimate/pose/test_pose_search.py and "
-        "tests/estimate/pose/test_first_pose.py"
     ),
     "meshmocap.geometry._mesh_kernels": (
         "numba loops of geometry/mesh: tests/apps/test_kernels.py and the normals of "
