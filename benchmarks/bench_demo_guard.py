@@ -103,7 +103,7 @@ def demo_figures(work: Path, methods: tuple[str, ...]) -> dict[str, dict[str, fl
         t0, c0 = time.perf_counter(), time.process_time()
         # one method at a time to time each; the body and first pose come from the
         # capture's cache after the first
-        _, [(_, _, _, ev)] = demo_tracks(cap, tracks, methods=(method,), show_progress=False)
+        _, [(_, _, _, ev)], _ = demo_tracks(cap, tracks, methods=(method,), show_progress=False)
         figures[method] = {
             "mean_mm": round(float(ev.joints.overall.mean), 2),
             "worst_frame_mm": round(float(ev.joints.per_frame.max()), 2),

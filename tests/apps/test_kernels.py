@@ -88,4 +88,6 @@ def test_tracking_compiles_only_the_listed_signatures(synth_capture, tmp_path):
         for function, signatures in kernels.items():
             listed = {_types(s) for s in signatures}
             used = set(getattr(module, function).signatures)
-            assert used and used <= listed, (function, used - listed)
+            # a kernel called only from another compiled kernel records no signature of its
+            # own when its caller is loaded from the cache: none used is then no finding
+            assert used <= listed, (function, used - listed)

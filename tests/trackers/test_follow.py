@@ -162,8 +162,10 @@ def test_a_mesh_folder_and_a_stop_callback(walk, tmp_path):
     th.join()
     assert [r.index for r in seen] == [2, 10] and list(result.frames) == [2, 10]
     assert cap.grow() == 0 and cap.skipped == [live / "m_1.ply"]  # listed, left out
-    assert all(cap.written(r.index) <= time.time() and not r.flags for r in seen[1:])
-    assert read_track(out).healthy.all()
+    # tracked, not coasted (the lost-limb rule's verdict on a hull is not live mode's claim)
+    bad = {"failed", "missing"}
+    assert all(cap.written(r.index) <= time.time() and not bad & set(r.flags) for r in seen)
+    assert not any(bad & set(f) for f in read_track(out).flags)
 
 
 def test_follow_needs_one_folder_and_idle_needs_follow(walk, tmp_path, capsys):

@@ -44,7 +44,7 @@ from meshmocap.body.light import tracking_body
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
-from meshmocap.errors import InputError
+from meshmocap.errors import InputError, MeshError
 from meshmocap.estimate.performer.tracking_template import (
     SUBJECT_FILE,
     TemplateChoice,
@@ -141,7 +141,11 @@ def run_demo(
     if frames is not None:
         cap = synthesize(out / "capture", demo_spec(frames, subject), show_progress=show_progress)
         files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
-        choice, done = demo_tracks(cap, out, template=template, show_progress=show_progress)
+        choice, done, refused = demo_tracks(
+            cap, out, template=template, show_progress=show_progress
+        )
+        notes += [f"{method} not tracked: {why}" for method, why in refused]
+        methods = [method for method, _, _, _ in done]
         notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
         folders = [folder for _, folder, _, _ in done]
         for method, folder, track, ev in done:
@@ -159,8 +163,8 @@ def run_demo(
         with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
             notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
         with phase("comparing the tracks' gaits", enabled=show_progress):
-            sections.append(gait_section(cap, tracks, list(DEMO_METHODS)))
-        title = f"{', '.join(DEMO_METHODS)} on the synthetic walk ({len(cap)} frames)"
+            sections.append(gait_section(cap, tracks, methods))
+        title = f"{', '.join(methods)} on the synthetic walk ({len(cap)} frames)"
         # the report holds the player's frames: a budget that keeps it under 10 MB
         templates = [choice.template] * len(tracks)
         with phase("building the 3D player", enabled=show_progress):
@@ -250,18 +254,28 @@ def demo_tracks(
     -------
     choice : TemplateChoice
     tracks : list of (method, track folder, Track, Evaluation)
+    refused : list of (method, reason)
+        Methods after the first whose tracker cannot be set up for the estimated body (the
+        cage that cannot enclose it, :mod:`meshmocap.trackers.cage.body`): said in the
+        report's notes, the others still tracked.
     """
     out = Path(out)
     folders = [out / f"track_{method}" for method in methods]
     choice = tracking_template(cap, template, folders[0])
-    done = []
+    done, refused = [], []
     for method, folder in zip(methods, folders, strict=True):
         if "template_file" in choice.info and folder != folders[0]:
             folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
             shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
         # the light body the driver tracks (meshmocap.body.light)
-        with phase(f"setting up the {method} tracker", enabled=show_progress):
-            tracker = make_tracker(method, template=tracking_body(choice.template).light)
+        try:
+            with phase(f"setting up the {method} tracker", enabled=show_progress):
+                tracker = make_tracker(method, template=tracking_body(choice.template).light)
+        except MeshError as exc:  # the cage refuses a body it cannot enclose: said, not fatal
+            if method == methods[0]:
+                raise
+            refused.append((method, str(exc)))
+            continue
         track = track_sequence(
             tracker,
             choice.template,
@@ -273,7 +287,7 @@ def demo_tracks(
         with phase(f"scoring the {method} track", enabled=show_progress):
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
         done.append((method, folder, track, ev))
-    return choice, done
+    return choice, done, refused
 
 
 def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:
