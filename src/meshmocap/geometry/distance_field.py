@@ -322,7 +322,7 @@ class LazyDistanceGrid(DistanceGrid):
         as a grid point's is (the distance to the nearest inner-boundary voxel centre less
         half a voxel, negative where the voxel holding the point is occupied) instead of
         interpolated between grid points: one k-d tree query per point where a lookup
-        (:meth:`__call__`) computes the eight corners of each new cell it touches (about
+        (``__call__``) computes the eight corners of each new cell it touches (about
         4× the work for a mesh's vertices at the voxels' spacing), and exact beyond the
         grid's box. It differs from the lookup by the interpolation's error (a fraction of
         a voxel), not used for gradients."""

@@ -73,7 +73,7 @@ class Truth:
 
 def write_truth(path: str | os.PathLike, truth: Truth) -> None:
     """Write ``truth`` to ``path`` (``.npz``) atomically, the vertices float32 stored
-    byte-shuffled (``vertices.f4s``, :func:`meshmocap._npz.shuffled_float32`)."""
+    byte-shuffled (``vertices.f4s``, ``shuffled_float32`` in ``meshmocap._npz``)."""
     arrays = {f"vertices{SHUFFLED}": shuffled_float32(truth.vertices)}
     for key in ("joints", "rotations", "root"):
         if getattr(truth, key) is not None:

@@ -384,7 +384,7 @@ def track_frame(
 #: A capture frame's lazily read files, and what its observed wrapper derives from them
 #: once (cached properties of :class:`~meshmocap.io.capture.CaptureFrame` and
 #: :class:`~meshmocap.estimate.recovery.observe.ObservedFrame`). With a timer, the driver computes
-#: up front those the frame before used (:func:`_read_and_observe`).
+#: up front those the frame before used (``_read_and_observe``).
 FRAME_READS = ("hull_mesh", "hull")
 FRAME_DERIVED = ("points", "field")
 
