@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -309,15 +310,18 @@ class LiveCapture:
 
 
 def _listing(folder: Path) -> list[Path]:
-    try:  # closed even when a Ctrl-C lands mid-listing
-        with os.scandir(folder) as entries:
-            return [Path(e.path) for e in entries if e.is_file()]
+    """The entries of ``folder``, as a list made at once: no directory iterator is left open
+    when a Ctrl-C lands mid-listing (:func:`_stat` keeps the files)."""
+    try:
+        return [folder / name for name in os.listdir(folder)]
     except FileNotFoundError:  # hulls/ not made yet
         return []
 
 
 def _stat(index: int, path: Path) -> FrameFile | None:
+    """The frame file ``path`` numbered ``index``; None when it is gone or not a file."""
     try:
-        return FrameFile(index, path, path.stat().st_mtime)
+        st = path.stat()
     except FileNotFoundError:  # renamed away between the listing and now
         return None
+    return FrameFile(index, path, st.st_mtime) if stat.S_ISREG(st.st_mode) else None
