@@ -315,7 +315,7 @@ def test_eval_takes_a_mesh_folder_that_track_accepts(cap, tmp_path, capsys):
     assert main(["track", str(seq), *ICP, "--frames", "0:2", "--out", str(tmp_path / "t")]) == 0
     assert main(["eval", str(seq), str(tmp_path / "t"), "--surface-frames", "2"]) == 0
     out = capsys.readouterr().out
-    assert "Surface distance to the hull" in out and "nan" not in out.lower()
+    assert "Surface distance to the input meshes" in out and "nan" not in out.lower()
 
 
 @pytest.mark.slow
