@@ -140,7 +140,7 @@ def read_cameras(
     """
     check_choice("read_cameras", "format", format, get_args(CameraFormat))
     check_choice("read_cameras", "unit", unit, get_args(CameraUnit))
-    text = _read_text(path)
+    text = read_text(path)
     fmt = _detect(path, text, format, "read_cameras")
     if fmt == "json":
         if unit != "m" or extrinsics is not None:
@@ -149,7 +149,7 @@ def read_cameras(
     doc = _load_yaml(path, text)
     label = path
     if extrinsics is not None:
-        extra = _load_yaml(extrinsics, _read_text(extrinsics))
+        extra = _load_yaml(extrinsics, read_text(extrinsics))
         doc = {**doc, **{k: v for k, v in extra.items() if k != "names"}}
         label = f"{path} (+ {extrinsics})"
     size = None
@@ -243,8 +243,8 @@ def _read_json(path, text: str) -> list[Camera]:
         t = _numbers(c["t"], where, "t", (3,), "3 numbers (metres)")
         dist = _numbers(c.get("dist", []), where, "dist", (0, 4, 5), "4 or 5 numbers")
         size = [_integer(c[k], where, k) for k in ("width", "height")]
-        cams.append(_camera(where, name, K, R, t, dist, *size))
-    _check_unique(path, cams)
+        cams.append(checked_camera(where, name, K, R, t, dist, *size))
+    check_unique(path, cams)
     return cams
 
 
@@ -359,7 +359,7 @@ def _cameras_from_opencv(path, doc: dict, scale: float, size, stem: str) -> list
             R = so3_exp(R) if R.size == 3 else R.reshape(3, 3)
         t = np.zeros(3) if tkey is None else _numbers(t, where, tkey, (3,), "3 numbers")
         wh = _image_size(where, get, size)
-        cams.append(_camera(where, name, K, R, t * scale, dist, *wh))
+        cams.append(checked_camera(where, name, K, R, t * scale, dist, *wh))
     return cams
 
 
@@ -425,7 +425,9 @@ def _yaml_float(x: float) -> str:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _camera(where, name, K, R, t, dist, width, height) -> Camera:
+def checked_camera(where, name, K, R, t, dist, width, height) -> Camera:
+    """A :class:`Camera` read from a file: ``R`` rounded in the file (off by up to 1e-3) is
+    replaced by the nearest rotation; problems raise :class:`FormatError` after ``where``."""
     dev = np.abs(R @ R.T - np.eye(3)).max()
     if dev > 1e-3 or np.linalg.det(R) <= 0:
         raise FormatError(f"{where}: R is not a rotation (|R Rᵀ − I| = {dev:.2g}, det ≤ 0?)")
@@ -471,7 +473,8 @@ def _integer(value, where, key) -> int:
     return int(value)
 
 
-def _check_unique(path, cams: list[Camera]) -> None:
+def check_unique(path, cams: list[Camera]) -> None:
+    """Raise :class:`FormatError` naming ``path`` when two cameras share a name."""
     names = [c.name for c in cams]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -499,7 +502,8 @@ def _detect(path, text: str | None, fmt: str, func: str) -> str:
     )
 
 
-def _read_text(path) -> str:
+def read_text(path) -> str:
+    """The UTF-8 text of the file ``path`` (a BOM dropped); one-line errors naming it."""
     p = Path(path)
     if not p.is_file():
         what = "is a folder, not a file" if p.is_dir() else "no such file"
