@@ -216,7 +216,9 @@ def _argv(command: str, args, work: Path, tree: str) -> list[str]:
     if command == "demo":
         return ["demo", "--out", str(out)]
     walk = _walk(args, work)
-    shutil.rmtree(walk / ".meshmocap", ignore_errors=True)  # its body and first pose, cached
+    # its body and first pose, cached: in the capture by older trees, in the cache by newer
+    shutil.rmtree(walk / ".meshmocap", ignore_errors=True)
+    shutil.rmtree(work / f"cache-{tree}" / "captures", ignore_errors=True)
     return ["track", str(walk), "--out", str(out), "--template", "auto"]
 
 

@@ -176,8 +176,7 @@ def run_demo(
         with phase("dropping the hull meshes (rebuilt when read)", enabled=show_progress):
             drop_hull_meshes(cap.path)
         shared = [f / n for f in folders for n in (SUBJECT_FILE, LIGHT_FILE, "faces.npy")]
-        cached = sorted((cap.path / ".meshmocap").glob("*.npz"))
-        link_duplicates([*shared, cap.path / "truth" / "faces.npy", *cached])
+        link_duplicates([*shared, cap.path / "truth" / "faces.npy"])
     sheets = tuple((what, p) for what, p in files if p is not None and p.suffix == ".png")
     with phase("writing the report"):
         report = _report(out, players, evaluations, sections, sheets, notes)

@@ -1,6 +1,6 @@
-"""Estimate once per capture: the body and the first pose are cached with the capture, keyed
-by its content, the options, the code and (first pose) the template; every track of the
-capture shares them."""
+"""Estimate once per capture: the body and the first pose are cached for the capture (in the
+user's cache folder, never in the capture), keyed by its content, the options, the code and
+(first pose) the template; every track of the capture shares them."""
 
 import shutil
 from dataclasses import replace
@@ -69,7 +69,30 @@ def test_the_body_is_estimated_once_per_capture_and_options(walk, tmp_path, monk
     assert len(calls) == 2
     tt.tracking_template(cap, "auto", tmp_path / "track_c", refresh=True)  # estimate again
     assert len(calls) == 3
-    assert (walk / cc.CACHE_FOLDER).is_dir()  # with the capture
+    assert not (walk / cc.CACHE_FOLDER).exists()  # never in the capture
+    assert len(list(cc.cache_folder(cap).glob("subject-*.npz"))) == 4  # 2 options, each 2 files
+
+
+def test_the_cache_is_the_users_one_folder_per_capture_and_off_caches_nothing(
+    walk, tmp_path, monkeypatch
+):
+    cap = open_capture(walk)
+    monkeypatch.setenv("MESHMOCAP_CACHE", str(tmp_path / "c"))
+    folder = cc.cache_folder(cap)
+    assert folder.parent == tmp_path / "c" / "captures" and folder.name.startswith("cap-")
+    assert cc.cache_folder(open_capture(walk / ".." / "cap")) == folder  # the resolved path
+    copy = tmp_path / "cap"
+    shutil.copytree(walk, copy)
+    assert cc.cache_folder(open_capture(copy)) != folder  # another capture folder
+    monkeypatch.delenv("MESHMOCAP_CACHE")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cc.cache_folder(cap).parent == tmp_path / "xdg" / "meshmocap" / "captures"
+    monkeypatch.setenv("MESHMOCAP_CACHE", "off")
+    assert cc.cache_folder(cap) is None
+    calls: list = []
+    for _ in range(2):  # no cache: estimated every time, nothing written
+        cc.cached_subject(cap, kind="auto", estimate=_counting(calls))
+    assert len(calls) == 2 and not (tmp_path / "xdg").exists()
 
 
 @pytest.mark.slow

@@ -1,11 +1,14 @@
-"""Estimate once per capture: the performer's body and the first pose, cached with the capture.
+"""Estimate once per capture: the performer's body and the first pose, cached for the capture.
 
 Estimating the body (:func:`~meshmocap.estimate.performer.subject.estimate_subject`) and searching
 the first pose (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`) are the slow steps before
 tracking, and every track of a capture (each method of the demo, each item of a batch, a
-restarted run) needs the same answers. They are stored in the capture's folder
-(``<capture>/.meshmocap/``; under ``MESHMOCAP_CACHE`` when that folder is read-only) under
-a key made of everything they depend on:
+restarted run) needs the same answers. They are stored in the user's cache folder, never in
+the capture (reading a capture never changes it: it may be on a read-only mount or an
+archive): ``$MESHMOCAP_CACHE/captures/<capture name>-<key of its resolved path>/``
+(``MESHMOCAP_CACHE`` defaults to ``$XDG_CACHE_HOME/meshmocap``, else
+``~/.cache/meshmocap``; ``off`` caches nothing), under a key made of everything they
+depend on:
 
 * the capture's content (:func:`capture_digest`: the bytes of the files the estimators
   read — cameras, silhouettes, and hulls or mesh files — not their dates);
@@ -25,6 +28,7 @@ import importlib
 import inspect
 import json
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -38,6 +42,7 @@ from meshmocap.estimate.performer.subject import SubjectEstimate
 from meshmocap.io.start import Start, start_json, start_of_json
 
 __all__ = [
+    "CACHE_ENV",
     "CACHE_FOLDER",
     "cache_folder",
     "cached_first_pose",
@@ -45,10 +50,14 @@ __all__ = [
     "capture_digest",
     "code_digest",
     "template_key",
+    "user_cache",
 ]
 
-#: The cache's folder inside a capture folder.
+#: The cache's folder inside a capture folder, where earlier versions wrote it: skipped when
+#: a capture's files are digested (the cache now lives outside, :func:`cache_folder`).
 CACHE_FOLDER = ".meshmocap"
+#: Environment variable naming the user's meshmocap cache folder (``off``: no cache).
+CACHE_ENV = "MESHMOCAP_CACHE"
 #: Modules whose source keys the body estimate.
 SUBJECT_CODE = (
     "meshmocap.estimate.performer.subject",
@@ -151,16 +160,29 @@ def template_key(template: Template) -> str:
     return h.hexdigest()[:16]
 
 
-def cache_folder(capture) -> Path:
-    """Where ``capture``'s cache lives: ``<capture>/.meshmocap`` when the capture is a
-    writable folder, else ``$MESHMOCAP_CACHE/captures`` (default ``~/.cache/meshmocap``)."""
-    root = Path(capture.path)
-    if root.is_dir() and os.access(root, os.W_OK):
-        return root / CACHE_FOLDER
-    base = os.environ.get("MESHMOCAP_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "meshmocap"
-    )
-    return Path(base) / "captures"
+def user_cache() -> Path | None:
+    """The user's meshmocap cache folder: ``$MESHMOCAP_CACHE``, else
+    ``$XDG_CACHE_HOME/meshmocap``, else ``~/.cache/meshmocap``; None when
+    ``MESHMOCAP_CACHE`` is ``off`` (or empty): nothing is cached."""
+    env = os.environ.get(CACHE_ENV)
+    if env is not None:
+        return None if env.strip().lower() in ("off", "") else Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "meshmocap"
+
+
+def cache_folder(capture) -> Path | None:
+    """Where ``capture``'s cache lives, outside the capture:
+    ``<user cache>/captures/<name>-<key>``, the key 16 hex digits of SHA-256 over the
+    capture's resolved path (its entries are keyed by its content, :func:`capture_digest`);
+    None when caching is off (:func:`user_cache`)."""
+    base = user_cache()
+    if base is None:
+        return None
+    root = Path(capture.path).resolve()
+    key = hashlib.sha256(os.fsencode(root)).hexdigest()[:16]
+    name = re.sub(r"[^\w.-]", "_", root.name)[:40] or "capture"
+    return base / "captures" / f"{name}-{key}"
 
 
 def _key(*parts: object) -> str:
@@ -179,8 +201,11 @@ def cached_subject(
     from the capture's cache; ``refresh`` estimates again (and replaces the entry)."""
     if estimate is None:
         from meshmocap.estimate.performer.subject import estimate_subject as estimate
-    key = _key("subject", capture_digest(capture), options, code_digest(SUBJECT_CODE))
     folder = cache_folder(capture)
+    if folder is None:  # caching is off
+        with phase("estimating the performer's body"):
+            return estimate(capture, **options)
+    key = _key("subject", capture_digest(capture), options, code_digest(SUBJECT_CODE))
     body, fit = folder / f"subject-{key}.npz", folder / f"subject-{key}-fit.npz"
     if not refresh and body.is_file() and fit.is_file():
         try:
@@ -232,6 +257,10 @@ def cached_first_pose(
     """The start (:class:`~meshmocap.io.start.Start`: the first pose and how it was found)
     of frame ``index`` of ``capture`` for ``template`` (searched with ``options``):
     ``find()`` once, then read from the capture's cache (the pose bit for bit)."""
+    folder = cache_folder(capture)
+    if folder is None:  # caching is off
+        with phase("finding the first pose"):
+            return find()
     key = _key(
         "first_pose",
         capture_digest(capture),
@@ -240,7 +269,7 @@ def cached_first_pose(
         options or {},
         code_digest(FIRST_POSE_CODE),
     )
-    path = cache_folder(capture) / f"first_pose-{key}.npz"
+    path = folder / f"first_pose-{key}.npz"
     if path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
