@@ -152,6 +152,12 @@ def check_options(owner: str, options: Any, table: Mapping[str, Constraint | tup
             raise InputError(f"{owner}: {name} must be {describe(constraint)}, found {value!r}")
 
 
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` and ``noun`` in words: ``"1 frame"``, ``"2 frames"`` (``plural``: the noun's
+    plural where it is not ``noun + "s"``)."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
 def check_choice(func: str, name: str, value: object, choices: Sequence[str]) -> None:
     """Raise :class:`InputError` unless ``value`` is one of ``choices`` (a Literal's values)."""
     if not isinstance(value, str) or value not in choices:

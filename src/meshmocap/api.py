@@ -49,7 +49,7 @@ from meshmocap.io.capture import (
     write_truth,
     write_truth_faces,
 )
-from meshmocap.io.guards import check_track_capture
+from meshmocap.io.guards import check_resumable, check_track_capture
 from meshmocap.io.live import LiveCapture
 from meshmocap.io.meshes import frame_files, write_mesh
 from meshmocap.io.results import (
@@ -372,6 +372,8 @@ def track(
     # the first pose found (meshmocap.apps.kernels)
     start_compiling(kernels_of(method))
     # a live capture's body is estimated from its first frames, as an ordinary capture
+    if resume:  # not the track of another capture (its body would be reused)
+        check_resumable(folder, capture, out="out", restart="resume=False")
     shown = capture
     if live and _estimates(capture, template, folder, resume):
         shown = body_capture(capture)

@@ -611,7 +611,12 @@ INPUTS: list[Case] = [
         "holds no <camera>/NNNNN.png masks",
     ),
     ("hull_missing", _args("hull", "TMP/none"), "hull: TMP/none is not a folder"),
-    ("eval_no_track", _args("eval", C, "TMP/none"), "track: TMP/none has no track.json"),
+    (
+        "eval_no_track",
+        _args("eval", C, "TMP/none"),
+        "eval: TMP/none is not a track folder (it does not exist); expected a folder written "
+        "by 'meshmocap track'",
+    ),
     (
         "eval_no_capture",
         lambda tmp, cap: ["eval", str(tmp / "none"), _track_with(tmp, cap, "")],
@@ -642,7 +647,27 @@ INPUTS: list[Case] = [
         lambda tmp, cap: ["eval", str(cap), _track_with(tmp, cap, "foreign_frame")],
         "evaluate: track frames [99] are not in the capture",
     ),
-    ("report_no_track", _args("report", C, "TMP/none", "--out", "TMP/r.html"), "has no track.json"),
+    (
+        "report_no_track",
+        _args("report", C, "TMP/none", "--out", "TMP/r.html"),
+        "report: TMP/none is not a track folder (it does not exist)",
+    ),
+    (
+        "report_on_a_capture",
+        _args("report", C, C, "--out", "TMP/r.html"),
+        "is not a track folder (it has no track.json); expected a folder written by",
+    ),
+    (
+        "export_no_track",
+        _args("export", "TMP", "--out", "TMP/x.bvh"),
+        "export: TMP is not a track folder (it has no track.json)",
+    ),
+    (
+        "export_no_format",
+        lambda tmp, cap: ["export", _track_with(tmp, cap, ""), "--out", str(tmp / "x.anim")],
+        "export: cannot tell the format of 'x.anim' from its extension; use one of ['.bvh', "
+        "'.c3d', '.trc', '.gltf', '.glb', '.csv'] or give --format",
+    ),
     (
         "retarget_bvh",
         lambda tmp, cap: ["retarget", _bad_bvh(tmp), "--out", str(tmp / "o.bvh")],
@@ -700,7 +725,7 @@ INPUTS: list[Case] = [
     (
         "transfer_no_track",
         _args("transfer", "TMP/none", "heavy_male", "--out", "TMP/x"),
-        "has no track.json",
+        "transfer: TMP/none is not a track folder (it does not exist)",
     ),
 ]
 

@@ -47,7 +47,7 @@ def test_a_4d_capture_in_mm_and_y_up_is_scored_in_its_own_frame(cap, tmp_path, c
     assert main(["track", str(seq), *ICP, "--fps", "25", "--out", str(out)]) == 0
     run = capsys.readouterr()
     assert "Y up, mm" in run.out and "25 fps" in run.out
-    assert "1 frame numbers have no file (first 2)" in run.err
+    assert "1 frame number without a file (first 2)" in run.err
     meta = json.loads((out / "track.json").read_text())
     assert meta["fps"] == 25.0
     assert meta["input"] == {"up": "y", "units": "mm", "scale": 0.001, "offset": [0.0, 0.0, 0.0]}

@@ -89,7 +89,7 @@ CASES = [
         "m.ply",
         _PLY_HEAD + b"nan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
         MeshError,
-        "1 vertices are NaN or infinite (first: 0)",
+        "1 vertex is NaN or infinite (first: vertex 1 of the file)",
     ),
     (
         "ply_face_range",
@@ -123,9 +123,9 @@ CASES = [
         "obj_inf",
         _read_mesh,
         "m.obj",
-        b"v 0 0 1e999\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        b"# made by hand\nv 0 0 0\nv 1 0 1e999\nv 0 1 0\nf 1 2 3\n",
         MeshError,
-        "vertices are NaN or infinite",
+        "1 vertex is NaN or infinite (first: vertex 2 of the file, line 3)",
     ),
     ("off_header", _read_mesh, "m.off", b"OFF\n3 1 0\n0 0 0\n", MeshError, ""),
     (
@@ -177,7 +177,7 @@ CASES = [
         "p.npy",
         _npy(np.array([[0, 0, np.nan]])),
         MeshError,
-        "1 points are NaN or infinite",
+        "1 point is NaN or infinite (first: point 1 of the file)",
     ),
     (
         "npy_header",

@@ -103,7 +103,12 @@ def test_obj_whose_vertices_do_not_survive_warns(tmp_path):
     [
         ("empty.obj", "", MeshError, "empty mesh|no triangles"),
         ("garbage.ply", "hello", MeshError, "cannot read PLY"),
-        ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", MeshError, "1 vertices are NaN"),
+        (
+            "nan.obj",
+            "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+            MeshError,
+            "1 vertex is NaN or infinite \\(first: vertex 1 of the file, line 1\\)",
+        ),
         ("points.obj", "v 0 0 0\nv 1 0 0\n", MeshError, "no triangles|empty"),
         ("mesh.xyz", "0 0 0\n", InputError, "must end in"),
     ],
@@ -185,7 +190,9 @@ def test_bad_point_files(tmp_path):
     with pytest.raises(FormatError, match="not a table of numbers"):
         read_points(tmp_path / "t.xyz")
     (tmp_path / "n.xyz").write_text("1 2 3\nnan 0 0\n")
-    with pytest.raises(MeshError, match="1 points are NaN"):
+    with pytest.raises(
+        MeshError, match=r"1 point is NaN or infinite \(first: point 2 of the file\)"
+    ):
         read_points(tmp_path / "n.xyz")
 
 
@@ -256,7 +263,7 @@ def test_sequence_errors(tmp_path):
     (tmp_path / "bad").mkdir()
     (tmp_path / "bad" / "f_1.obj").write_text("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     seq = MeshSequence(tmp_path / "bad")  # listing is lazy: the error comes with the frame
-    with pytest.raises(MeshError, match=r"f_1\.obj: 1 vertices are NaN"):
+    with pytest.raises(MeshError, match=r"f_1\.obj: 1 vertex is NaN"):
         seq[0]
 
 

@@ -128,7 +128,7 @@ def test_a_dropped_camera_frame_is_carved_from_the_others(walk_capture, tmp_path
     (out / "silhouettes" / "C3" / "00002.png").unlink()
     for cam in ("C1", "C2", "C4"):  # frame 4: only C3 sees the subject
         write_mask(out / "silhouettes" / cam / "00004.png", np.zeros((480, 640), bool))
-    with pytest.warns(MissingFrameWarning, match="1 frames without hull") as info:
+    with pytest.warns(MissingFrameWarning, match="1 frame without hull") as info:
         run = compute_hulls(out)
     assert "\n" not in str(info[0].message)
     assert run.partial == {

@@ -34,10 +34,10 @@ from meshmocap.analysis.metrics import (
     surface_distance,
 )
 from meshmocap.analysis.tables import format_table, table
-from meshmocap.errors import InputError
+from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.estimate.pose.start import start_description
 from meshmocap.geometry.camera import in_view
-from meshmocap.io.capture import Capture, SequenceCapture, Truth
+from meshmocap.io.capture import Capture, SequenceCapture, SequenceFrame, Truth
 from meshmocap.io.results import Track, template_label
 from meshmocap.io.start import Start
 
@@ -125,7 +125,8 @@ def evaluate(
         every camera's image (a subject running out of the studio leaves a truncated hull);
         the others are listed in ``Evaluation.out_of_view`` and counted as skipped.
     """
-    frames = [capture[k] for k, i in enumerate(capture.indices) if i in set(track.frames.tolist())]
+    tracked = set(track.frames.tolist())
+    frames = [_frame(capture, k) for k, i in enumerate(capture.indices) if i in tracked]
     if len(frames) != len(track.frames):
         missing = sorted(set(track.frames.tolist()) - set(capture.indices))
         raise InputError(
@@ -200,6 +201,16 @@ def evaluate(
         template=template_label(track.meta),
         cage_body=str(track.meta.get("cage_body", "")),
     )
+
+
+def _frame(capture, k: int):
+    """Frame position ``k`` of ``capture``; a mesh file that cannot be read is a frame
+    without observation (``missing`` names the file and why), as the track skipped it."""
+    try:
+        return capture[k]
+    except (MeshmocapFileNotFoundError, FormatError, MeshError) as exc:
+        why = (str(exc).splitlines() or ["unreadable"])[0]
+        return SequenceFrame(int(capture.indices[k]), (np.zeros((0, 3)), None), None, missing=why)
 
 
 def _file_truths(frames: list, track: Track) -> list[Truth] | None:

@@ -118,8 +118,12 @@ class ExportResult:
     planned: int = 0
 
 
-def export_format(path: str | os.PathLike, format: str | None = None) -> str:
-    """The format of ``path``: ``format`` when given (checked), else its extension."""
+def export_format(
+    path: str | os.PathLike, format: str | None = None, *, given_as: str = "format="
+) -> str:
+    """The format of ``path``: ``format`` when given (checked), else its extension;
+    ``given_as`` names the way to give it in the message (``--format`` on the command
+    line)."""
     choices = get_args(ExportFormat)
     if format is not None:
         check_choice("export", "format", format, choices)
@@ -128,7 +132,7 @@ def export_format(path: str | os.PathLike, format: str | None = None) -> str:
     if ext not in choices:
         raise InputError(
             f"export: cannot tell the format of {Path(path).name!r} from its extension; "
-            f"use one of {['.' + c for c in choices]} or give format="
+            f"use one of {['.' + c for c in choices]} or give {given_as}"
         )
     return ext
 

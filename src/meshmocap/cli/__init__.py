@@ -41,7 +41,7 @@ from meshmocap.cli import (
     transfer,
 )
 from meshmocap.errors import MeshmocapError, MeshmocapWarning
-from meshmocap.io.guards import OutputKind, check_output_path
+from meshmocap.io.guards import OutputKind, check_apart_from_inputs, check_output_path
 
 #: Command modules, in the order ``meshmocap --help`` lists their commands.
 COMMANDS = (demo, motion, capture, subject, track, learn, transfer, evaluation, batch, export, gait)
@@ -139,6 +139,8 @@ def check_outputs(args: argparse.Namespace) -> None:
     for name, flag, what in OTHER_OUTPUTS.get(args.command, ()):
         if getattr(args, name, None) is not None:
             paths.append((flag, getattr(args, name), what))
+    if args.command == "track" and out is not None:  # never among what it reads
+        check_apart_from_inputs(out, args.capture, command="track")
     for flag, path, what in paths:
         own = args.command == "track" and flag != "--out" and _inside(path, out)
         if own:  # the live view's recording, in the track folder this run writes

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from pathlib import Path
 
 from meshmocap._validate import frame_slice
 from meshmocap.errors import InputError
@@ -78,3 +79,22 @@ def xy_pair(text: str) -> tuple[float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected X,Y with two numbers, found {text!r}") from None
     return x, y
+
+
+def check_track_folders(command: str, paths: Iterable[str]) -> None:
+    """Refuse, in ``command``'s words, a path that is not a track folder (one with the
+    ``track.json`` that ``meshmocap track`` writes), before any work."""
+    for path in paths:
+        p = Path(path)
+        found = (
+            "it does not exist"
+            if not p.exists()
+            else "it is a file"
+            if not p.is_dir()
+            else "it has no track.json"
+        )
+        if not (p / "track.json").is_file():
+            raise InputError(
+                f"{command}: {path} is not a track folder ({found}); expected a folder "
+                "written by 'meshmocap track'"
+            )

@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from meshmocap.cli._args import number
+from meshmocap.cli._args import check_track_folders, number
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -16,6 +16,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap.io.plausibility import partial_hulls
     from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
+    check_track_folders("eval", [args.track])
     track = read_track(args.track)
     capture = open_tracked_capture(track.meta, args.capture)
     if "input" in track.meta:
@@ -75,6 +76,7 @@ def _check_report_tracks(args: argparse.Namespace) -> None:
     from meshmocap.io.guards import check_track_capture
     from meshmocap.io.results import open_tracked_capture
 
+    check_track_folders("report", args.tracks)
     for t in args.tracks:
         meta_path = Path(t) / "track.json"
         try:

@@ -5,13 +5,15 @@ from __future__ import annotations
 import argparse
 import math
 
-from meshmocap.cli._args import add_frames, number
+from meshmocap.cli._args import add_frames, check_track_folders, number
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
     from meshmocap._progress import phase
-    from meshmocap.apps.export import export_track, frame_ranges
+    from meshmocap.apps.export import export_format, export_track, frame_ranges
 
+    check_track_folders("export", [args.track])
+    export_format(args.out, args.format, given_as="--format")  # before reading the track
     joints = [j for j in args.joints.split(",") if j] if args.joints else None
     with phase(f"exporting {args.out}"):
         res = export_track(

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from meshmocap._validate import counted
 from meshmocap.cli._args import add_frames, add_restart, flag, number
 
 #: Tracking options the command line offers (each taken only by the methods that have it).
@@ -19,6 +20,17 @@ TRACK_OPTIONS = (
     "fast_iter_scale",
     "joint_readout",
 )
+
+#: Defaults of the tracking options, as ``track --help`` states them (the tracker options'
+#: own, :func:`meshmocap.trackers.registry.resolved_options`; a test keeps them equal):
+#: written out so that ``--help`` does not import the trackers.
+DEFAULTS = {
+    "n_patches": 200,
+    "classifier": "logistic",
+    "keep_fraction": 1.0,
+    "max_iter": 10,
+    "icp_max_iter": 20,
+}
 
 #: Fewest patches ``--n-patches`` takes: about one per bone of the evaluation skeleton (the
 #: paper uses 150–250). With one patch the rigidity energy has no pair and is NaN.
@@ -52,6 +64,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap._timing import StageTimer
     from meshmocap._validate import frame_positions
     from meshmocap.errors import InputError
+    from meshmocap.io.guards import check_resumable
     from meshmocap.io.plausibility import check_observations
     from meshmocap.io.results import done_frames
 
@@ -81,8 +94,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
         gaps = getattr(capture, "gaps", [])
         if gaps:
             print(
-                f"meshmocap: warning: {len(gaps)} frame numbers have no file (first "
-                f"{gaps[0]}): tracked as missing frames, coasted across",
+                f"meshmocap: warning: {counted(len(gaps), 'frame number')} without a file "
+                f"(first {gaps[0]}): tracked as missing frames, coasted across",
                 file=sys.stderr,
             )
         frames = None
@@ -101,6 +114,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
                     f"tracking {len(frames)}",
                     file=sys.stderr,
                 )
+        if not args.restart:  # --out holds this capture's track, or none
+            check_resumable(args.out, capture)
         for line in check_observations(capture, frames):  # one person? dense? partial hulls?
             print(f"meshmocap: warning: {line}", file=sys.stderr)
         run.capture = capture if live else None
@@ -147,7 +162,7 @@ def _summary(args: argparse.Namespace, result, before: set[int], timer) -> None:
     missing = sum("missing" in f for f in track.flags)
     fresh = [s for i, s in zip(track.frames, track.seconds, strict=True) if int(i) not in before]
     per = sum(fresh[1:]) / (len(fresh) - 1) if len(fresh) > 1 else 0.0
-    done = f"tracked {new} frames"
+    done = f"tracked {counted(new, 'frame')}"
     done += f" ({resumed} resumed from an earlier run)" if resumed else ""
     flagged = f"{bad} flagged unhealthy" + (f" ({missing} missing)" if missing else "")
     print(
@@ -159,8 +174,9 @@ def _summary(args: argparse.Namespace, result, before: set[int], timer) -> None:
     if missing:
         first = next(k for k, f in enumerate(track.flags) if "missing" in f)
         print(
-            f"meshmocap: warning: {missing} frames had no observation and were coasted "
-            f"across, first {int(track.frames[first])}: {track.messages[first]}",
+            f"meshmocap: warning: {counted(missing, 'frame')} without a usable observation "
+            f"(skipped, coasted across), first {int(track.frames[first])}: "
+            f"{track.messages[first]}",
             file=sys.stderr,
         )
 
@@ -173,7 +189,7 @@ def _lost(track) -> str:
     reinit = sum("reinit" in f for f in track.flags)
     k = lost[0]
     return (
-        f", {len(lost)} with a limb lost ({reinit} re-initialised; first: frame "
+        f", {counted(len(lost), 'frame')} with a limb lost ({reinit} re-initialised; first: frame "
         f"{int(track.frames[k])}, {track.messages[k]})"
     )
 
@@ -211,8 +227,8 @@ class _Run:
         have = len(done_frames(self.args.out))
         kept = f" ({have - n} from an earlier run)" if have > n else ""
         print(
-            f"{how}: tracked {n} frames (median {1000 * per:.0f} ms per frame, {self.flagged} "
-            f"flagged){kept}; results in {self.args.out}"
+            f"{how}: tracked {counted(n, 'frame')} (median {1000 * per:.0f} ms per frame, "
+            f"{self.flagged} flagged){kept}; results in {self.args.out}"
         )
         if self.view is not None:
             self.view.close()
@@ -259,7 +275,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--method",
         default="patch",
         help="patch, patch_svc, patch_noclf, "
-        "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal",
+        "articulated_icp, cage, cage_quads, cage_noreg, cage_nolocal (default: %(default)s)",
     )
     k.add_argument(
         "--template",
@@ -267,19 +283,29 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the performer's body (default: the template capture.json names, else auto; "
         "an estimate is cached as subject.npz in --out)",
     )
-    k.add_argument("--out", required=True, help="track folder (frame-by-frame results)")
-    add_frames(k)
+    k.add_argument(
+        "--out",
+        required=True,
+        help="track folder (frame-by-frame results); a new folder, or this capture's track "
+        "to resume, never the input's own folder",
+    )
+    add_frames(k, "default: all")
     k.add_argument(
         "--n-patches",
         type=number(MIN_PATCHES, 10_000, integer=True),
-        help=f"patch tracker: number of patches (at least {MIN_PATCHES}: fewer cannot follow "
-        "the limbs, and one has no neighbour to be rigid with)",
+        help=f"patch tracker: number of patches (default {DEFAULTS['n_patches']}; at least "
+        f"{MIN_PATCHES}: fewer cannot follow the limbs, and one has no neighbour to be rigid "
+        "with)",
     )
-    k.add_argument("--classifier", help="patch tracker: logistic, svc or none")
+    k.add_argument(
+        "--classifier",
+        help=f"patch tracker: logistic, svc or none (default {DEFAULTS['classifier']})",
+    )
     k.add_argument(
         "--keep-fraction",
         type=number(0, 1, open_lo=True),
-        help="patch tracker: on-bone points kept",
+        help=f"patch tracker: fraction of the on-bone points kept (default "
+        f"{DEFAULTS['keep_fraction']:g}: all)",
     )
     k.add_argument(
         "--outlier-sigmas",
@@ -289,7 +315,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "few-camera hull's phantom volumes, but also true points where the subject's "
         "surface differs from the template's)",
     )
-    k.add_argument("--max-iter", type=number(1, 10_000, integer=True), help="iterations per frame")
+    k.add_argument(
+        "--max-iter",
+        type=number(1, 10_000, integer=True),
+        help=f"iterations per frame (default {DEFAULTS['max_iter']} for the patch tracker, "
+        f"{DEFAULTS['icp_max_iter']} for articulated_icp; the cage methods have their own "
+        "schedule)",
+    )
     k.add_argument(
         "--fast-iter-scale",
         type=number(1, 100),
@@ -365,7 +397,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument(
         "--idle",
         type=number(0, 1e6, "seconds", open_lo=True),
-        help="with --follow: stop after this many seconds without a new frame",
+        help="with --follow: stop after this many seconds without a new frame (default: "
+        "never; Ctrl-C stops)",
     )
     k.add_argument(
         "--view",
@@ -373,5 +406,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --follow: show the body as it is tracked in the rerun viewer "
         '(pip install -e ".[view]"); headless, save the recording as OUT/live.rrd',
     )
-    k.add_argument("--recording", help="with --follow: --view, saved to this .rrd file")
+    k.add_argument(
+        "--recording", help="with --follow: --view, saved to this .rrd file (default: none)"
+    )
     k.set_defaults(func=_cmd_track)

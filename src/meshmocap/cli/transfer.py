@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from meshmocap.cli._args import add_restart, number
+from meshmocap.cli._args import add_restart, check_track_folders, number
 
 
 def _cmd_transfer(args: argparse.Namespace) -> int:
@@ -19,6 +19,7 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     from meshmocap.io.meshes import read_mesh
     from meshmocap.trackers.cage.transfer import read_cage_track, write_transfer
 
+    check_track_folders("transfer", [args.track])
     template = load_template(args.template) if args.template else None
     track = read_cage_track(args.track, template=template)
     if args.mesh in bundled_templates():

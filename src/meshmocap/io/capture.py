@@ -35,7 +35,8 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap._npz import SHUFFLED, open_npz, shuffled_float32
-from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
+from meshmocap._validate import counted
+from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import VoxelHull, hull_mesh
 from meshmocap.geometry.normals import point_normals, solid_occupancy, surface_samples
@@ -549,6 +550,11 @@ class SequenceCapture:
     or 2 for files of every other frame), is a frame without observation (``missing`` says
     so): trackers coast across it and keep it in the numbering.
 
+    A sequence of fixed connectivity (a clean 4D capture: :attr:`connectivity`) keeps it
+    in every frame: a file of other vertices or triangles (another performer's mesh, a file
+    cut off in its faces) is a frame without observation too, ``missing`` naming the file,
+    what it holds and what the others hold.
+
     Parameters
     ----------
     source : path or glob
@@ -613,6 +619,65 @@ class SequenceCapture:
         """The files' length unit (``"m"``, ``"cm"``, ``"mm"``; else metres per unit)."""
         return UNIT_NAMES.get(self.scale, f"{self.scale:g} m")
 
+    @cached_property
+    def connectivity(self) -> tuple[int, np.ndarray] | None:
+        """``(n_vertices, F (m, 3) int64)`` that the frames of a fixed-connectivity mesh
+        sequence share (vertex ``i`` is the same point of the body in every file), or None
+        (point clouds, visual hulls, a mesh per frame). Read from files spread over the
+        sequence (the first, middle and last; the quartiles too where one differs): where
+        every one, or all but one of at least three, have the same vertex count and
+        triangles. Files that cannot be read are left out."""
+        n = len(self.seq)
+        groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}  # connectivity → its files
+
+        def read(positions) -> tuple[int, int]:
+            """Files read into ``groups``; the largest group's size and all files read."""
+            for k in positions:
+                try:
+                    f = self.seq[k]
+                except (MeshmocapFileNotFoundError, FormatError, MeshError, InputError):
+                    continue  # an unreadable file: the driver's missing frame
+                if f.F is not None:
+                    key = (len(f.V), f.F.shape, hash(f.F.tobytes()))
+                    groups.setdefault(key, []).append((len(f.V), f.F))
+            sizes = [len(g) for g in groups.values()]
+            return max(sizes, default=0), sum(sizes)
+
+        picks = {0, n // 2, n - 1}
+        agree, total = read(sorted(picks))
+        if 2 <= agree < total == agree + 1:  # one differs: the quartiles decide
+            agree, total = read(sorted({n // 4, (3 * n) // 4} - picks))
+            if total >= 3 and agree >= total - 1:
+                agree = total  # all but one agree
+        if agree < 2 or agree != total:
+            return None
+        return max(groups.values(), key=len)[0]
+
+    def foreign(self, path: str, V: np.ndarray, F: np.ndarray | None) -> str | None:
+        """Why the file ``path`` (its vertices ``V`` and triangles ``F``, None for points)
+        is not a frame of this sequence of fixed :attr:`connectivity`, or None: one line
+        naming the file, what it holds and what the other frames hold."""
+        ref = self.connectivity
+        if ref is None:
+            return None
+        n, F0 = ref
+        if F is None:
+            found = f"a point cloud of {counted(len(V), 'point')}"
+        elif len(V) == n and np.array_equal(F, F0):
+            return None
+        elif len(V) == n and len(F) == len(F0):
+            found = f"a mesh of {n} vertices and {len(F)} triangles, but other triangles"
+        else:
+            found = (
+                f"a mesh of {counted(len(V), 'vertex', 'vertices')} and "
+                f"{counted(len(F), 'triangle')}"
+            )
+        return (
+            f"{path}: {found}; expected {n} vertices and {len(F0)} triangles as in the other "
+            "frames of this fixed-connectivity sequence (another performer's mesh, or a file "
+            "cut off or damaged)"
+        )
+
     def __len__(self) -> int:
         return len(self.indices)
 
@@ -626,6 +691,9 @@ class SequenceCapture:
             why = f"no file of frame {index} (the files skip from frame {before} to {after})"
             return SequenceFrame(index, (np.zeros((0, 3)), None), None, missing=why)
         f = self.seq[self._position[index]]
+        why = self.foreign(f.path, f.V, f.F)
+        if why is not None:  # another connectivity than the sequence's: not one of its frames
+            return SequenceFrame(index, (np.zeros((0, 3)), None), None, missing=why)
         V = f.V if self.scale == 1.0 else f.V * self.scale  # in metres
         if self.offset.any():
             V = V - self.offset

@@ -10,6 +10,7 @@ overwriting the track) is refused.
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
 import os
@@ -34,7 +35,9 @@ from meshmocap.io.results import planned_frames
 __all__ = [
     "TRACK_OWN_FILES",
     "capture_digest",
+    "check_apart_from_inputs",
     "check_output_path",
+    "check_resumable",
     "check_track_capture",
     "protected_track_file",
     "track_folder",
@@ -139,6 +142,80 @@ def check_output_path(
             f"{head}: {what} {track}, which only 'meshmocap track' writes; "
             "expected a path outside it"
         )
+
+
+def _input_folder(source: str) -> tuple[Path, str]:
+    """The folder an input ``source`` reads, and what it is: a folder (or a glob's folder)
+    is read whole; a file (a mesh, an archive) is read from the folder holding it."""
+    if glob.has_magic(source):
+        parts = Path(source).parts
+        head = next(k for k, part in enumerate(parts) if glob.has_magic(part))
+        return Path(*parts[:head]) if head else Path("."), "the folder of the glob"
+    if Path(source).is_dir():
+        return Path(source), "the capture folder"
+    return Path(source).parent, "the folder holding the input"
+
+
+def check_apart_from_inputs(
+    path: str | os.PathLike, sources, *, command: str, flag: str = "--out"
+) -> None:
+    """Refuse an output folder ``path`` that is the folder of one of the inputs
+    ``sources`` (folders, globs, files, archives) or, for a folder read whole, lies inside
+    it: a command never writes among what it reads (a track's ``faces.npy`` and
+    ``frames/`` among the meshes would be read as frames by every later command). Beside
+    input files or a glob's, in a folder of its own, is fine.
+
+    Raises
+    ------
+    OutputPathError
+        One line naming the flag, the input and what was expected.
+    """
+    out = Path(os.path.realpath(path))
+    for source in map(os.fspath, sources):
+        folder, what = _input_folder(source)
+        real = Path(os.path.realpath(folder))
+        whole = what == "the capture folder"  # a subfolder of it would be written to
+        if out == real or (whole and real in out.parents):
+            how = "is" if out == real else "lies in"
+            raise OutputPathError(
+                f"{command}: {flag} {path}: {how} {what} {source}, which {command} reads; "
+                "expected a folder outside it (the input is never written to)"
+            )
+
+
+def check_resumable(
+    path: str | os.PathLike,
+    capture,
+    *,
+    command: str = "track",
+    out: str = "--out",
+    restart: str = "--restart",
+) -> None:
+    """Refuse to resume, in the track folder ``path``, a track of another capture than
+    ``capture`` (its ``track.json`` names the capture it was made from): ``--out`` names
+    another capture's track, not this one's. A folder without a readable ``track.json``
+    passes (a new track, or one whose damage the driver reports). ``out`` and ``restart``
+    name the argument and the way to start over in the message (the command line's flags,
+    or the Python arguments).
+
+    Raises
+    ------
+    OutputPathError
+        One line naming both captures and what to do.
+    """
+    meta_path = Path(path) / "track.json"
+    try:
+        named = json.loads(meta_path.read_text(encoding="utf-8")).get("capture")
+    except (OSError, ValueError, AttributeError):
+        return
+    here = Path(capture.path).resolve()
+    if not isinstance(named, str) or not named or Path(named) == here:
+        return
+    raise OutputPathError(
+        f"{command}: {out} {path} holds the track of another capture ({named}); expected a "
+        f"new folder, or a track of {here} to resume: give another {out}, or {restart} to "
+        "track over it"
+    )
 
 
 def capture_digest(capture) -> str:

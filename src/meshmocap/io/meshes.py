@@ -35,6 +35,7 @@ import trimesh
 
 from meshmocap._atomic import write_bytes_atomic
 from meshmocap._npz import NPY_ERRORS
+from meshmocap._validate import counted
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapWarning
 from meshmocap.errors import MeshmocapFileNotFoundError as NotFound
 from meshmocap.io.archives import TarArchive
@@ -75,10 +76,33 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
 
 
-def _finite(X: np.ndarray, label: str, what: str) -> None:
+def _finite(
+    X: np.ndarray, label: str, what: str, data: bytes | None = None, *, array: bool = False
+) -> None:
+    """Refuse NaN or infinite rows of ``X``, naming the first as a reader of the file counts:
+    vertex ``k + 1`` (1-based), and for an OBJ file (``data``) its line; row ``k`` of an
+    ``array`` given in Python."""
     bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
     if bad.size:
-        raise MeshError(f"{label}: {bad.size} {what} are NaN or infinite (first: {bad[0]})")
+        k, one = int(bad[0]), _SINGULAR[what]
+        first = f"row {k}" if array else f"{one} {k + 1} of the file"
+        line = _obj_line(data, b"v", k) if data is not None else None
+        first += f", line {line}" if line is not None else ""
+        are = "is" if bad.size == 1 else "are"
+        raise MeshError(
+            f"{label}: {counted(bad.size, one, what)} {are} NaN or infinite (first: {first})"
+        )
+
+
+_SINGULAR = {"vertices": "vertex", "points": "point", "normals": "normal"}
+
+
+def _obj_line(data: bytes, keyword: bytes, k: int) -> int | None:
+    """The 1-based line number of the ``k``-th (0-based) ``keyword`` line of an OBJ file."""
+    for n, m in enumerate(re.finditer(rb"(?m)^" + keyword + rb"[ \t]", data)):
+        if n == k:
+            return data.count(b"\n", 0, m.start()) + 1
+    return None
 
 
 def _load_scene(data: bytes, ext: str, label: str):
@@ -160,7 +184,10 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
     scene = _load_scene(data, ext, label)
     meshes = [g for g in scene.geometry.values() if isinstance(g, trimesh.Trimesh)]
     if not meshes:
-        raise MeshError(f"{label}: no triangles (empty, or a point cloud: use read_points)")
+        raise MeshError(
+            f"{label}: no triangles (a file cut off before its faces, or a point cloud, which "
+            "is read from .ply, .xyz, .npy or .pcd files)"
+        )
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
@@ -179,14 +206,36 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
         raise MeshError(
             f"{label}: face indices must lie in [0, {len(V) - 1}], found [{F.min()}, {F.max()}]"
         )
-    _finite(V, label, "vertices")
+    _finite(V, label, "vertices", data if ext == ".obj" else None)
     if ext == ".obj":
+        _check_obj_faces(data, label)
         n_file = len(re.findall(rb"(?m)^v[ \t]", data))
         if n_file != len(V):
             msg = f"{n_file} 'v' lines but {len(V)} vertices read (unreferenced vertices"
             msg += " dropped or split at texture seams): indices differ from the file's"
             warnings.warn(f"{label}: {msg}", MeshmocapWarning, stacklevel=3)
     return _to_world(V, up), F
+
+
+#: An OBJ face line of fewer than 3 vertices (what a file cut off in its faces ends with).
+_SHORT_FACE = re.compile(rb"(?m)^f(?:[ \t]+[^\s]+){0,2}[ \t]*\r?$")
+
+
+def _check_obj_faces(data: bytes, label: str) -> None:
+    """Refuse an OBJ face line of fewer than 3 vertices (a reader drops it silently): one
+    line naming the file's line (1-based) and what it holds."""
+    m = _SHORT_FACE.search(data)
+    if m is None:
+        return
+    text = m.group().decode(errors="replace").strip()
+    line = data.count(b"\n", 0, m.start()) + 1
+    last = not data[m.end() :].strip()
+    why = "the file is cut off there" if last else "the file is damaged"
+    n = len(text.split()) - 1
+    raise MeshError(
+        f"{label}: line {line} {text!r} is a face of {counted(n, 'vertex', 'vertices')}, "
+        f"expected 3 or more ({why})"
+    )
 
 
 def read_mesh(path: str | os.PathLike, *, up: Up = "z") -> tuple[np.ndarray, np.ndarray]:
@@ -346,7 +395,7 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *, up: Up 
         raise InputError(f"write_mesh: F must be (m, 3) integers, found {F.shape} {F.dtype}")
     if len(F) and (F.min() < 0 or F.max() >= len(V)):
         raise InputError(f"write_mesh: face indices must lie in [0, {len(V) - 1}]")
-    _finite(V, "write_mesh: V", "vertices")
+    _finite(V, "write_mesh: V", "vertices", array=True)
     if not path.parent.is_dir():
         raise NotFound(f"{path.parent}: folder does not exist")
     if up == "y":

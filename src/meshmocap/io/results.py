@@ -4,7 +4,9 @@ Layout (``track.json`` holds ``"format": "meshmocap-track-1"``)::
 
     TRACK/
       track.json        method, template, capture, evaluation-joint names and parents, options,
-                        and once the first frame is done, how it started ("start": a Start)
+                        once the first frame is done, how it started ("start": a Start), and
+                        the frames skipped for want of an observation ("skipped": number →
+                        the reason)
       faces.npy         the template's triangles (m, 3), so the tracked meshes stand alone
       frames/NNNNN.npz  one file per frame: joints (K, 3), vertices (n, 3) float32 (stored
                         byte-shuffled as vertices.f4s, meshmocap._npz; older files hold
@@ -298,13 +300,12 @@ def start_track(
     full = {"format": FORMAT, **meta}
     if meta_path.is_file() and resume:
         old = _read_json(meta_path)
-        start = old.pop(START_KEY, None)  # found by the run, not one of its settings
+        found = {k: old.pop(k) for k in (START_KEY, SKIPPED_KEY) if k in old}  # by the run
         if old != json.loads(json.dumps(full)):
             raise FormatError(
                 f"{meta_path}: holds a track made with other settings; use another folder"
             )
-        if start is not None:
-            full[START_KEY] = start
+        full.update(found)
     else:
         for p in (path / "frames").glob("*.npz"):
             p.unlink()
@@ -316,6 +317,10 @@ def start_track(
 
 #: The key of ``track.json`` that holds the start (:func:`write_start`).
 START_KEY = "start"
+#: The key of ``track.json`` that names the frames skipped for want of a usable observation
+#: (flagged ``missing``: a dropped frame, an unreadable file, another performer's mesh),
+#: frame number → the reason (:func:`write_frame`).
+SKIPPED_KEY = "skipped"
 
 
 def write_start(path: str | os.PathLike, start: Start) -> None:
@@ -353,7 +358,13 @@ def done_frames(path: str | os.PathLike) -> list[int]:
 
 
 def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
-    """Write one frame's result atomically."""
+    """Write one frame's result atomically; a frame flagged ``missing`` is also named, with
+    its reason, in ``track.json`` (:data:`SKIPPED_KEY`), first."""
+    if "missing" in r.flags:
+        meta_path = Path(path) / "track.json"
+        meta = _read_json(meta_path)
+        meta[SKIPPED_KEY] = {**meta.get(SKIPPED_KEY, {}), str(int(r.index)): r.message}
+        write_text_atomic(meta_path, json.dumps(meta, indent=2) + "\n")
     extra = {f"energy_{k}": np.float64(v) for k, v in r.energies.items()}
     extra.update({f"state_{k}": np.asarray(v) for k, v in r.state.items()})
     with atomic_open(frame_path(path, r.index)) as f:

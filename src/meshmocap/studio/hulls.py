@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._progress import progress
+from meshmocap._validate import counted
 from meshmocap.errors import (
     GreyMaskWarning,
     InputError,
@@ -237,5 +238,6 @@ def frames_note(partial: dict[int, str], missing: dict[int, str]) -> str:
     ):
         if notes:
             first = min(notes)
-            parts.append(f"{len(notes)} frames {what}, first {frame_name(first)}: {notes[first]}")
+            head = f"{counted(len(notes), 'frame')} {what}"
+            parts.append(f"{head}, first {frame_name(first)}: {notes[first]}")
     return "; ".join(parts)

@@ -377,7 +377,7 @@ def track_frame(
     except FRAME_ERRORS as exc:  # this frame's file is absent or unreadable
         if retry is not None and retry():
             return None
-        reason = failure_reason(exc)
+        reason = file_reason(exc)
     return coast_frame(tracker, out, good, index, t0, "missing", reason)
 
 
@@ -430,6 +430,12 @@ def failure_reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
 
 
+def file_reason(exc: BaseException) -> str:
+    """One line (at most 200 characters) naming why a frame's file could not be read: the
+    error's own words, which name the file (:data:`FRAME_ERRORS`), for its flag."""
+    return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
+
+
 def coast_frame(
     tracker: Tracker, out, good: int, index: int, t0: float, flag: str, why: str
 ) -> FrameResult:
@@ -475,7 +481,7 @@ def initialise_tracker(
             frame = capture[k]  # a mesh sequence reads the file here
             reason = missing_reason(frame)
         except FRAME_ERRORS as exc:
-            reason = failure_reason(exc)
+            reason = file_reason(exc)
         if reason is None:
             t0 = time.perf_counter()
             try:
@@ -490,7 +496,7 @@ def initialise_tracker(
                 ):
                     r = tracker.init(body.light, frame, found.R, found.root)
             except FRAME_ERRORS as exc:
-                reason = failure_reason(exc)
+                reason = file_reason(exc)
         if reason is not None:
             skipped.append((index, reason))
             continue
