@@ -55,6 +55,7 @@ OUTPUTS: dict[str, OutputKind] = {
     "retarget": "file",
     "track": "folder",
     "synth": "folder",
+    "silhouettes": "folder",
     "eval": "folder",
     "batch": "folder",
     "bench": "folder",

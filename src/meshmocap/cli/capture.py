@@ -1,5 +1,5 @@
-"""Captures: ``meshmocap synth`` (the synthetic studio) and ``hull`` (visual hulls of real
-silhouettes)."""
+"""Captures: ``meshmocap synth`` (the synthetic studio), ``silhouettes`` (silhouettes of
+calibrated multi-view video) and ``hull`` (visual hulls of real silhouettes)."""
 
 from __future__ import annotations
 
@@ -43,6 +43,44 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     cap = synthesize(args.out, spec)
     dt = time.perf_counter() - t0
     print(f"wrote {cap.path}: {len(cap)} frames, {len(cap.cameras)} cameras, {dt:.1f} s")
+    return 0
+
+
+def _offset(text: str) -> tuple[str, int]:
+    """Parse ``CAMERA=N`` (a camera name and a whole number of frames)."""
+    name, _, value = text.rpartition("=")
+    try:
+        if not name:
+            raise ValueError
+        return name, int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected CAMERA=FRAMES (e.g. cam02=3), found {text!r}"
+        ) from None
+
+
+def _cmd_silhouettes(args: argparse.Namespace) -> int:
+    from meshmocap.studio.from_video import silhouettes_from_video
+
+    t0 = time.perf_counter()
+    run = silhouettes_from_video(
+        args.videos,
+        args.calibration,
+        args.out,
+        frames=args.frames,
+        offsets=dict(args.offset or []),
+        plates=args.plates,
+        scale=args.scale,
+        voxel_size=args.voxel_size,
+        overwrite=args.restart,
+    )
+    for note in run.notes:
+        print(f"note: {note}")
+    print(
+        f"silhouettes of {len(run.frames)} frames × {len(run.cameras)} cameras in "
+        f"{run.path / 'silhouettes'} ({run.written} segmented by this run; "
+        f"{time.perf_counter() - t0:.1f} s); next: meshmocap hull {run.path}"
+    )
     return 0
 
 
@@ -149,6 +187,41 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="seed of the degradations",
     )
     y.set_defaults(func=_cmd_synth)
+    v = sub.add_parser(
+        "silhouettes", help="segment calibrated multi-view video into a capture's silhouettes"
+    )
+    v.add_argument(
+        "videos", help="folder with a video (<camera>.mp4, .avi, .mov) or image folder per camera"
+    )
+    v.add_argument(
+        "--calibration",
+        required=True,
+        help="Qualisys .qca.txt, Pose2Sim/anipose Calib.toml, OpenCV .yml or cameras.json",
+    )
+    v.add_argument("--out", required=True, help="capture folder to write (resumes)")
+    add_frames(v, "capture frame numbers, default: every frame all cameras have")
+    v.add_argument(
+        "--offset",
+        type=_offset,
+        action="append",
+        metavar="CAMERA=N",
+        help="capture frame k is frame k+N of this camera's video (repeat per camera)",
+    )
+    v.add_argument("--plates", help="folder of empty-scene images, <camera>.png (or .jpg)")
+    v.add_argument(
+        "--scale",
+        type=number(0.1, 1, "of the image size"),
+        default=0.5,
+        help="segmentation resolution relative to the images (default: %(default)s)",
+    )
+    v.add_argument(
+        "--voxel-size",
+        type=number(0.005, 0.2, "metres"),
+        default=0.03,
+        help="voxel edge of the multi-view consistency carving, metres (default: %(default)s)",
+    )
+    add_restart(v, "segment every frame again")
+    v.set_defaults(func=_cmd_silhouettes)
     h = sub.add_parser("hull", help="carve visual hulls from a capture's silhouettes")
     h.add_argument("capture", help="folder with cameras.json and silhouettes/<camera>/NNNNN.png")
     h.add_argument(

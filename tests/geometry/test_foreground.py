@@ -1,0 +1,118 @@
+"""Foreground segmentation: background models, shadows, clean-up, multi-view consistency."""
+
+import numpy as np
+import pytest
+
+from meshmocap.errors import InputError
+from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.foreground import (
+    clean_mask,
+    consistent_masks,
+    foreground_mask,
+    learn_background,
+    others_reach,
+    reach,
+)
+
+
+def _scene(n=12, H=40, W=50, seed=0):
+    """A textured background and a bright square moving across it (its masks too)."""
+    rng = np.random.default_rng(seed)
+    bg = rng.integers(40, 200, (H, W, 3)).astype(np.uint8)
+    frames = np.repeat(bg[None], n, axis=0)
+    masks = np.zeros((n, H, W), bool)
+    for k in range(n):
+        c = 2 + 3 * k
+        masks[k, 10:22, c : c + 10] = True
+    frames[masks] = (250, 30, 30)
+    noise = rng.normal(0, 1.5, frames.shape)
+    return np.clip(frames + noise, 0, 255).astype(np.uint8), bg, masks
+
+
+def test_learned_background_is_the_scene_without_the_subject():
+    frames, bg, masks = _scene()
+    B, noise = learn_background(frames)
+    assert np.abs(B - bg).max() <= 6  # the subject covers each pixel in < half the frames
+    assert noise.shape == bg.shape[:2] and noise.min() >= 3.0
+    # masked median: a subject standing still for most frames is left out where masks say
+    still = frames.copy()
+    still[:8, 10:22, 20:30] = (250, 30, 30)
+    m = masks.copy()
+    m[:8, 10:22, 20:30] = True
+    plain, _ = learn_background(still)
+    masked, _ = learn_background(still, masks=m, min_frames=3)  # 4 frames see the floor
+    assert np.abs(plain[15, 25] - (250, 30, 30)).max() < 10  # the plain median is the ghost
+    assert np.abs(masked[15, 25] - bg[15, 25]).max() <= 6
+    with pytest.raises(InputError, match="frames must be"):
+        learn_background(frames[..., 0])
+
+
+def test_foreground_mask_finds_the_subject_and_not_its_shadow():
+    frames, bg, masks = _scene()
+    B, noise = learn_background(frames)
+    image = frames[5].astype(float)
+    shadow = np.zeros(bg.shape[:2], bool)
+    shadow[28:36, 5:45] = True
+    image[shadow] *= 0.6  # a floor shadow: darker, same chromaticity
+    m = foreground_mask(image, B, noise, blur=0.0)  # a 12×10 px subject: no smoothing
+    iou = (m & masks[5]).sum() / (m | masks[5]).sum()
+    assert iou > 0.95
+    assert m[shadow].mean() < 0.05
+    very_dark = image.copy()
+    very_dark[shadow] = 5.0  # a black object is not a shadow
+    assert foreground_mask(very_dark, B, noise)[shadow].mean() > 0.9
+
+
+def test_clean_mask_fills_holes_and_drops_specks():
+    m = np.zeros((60, 60), bool)
+    m[10:40, 10:30] = True
+    m[20:25, 15:20] = False  # a hole
+    m[50, 50] = True  # a speck
+    m[45:48, 40:43] = True  # a small blob (9 px)
+    out = clean_mask(m, min_area=20 / m.size)
+    assert out[22, 17] and not out[50, 50] and not out[46, 41]
+    assert out[11:39, 11:29].all() and out.sum() <= m.sum() + 25  # corners rounded
+
+
+def _rig(n=4, size=(64, 48)):
+    cams = []
+    for k in range(n):
+        a = 2 * np.pi * k / n
+        R, t = look_at([3 * np.cos(a), 3 * np.sin(a), 1.5], [0.0, 0.0, 1.0])
+        cams.append(Camera(intrinsics(*size, 50.0), R, t, *size, None, f"c{k}"))
+    return cams
+
+
+def _sphere_mask(cam, centre, radius):
+    v, u = np.mgrid[: cam.height, : cam.width]
+    Kinv = np.linalg.inv(cam.K)
+    rays = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3) @ Kinv.T @ cam.R  # world dirs
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    oc = np.asarray(centre) - cam.centre
+    along = rays @ oc
+    d2 = oc @ oc - along**2
+    return (d2 < radius**2).reshape(cam.shape)
+
+
+def test_consistency_drops_what_the_other_cameras_do_not_see():
+    cams = _rig()
+    truth = [_sphere_mask(c, [0.0, 0.0, 1.0], 0.3) for c in cams]
+    masks = [m.copy() for m in truth]
+    masks[0][2:8, 2:8] = True  # clutter seen by camera 0 only
+    out = consistent_masks(masks, cams, voxel_size=0.03)
+    assert not out[0][2:8, 2:8].any()
+    for m, t in zip(out, truth, strict=True):
+        assert (m & t).sum() / t.sum() > 0.97  # the sphere stays
+    reaches = others_reach([truth[0], truth[1], np.zeros_like(truth[2]), truth[3]], cams)
+    assert reaches[2] is not None and reaches[2][truth[2]].mean() > 0.97
+    with pytest.raises(InputError, match="3 masks for 4 cameras"):
+        consistent_masks(masks[:3], cams)
+
+
+def test_reach_covers_the_projected_cubes():
+    (cam,) = _rig(1)
+    X = np.array([[0.0, 0.0, 1.0]])
+    r = reach(X, cam, 0.1)
+    uv, _ = cam.project(X)
+    c, row = np.round(uv[0]).astype(int)
+    assert r[row, c] and r.sum() < 0.2 * r.size
