@@ -858,6 +858,11 @@ PROTECTED: list[tuple[str, list[str], str]] = [
     ("export_beside", ["export", T, "--out", "TRK/x.bvh"], f"export: --out TRK/x.bvh: {INSIDE}"),
     ("synth_into_track", ["synth", "TRK", "--template", "neutral_5k"], "OUT TRK: is the track"),
     ("synth_beside", ["synth", "TRK/cap"], f"synth: OUT TRK/cap: {INSIDE}"),
+    (
+        "silhouettes_beside",
+        ["silhouettes", "TMP", "--calibration", "TMP/c.toml", "--out", "TRK/s"],
+        f"silhouettes: --out TRK/s: {INSIDE}",
+    ),
     ("eval_into_track", ["eval", C, T, "--out", "TRK"], "eval: --out TRK: is the track folder TRK"),
     ("eval_beside", ["eval", C, T, "--out", "TRK/e"], f"eval: --out TRK/e: {INSIDE}"),
     ("report_over_track", ["report", C, T, "--out", "TRK/track.json"], INSIDE),
