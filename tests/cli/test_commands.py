@@ -142,7 +142,7 @@ def test_frames_are_frame_numbers_and_restart_is_one_flag_everywhere(tmp_path, c
     said = capsys.readouterr().out  # the frames asked for, not the folder's six
     assert f"\nhulls of 2 frames (6–7) in {cap / 'hulls'} (2 carved by this run" in said
     assert main(["hull", str(cap), "--frames", "5", "--overwrite"]) == 0
-    assert "hulls of 1 frames (5) in" in capsys.readouterr().out
+    assert "hulls of 1 frame (5) in" in capsys.readouterr().out
     assert main(["hull", str(cap)]) == 0
     assert "hulls of 6 frames in" in capsys.readouterr().out
     assert main(["hull", str(cap), "--frames", "20:30"]) == 2

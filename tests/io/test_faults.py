@@ -231,7 +231,7 @@ def test_a_rerun_says_what_was_resumed(cap, tmp_path, capsys):
     (tmp_path / "t" / "frames" / "00004.npz").unlink()  # as if killed before the last frame
     capsys.readouterr()
     assert main(argv) == 0
-    assert "tracked 1 frames (4 resumed from an earlier run)" in capsys.readouterr().out
+    assert "tracked 1 frame (4 resumed from an earlier run)" in capsys.readouterr().out
     assert main(argv) == 0
     assert "tracked 0 frames (5 resumed from an earlier run)" in capsys.readouterr().out
 

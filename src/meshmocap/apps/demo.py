@@ -244,9 +244,9 @@ def demo_tracks(
     as the demo does and score each against the truth the studio kept (joints only).
 
     The tracking template is chosen once (:func:`tracking_template`: ``"auto"`` estimates the
-    performer's body, cached with the capture) and kept in every track folder; each method
+    performer's body, cached for the capture) and kept in every track folder; each method
     runs on the default path: the light body the driver tracks (:mod:`meshmocap.body.light`),
-    default options, the automatic first pose (cached with the capture), the recovery
+    default options, the automatic first pose (cached for the capture), the recovery
     checks. ``benchmarks/bench_demo_guard.py`` guards these figures.
 
     Returns

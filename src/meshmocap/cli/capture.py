@@ -85,7 +85,7 @@ def _cmd_silhouettes(args: argparse.Namespace) -> int:
 
 
 def _cmd_hull(args: argparse.Namespace) -> int:
-    from meshmocap._validate import frame_positions
+    from meshmocap._validate import counted, frame_positions
     from meshmocap.apps.export import frame_ranges
     from meshmocap.errors import InputError
     from meshmocap.io.cameras import read_cameras
@@ -107,7 +107,8 @@ def _cmd_hull(args: argparse.Namespace) -> int:
     )
     cap = run.capture
     made = cap.indices if frames is None else frames  # the frames asked for, not the folder's
-    which = f"{len(made)} frames" + (f" ({frame_ranges(made)})" if frames is not None else "")
+    ranges = f" ({frame_ranges(made)})" if frames is not None else ""
+    which = counted(len(made), "frame") + ranges
     print(
         f"hulls of {which} in {cap.path / 'hulls'} ({run.carved} carved by this run, "
         f"{len(run.partial)} from fewer cameras, {len(run.missing)} without hull; "

@@ -3,7 +3,7 @@ each):
 
 * :mod:`~meshmocap.estimate.performer` — the performer's body: estimated from the
   silhouettes, a clean mesh or the points, the tracking template chosen, and both cached
-  with the capture;
+  for the capture (outside it);
 * :mod:`~meshmocap.estimate.pose` — the pose: the articulated fit, many candidate poses
   scored at once, the global search of the first pose and the record of how the first
   pose was found (:class:`~meshmocap.io.results.Start`, made here, written to

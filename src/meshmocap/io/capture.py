@@ -628,6 +628,8 @@ class SequenceCapture:
         every one, or all but one of at least three, have the same vertex count and
         triangles. Files that cannot be read are left out."""
         n = len(self.seq)
+        if n < 2:  # one file (a live frame): nothing to compare, nothing read twice
+            return None
         groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}  # connectivity → its files
 
         def read(positions) -> tuple[int, int]:

@@ -548,7 +548,7 @@ def first_pose(
     template: Template, frame, init: Init, *, capture=None, options: dict | None = None
 ) -> Start:
     """The first frame's pose and how it was found. An automatic search is made once per
-    capture, frame and template, and cached with the capture
+    capture, frame and template, and cached for the capture
     (:func:`~meshmocap.estimate.performer.capture_cache.cached_first_pose`)."""
     if init == "truth":
         truth = _truth(frame)

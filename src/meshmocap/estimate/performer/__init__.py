@@ -10,5 +10,5 @@ tracked with.
   tracked with (given, named by the capture, or estimated), and the start a template made
   from a frame knows;
 * :mod:`~meshmocap.estimate.performer.capture_cache` — the body and the first pose
-  estimated once per capture and cached with it.
+  estimated once per capture and cached for it (outside the capture).
 """

@@ -187,7 +187,7 @@ def tracking_template(
         return TemplateChoice(t, info, note, start)
     check_choice("tracking_template", "kind", kind, FRAME_KINDS)
     chosen = frames_kind(capture) if kind == "auto" else kind
-    # estimated once per capture and cached with it (meshmocap.estimate.performer.capture_cache);
+    # estimated once per capture and cached for it (meshmocap.estimate.performer.capture_cache);
     # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
     if chosen == "points":
         est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
