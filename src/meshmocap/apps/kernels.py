@@ -67,7 +67,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
         "stale_rows": (
             "float64[:, ::1], float64[:], float64[::1], int64[::1], float64[:, ::1], "
-            "float64[:, ::1], float64[::1]",
+            "int64[:, ::1], float64[:, ::1], float64[::1]",
         ),
         "assign_kernel": (
             "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
@@ -78,6 +78,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
         ),
+        "block_cholesky": (
+            "float64[:, :, ::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1]",
+        ),
+        "block_cholesky_solve": ("float64[:, :, ::1], int64[::1], int64[::1], float64[:, ::1]",),
     },
     "meshmocap.trackers.cage.kernels": {
         "quad_skinning_transforms": (

@@ -10,6 +10,9 @@
 * :func:`point_moments`: the per-patch sums of the point terms, one pass.
 * :func:`nearest_among`, :func:`stale_rows`: the candidate vertices re-used across a
   frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
+* :func:`block_cholesky`, :func:`block_cholesky_solve`: the normal equations' sparse
+  Cholesky factor in 3×3 blocks on a structure computed once
+  (:class:`~meshmocap.trackers.patch.solver.BlockFactor`), and its solve.
 """
 
 from __future__ import annotations
@@ -142,13 +145,15 @@ def nearest_among(Y, V, cand, k):
 
 
 @njit(cache=True, nogil=True)
-def stale_rows(Y, kth, far, epoch, moved, centres, radius):
+def stale_rows(Y, kth, far, epoch, moved, order, centres, radius):
     """Points whose ``k`` nearest candidates may miss a nearer vertex
     (:mod:`~meshmocap.trackers.patch.nearest`): point t (``Y[t]``, k-th candidate at
     ``kth[t]``, every other vertex at least ``far[t]`` away at snapshot ``epoch[t]``) is
     stale if a patch ``p`` that moved at least ``far[t] − kth[t]`` since that snapshot
     (``moved[epoch[t], p]``) now reaches within ``kth[t]`` of it (its vertices lie within
-    ``radius[p]`` of ``centres[p]``). Returns (m,) bool."""
+    ``radius[p]`` of ``centres[p]``). ``order[e]`` lists the patches by decreasing
+    ``moved[e]``, so a point looks only at the patches that moved enough. Returns (m,)
+    bool."""
     m = Y.shape[0]
     P = centres.shape[0]
     out = np.zeros(m, dtype=np.bool_)
@@ -158,14 +163,16 @@ def stale_rows(Y, kth, far, epoch, moved, centres, radius):
             out[t] = True
             continue
         e = epoch[t]
-        for p in range(P):
-            if moved[e, p] >= slack:
-                x = centres[p, 0] - Y[t, 0]
-                y = centres[p, 1] - Y[t, 1]
-                z = centres[p, 2] - Y[t, 2]
-                if np.sqrt(x * x + y * y + z * z) - radius[p] < kth[t]:
-                    out[t] = True
-                    break
+        for u in range(P):
+            p = order[e, u]
+            if moved[e, p] < slack:
+                break
+            x = centres[p, 0] - Y[t, 0]
+            y = centres[p, 1] - Y[t, 1]
+            z = centres[p, 2] - Y[t, 2]
+            if np.sqrt(x * x + y * y + z * z) - radius[p] < kth[t]:
+                out[t] = True
+                break
     return out
 
 
@@ -210,3 +217,83 @@ def rotated_moments(R, k, l, M):
                             j, 2
                         ]
     return Q
+
+
+@njit(cache=True, nogil=True)
+def block_cholesky(L, colptr, rowidx, row_ptr, row_col, row_entry):
+    """In place, the Cholesky factor of a symmetric positive definite matrix stored as the
+    lower 3×3 blocks ``L`` (nnz, 3, 3) of its factor's pattern (compressed columns
+    ``colptr`` (nb + 1,), block rows ``rowidx`` (nnz,), each column's diagonal block first
+    and its rows increasing; fill blocks zero). Left-looking, column by column: column
+    ``j`` is updated by every column ``k = row_col[t]`` whose block in row ``j`` is the
+    entry ``row_entry[t]`` of ``L``, ``t`` in ``row_ptr[j]:row_ptr[j + 1]`` (the factor's
+    row structure). Returns False (``L`` spoiled) where a pivot is not positive: the
+    matrix is not positive definite to rounding."""
+    nb = colptr.shape[0] - 1
+    pos = np.zeros(nb, dtype=np.int64)
+    for j in range(nb):
+        for e in range(colptr[j], colptr[j + 1]):
+            pos[rowidx[e]] = e
+        for t in range(row_ptr[j], row_ptr[j + 1]):
+            ejk = row_entry[t]  # L[j, k]: the rows of column k from j on follow it
+            for e in range(ejk, colptr[row_col[t] + 1]):  # L[i, j] −= L[i, k] L[j, k]ᵀ
+                dst = pos[rowidx[e]]
+                for a in range(3):
+                    for b in range(3):
+                        L[dst, a, b] -= (L[e, a, 0] * L[ejk, b, 0] + L[e, a, 1] * L[ejk, b, 1]) + L[
+                            e, a, 2
+                        ] * L[ejk, b, 2]
+        d = colptr[j]  # the diagonal block: its 3×3 Cholesky factor
+        for a in range(3):
+            s = L[d, a, a]
+            for c in range(a):
+                s -= L[d, a, c] * L[d, a, c]
+            if not s > 0.0:
+                return False
+            L[d, a, a] = np.sqrt(s)
+            for b in range(a + 1, 3):
+                s = L[d, b, a]
+                for c in range(a):
+                    s -= L[d, b, c] * L[d, a, c]
+                L[d, b, a] = s / L[d, a, a]
+            for b in range(a + 1, 3):
+                L[d, a, b] = 0.0
+        for e in range(d + 1, colptr[j + 1]):  # L[i, j] = A[i, j] L[j, j]⁻ᵀ
+            for r in range(3):
+                for a in range(3):
+                    s = L[e, r, a]
+                    for c in range(a):
+                        s -= L[e, r, c] * L[d, a, c]
+                    L[e, r, a] = s / L[d, a, a]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def block_cholesky_solve(L, colptr, rowidx, b):
+    """``x`` (nb, 3) of ``L Lᵀ x = b`` (nb, 3) for the factor ``L`` of
+    :func:`block_cholesky` (same storage): forward, then backward substitution."""
+    nb = colptr.shape[0] - 1
+    x = b.copy()
+    for j in range(nb):  # L y = b
+        d = colptr[j]
+        for a in range(3):
+            s = x[j, a]
+            for c in range(a):
+                s -= L[d, a, c] * x[j, c]
+            x[j, a] = s / L[d, a, a]
+        for e in range(d + 1, colptr[j + 1]):
+            i = rowidx[e]
+            for a in range(3):
+                x[i, a] -= (L[e, a, 0] * x[j, 0] + L[e, a, 1] * x[j, 1]) + L[e, a, 2] * x[j, 2]
+    for j in range(nb - 1, -1, -1):  # Lᵀ x = y
+        d = colptr[j]
+        for e in range(d + 1, colptr[j + 1]):
+            i = rowidx[e]
+            for a in range(3):
+                x[j, a] -= (L[e, 0, a] * x[i, 0] + L[e, 1, a] * x[i, 1]) + L[e, 2, a] * x[i, 2]
+        for a in range(2, -1, -1):
+            s = x[j, a]
+            for c in range(a + 1, 3):
+                s -= L[d, c, a] * x[j, c]
+            x[j, a] = s / L[d, a, a]
+    return x

@@ -80,6 +80,7 @@ class NearestVertices:
                 self.far,
                 self.epoch,
                 moved,
+                np.argsort(-moved, axis=1, kind="stable"),
                 np.ascontiguousarray(c),
                 self.radius,
             )

@@ -32,7 +32,12 @@ from meshmocap.geometry.levenberg_marquardt import (
     solve_damped,
 )
 from meshmocap.geometry.rotations import skew
-from meshmocap.trackers.patch.kernels import point_moments, rotated_moments
+from meshmocap.trackers.patch.kernels import (
+    block_cholesky,
+    block_cholesky_solve,
+    point_moments,
+    rotated_moments,
+)
 from meshmocap.trackers.patch.model import PatchModel
 
 #: ε of the damped solves, relative to the median diagonal entry
@@ -74,6 +79,98 @@ def _pair_index(model: PatchModel) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
+class BlockFactor:
+    """Where the Cholesky factor of a :class:`Pattern`'s ``H`` has its 3×3 blocks (every
+    unknown comes in threes: a patch's rotation, its centre, a joint), on a fill-reducing
+    order of the blocks; :func:`~meshmocap.trackers.patch.kernels.block_cholesky` fills
+    them in.
+
+    Attributes
+    ----------
+    colptr, rowidx : compressed-column structure of the factor's blocks (block positions in
+        the order; each column's diagonal block first, rows increasing)
+    row_ptr, row_col, row_entry : its row structure: the blocks of row ``j`` are the entries
+        ``row_entry[row_ptr[j]:row_ptr[j + 1]]`` in columns ``row_col[...]``
+    src : (9 nnz,) int, index of each factor entry into the concatenated block arrays of a
+        :class:`System` (−1: a fill entry, zero in ``H``)
+    scalar : (n,) int, the unknown at each position of the ordered system
+    diag : (n,) int, the flat factor entry of each unknown's diagonal
+    """
+
+    colptr: np.ndarray
+    rowidx: np.ndarray
+    row_ptr: np.ndarray
+    row_col: np.ndarray
+    row_entry: np.ndarray
+    src: np.ndarray
+    scalar: np.ndarray
+    diag: np.ndarray
+
+
+def block_factor(rows: np.ndarray, cols: np.ndarray, n: int) -> BlockFactor:
+    """The :class:`BlockFactor` of a symmetric ``n × n`` matrix whose entries lie at
+    ``rows``, ``cols`` (m,) int (both triangles, each entry once, in 3×3 blocks; ``n`` a
+    multiple of 3): a minimum-degree order of the blocks (SuperLU's, on the block graph),
+    then the factor's structure column by column (each column: the matrix's own below the
+    diagonal and its children's in the elimination tree)."""
+    nb = n // 3
+    br, bc = rows // 3, cols // 3
+    B = sp.csc_matrix((np.ones(len(br)), (br, bc)), shape=(nb, nb))
+    B.sum_duplicates()
+    B.data[:] = 1.0
+    B = (B + sp.identity(nb, format="csc") * float(nb)).tocsc()
+    lu = spla.splu(
+        B, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
+    pos = lu.perm_c  # block → position
+    order = np.argsort(pos)  # position → block
+    Bc = B.tocoo()
+    pi, pj = pos[Bc.row], pos[Bc.col]
+    low = pi > pj
+    lower = sp.csc_matrix((np.ones(int(low.sum())), (pi[low], pj[low])), shape=(nb, nb))
+    children: list[list[int]] = [[] for _ in range(nb)]
+    struct: list[np.ndarray] = []
+    for j in range(nb):  # symbolic factorisation along the elimination tree
+        own = lower.indices[lower.indptr[j] : lower.indptr[j + 1]]
+        s = np.union1d(
+            np.concatenate([[j], own]),
+            np.concatenate([struct[c][1:] for c in children[j]] or [np.zeros(0, np.int64)]).astype(
+                np.int64
+            ),
+        )
+        struct.append(s)
+        if len(s) > 1:
+            children[int(s[1])].append(j)
+    counts = np.array([len(s) for s in struct])
+    colptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    rowidx = np.concatenate(struct).astype(np.int64)
+    col = np.repeat(np.arange(nb), counts)
+    off = np.flatnonzero(rowidx != col)
+    by_row = off[np.argsort(rowidx[off], kind="stable")]
+    row_ptr = np.concatenate([[0], np.cumsum(np.bincount(rowidx[off], minlength=nb))])
+    # each factor entry's source among the matrix's entries (1-based; 0: fill)
+    where = sp.csr_matrix((np.arange(1, len(rows) + 1), (rows, cols)), shape=(n, n))
+    e3 = np.arange(3)
+    r = (3 * order[rowidx])[:, None, None] + e3[None, :, None]
+    c = (3 * order[col])[:, None, None] + e3[None, None, :]
+    r, c = np.broadcast_arrays(r, c)
+    src = np.asarray(where[r.ravel(), c.ravel()]).ravel().astype(np.int64) - 1
+    scalar = (3 * order[:, None] + e3).ravel()
+    u = np.arange(n)
+    diag = 9 * colptr[pos[u // 3]] + 4 * (u % 3)
+    return BlockFactor(
+        colptr,
+        rowidx,
+        row_ptr.astype(np.int64),
+        col[by_row].astype(np.int64),
+        by_row.astype(np.int64),
+        src,
+        scalar.astype(np.int64),
+        diag.astype(np.int64),
+    )
+
+
+@dataclass(frozen=True, eq=False)
 class Pattern:
     """Sparsity of the normal equations of one patch model, fixed while tracking.
 
@@ -95,6 +192,7 @@ class Pattern:
     diag : (n,) int, stored positions of the ordered diagonal
     pair_sum : (P, 2E) sparse, sums blocks given per pair end (the first patches of every
         pair, then the second ones) into per-patch blocks
+    factor : BlockFactor, the structure of ``H``'s Cholesky factor (:meth:`System.solve`)
     """
 
     n_patches: int
@@ -106,6 +204,7 @@ class Pattern:
     gather: np.ndarray
     diag: np.ndarray
     pair_sum: sp.csr_matrix
+    factor: BlockFactor
 
     @property
     def n(self) -> int:
@@ -157,7 +256,8 @@ def normal_pattern(model: PatchModel, n_joints: int) -> Pattern:
     pair_sum = sp.csr_matrix(
         (np.ones(len(ends)), (ends, np.arange(len(ends)))), shape=(P, len(ends))
     )
-    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag, pair_sum)
+    factor = block_factor(rows, cols, n)
+    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag, pair_sum, factor)
 
 
 @dataclass
@@ -226,9 +326,9 @@ class System:
         idx = ru[:, None] + np.arange(G.shape[1])
         self.g += np.bincount(idx.ravel(), G.ravel(), minlength=self.n)
 
-    def _values(self) -> np.ndarray:
-        """Stored entries of ``H`` in the pattern's order."""
-        vals = np.concatenate(
+    def _blocks(self) -> np.ndarray:
+        """The block arrays concatenated (the pattern's storage order, before ``gather``)."""
+        return np.concatenate(
             [
                 self.D.ravel(),
                 self.O.ravel(),
@@ -238,7 +338,10 @@ class System:
                 self.JJ.ravel(),
             ]
         )
-        return vals[self.pattern.gather]
+
+    def _values(self) -> np.ndarray:
+        """Stored entries of ``H`` in the pattern's order."""
+        return self._blocks()[self.pattern.gather]
 
     def matrix(self, damping: float | None = None) -> sp.csc_matrix:
         """``H`` (n, n), damped as in :meth:`solve` with λ = ``damping`` (None: undamped),
@@ -262,28 +365,23 @@ class System:
         FitError
             Singular normal equations (after the rule's retries with more damping).
         """
-        pt = self.pattern
-        data = self._values()
-        d = data[pt.diag].copy()
-        rhs = -self.g[pt.order]
+        f = self.pattern.factor
+        L0 = self._blocks()[f.src]
+        L0[f.src < 0] = 0.0
+        d = L0[f.diag]  # H's diagonal, unknowns in their own order
+        rhs = np.ascontiguousarray(-self.g[f.scalar].reshape(-1, 3))
 
         def factor_and_solve(add: np.ndarray) -> np.ndarray:
             # H is symmetric positive definite and sparse (each patch couples with its ~6
-            # neighbours and its bone's joints): SuperLU in symmetric mode with diagonal
-            # pivots, on the pattern's minimum-degree order, is a sparse Cholesky in all but
-            # name: exact, and faster here than block-Jacobi conjugate gradients
-            # (docs/patch.rst).
-            vals = data.copy()
-            vals[pt.diag] += add
-            H = sp.csc_matrix((vals, pt.indices, pt.indptr), shape=(self.n, self.n))
-            try:
-                lu = spla.splu(
-                    H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-                )
-            except RuntimeError as exc:  # "Factor is exactly singular"
-                raise np.linalg.LinAlgError(str(exc)) from None
+            # neighbours and its bone's joints): a Cholesky factor in 3×3 blocks on the
+            # pattern's fill-reducing order, its structure computed once (BlockFactor)
+            L = L0.copy()
+            L[f.diag] += add
+            L = L.reshape(-1, 3, 3)
+            if not block_cholesky(L, f.colptr, f.rowidx, f.row_ptr, f.row_col, f.row_entry):
+                raise np.linalg.LinAlgError("not positive definite")
             delta = np.empty(self.n)
-            delta[pt.order] = lu.solve(rhs)
+            delta[f.scalar] = block_cholesky_solve(L, f.colptr, f.rowidx, rhs).ravel()
             return delta
 
         return solve_damped(factor_and_solve, d, lam=damping, floor=FLOOR)
