@@ -10,7 +10,7 @@ from PIL import Image
 from meshmocap.errors import FormatError, GreyMaskWarning, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
 from meshmocap.geometry.raster import coverage, rasterize
-from meshmocap.geometry.silhouette import fill_triangles, silhouette
+from meshmocap.geometry.silhouette import covered_pixels, fill_triangles, silhouette
 from meshmocap.io.silhouettes import read_mask, write_mask
 from meshmocap.studio.rigs import camera_rig
 
@@ -60,6 +60,25 @@ def test_equals_coverage_of_raster_exactly(seed):
         # A closed mesh: its positive-area triangles alone cover the silhouette.
         assert np.array_equal(silhouette(V, F, cam, assume_closed=True), expect)
         assert np.array_equal(silhouette(V, F[:, ::-1], cam, assume_closed=True), expect)
+
+
+@pytest.mark.parametrize("orientation", ["any", "positive"])
+def test_covered_pixels_are_the_filled_image_at_those_pixels(orientation):
+    """The pixels' rows only, cut into the same spans: exactly the image's pixels, for a
+    closed mesh and for a soup of random triangles (some off the image, some behind the
+    camera), and nothing for no pixels."""
+    rng = np.random.default_rng(3)
+    cam = _camera((2.5, -1.0, 1.2))
+    soup = rng.uniform(-2.0, 2.0, size=(300, 3)) + [0, 0, 0.9]
+    for V, F in (_lumpy_sphere(4), (soup, rng.integers(0, 300, size=(400, 3)))):
+        uv, depth = cam.project(V)
+        mask = fill_triangles(uv, F, cam.shape, valid=depth > 0, orientation=orientation)
+        px = np.stack([rng.integers(0, 640, 2000), rng.integers(0, 480, 2000)], 1)
+        px = np.concatenate([px, np.argwhere(mask)[::7, ::-1]])  # and pixels inside
+        got = covered_pixels(uv, F, px, cam.shape, valid=depth > 0, orientation=orientation)
+        np.testing.assert_array_equal(got, mask[px[:, 1], px[:, 0]])
+        assert got.any()
+    assert covered_pixels(uv, F, np.zeros((0, 2), int), cam.shape).shape == (0,)
 
 
 def test_triangle_soup_equals_coverage():

@@ -36,7 +36,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.template import Template
 from meshmocap.geometry.camera import Camera, project
 from meshmocap.geometry.distance_field import DistanceGrid
-from meshmocap.geometry.silhouette import silhouette
+from meshmocap.geometry.silhouette import covered_pixels
 
 __all__ = [
     "BURIED_DEPTH",
@@ -207,8 +207,11 @@ def uncovered_points(
         sel = np.flatnonzero(ok)[core]
         if sel.size == 0:  # no point images into the silhouette: nothing to render
             continue
-        model = silhouette(V, F, cam, assume_closed=True)
-        hit[todo[sel]] = ~model[px[sel, 1], px[sel, 0]]
+        # the tracked mesh's silhouette (assume_closed) at those pixels only
+        with np.errstate(over="ignore", invalid="ignore"):
+            uvm, zm = cam.project(V)
+        covered = covered_pixels(uvm, F, px[sel], cam.shape, valid=zm > 0, orientation="positive")
+        hit[todo[sel]] = ~covered
     return hit
 
 
