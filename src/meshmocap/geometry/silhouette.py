@@ -186,11 +186,11 @@ def covered_pixels(
     pixels = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
     out = np.zeros(len(pixels), dtype=bool)
     H, W = int(shape[0]), int(shape[1])
-    prep = _prepare(uv, F, H, W, valid, orientation)
+    rows, where = np.unique(pixels[:, 1], return_inverse=True)
+    prep = _prepare(uv, F, H, W, valid, orientation, rows=rows)
     if prep is None or len(pixels) == 0:
         return out
     ids, counts, top, bounds, (_, _, c0, c1) = prep
-    rows, where = np.unique(pixels[:, 1], return_inverse=True)
     bottom = top + counts - 1
     first = np.searchsorted(rows, top, side="left")  # each triangle's rows among them
     n = np.searchsorted(rows, bottom, side="right") - first
@@ -206,10 +206,12 @@ def covered_pixels(
     return cover[where.ravel(), pixels[:, 0]]
 
 
-def _prepare(uv, F, H: int, W: int, valid, orientation):
+def _prepare(uv, F, H: int, W: int, valid, orientation, rows=None):
     """The triangles :func:`fill_triangles` fills: their indices ``ids``, their numbers of
     pixel rows and first rows (float), their edge bounds (:func:`_edge_bounds`) and the
-    bounding box ``(r0, r1, c0, c1)`` of them all; None where none covers a pixel."""
+    bounding box ``(r0, r1, c0, c1)`` of them all; None where none covers a pixel.
+    ``rows`` (sorted int, optional): only the triangles spanning one of these rows are
+    returned (the box is still that of them all)."""
     uv = np.asarray(uv, dtype=np.float64)
     F = np.asarray(F, dtype=np.intp)
     # Column arrays (m,) are much faster to combine than (m, 3) reductions.
@@ -232,7 +234,6 @@ def _prepare(uv, F, H: int, W: int, valid, orientation):
     ids = np.flatnonzero(n_rows)
     if ids.size == 0:
         return None
-    bounds = _edge_bounds((x0[ids], x1[ids], x2[ids]), (y0[ids], y1[ids], y2[ids]), area[ids])
     # Work in the bounding box of the filled triangles: the difference image and its
     # cumulative sum are then as small as the silhouette, not the whole picture.
     r0, r1 = int(top[ids].min()), int(bottom[ids].max())
@@ -241,6 +242,10 @@ def _prepare(uv, F, H: int, W: int, valid, orientation):
     c0, c1 = int(max(np.ceil(xmin), 0)), int(min(np.floor(xmax), W - 1))
     if c1 < c0:
         return None
+    if rows is not None:
+        span = np.searchsorted(rows, bottom[ids], "right") - np.searchsorted(rows, top[ids])
+        ids = ids[span > 0]
+    bounds = _edge_bounds((x0[ids], x1[ids], x2[ids]), (y0[ids], y1[ids], y2[ids]), area[ids])
     return ids, n_rows[ids], top[ids], bounds, (r0, r1, c0, c1)
 
 
