@@ -75,6 +75,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         ),
         "point_moments": ("int64[::1], float64[:, ::1], float64[:, ::1], float64[::1], int64",),
         "rotated_moments": ("float64[:, :, ::1], int64[:], int64[:], float64[:, :, :, :, ::1]",),
+        "rigidity_blocks": (
+            "float64[:, :, ::1], float64[:, ::1], int64[:], int64[:], float64[::1], "
+            "float64[:, :, ::1], float64[:, :, :, :, ::1]",
+        ),
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
         ),

@@ -8,6 +8,8 @@
   candidates' normals, a sort of point × patch keys, a bincount), weights to rounding
   (``tests/trackers/patch/test_assign.py``).
 * :func:`point_moments`: the per-patch sums of the point terms, one pass.
+* :func:`rigidity_blocks`: the rigidity term's blocks, gradient and energy from the pairs'
+  rest moments (:func:`rotated_moments`), one pass.
 * :func:`nearest_among`, :func:`stale_rows`: the candidate vertices re-used across a
   frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
 * :func:`block_cholesky`, :func:`block_cholesky_solve`: the normal equations' sparse
@@ -297,3 +299,80 @@ def block_cholesky_solve(L, colptr, rowidx, b):
                 s -= L[d, c, a] * x[j, c]
             x[j, a] = s / L[d, a, a]
     return x
+
+
+@njit(cache=True, nogil=True)
+def rigidity_blocks(R, c, k, l, W, m, M):
+    """The rigidity term (Eq. 2) from the pairs' rest moments, one pass
+    (:func:`~meshmocap.trackers.patch.solver.add_rigidity`, which states the algebra): per
+    neighbouring pair ``(k[e], l[e])`` with moments ``W`` (E,), ``m`` (E, 2, 3), ``M``
+    (E, 2, 2, 3, 3), the 6×6 blocks ``H_kk``, ``H_ll`` (in ``H2[:E]``, ``H2[E:]``) and
+    ``H_kl`` (E, 6, 6), the gradient pieces of patch k and patch l (E, 2, 6), and the
+    energy; patch rotations ``R`` (P, 3, 3), centres ``c`` (P, 3)."""
+    E = k.shape[0]
+    Q = rotated_moments(R, k, l, M)
+    H2 = np.zeros((2 * E, 6, 6))
+    Hkl = np.zeros((E, 6, 6))
+    G = np.zeros((E, 2, 6))
+    s = np.empty((2, 3))
+    dc = np.empty(3)
+    value = 0.0
+    for e in range(E):
+        w = W[e]
+        for a in range(2):
+            Ra = R[k[e]] if a == 0 else R[l[e]]
+            for i in range(3):
+                s[a, i] = (Ra[i, 0] * m[e, a, 0] + Ra[i, 1] * m[e, a, 1]) + Ra[i, 2] * m[e, a, 2]
+        for i in range(3):
+            dc[i] = c[k[e], i] - c[l[e], i]
+        t00 = Q[e, 0, 0, 0, 0] + Q[e, 0, 0, 1, 1] + Q[e, 0, 0, 2, 2]
+        t11 = Q[e, 1, 1, 0, 0] + Q[e, 1, 1, 1, 1] + Q[e, 1, 1, 2, 2]
+        t01 = Q[e, 0, 1, 0, 0] + Q[e, 0, 1, 1, 1] + Q[e, 0, 1, 2, 2]
+        value += t00 + t11 - 2.0 * t01
+        for i in range(3):
+            value += 2.0 * dc[i] * (s[0, i] - s[1, i]) + w * dc[i] * dc[i]
+        # Σ w A(q_a)ᵀ A(q_b) = [[tr(Q_ab) I − Q_ba, [s_a]×], [−[s_b]×, W I]]
+        for blk in range(3):  # H_kk, H_ll, −H_kl
+            a, b = (0, 0) if blk == 0 else ((1, 1) if blk == 1 else (0, 1))
+            tr = t00 if blk == 0 else (t11 if blk == 1 else t01)
+            sign = -1.0 if blk == 2 else 1.0
+            for i in range(3):
+                for j in range(3):
+                    v = -Q[e, b, a, i, j]
+                    if i == j:
+                        v += tr
+                    if blk == 0:
+                        H2[e, i, j] = v
+                    elif blk == 1:
+                        H2[E + e, i, j] = v
+                    else:
+                        Hkl[e, i, j] = -v
+            sa0, sa1, sa2 = s[a, 0], s[a, 1], s[a, 2]
+            sb0, sb1, sb2 = s[b, 0], s[b, 1], s[b, 2]
+            X = H2[e] if blk == 0 else (H2[E + e] if blk == 1 else Hkl[e])
+            # [s_a]× top right, −[s_b]× bottom left, W I bottom right
+            X[0, 4], X[0, 5] = -sa2 * sign, sa1 * sign
+            X[1, 3], X[1, 5] = sa2 * sign, -sa0 * sign
+            X[2, 3], X[2, 4] = -sa1 * sign, sa0 * sign
+            X[4, 0], X[5, 0] = -sb2 * sign, sb1 * sign
+            X[3, 1], X[5, 1] = sb2 * sign, -sb0 * sign
+            X[3, 2], X[4, 2] = -sb1 * sign, sb0 * sign
+            X[3, 3] = w * sign
+            X[4, 4] = w * sign
+            X[5, 5] = w * sign
+        # gradient: Σ w A(q_a)ᵀ r, r = q_k − q_l + Δc; Σ w q_a × q_b = axial(Q_ba − Q_ab)
+        for a in range(2):
+            sign = 1.0 if a == 0 else -1.0
+            for i in range(3):
+                i1, i2 = (i + 1) % 3, (i + 2) % 3
+                # axial(S)_i = (S[i2, i1] − S[i1, i2]) / 2 for S = Q_0a − Q_a0 − Q_1a + Q_a1
+                ax = 0.5 * (
+                    (Q[e, 0, a, i2, i1] - Q[e, a, 0, i2, i1])
+                    - (Q[e, 0, a, i1, i2] - Q[e, a, 0, i1, i2])
+                    - (Q[e, 1, a, i2, i1] - Q[e, a, 1, i2, i1])
+                    + (Q[e, 1, a, i1, i2] - Q[e, a, 1, i1, i2])
+                )
+                cross = s[a, i1] * dc[i2] - s[a, i2] * dc[i1]
+                G[e, a, i] = sign * (ax + cross)
+                G[e, a, 3 + i] = sign * (s[0, i] - s[1, i] + w * dc[i])
+    return H2, Hkl, G, value

@@ -36,7 +36,7 @@ from meshmocap.trackers.patch.kernels import (
     block_cholesky,
     block_cholesky_solve,
     point_moments,
-    rotated_moments,
+    rigidity_blocks,
 )
 from meshmocap.trackers.patch.model import PatchModel
 
@@ -445,14 +445,6 @@ def _ata_blocks(
     return out
 
 
-def _axial(S: np.ndarray) -> np.ndarray:
-    """Axial vectors (m, 3) of the antisymmetric parts of (m, 3, 3) matrices:
-    ``[axial(S)]× = (S − Sᵀ) / 2``, so ``axial(b aᵀ − a bᵀ) = a × b``."""
-    return 0.5 * np.stack(
-        [S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]], axis=1
-    )
-
-
 def add_rigidity(
     sys: System,
     model: PatchModel,
@@ -461,30 +453,24 @@ def add_rigidity(
     c: np.ndarray,
     weight: float,
 ) -> float:
-    """Add ``weight · Er`` (Eq. 2) and return its value (before ``weight``)."""
+    """Add ``weight · Er`` (Eq. 2) and return its value (before ``weight``).
+
+    With ``s_a = R_a m_a`` and ``Q_ab = R_a M_ab R_bᵀ`` (the pair's rest moments turned),
+    the energy ``Σ w |q_k − q_l + Δc|²`` is ``tr Q_kk + tr Q_ll − 2 tr Q_kl + 2 Δc·(s_k −
+    s_l) + W |Δc|²``; the Jacobians are ``+A(q_k)`` on patch k and ``−A(q_l)`` on patch l,
+    so the blocks are ``Σ w A(q_a)ᵀ A(q_b)`` (module docstring) and the gradient pieces
+    ``±[axial(Q_0a − Q_a0) − axial(Q_1a − Q_a1) + s_a × Δc; s_k − s_l + W Δc]`` (``Σ w q_a
+    × q_b = axial(Q_ba − Q_ab)``), all computed in one pass
+    (:func:`~meshmocap.trackers.patch.kernels.rigidity_blocks`).
+    """
     k, l = model.pairs[:, 0], model.pairs[:, 1]
-    Rs = np.stack([R[k], R[l]], 1)  # (E, 2, 3, 3)
-    s = np.einsum("eaij,eaj->eai", Rs, mom.m)  # s_a = R_a m_a
-    Q = rotated_moments(R, k, l, mom.M)  # R_a M_ab R_bᵀ
-    W = mom.W
-    dc = c[k] - c[l]
-    # energy: Σ w |q_k − q_l + Δc|²
-    tr = np.trace(Q, axis1=-2, axis2=-1)
-    value = np.sum(tr[:, 0, 0] + tr[:, 1, 1] - 2 * tr[:, 0, 1]) + np.sum(
-        2 * np.sum(dc * (s[:, 0] - s[:, 1]), axis=1) + W * np.sum(dc * dc, axis=1)
+    H2, Hkl, G, value = rigidity_blocks(
+        R, np.ascontiguousarray(c), k, l, mom.W, np.ascontiguousarray(mom.m), mom.M
     )
-    # Jacobians: +A(q_k) on θ_k, −A(q_l) on θ_l
-    Hkk = _ata_blocks(Q[:, 0, 0], Q[:, 0, 0], s[:, 0], s[:, 0], W)
-    Hll = _ata_blocks(Q[:, 1, 1], Q[:, 1, 1], s[:, 1], s[:, 1], W)
-    Hkl = -_ata_blocks(Q[:, 0, 1], Q[:, 1, 0], s[:, 0], s[:, 1], W)
-    sys.add_pair_ends(weight * np.concatenate([Hkk, Hll]))
+    sys.add_pair_ends(weight * H2)
     sys.add_pairs(weight * Hkl)
-    # gradient: Σ w A(q_a)ᵀ r with r = q_k − q_l + Δc; Σ w q_a × q_b = axial(Q_ba − Q_ab)
-    r_sum = s[:, 0] - s[:, 1] + W[:, None] * dc
-    for a, sign in ((0, 1.0), (1, -1.0)):
-        cross = _axial(Q[:, 0, a] - Q[:, a, 0]) - _axial(Q[:, 1, a] - Q[:, a, 1])
-        top = cross + np.cross(s[:, a], dc)
-        sys.add_g(6 * (k if a == 0 else l), weight * sign * np.concatenate([top, r_sum], 1))
+    sys.add_g(6 * k, weight * G[:, 0])
+    sys.add_g(6 * l, weight * G[:, 1])
     return float(value)
 
 
