@@ -45,6 +45,7 @@ from meshmocap.body.template import load_template
 from meshmocap.trackers.cage.manifold import PoseManifold, learn_pose_manifold
 from meshmocap.trackers.cage.tracker import STAGES
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -75,7 +76,9 @@ def run(label, method, opts, kind, template, capture, work: Path) -> dict:
     pm = manifold(kind, template, work)
     tracker = make_tracker(method, manifold=pm, template=template, **opts)
     out = work / "tracks" / capture.path.name / f"{label.replace(' ', '_')}-{kind}"
-    track = track_sequence(tracker, template, capture, out, resume=False, show_progress=False)
+    track = track_sequence(
+        tracker, template, capture, out, TrackOptions(resume=False, show_progress=False)
+    )
     ev = evaluate(track, capture, surface_frames=0, silhouettes=False)
     steps = max(tracker.n_steps, 1)
     return {

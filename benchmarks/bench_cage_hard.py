@@ -33,6 +33,7 @@ from meshmocap.analysis.evaluate import evaluate
 from meshmocap.apps.bench_captures import BenchCapture, make_capture, parse_capture
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -82,7 +83,9 @@ def main() -> None:
             tracker = make_tracker(method, template=template)
             out = work / "tracks" / name / method
             t0 = time.perf_counter()
-            track = track_sequence(tracker, template, cap, out, resume=False, show_progress=False)
+            track = track_sequence(
+                tracker, template, cap, out, TrackOptions(resume=False, show_progress=False)
+            )
             wall = time.perf_counter() - t0
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
             pf = ev.joints.per_frame

@@ -71,6 +71,7 @@ from meshmocap.trackers.cage.oqr import (
 )
 from meshmocap.trackers.cage.training_poses import PoseSet
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 CRANE = (
@@ -231,7 +232,9 @@ def main() -> None:
         key = repr(sorted(tracker.options().items())) + code_digest()  # new code: new track
         opts = hashlib.sha1(key.encode()).hexdigest()[:8]
         out = work / "tracks" / f"{m}-{N}f-{template_digest(tmpl)[:8]}-{opts}"
-        track = track_sequence(tracker, tmpl, capture, out, frames=positions, show_progress=True)
+        track = track_sequence(
+            tracker, tmpl, capture, out, TrackOptions(positions=positions, show_progress=True)
+        )
         V = (
             track.vertices[:N]
             if m != "cage" or n_cage is None

@@ -30,6 +30,7 @@ from meshmocap.io.bvh import read_bvh
 from meshmocap.io.results import read_track
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 METHODS = ("patch", "cage", "articulated_icp")
@@ -65,7 +66,7 @@ def main() -> None:
                     if method == "cage"
                     else (make_tracker(method))
                 )
-                track_sequence(tracker, template, cap, out, show_progress=False)
+                track_sequence(tracker, template, cap, out, TrackOptions(show_progress=False))
             tr = read_track(out)
             files = work / "exports" / f"{name}-{method}"
             files.mkdir(parents=True, exist_ok=True)

@@ -49,6 +49,7 @@ from meshmocap.io.results import read_track
 from meshmocap.studio.rigs import camera_rig
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import MANIFOLD_METHODS, make_tracker
 
 #: clip name → (source: procedural motion or file under DATA/mocap/cmu, what CMU's index
@@ -132,7 +133,7 @@ def tracked(method: str, template, capture: Capture, work: Path, manifold) -> Pa
     key = [tracker.name, tracker.options(), template.name, salt, track_digest()]
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
     out = work / "tracks" / capture.path.name / f"{method}-{digest}"
-    track_sequence(tracker, template, capture, out, show_progress=False)
+    track_sequence(tracker, template, capture, out, TrackOptions(show_progress=False))
     return out
 
 

@@ -54,6 +54,7 @@ from meshmocap.estimate.recovery.observe import observed
 from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, placed_motion, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 #: ../shared/data beside the project (a worktree one level deeper finds it one more up)
@@ -170,7 +171,7 @@ def run_case(case: dict, work: str, method: str, first_only: bool) -> dict:
     for init in ("auto",) if first_only else ("auto", "truth"):
         out = work / "tracks" / case["name"] / f"{method}-{init}"
         track = track_sequence(
-            make_tracker(method), template, cap, out, init=init, show_progress=False
+            make_tracker(method), template, cap, out, TrackOptions(init=init, show_progress=False)
         )
         ev = evaluate(track, cap, silhouettes=False, surface_frames=0)
         res[f"{init}_first"] = float(ev.joints.per_frame[0]) if ev.joints.per_frame.size else np.nan

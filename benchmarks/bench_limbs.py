@@ -47,6 +47,7 @@ from meshmocap.estimate.performer.tracking_template import tracking_template
 from meshmocap.io.clips import clip_on
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -129,7 +130,11 @@ def run_case(trial: str, performer: str, index: int, args) -> list[dict]:
             t0 = time.perf_counter()
             if path == "protocol":
                 track = track_sequence(
-                    make_tracker(method), own, cap, out, init="truth", show_progress=False
+                    make_tracker(method),
+                    own,
+                    cap,
+                    out,
+                    TrackOptions(init="truth", show_progress=False),
                 )
             else:
                 choice = tracking_template(cap, "auto", work / "subjects" / name)
@@ -138,10 +143,12 @@ def run_case(trial: str, performer: str, index: int, args) -> list[dict]:
                     choice.template,
                     cap,
                     out,
-                    init="auto",
-                    show_progress=False,
-                    template_info=choice.info,
-                    init_options={"exclude_trials": excluded(trial)},
+                    TrackOptions(
+                        init="auto",
+                        show_progress=False,
+                        template_info=choice.info,
+                        init_options={"exclude_trials": excluded(trial)},
+                    ),
                 )
             e = joint_errors(track, cap)
             rows.append(

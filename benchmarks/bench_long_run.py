@@ -42,6 +42,7 @@ from meshmocap.io.results import read_track
 from meshmocap.studio.rigs import camera_rig
 from meshmocap.studio.synth import SynthSpec, synth_frame
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 
@@ -150,9 +151,7 @@ def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool
             template,
             stream,
             out,
-            show_progress=None,
-            vertices=False,
-            init="truth",
+            TrackOptions(show_progress=None, vertices=False, init="truth"),
         )
         how = "done"
     except (OutOfTime, KeyboardInterrupt):

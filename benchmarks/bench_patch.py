@@ -37,6 +37,7 @@ from meshmocap.apps.bench_captures import CMU_CLIPS, make_capture, parse_capture
 from meshmocap.apps.bench_report import markdown_table
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.patch.tracker import STAGES, PatchOptions, PatchTracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -64,8 +65,7 @@ def speed(out: Path, repeats: int) -> None:
                 template,
                 capture,
                 out / "speed" / f"{name}-{r}",
-                resume=False,
-                show_progress=False,
+                TrackOptions(resume=False, show_progress=False),
             )
             stages = {k: v / max(tracker.n_steps, 1) for k, v in tracker.stage_seconds.items()}
             runs.append((float(np.mean(track.seconds[1:])), stages, track))

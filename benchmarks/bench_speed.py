@@ -64,6 +64,7 @@ from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_cap
 from meshmocap.body.template import load_template
 from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -172,9 +173,7 @@ def child_stages(args) -> dict:
         template,
         capture,
         Path(args.work) / "tracks" / f"stages-{args.methods[0]}",
-        resume=False,
-        show_progress=False,
-        init="truth",
+        TrackOptions(resume=False, show_progress=False, init="truth"),
         **kw,
     )
     truth = np.stack([f.truth.joints for f in capture])
@@ -305,9 +304,7 @@ def crane_table(args, work: Path) -> None:
             template,
             capture,
             out,
-            frames=positions,
-            resume=False,
-            show_progress=False,
+            TrackOptions(positions=positions, resume=False, show_progress=False),
         )
         e = correspondence_error(track.vertices[1:], truth).errors  # (20, n) mm
         rows.append((method, e, float(np.median(track.seconds[1:]))))
@@ -363,11 +360,9 @@ def light_table(args, work: Path) -> None:
                     template,
                     capture,
                     out,
-                    resume=False,
-                    show_progress=False,
-                    init="truth",
-                    recover=False,
-                    light=light,
+                    TrackOptions(
+                        resume=False, show_progress=False, init="truth", recover=False, light=light
+                    ),
                 )
                 ej = 1000 * np.linalg.norm(track.joints - truth_J, axis=2).mean()
                 ev = 1000 * np.linalg.norm(track.vertices - truth_V, axis=2).mean()

@@ -44,6 +44,7 @@ from meshmocap.estimate.performer.subject import estimate_subject
 from meshmocap.io.capture import Capture
 from meshmocap.studio.synth import SynthSpec, synthesize, synthesize_from_meshes
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data"
@@ -64,7 +65,9 @@ def _surface_mm(Va, Fa, Vb, Fb) -> float:
 
 def _track(cap: Capture, template, out: Path) -> tuple[float, float]:
     """Patch-track ``cap`` with ``template``; mean and worst-frame joint error, mm."""
-    tr = track_sequence(make_tracker("patch"), template, cap, out, show_progress=False)
+    tr = track_sequence(
+        make_tracker("patch"), template, cap, out, TrackOptions(show_progress=False)
+    )
     ev = evaluate(tr, cap, silhouettes=False, surface_frames=0)
     return ev.joints.overall.mean, float(ev.joints.per_frame.max())
 

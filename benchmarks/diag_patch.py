@@ -91,12 +91,17 @@ def forces(tr: PatchTracker, frame, part_patches: np.ndarray, lag: np.ndarray) -
 def baseline(args, cap, t) -> None:
     """Per-frame joint errors of another method (``--method``) on the same capture."""
     from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.options import TrackOptions
     from meshmocap.trackers.registry import make_tracker
 
     n = len(cap) if args.frames is None else min(len(cap), args.frames)
     out = Path(args.out).with_suffix("")
     track = track_sequence(
-        make_tracker(args.method), t, cap, out, frames=range(n), resume=False, show_progress=False
+        make_tracker(args.method),
+        t,
+        cap,
+        out,
+        TrackOptions(positions=range(n), resume=False, show_progress=False),
     )
     true = np.stack([cap[i].truth.joints for i in range(n)])
     e = np.linalg.norm(track.joints - true, axis=2) * 1000

@@ -68,6 +68,7 @@ from meshmocap.body.template import load_template
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.patch.tracker import PatchOptions, PatchTracker
 from meshmocap.trackers.registry import make_tracker
 
@@ -151,10 +152,9 @@ def main() -> None:
                     t,
                     cap,
                     work / "tracks" / f"{name}-{v}",
-                    frames=range(n),
-                    resume=False,
-                    show_progress=False,
-                    vertices=False,
+                    TrackOptions(
+                        positions=range(n), resume=False, show_progress=False, vertices=False
+                    ),
                 )
                 sec = (time.perf_counter() - t0) / max(n - 1, 1)
                 e = np.linalg.norm(track.joints - true, axis=2)[1:] * 1000

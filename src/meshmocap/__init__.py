@@ -11,7 +11,15 @@ from meshmocap._version import __version__ as __version__
 
 #: The Python API (:mod:`meshmocap.api`), loaded on first use so that ``import meshmocap``
 #: stays light: ``meshmocap.open_capture``, ``meshmocap.track``, ``meshmocap.evaluate``...
-API = ("open_capture", "track", "evaluate", "summary", "open_track", "TrackResult")
+API = (
+    "open_capture",
+    "track",
+    "TrackOptions",
+    "evaluate",
+    "summary",
+    "open_track",
+    "TrackResult",
+)
 
 
 def __getattr__(name: str):

@@ -20,7 +20,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -34,7 +34,7 @@ from meshmocap.analysis.evaluate import summary as evaluation_summary
 from meshmocap.analysis.gait import Gait, track_gait
 from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
 from meshmocap.apps.kernels import kernels_of, start_compiling
-from meshmocap.body.light import LIGHT_VERTICES, tracking_body
+from meshmocap.body.light import tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.performer.tracking_template import SUBJECT_FILE, tracking_template
@@ -62,6 +62,7 @@ from meshmocap.io.results import (
 )
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.follow import body_capture, open_live
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
 __all__ = [
@@ -293,21 +294,28 @@ def track(
     method: str = "patch",
     out: str | os.PathLike | None = None,
     template: str | os.PathLike | None = None,
+    manifold: str | os.PathLike | None = None,
+    options: TrackOptions | None = None,
     frames: Sequence[int] | slice | None = None,
+    positions: Sequence[int] | slice | None = None,
     init: Literal["auto", "truth"] = "auto",
     resume: bool = True,
     recover: bool = True,
-    reseat: bool = False,
     refine: Literal["auto", "on", "off"] = "auto",
-    manifold: str | os.PathLike | None = None,
     vertices: bool = True,
     show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
     on_frame: Callable[[FrameResult], object] | None = None,
     timer: StageTimer | None = None,
-    **options,
+    **tracker_options,
 ) -> TrackResult:
     """Track a capture, as ``meshmocap track`` does.
+
+    How to track is one record, :class:`~meshmocap.trackers.options.TrackOptions`, which
+    the command line and the driver share: give it as ``options``, or give its fields as
+    keywords (``frames``, ``positions``, ``init``, ``resume``, ``recover``, ``refine``,
+    ``vertices``, ``show_progress``), which build it; a keyword set to other than its
+    default replaces that field of a given record.
 
     Parameters
     ----------
@@ -325,22 +333,28 @@ def track(
     template : name or .npz path, optional
         The tracking template; ``"auto"`` estimates the performer's body. Default: the one
         the capture's ``capture.json`` names, else ``"auto"``.
+    manifold : path, optional
+        Cage methods: a pose manifold from ``meshmocap learn`` (default: learned once).
+    options : TrackOptions, optional
+        How to track (default: built from the keywords below).
     frames : sequence of int or slice, optional
-        Positions in the capture to track (default: all).
+        The frame NUMBERS to track, in the order given (default: all), as ``--frames`` on
+        the command line: ``slice(3, 9)`` is frames 3 to 8 wherever the capture starts.
+    positions : sequence of int or slice, optional
+        The frames to track by their positions in the capture (0: its first frame),
+        instead of ``frames``.
     init : {"auto", "truth"}
         The first pose: found from the capture, or copied from its ground truth.
     resume : bool
         Continue a run in ``out`` instead of starting over (False also re-estimates).
-    recover, reseat : bool
-        Score frames and flag lost limbs; re-seat lost limbs
-        (:func:`~meshmocap.trackers.driver.track_sequence`).
+    recover : bool
+        Score frames and flag lost limbs
+        (:class:`~meshmocap.estimate.recovery.reinit.Recovery`).
     refine : {"auto", "on", "off"}
         Refine each frame's output surface towards its observations
-        (:func:`~meshmocap.trackers.driver.track_sequence`: ``"auto"`` for mesh and
+        (:class:`~meshmocap.trackers.options.TrackOptions`: ``"auto"`` for mesh and
         point-cloud files, not a capture folder's visual hulls); ``"off"`` outputs the
         tracked skeleton's surface as it is.
-    manifold : path, optional
-        Cage methods: a pose manifold from ``meshmocap learn`` (default: learned once).
     vertices : bool
         Read the tracked vertices back into the result (False for long runs: ``vertices``
         is then empty; exports read them from the folder).
@@ -355,7 +369,7 @@ def track(
     timer : StageTimer, optional
         Records each frame's seconds per stage (read, observe, step, checks, write;
         :mod:`meshmocap._timing`): ``timer.summary()`` says where a frame's time goes.
-    **options
+    **tracker_options
         Options of the method's tracker (``n_patches``, ``max_iter``, ...).
 
     Returns
@@ -363,10 +377,21 @@ def track(
     TrackResult
     """
     _check_track_arguments(locals())
+    opts = track_options(
+        options,
+        frames=frames,
+        positions=positions,
+        init=init,
+        resume=resume,
+        recover=recover,
+        refine=refine,
+        vertices=vertices,
+        show_progress=show_progress,
+    )
     if not isinstance(capture, AnyCapture):
         capture = open_capture(capture)
     live = isinstance(capture, LiveCapture)
-    frames = _check_frames(capture, frames)
+    chosen = opts.positions_in(capture)
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="meshmocap-track-"))
     # a fresh install's kernels compile in the background while the body is estimated and
     # the first pose found (meshmocap.apps.kernels)
@@ -375,13 +400,13 @@ def track(
     if resume:  # not the track of another capture (its body would be reused)
         check_resumable(folder, capture, out="out", restart="resume=False")
     shown = capture
-    if live and _estimates(capture, template, folder, resume):
+    if live and _estimates(capture, template, folder, opts.resume):
         shown = body_capture(capture)
-    choice = tracking_template(shown, template, folder, refresh=not resume)
+    choice = tracking_template(shown, template, folder, refresh=not opts.resume)
     say = log or (lambda line: None)
     say(choice.note)
-    start = choice.start  # a template made from a frame starts in that frame's pose
-    if start is not None and frames is not None and capture.indices[frames[0]] != start.frame:
+    start = opts.start or choice.start  # a template made from a frame starts in its pose
+    if start is not None and chosen is not None and capture.indices[chosen[0]] != start.frame:
         start = None
     if method in MANIFOLD_METHODS and manifold is None:
         say(
@@ -390,34 +415,42 @@ def track(
         )
     # tracked on a light copy of the template, unless a manifold learned for the template
     # itself is given (meshmocap.body.light)
-    light = None if manifold is not None else LIGHT_VERTICES
+    light = None if manifold is not None else opts.light
     tracked = tracking_body(choice.template, n_vertices=light).light
-    tracker = make_tracker(method, manifold=manifold, template=tracked, **options)
-    t0 = time.perf_counter()
-    data = track_sequence(
-        tracker,
-        choice.template,
-        capture,
-        folder,
-        frames=frames,
-        resume=resume,
-        init=init,
-        recover=recover,
-        reseat=reseat,
-        vertices=vertices,
-        show_progress=show_progress,
-        template_info={**choice.info, **input_meta(capture)},
+    tracker = make_tracker(method, manifold=manifold, template=tracked, **tracker_options)
+    opts = replace(
+        opts,
         light=light,
         start=start,
-        on_frame=on_frame,
-        timer=timer,
-        refine=refine,
+        template_info={**choice.info, **input_meta(capture), **(opts.template_info or {})},
+    )
+    t0 = time.perf_counter()
+    data = track_sequence(
+        tracker, choice.template, capture, folder, opts, on_frame=on_frame, timer=timer
     )
     return TrackResult(folder, data, choice.template, choice.note, time.perf_counter() - t0)
 
 
+def track_options(options: TrackOptions | None = None, **fields) -> TrackOptions:
+    """``options`` (default: the defaults) with each of ``fields`` (fields of
+    :class:`~meshmocap.trackers.options.TrackOptions`) that is not its default put in:
+    how :func:`track` builds its record from its keywords."""
+    if options is None:
+        return TrackOptions(**fields)
+    check_type("track", "options", options, TrackOptions, "a TrackOptions or None")
+    defaults = TrackOptions()
+    changed = {k: v for k, v in fields.items() if not _same(v, getattr(defaults, k))}
+    return replace(options, **changed) if changed else options
+
+
+def _same(a: object, b: object) -> bool:
+    """Whether a keyword's value is its default (None, a flag or a choice)."""
+    return a is b or (type(a) is type(b) and isinstance(a, bool | str) and a == b)
+
+
 def _check_track_arguments(given: dict) -> None:
-    """:func:`track`'s arguments, each of its type (one line naming the first that is not)."""
+    """:func:`track`'s own arguments, each of its type (one line naming the first that is
+    not); the record's fields are checked by the record."""
     func = "track"
     if not isinstance(given["capture"], AnyCapture):
         _check_source(func, "capture", given["capture"])
@@ -428,33 +461,9 @@ def _check_track_arguments(given: dict) -> None:
         )
     for name in ("out", "template", "manifold"):
         _check_optional(func, name, given[name], _PATH, "a path or name (str or os.PathLike)")
-    check_choice(func, "init", given["init"], ("auto", "truth"))
-    check_choice(func, "refine", given["refine"], ("auto", "on", "off"))
-    for name in ("resume", "recover", "reseat", "vertices"):
-        check_type(func, name, given[name], bool, "True or False")
-    _check_optional(func, "show_progress", given["show_progress"], bool, "True or False")
     for name in ("log", "on_frame"):
         _check_optional(func, name, given[name], Callable, "a callable")
     _check_optional(func, "timer", given["timer"], StageTimer, "a StageTimer")
-
-
-def _check_frames(capture: AnyCapture, frames: object) -> list[int] | None:
-    """``frames`` as positions in ``capture`` (a slice of them, or a sequence), checked."""
-    if frames is None:
-        return None
-    if isinstance(capture, LiveCapture):
-        raise InputError("track: a live capture is tracked whole, as its frames come; no frames")
-    n = len(capture)
-    if isinstance(frames, slice):
-        return list(range(n)[frames])
-    if isinstance(frames, str) or not isinstance(frames, Sequence | np.ndarray):
-        check_type("track", "frames", frames, (slice, Sequence), "a slice or a sequence of int")
-    out = list(frames)
-    for k, v in enumerate(out):
-        check_type("track", f"frames[{k}]", v, (int, np.integer), "a frame position (int)")
-        if not 0 <= v < n:
-            raise InputError(f"track: frames[{k}] must be a position from 0 to {n - 1}, found {v}")
-    return [int(v) for v in out]
 
 
 def _estimates(capture, template, folder: Path, resume: bool) -> bool:

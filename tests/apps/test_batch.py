@@ -21,6 +21,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.io.results import done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 distributed = pytest.importorskip("distributed")
@@ -52,7 +53,7 @@ def alone(captures, tmp_path_factory):
             template,
             Capture(captures / motion),
             root / motion,
-            show_progress=False,
+            TrackOptions(show_progress=False),
         )
     return root
 

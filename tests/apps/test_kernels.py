@@ -73,12 +73,14 @@ def test_tracking_compiles_only_the_listed_signatures(synth_capture, tmp_path):
     from meshmocap.body.template import load_template
     from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, learn_manifold
     from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.options import TrackOptions
     from meshmocap.trackers.registry import make_tracker
 
     t = load_template("neutral_5k")
     cap = synth_capture("walk", stop=3)
     gp = learn_manifold(t, [walk(t, duration=1.0, fps=30.0)], n_components=2, n_samples=30)
-    run = functools.partial(track_sequence, show_progress=False, init="truth", light=None)
+    opts = TrackOptions(show_progress=False, init="truth", light=None)
+    run = functools.partial(track_sequence, options=opts)
     run(make_tracker("patch", template=t), t, cap, tmp_path / "patch")
     run(make_tracker("articulated_icp", template=t), t, cap, tmp_path / "icp")
     run(CageTracker(gp, CageOptions(local_iters=1, alternations=1)), t, cap, tmp_path / "cage")

@@ -39,6 +39,7 @@ def tracked(capture, tmp_path_factory):
     """A real articulated-ICP track of the capture: (folder, Track)."""
     from meshmocap.body.template import load_template
     from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.options import TrackOptions
     from meshmocap.trackers.registry import make_tracker
 
     out = tmp_path_factory.mktemp("icp")
@@ -47,9 +48,7 @@ def tracked(capture, tmp_path_factory):
         load_template("neutral_5k"),
         capture,
         out,
-        show_progress=False,
-        init="truth",
-        recover=False,
+        TrackOptions(show_progress=False, init="truth", recover=False),
     )
     return out, tr
 

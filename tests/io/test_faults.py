@@ -97,6 +97,7 @@ def test_a_dropped_frame_is_carved_from_the_others_and_tracked_through(cap, tmp_
 def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
     from meshmocap.body.template import load_template
     from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.options import TrackOptions
     from meshmocap.trackers.registry import make_tracker
 
     c = tmp_path / "c"
@@ -107,7 +108,7 @@ def test_a_missing_hull_file_is_a_missing_frame(cap, tmp_path):
         load_template("neutral_5k"),
         Capture(c),
         tmp_path / "t",
-        show_progress=False,
+        TrackOptions(show_progress=False),
     )
     assert t.flags[2] == ("missing",) and "missing" not in t.flags[3]  # 3 may be re-seated
     assert not t.messages[2].startswith("Meshmocap")  # the reason in words, no class name

@@ -89,3 +89,17 @@ def test_a_track_folder_without_a_start_reads_with_the_start_unknown(tmp_path):
     (tmp_path / "track.json").write_text(json.dumps({**meta, "start": {"frame": 0}}))
     with pytest.raises(FormatError, match=r"track.json: 'start': not a start record"):
         read_track(tmp_path)
+
+
+def test_a_track_made_before_the_limb_only_reseat_was_removed_resumes(tmp_path):
+    """``track.json`` of an older track says ``"reseat": false``: the same settings as a
+    track made now, so it resumes (and is read); one made with the re-seat on does not."""
+    meta, F = {"method": "test", "recover": True}, np.array([[0, 1, 2]])
+    start_track(tmp_path / "off", {**meta, "reseat": False}, F)
+    write_frame(tmp_path / "off", _result(0))
+    assert read_track(tmp_path / "off").meta["reseat"] is False
+    assert start_track(tmp_path / "off", meta, F) == [0]  # resumed as it was
+    assert "reseat" not in json.loads((tmp_path / "off" / "track.json").read_text())
+    start_track(tmp_path / "on", {**meta, "reseat": True}, F)
+    with pytest.raises(FormatError, match="other settings"):
+        start_track(tmp_path / "on", meta, F)

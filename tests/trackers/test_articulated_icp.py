@@ -1,6 +1,5 @@
 """The articulated ICP baseline: exact Jacobians, tracking a short synthetic walk, resuming."""
 
-import functools
 import shutil
 from types import SimpleNamespace
 
@@ -23,11 +22,17 @@ from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
 from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 #: The papers' protocol (first pose from ground truth), no loss recovery: these tests are
 #: about the tracker itself.
-track_sequence = functools.partial(track_sequence, init="truth", recover=False)
+
+
+def truth_options(**fields) -> TrackOptions:
+    """The record of these tests' tracks: the first pose from ground truth, no checks."""
+    return TrackOptions(init="truth", recover=False, **fields)
+
 
 N_FRAMES = 8  # 60 fps: 0.13 s of walking
 
@@ -121,7 +126,13 @@ def test_residual_jacobian_matches_finite_differences(template, posed, residual)
 def tracked(walk, template, tmp_path_factory):
     out = tmp_path_factory.mktemp("icp")
     opts = ICPOptions(max_iter=10)
-    return track_sequence(ArticulatedICP(opts), template, walk, out, show_progress=False), out, opts
+    return (
+        track_sequence(
+            ArticulatedICP(opts), template, walk, out, truth_options(show_progress=False)
+        ),
+        out,
+        opts,
+    )
 
 
 def test_articulated_icp_follows_a_walk(walk, tracked, template):
@@ -148,11 +159,17 @@ def test_interrupted_run_resumes_to_the_same_result(walk, tracked, template, tmp
     for i in (N_FRAMES - 2, N_FRAMES - 1):
         (part / "frames" / f"{i:05d}.npz").unlink()
     assert done_frames(part) == list(range(N_FRAMES - 2))
-    again = track_sequence(ArticulatedICP(opts), template, walk, part, show_progress=False)
+    again = track_sequence(
+        ArticulatedICP(opts), template, walk, part, truth_options(show_progress=False)
+    )
     assert np.allclose(again.joints, track.joints, atol=1e-9)  # seeded per frame: identical
     with pytest.raises(Exception, match="other settings"):
         track_sequence(
-            ArticulatedICP(ICPOptions(max_iter=3)), template, walk, part, show_progress=False
+            ArticulatedICP(ICPOptions(max_iter=3)),
+            template,
+            walk,
+            part,
+            truth_options(show_progress=False),
         )
 
 
@@ -216,7 +233,11 @@ def test_a_frame_that_cannot_be_fitted_raises_fit_error_and_the_driver_coasts(
     with pytest.raises(FitError, match="only 5 observed points"):
         icp.step(few)
     track = track_sequence(
-        _Failing(ICPOptions(max_iter=3)), template, walk, tmp_path / "t", frames=range(5)
+        _Failing(ICPOptions(max_iter=3)),
+        template,
+        walk,
+        tmp_path / "t",
+        truth_options(positions=range(5)),
     )
     assert track.healthy.tolist() == [True, True, True, False, True]
     assert track.messages[3] == "FitError: no compatible correspondences"

@@ -15,6 +15,7 @@ from meshmocap.estimate.pose.start import start_description, start_message
 from meshmocap.io.results import LIGHT_FILE, read_frame_arrays
 from meshmocap.io.start import Start
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 N = 5
@@ -32,7 +33,11 @@ def _track(walk, out, light):
     body = tracking_body(t, n_vertices=light)
     tracker = make_tracker("articulated_icp", template=body.light, max_iter=5)
     return track_sequence(
-        tracker, t, walk, out, init="truth", recover=False, show_progress=False, light=light
+        tracker,
+        t,
+        walk,
+        out,
+        TrackOptions(init="truth", recover=False, show_progress=False, light=light),
     )
 
 
@@ -74,7 +79,7 @@ def test_the_start_record_sets_the_first_frames_flag_and_message(walk, tmp_path,
     start = Start(0, truth.rotations, truth.root, "search", confident, "02_02:2@0°", 0.03, 0.04)
     tracker = make_tracker("articulated_icp", template=tracking_body(t).light, max_iter=3)
     track = track_sequence(
-        tracker, t, walk, tmp_path, frames=[0, 1], start=start, show_progress=False
+        tracker, t, walk, tmp_path, TrackOptions(positions=[0, 1], start=start, show_progress=False)
     )
     assert track.flags[0] == (() if confident else ("lost",))  # from the record, not the text
     assert track.messages[0] == start_message(start)
@@ -86,7 +91,11 @@ def test_the_start_record_sets_the_first_frames_flag_and_message(walk, tmp_path,
     # from ground truth: recorded as such, never flagged
     tracker = make_tracker("articulated_icp", template=tracking_body(t).light, max_iter=3)
     truth_track = track_sequence(
-        tracker, t, walk, tmp_path / "truth", frames=[0], init="truth", show_progress=False
+        tracker,
+        t,
+        walk,
+        tmp_path / "truth",
+        TrackOptions(positions=[0], init="truth", show_progress=False),
     )
     assert truth_track.start.source == "truth" and truth_track.flags == ((),)
 
@@ -102,7 +111,12 @@ def test_a_timer_records_every_frames_stages_and_changes_no_result(walk, tmp_pat
     def run(out, timer):
         tracker = make_tracker("articulated_icp", template=t, max_iter=5)
         return track_sequence(
-            tracker, t, walk, out, init="truth", show_progress=False, light=None, timer=timer
+            tracker,
+            t,
+            walk,
+            out,
+            TrackOptions(init="truth", show_progress=False, light=None),
+            timer=timer,
         )
 
     timer = StageTimer()
@@ -126,7 +140,9 @@ def test_the_checks_start_the_pose_of_an_articulated_track_at_the_trackers_own(w
     t = load_template("neutral_5k")
     tracker = make_tracker("articulated_icp", template=t, max_iter=5)
     out = tmp_path / "icp"
-    track = track_sequence(tracker, t, walk, out, init="truth", show_progress=False, light=None)
+    track = track_sequence(
+        tracker, t, walk, out, TrackOptions(init="truth", show_progress=False, light=None)
+    )
     for i in track.frames[1:]:
         z = read_frame_arrays(out, int(i))
         R, root = z["state_pose_R"], z["state_pose_root"]
@@ -149,10 +165,9 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
             t,
             walk,
             out,
-            init="truth",
-            show_progress=False,
-            light=None,
-            refine="on" if refine else "off",
+            TrackOptions(
+                init="truth", show_progress=False, light=None, refine="on" if refine else "off"
+            ),
         )
 
     refined, plain = run(tmp_path / "refined", True), run(tmp_path / "plain", False)
@@ -160,7 +175,11 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
     # by default a capture folder's visual hulls (larger than the body) are not followed
     tracker = make_tracker("articulated_icp", template=t, max_iter=5)
     auto = track_sequence(
-        tracker, t, walk, tmp_path / "auto", init="truth", show_progress=False, light=None
+        tracker,
+        t,
+        walk,
+        tmp_path / "auto",
+        TrackOptions(init="truth", show_progress=False, light=None),
     )
     assert auto.meta["refine_surface"] is False
     np.testing.assert_array_equal(auto.vertices, plain.vertices)

@@ -17,6 +17,7 @@ from meshmocap.cli import main
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import done_frames, read_track
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 N = 6  # frames of the walk
@@ -34,7 +35,7 @@ def offline(walk, tmp_path_factory):
     out = tmp_path_factory.mktemp("offline")
     t = load_template("neutral_5k")
     return track_sequence(
-        make_tracker("articulated_icp", template=t), t, walk, out, show_progress=False
+        make_tracker("articulated_icp", template=t), t, walk, out, TrackOptions(show_progress=False)
     )
 
 

@@ -164,24 +164,21 @@ def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> Cap
     from meshmocap.io.capture import Capture
     from meshmocap.io.results import template_label
     from meshmocap.trackers.driver import track_sequence
+    from meshmocap.trackers.options import TrackOptions
     from meshmocap.trackers.registry import make_tracker
 
     capture, _ = open_oriented(item.capture)  # mesh files: up axis and units as track reads
     choice = tracking_template(capture, item.template or None, folder / "track")
     template = choice.template
     tracker = make_tracker(item.method, template=tracking_body(template).light)  # as tracked
-    frames = None
-    if item.frames:
-        sl = frame_slice(item.frames, what="batch: frames")  # frame numbers, as track reads them
-        frames = frame_positions([int(i) for i in capture.indices], sl)
+    # frame numbers, as track reads them
+    frames = frame_slice(item.frames, what="batch: frames") if item.frames else None
     track = track_sequence(
         tracker,
         template,
         capture,
         folder / "track",
-        frames=frames,
-        show_progress=False,
-        template_info=choice.info,
+        TrackOptions(frames=frames, show_progress=False, template_info=choice.info),
     )
     flags = track.flags or tuple(() if h else ("failed",) for h in track.healthy)
     steady = track.seconds[1:] if len(track.seconds) > 1 else track.seconds

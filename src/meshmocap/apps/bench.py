@@ -91,6 +91,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.io.results import done_frames
 from meshmocap.trackers.cage.manifold import template_digest
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import MANIFOLD_METHODS, METHODS, make_tracker
 
 _EVAL_CACHE = "bench_eval.json"
@@ -224,7 +225,11 @@ class _Run:
         key = f"{capture.path.name}/{out.name}"
         before = len(done_frames(out)) if (out / "frames").is_dir() else 0
         track = track_sequence(
-            tracker, template, capture, out, show_progress=self.show_progress, init=init
+            tracker,
+            template,
+            capture,
+            out,
+            TrackOptions(show_progress=self.show_progress, init=init),
         )
         if len(track.frames) > before:
             self.tracked.append(key)

@@ -56,6 +56,7 @@ from meshmocap.io.clips import clip_on
 from meshmocap.io.results import LIGHT_FILE, Track, done_frames, frame_path
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 #: Trackers the demo compares: both papers' methods and the skeleton-only baseline. The
@@ -280,8 +281,7 @@ def demo_tracks(
             choice.template,
             cap,
             folder,
-            show_progress=show_progress,
-            template_info=choice.info,
+            TrackOptions(show_progress=show_progress, template_info=choice.info),
         )
         with phase(f"scoring the {method} track", enabled=show_progress):
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)

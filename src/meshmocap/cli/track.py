@@ -67,6 +67,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from meshmocap.io.guards import check_resumable
     from meshmocap.io.plausibility import check_observations
     from meshmocap.io.results import done_frames
+    from meshmocap.trackers.options import TrackOptions
 
     options = _tracker_options(args)
     live = args.follow
@@ -101,7 +102,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         frames = None
         if args.frames:
             numbers = [int(i) for i in capture.indices]
-            frames = frame_positions(numbers, args.frames)  # frame numbers, not positions
+            frames = frame_positions(numbers, args.frames)  # --frames: frame numbers
             if not frames:
                 raise InputError(
                     f"track: --frames {_text(args.frames)} selects none of the {len(numbers)} "
@@ -121,20 +122,22 @@ def _cmd_track(args: argparse.Namespace) -> int:
         run.capture = capture if live else None
         if args.view or args.recording:
             run.view = _live_view(args)
+        how = TrackOptions(
+            frames=args.frames or None,  # frame numbers, as meshmocap.track(frames=)
+            init=args.init,
+            resume=not args.restart,
+            recover=not args.no_recover,
+            refine=args.refine,
+            vertices=False,
+            show_progress=False if live else None,
+        )
         result = api.track(
             capture,
             method=args.method,
             out=args.out,
             template=args.template,
-            frames=frames,
-            init=args.init,
-            resume=not args.restart,
-            recover=not args.no_recover,
-            reseat=args.reseat,
-            refine=args.refine,
             manifold=args.manifold,
-            vertices=False,
-            show_progress=False if live else None,
+            options=how,
             log=print,
             on_frame=run.frame if live else None,
             timer=None if live else timer,
@@ -182,14 +185,16 @@ def _summary(args: argparse.Namespace, result, before: set[int], timer) -> None:
 
 
 def _lost(track) -> str:
-    """Frames with a limb lost, re-initialised, and the first one's reason ('' if none)."""
+    """Frames with a limb lost (and re-initialised, where some were) and the first one's
+    reason ('' if none)."""
     lost = [k for k, f in enumerate(track.flags) if "lost" in f]
     if not lost:
         return ""
     reinit = sum("reinit" in f for f in track.flags)
+    again = f"{reinit} re-initialised; " if reinit else ""
     k = lost[0]
     return (
-        f", {counted(len(lost), 'frame')} with a limb lost ({reinit} re-initialised; first: frame "
+        f", {counted(len(lost), 'frame')} with a limb lost ({again}first: frame "
         f"{int(track.frames[k])}, {track.messages[k]})"
     )
 
@@ -361,13 +366,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="mesh/point-cloud files: their length unit (default: detected)",
     )
     k.add_argument(
-        "--reseat",
-        action="store_true",
-        help="re-initialise a lost limb where a "
-        "better pose is found and hold one the hulls miss as last seen (rescues a "
-        "limb lost behind a hole; can mistake a fast limb for a lost one)",
-    )
-    k.add_argument(
         "--refine",
         default="auto",
         choices=["auto", "on", "off"],
@@ -379,7 +377,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument(
         "--no-recover",
         action="store_true",
-        help="do not score frames, flag lost limbs or re-initialise them",
+        help="do not score frames or flag lost limbs",
     )
     k.add_argument(
         "--fps",

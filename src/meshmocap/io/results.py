@@ -301,6 +301,9 @@ def start_track(
     if meta_path.is_file() and resume:
         old = _read_json(meta_path)
         found = {k: old.pop(k) for k in (START_KEY, SKIPPED_KEY) if k in old}  # by the run
+        for key, value in RETIRED_SETTINGS.items():  # a setting that is gone, as it was
+            if key in old and old[key] == value:
+                del old[key]
         if old != json.loads(json.dumps(full)):
             raise FormatError(
                 f"{meta_path}: holds a track made with other settings; use another folder"
@@ -314,6 +317,11 @@ def start_track(
         np.save(f, np.asarray(faces, dtype=np.int32))
     return done_frames(path)
 
+
+#: Settings ``track.json`` no longer records, with the value that tracked as a track made
+#: now does: a folder written with that value resumes, one written otherwise does not
+#: (``reseat``: the limb-only re-seat, removed; off, a track was the tracker's alone).
+RETIRED_SETTINGS = {"reseat": False}
 
 #: The key of ``track.json`` that holds the start (:func:`write_start`).
 START_KEY = "start"

@@ -18,13 +18,12 @@ The first frame's pose comes from the capture alone (``init="auto"``,
 ground truth (``init="truth"``); how is recorded (:class:`~meshmocap.io.start.Start`, in
 ``track.json``), and an uncertain start flags its frame ``lost``. With ``recover``, every
 fitted frame is scored (:class:`~meshmocap.estimate.recovery.reinit.Recovery`): a frame
-with a limb lost is flagged ``lost`` (the message names the limbs). With ``reseat`` too,
-where a better pose is found from the frame the tracker is re-seated there
-(``Tracker.reseat``) and the frame also flagged ``reinit``, and a limb the observations
-miss is held as last seen. Re-seating is off by default: it rescues a limb lost behind a
-hole in the hull (CMU 05_01 with a forearm missed for 10 frames: worst joint 342 → 62 mm)
-but mistakes a fast limb for a lost one on a run (CMU 09_01, patch, 55 frames: 13.5 →
-35.8 mm mean; ``benchmarks/bench_recovery.py``).
+with a limb lost is flagged ``lost`` (the message names the limbs); the track is left as
+the tracker made it.
+
+How a capture is tracked (its frames, the start, resuming, recovery, the surface
+refinement) is one record, :class:`~meshmocap.trackers.options.TrackOptions`, shared
+with :func:`meshmocap.api.track` and the commands.
 """
 
 from __future__ import annotations
@@ -32,10 +31,9 @@ from __future__ import annotations
 import functools
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Literal, get_args
 
 import numpy as np
 
@@ -43,8 +41,8 @@ from meshmocap._atomic import folder_lock
 from meshmocap._progress import phase, progress
 from meshmocap._threads import blas_threads
 from meshmocap._timing import StageTimer, touched
-from meshmocap._validate import check_choice
-from meshmocap.body.light import LIGHT_VERTICES, TrackingBody, tracking_body
+from meshmocap._validate import check_type
+from meshmocap.body.light import TrackingBody, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import (
     FitError,
@@ -76,9 +74,7 @@ from meshmocap.io.results import (
 )
 from meshmocap.io.start import Start
 from meshmocap.trackers.base import Tracker
-
-#: How the first frame's pose is found: from the capture alone, or from its ground truth.
-Init = Literal["auto", "truth"]
+from meshmocap.trackers.options import Init, TrackOptions
 
 #: Errors that mean "this frame could not be fitted" rather than a bug or a user mistake:
 #: a tracker's :class:`~meshmocap.errors.FitError`, and the numerical errors of numpy
@@ -96,21 +92,10 @@ def track_sequence(
     template: Template,
     capture: Capture,
     out: str | os.PathLike,
+    options: TrackOptions | None = None,
     *,
-    frames: Sequence[int] | None = None,
-    resume: bool = True,
-    show_progress: bool | None = None,
-    vertices: bool = True,
-    init: Init = "auto",
-    recover: bool = True,
-    reseat: bool = False,
-    template_info: dict | None = None,
-    light: int | None = LIGHT_VERTICES,
-    init_options: dict | None = None,
-    start: Start | None = None,
     on_frame: Callable[[FrameResult], object] | None = None,
     timer: StageTimer | None = None,
-    refine: Refine = "auto",
 ) -> Track:
     """Track ``capture`` with ``tracker`` and write the results to the folder ``out``.
 
@@ -126,67 +111,29 @@ def track_sequence(
         ``"live": true`` instead of the frames).
     out : path
         Track folder (:mod:`meshmocap.io.results`).
-    frames : sequence of int, optional
-        Positions in the capture to track (default: all).
-    resume : bool
-        Continue an interrupted run in ``out`` (same settings) instead of starting over.
-    vertices : bool
-        Read the tracked vertices back into the returned track (False for long runs: see
-        :func:`~meshmocap.io.results.read_track`).
-    init : {"auto", "truth"}
-        The first frame's pose: found from the frame alone (a global search over heading,
-        place and the bundled pose library,
-        :func:`~meshmocap.estimate.pose.first_pose.initial_pose`), or copied from its
-        ground truth (the papers' protocol; the capture must have it). ``track.json``
-        records which, and how the first pose was found (its ``start``).
-    recover : bool
-        Score every frame and flag lost limbs (module docstring).
-    reseat : bool
-        With ``recover``, also re-initialise lost limbs where a better pose is found and
-        hold unobserved ones as last seen (module docstring: off by default).
-    template_info : dict, optional
-        How the template was chosen, kept in ``track.json`` (``template_source``: ``"given"``,
-        ``"capture"`` or ``"estimated"``; ``template_file``); see
-        :func:`meshmocap.estimate.performer.tracking_template.tracking_template`.
-    light : int or None
-        Track a light copy of the template with about this many vertices
-        (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
-        is): the frames hold its vertices, and :func:`~meshmocap.io.results.read_track`
-        reads the template's out of them. None tracks the template itself.
-    init_options : dict, optional
-        Options of the automatic first pose's search
-        (:func:`~meshmocap.estimate.pose.first_pose.initial_pose`, e.g. ``exclude_trials``).
-    start : Start, optional
-        The pose of its frame (:attr:`~meshmocap.io.start.Start.frame`) when it is already
-        known (a template made from that very frame): with ``init="auto"``, the track
-        starts there without a search.
+    options : TrackOptions, optional
+        How to track (:class:`~meshmocap.trackers.options.TrackOptions`: the frames, the
+        start, resuming, recovery, the surface refinement...; default: its defaults).
     on_frame : callable, optional
         Called with each frame's result once it is written (live mode reports them).
     timer : StageTimer, optional
         Records the seconds of each frame tracked (not the first) per stage: read,
         observe, the tracker's step and its own stages, the checks, the write
         (:mod:`meshmocap._timing`). None records nothing.
-    refine : {"auto", "on", "off"}
-        Refine each frame's output surface towards that frame's observations along its
-        normals (:class:`~meshmocap.geometry.refine.SurfaceRefiner`: what the skeleton's
-        skin cannot follow, clothing), from the tracked surface every frame: the joints and
-        the tracker's state stay the skeleton's, so nothing accumulates. ``"auto"``: on for
-        mesh or point-cloud files (a 4D capture: their surface is the performer's), off for
-        a capture folder carved from its cameras (a visual hull is larger than the body, and
-        the surface would swell into it). ``track.json`` records it (``refine_surface``).
 
     Returns
     -------
     Track
         Every frame's result, read back from ``out``.
     """
+    opts = TrackOptions() if options is None else options
+    check_type("track_sequence", "options", opts, TrackOptions, "a TrackOptions")
     live = isinstance(capture, LiveCapture)
-    if live and frames is not None:
-        raise InputError("track: a live capture is tracked whole, as its frames come; no frames")
-    positions = list(range(len(capture))) if frames is None else list(frames)
+    chosen = opts.positions_in(capture)
+    positions = list(range(len(capture))) if chosen is None else chosen
     if not positions:
-        raise InputError("track: no frames to track")
-    check_choice("track", "init", init, get_args(Init))
+        raise InputError(f"track: {capture.path} has no frames to track")
+    init, recover, init_options = opts.init, opts.recover, opts.init_options
     indices = [int(capture.indices[k]) for k in positions]  # without reading the frames
     meta = {
         "method": tracker.name,
@@ -197,22 +144,20 @@ def track_sequence(
         "eval_parents": template.eval_skeleton.parents.tolist(),
         "options": tracker.options(),
         "init": init,
-        "recover": bool(recover),
-        "reseat": bool(recover and reseat),
-        **(template_info or {}),
+        "recover": recover,
+        **(opts.template_info or {}),
     }
-    body = tracking_body(template, n_vertices=light)
+    body = tracking_body(template, n_vertices=opts.light)
     meta["tracked_vertices"] = body.light.n_vertices
     meta.update(_built_on(tracker, body.light))
-    check_choice("track", "refine", refine, get_args(Refine))
-    on = refine == "on" or (refine == "auto" and not getattr(capture, "cameras", None))
+    on = opts.refine == "on" or (opts.refine == "auto" and not getattr(capture, "cameras", None))
     meta["refine_surface"] = on
     refiner = SurfaceRefiner(body.light.F, body.light.n_vertices) if on else None
     Path(out).mkdir(parents=True, exist_ok=True)
     report = on_frame or (lambda r: None)
     # one BLAS thread while tracking; a second run into the same folder is refused
     with blas_threads(), folder_lock(out, "track"):
-        done = set(start_track(out, meta, template.F, resume=resume))
+        done = set(start_track(out, meta, template.F, resume=opts.resume))
         if body.binding is not None:  # frames hold the light body; read_track reads out
             write_light_binding(out, body.binding)
         if indices[0] not in done:
@@ -226,8 +171,8 @@ def track_sequence(
                 list(range(len(first))) if live else positions,
                 init,
                 init_options,
-                start=start,
-                show_progress=show_progress,
+                start=opts.start,
+                show_progress=opts.show_progress,
             )
             started = set(done_frames(out))
             for i in sorted(started - done):
@@ -240,15 +185,14 @@ def track_sequence(
             todo = [k for k in positions[1:] if capture.indices[k] not in done]
         pool = capture.indices if live else indices
         recovery, good = None, None
-        for k in progress(todo, label=tracker.name, enabled=show_progress):
+        for k in progress(todo, label=tracker.name, enabled=opts.show_progress):
             index = int(capture.indices[k])
             if good is None:  # the first frame to track: from the state of the one before
                 last = max((i for i in pool if i in done and i < index), default=indices[0])
                 resume_tracker(tracker, body.light, out, last)
                 if recover:
                     pose = _last_pose(out, [i for i in pool if i in done and i <= last])
-                    excl = (init_options or {}).get("exclude_trials", ())
-                    recovery = Recovery(body.light, *pose, exclude_trials=excl)
+                    recovery = Recovery(body.light, *pose)
                 good = last
             while True:
                 r = track_frame(
@@ -258,7 +202,6 @@ def track_sequence(
                     out,
                     good,
                     recovery=recovery,
-                    reseat=reseat,
                     retry=functools.partial(capture.young, k) if live else None,
                     timer=timer,
                     refiner=refiner,
@@ -271,11 +214,7 @@ def track_sequence(
             if timer is not None:
                 timer.lap("write")
             report(r)
-    return read_track(out, vertices=vertices)
-
-
-#: When the output surface is refined towards the observations (:func:`track_sequence`).
-Refine = Literal["auto", "on", "off"]
+    return read_track(out, vertices=opts.vertices)
 
 
 def _built_on(tracker: Tracker, template: Template) -> dict:
@@ -315,7 +254,6 @@ def track_frame(
     good: int,
     *,
     recovery: Recovery | None = None,
-    reseat: bool = False,
     retry: Callable[[], bool] | None = None,
     timer: StageTimer | None = None,
     refiner: SurfaceRefiner | None = None,
@@ -329,7 +267,8 @@ def track_frame(
     read : callable returning the frame (a mesh sequence reads its file here)
     index : int, its frame number
     out : path, the track folder; ``good`` : int, its last well-fitted frame
-    recovery, reseat : score the frame and flag lost limbs (:func:`recovered`)
+    recovery : Recovery, optional
+        Scores the frame and flags lost limbs (:func:`recovered`).
     retry : callable, optional
         Asked when the frame cannot be read: True means "not yet" (live mode: a file still
         being written), and None is returned for the caller to try again later.
@@ -361,7 +300,7 @@ def track_frame(
             if not is_finite_result(r):
                 raise FitError("non-finite joints or vertices")
             if recovery is not None:
-                r = recovered(tracker, recovery, frame, r, reseat=reseat)
+                r = recovered(recovery, frame, r)
                 if timer is not None:
                     timer.lap("checks")
             if refiner is not None:
@@ -594,35 +533,15 @@ def _is_rest(template: Template, truth) -> bool:
     return V.shape == template.V.shape and float(np.abs(V - template.V).max()) < 1e-3
 
 
-def recovered(
-    tracker: Tracker, recovery: Recovery, frame, r: FrameResult, *, reseat: bool = False
-) -> FrameResult:
-    """``r`` scored against ``frame``; flagged ``lost`` with the limbs concerned, and with
-    ``reseat``, where a better pose is found, the tracker re-seated there (flag ``reinit``).
-    The frame's quality (``fit_outside``, ``fit_unexplained``) joins its energies, the
+def recovered(recovery: Recovery, frame, r: FrameResult) -> FrameResult:
+    """``r`` scored against ``frame``: flagged ``lost`` with the limbs concerned. The
+    frame's quality (``fit_outside``, ``fit_unexplained``) joins its energies, the
     articulated pose of the tracked mesh its state (``pose_R``, ``pose_root``)."""
     q = recovery.assess(frame, r.vertices, start=_tracker_pose(recovery, r))
     flags, message = tuple(r.flags), r.message
     if q.lost:
         flags += ("lost",)
         message = f"lost {q.describe()}"
-    # re-seating acts on the recovery's own suspects (past the fit quality's thresholds, or
-    # missed), not on the calibrated flag: it holds a limb the observations miss
-    suspect = recovery.suspect
-    if suspect.lost and reseat:
-        found = recovery.reinitialise(frame, r.vertices, suspect)
-        held = [n for n in suspect.lost if n in recovery.missing]
-        if found is not None or held:
-            flags += ("lost",) * ("lost" not in flags)
-            message = message or f"lost {suspect.describe()}"
-        if found is not None:
-            r = tracker.reseat(frame, found.R, found.root)
-            flags += ("reinit",)
-            message += f"; re-initialised {', '.join(found.limbs)}"
-            q = found.quality
-        elif held:  # limbs the observations miss: held as last seen, not left where pulled
-            r = tracker.reseat(frame, recovery.coast_pose(), recovery.root)
-            message += f"; {', '.join(held)} held as last seen"
     state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
     return replace(
         r, flags=flags, message=message, energies={**r.energies, **q.energies()}, state=state

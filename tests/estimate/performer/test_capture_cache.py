@@ -17,6 +17,7 @@ from meshmocap.io.capture import open_capture
 from meshmocap.io.results import read_state
 from meshmocap.io.start import Start
 from meshmocap.trackers import driver
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 
@@ -109,7 +110,11 @@ def test_the_first_pose_is_searched_once_for_every_tracker(walk, tmp_path, monke
     t = load_template("neutral_5k")
     tracks = [
         driver.track_sequence(
-            make_tracker(method, template=t), t, cap, tmp_path / method, show_progress=False
+            make_tracker(method, template=t),
+            t,
+            cap,
+            tmp_path / method,
+            TrackOptions(show_progress=False),
         )
         for method in ("articulated_icp", "patch")
     ]

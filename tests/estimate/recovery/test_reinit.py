@@ -1,5 +1,5 @@
 """Tracking from the capture alone: the studio's heading, offset and missed limb, loss
-flags and re-seating, point clouds, and the one-line refusals of inputs that cannot be
+flags, the whole-body re-seat, point clouds, and the one-line refusals of inputs that cannot be
 tracked as given."""
 
 import functools
@@ -24,6 +24,7 @@ from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, placed_motion
 from meshmocap.trackers.articulated_icp import ArticulatedICP
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.patch.tracker import PatchTracker
 from toys import observed_frame
 
@@ -89,7 +90,7 @@ def test_the_hull_misses_the_limb_only_on_its_frames(gap):
 def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     t = load_template("neutral_5k")
     track = track_sequence(
-        PatchTracker(), t, gap, tmp_path / "tr", init="truth", show_progress=False
+        PatchTracker(), t, gap, tmp_path / "tr", TrackOptions(init="truth", show_progress=False)
     )
     lost = [k for k, f in enumerate(track.flags) if "lost" in f]
     # the hull misses the arm on frames 2-3; frame 4 sees it again where the track left it
@@ -115,17 +116,17 @@ def test_frames_missing_a_limb_are_flagged_naming_it(gap, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "init truth: the first pose from ground truth" in out and "with a limb lost" in out
     quiet = track_sequence(
-        PatchTracker(), t, gap, tmp_path / "quiet", init="truth", recover=False, show_progress=False
+        PatchTracker(),
+        t,
+        gap,
+        tmp_path / "quiet",
+        TrackOptions(init="truth", recover=False, show_progress=False),
     )
     assert not any(quiet.flags) and "fit_outside" not in quiet.energies
-    # the default flags and never moves the track; reseat acts on the lost limb
+    # the forward pass flags and never moves the track (the limb-only re-seat is gone)
     assert not any("reinit" in f for f in track.flags)
     assert not any("held as last seen" in m for m in track.messages)
-    acted = track_sequence(
-        PatchTracker(), t, gap, tmp_path / "acted", init="truth", reseat=True, show_progress=False
-    )
-    assert any("held as last seen" in m or "re-initialised" in m for m in acted.messages)
-    assert json.loads((tmp_path / "acted" / "track.json").read_text())["reseat"] is True
+    assert "reseat" not in json.loads((tmp_path / "tr" / "track.json").read_text())
 
 
 def test_a_limb_the_observations_miss_is_lost_until_seen_again(walker):

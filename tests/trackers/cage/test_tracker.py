@@ -1,7 +1,5 @@
 """The cage tracker: Gram–Schmidt derivatives, manifold learning, tracking a short walk."""
 
-import functools
-
 import numpy as np
 import pytest
 
@@ -15,10 +13,16 @@ from meshmocap.trackers.cage.quad_frames import gram_schmidt_forward
 from meshmocap.trackers.cage.tracker import CageOptions, CageTracker, learn_manifold
 from meshmocap.trackers.cage.training_poses import library_poses
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 
 #: The papers' protocol (first pose from ground truth), no loss recovery: these tests are
 #: about the tracker itself.
-track_sequence = functools.partial(track_sequence, init="truth", recover=False)
+
+
+def truth_options(**fields) -> TrackOptions:
+    """The record of these tests' tracks: the first pose from ground truth, no checks."""
+    return TrackOptions(init="truth", recover=False, **fields)
+
 
 RNG = np.random.default_rng(2)
 
@@ -46,7 +50,9 @@ def setup(synth_capture):
 def test_cage_tracker_follows_a_walk_and_resumes(setup, tmp_path):
     t, gp, cap = setup
     opts = CageOptions(local_iters=1, alternations=2)
-    track = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", show_progress=False)
+    track = track_sequence(
+        CageTracker(gp, opts), t, cap, tmp_path / "tr", truth_options(show_progress=False)
+    )
     true = np.stack([f.truth.joints for f in cap])
     err = np.linalg.norm(track.joints - true, axis=2).mean(axis=1) * 1000
     # joints start exactly on the truth (their Green coordinates are taken there) and stay
@@ -54,7 +60,9 @@ def test_cage_tracker_follows_a_walk_and_resumes(setup, tmp_path):
     assert err[0] < 1e-6 and err.max() < 35.0
     assert track.meta["cage_body"] == "template"  # a bundled body: its own cage
     (tmp_path / "tr" / "frames" / "00005.npz").unlink()
-    again = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", show_progress=False)
+    again = track_sequence(
+        CageTracker(gp, opts), t, cap, tmp_path / "tr", truth_options(show_progress=False)
+    )
     assert np.allclose(again.joints, track.joints, atol=1e-9)
 
 
@@ -100,7 +108,9 @@ def test_options_and_learning_errors(setup):
 def test_joints_ride_their_quads_when_asked(setup, tmp_path):
     t, gp, cap = setup
     opts = CageOptions(local_iters=1, alternations=2, joints="quads")
-    track = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", show_progress=False)
+    track = track_sequence(
+        CageTracker(gp, opts), t, cap, tmp_path / "tr", truth_options(show_progress=False)
+    )
     true = np.stack([f.truth.joints for f in cap])
     err = np.linalg.norm(track.joints - true, axis=2).mean(axis=1) * 1000
     assert err[0] < 1e-6 and err.max() < 35.0  # each evaluation joint is a quad's rig joint
@@ -154,11 +164,19 @@ def test_options_identify_the_manifold_and_a_resume_with_another_is_refused(setu
     opts = CageOptions(local_iters=0, alternations=1)
     frames = [0, 1]
     track_sequence(
-        CageTracker(gp, opts), t, cap, tmp_path / "tr", frames=frames, show_progress=False
+        CageTracker(gp, opts),
+        t,
+        cap,
+        tmp_path / "tr",
+        truth_options(positions=frames, show_progress=False),
     )
     with pytest.raises(FormatError, match="other settings") as info:
         track_sequence(
-            CageTracker(other, opts), t, cap, tmp_path / "tr", frames=frames, show_progress=False
+            CageTracker(other, opts),
+            t,
+            cap,
+            tmp_path / "tr",
+            truth_options(positions=frames, show_progress=False),
         )
     assert "\n" not in str(info.value)
     with pytest.raises(InputError, match="manifold_digest: gp must be a fitted GPLVM"):
@@ -177,8 +195,7 @@ def test_a_manifold_of_other_motions_is_noticed_and_not_pulled_back_to(setup, tm
         t,
         cap,
         tmp_path / "c",
-        frames=range(4),
-        show_progress=False,
+        truth_options(positions=range(4), show_progress=False),
     )
     assert not np.any(own.energies["off_manifold"] > 0)
     lib = library_poses(t, 400)
@@ -191,12 +208,11 @@ def test_a_manifold_of_other_motions_is_noticed_and_not_pulled_back_to(setup, tm
         t,
         cap,
         tmp_path / "a",
-        frames=frames,
-        show_progress=False,
+        truth_options(positions=frames, show_progress=False),
     ).energies["off_manifold"]
     assert np.sum(off[1:] > 0) >= 2
     never = CageTracker(other, CageOptions(off_manifold=0.0, **opts))
     off = track_sequence(
-        never, t, cap, tmp_path / "b", frames=frames, show_progress=False
+        never, t, cap, tmp_path / "b", truth_options(positions=frames, show_progress=False)
     ).energies["off_manifold"]
     assert not np.any(off[1:] > 0)

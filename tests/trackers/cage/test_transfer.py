@@ -24,6 +24,7 @@ from meshmocap.trackers.cage.transfer import (
     write_transfer,
 )
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
 
@@ -44,7 +45,9 @@ def tracked(rig, synth_capture, tmp_path_factory):
     cap = synth_capture("walk", stop=8, step=2, voxel_size=0.02)
     tr = make_tracker("cage_green", manifold=pm.gp, alternations=1, local_iters=1, n_sample=300)
     out = tmp_path_factory.mktemp("track")
-    track = track_sequence(tr, t, cap, out, show_progress=False, init="truth", recover=False)
+    track = track_sequence(
+        tr, t, cap, out, TrackOptions(show_progress=False, init="truth", recover=False)
+    )
     return t, out, track, read_cage_track(out, template=t, oqr=oqr)
 
 

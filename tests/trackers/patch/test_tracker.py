@@ -1,6 +1,5 @@
 """The patch tracker and the sequence driver on a short synthetic walk."""
 
-import functools
 import json
 import shutil
 from dataclasses import replace
@@ -12,6 +11,7 @@ from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
 from meshmocap.io.results import done_frames, read_track
 from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.patch.tracker import (
     STAGES,
     PatchOptions,
@@ -21,7 +21,11 @@ from meshmocap.trackers.patch.tracker import (
 
 #: The papers' protocol (first pose from ground truth), no loss recovery: these tests are
 #: about the tracker itself.
-track_sequence = functools.partial(track_sequence, init="truth", recover=False)
+
+
+def truth_options(**fields) -> TrackOptions:
+    """The record of these tests' tracks: the first pose from ground truth, no checks."""
+    return TrackOptions(init="truth", recover=False, **fields)
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +39,11 @@ def tracked(walk, tmp_path_factory):
     cap, t = walk
     out = tmp_path_factory.mktemp("track")
     opts = PatchOptions(n_patches=120, max_iter=6)
-    return track_sequence(PatchTracker(opts), t, cap, out, show_progress=False), out, opts
+    return (
+        track_sequence(PatchTracker(opts), t, cap, out, truth_options(show_progress=False)),
+        out,
+        opts,
+    )
 
 
 def test_patch_tracker_follows_a_walk(walk, tracked):
@@ -58,7 +66,9 @@ def test_stage_breakdown_accounts_for_the_step_time(walk, tmp_path):
     on the machine, so only the order is claimed)."""
     cap, t = walk
     tracker = PatchTracker(PatchOptions(n_patches=120, max_iter=3))
-    track = track_sequence(tracker, t, cap, tmp_path / "tr", frames=range(3), show_progress=False)
+    track = track_sequence(
+        tracker, t, cap, tmp_path / "tr", truth_options(positions=range(3), show_progress=False)
+    )
     assert tracker.n_steps == 2 and set(tracker.stage_seconds) == set(STAGES)
     assert all(v > 0 for v in tracker.stage_seconds.values())
     assert sum(tracker.stage_seconds.values()) <= track.seconds[1:].sum()
@@ -89,10 +99,16 @@ def test_interrupted_run_resumes_to_the_same_result(walk, tracked, tmp_path):
     for i in (5, 6):
         (part / "frames" / f"{i:05d}.npz").unlink()
     assert done_frames(part) == [0, 1, 2, 3, 4]
-    again = track_sequence(PatchTracker(opts), t, cap, part, show_progress=False)
+    again = track_sequence(PatchTracker(opts), t, cap, part, truth_options(show_progress=False))
     assert np.allclose(again.joints, track.joints, atol=1e-9)  # seeded per frame: identical
     with pytest.raises(Exception, match="other settings"):
-        track_sequence(PatchTracker(PatchOptions(n_patches=90)), t, cap, part, show_progress=False)
+        track_sequence(
+            PatchTracker(PatchOptions(n_patches=90)),
+            t,
+            cap,
+            part,
+            truth_options(show_progress=False),
+        )
 
 
 class _Flaky(PatchTracker):
@@ -108,7 +124,11 @@ def test_failed_frame_is_flagged_and_tracking_continues(walk, tmp_path):
     cap, t = walk
     opts = PatchOptions(n_patches=120, max_iter=4)
     track = track_sequence(
-        _Flaky(opts), t, cap, tmp_path / "tr", frames=range(5), show_progress=False
+        _Flaky(opts),
+        t,
+        cap,
+        tmp_path / "tr",
+        truth_options(positions=range(5), show_progress=False),
     )
     assert track.healthy.tolist() == [True, True, True, False, True]
     assert np.array_equal(track.joints[3], track.joints[2])  # the last good result repeated
