@@ -228,6 +228,21 @@ def test_an_out_among_the_inputs_is_refused_and_nothing_written(mesh_folder, tmp
     assert snapshot(cap) == before
 
 
+def test_a_folder_mixing_formats_suggests_the_glob_of_most_of_its_files(tmp_path, capsys):
+    import numpy as np
+
+    for k in range(3):
+        (tmp_path / f"m_{k}.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    np.save(tmp_path / "faces.npy", np.zeros((1, 3), np.int32))  # a stray array among them
+    capsys.readouterr()
+    assert main(["track", str(tmp_path), "--out", str(tmp_path.parent / "t")]) == 2
+    _one_error_line(
+        capsys,
+        f"{tmp_path}: folder mixes ['.npy', '.obj'] (1 .npy, 3 .obj); pass a glob "
+        f"like '{tmp_path}/*.obj'",
+    )
+
+
 @pytest.mark.slow
 def test_an_out_holding_another_captures_track_is_refused_before_its_body_is_reused(
     damaged, mesh_folder, capsys

@@ -502,9 +502,14 @@ class MeshSequence:
         elif path.is_dir():
             names = [str(p) for p in path.iterdir() if p.is_file() and is_frame_file(p.name)]
             exts = sorted({_ext(n) for n in names})
-            if len(exts) > 1:
-                glob = path / ("*" + exts[0])
-                raise InputError(f"{source}: folder mixes {exts}; pass a glob like '{glob}'")
+            if len(exts) > 1:  # the glob of the format most files have
+                count = {e: sum(_ext(n) == e for n in names) for e in exts}
+                most = max(exts, key=lambda e: count[e])
+                held = ", ".join(f"{count[e]} {e}" for e in exts)
+                raise InputError(
+                    f"{source}: folder mixes {exts} ({held}); pass a glob like "
+                    f"'{path / ('*' + most)}'"
+                )
         elif path.is_file():
             if not is_frame_file(path.name):
                 raise InputError(f"{source}: not a frame file {list(_FRAME_EXTENSIONS)}")
