@@ -396,9 +396,9 @@ def track(
     # a fresh install's kernels compile in the background while the body is estimated and
     # the first pose found (meshmocap.apps.kernels)
     start_compiling(kernels_of(method))
-    # a live capture's body is estimated from its first frames, as an ordinary capture
     if resume:  # not the track of another capture (its body would be reused)
         check_resumable(folder, capture, out="out", restart="resume=False")
+    # a live capture's body is estimated from its first frames, as an ordinary capture
     shown = capture
     if live and _estimates(capture, template, folder, opts.resume):
         shown = body_capture(capture)
