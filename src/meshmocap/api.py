@@ -393,11 +393,11 @@ def track(
     live = isinstance(capture, LiveCapture)
     chosen = opts.positions_in(capture)
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="meshmocap-track-"))
+    if resume:  # not the track of another capture (its body would be reused)
+        check_resumable(folder, capture, out="out", restart="resume=False")
     # a fresh install's kernels compile in the background while the body is estimated and
     # the first pose found (meshmocap.apps.kernels)
     start_compiling(kernels_of(method))
-    if resume:  # not the track of another capture (its body would be reused)
-        check_resumable(folder, capture, out="out", restart="resume=False")
     # a live capture's body is estimated from its first frames, as an ordinary capture
     shown = capture
     if live and _estimates(capture, template, folder, opts.resume):

@@ -263,6 +263,23 @@ def test_an_out_holding_another_captures_track_is_refused_before_its_body_is_reu
     assert snapshot(trk) == before
 
 
+def test_the_python_api_refuses_another_captures_track_in_its_own_words(mesh_folder, tmp_path):
+    import json
+
+    from meshmocap import api
+    from meshmocap.errors import OutputPathError
+
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "track.json").write_text(json.dumps({"capture": "/data/walk"}))
+    with pytest.raises(OutputPathError) as info:
+        api.track(str(mesh_folder), out=tmp_path / "t", method="articulated_icp")
+    assert str(info.value) == (
+        f"track: out {tmp_path / 't'} holds the track of another capture (/data/walk); "
+        f"expected a new folder, or a track of {mesh_folder} to resume: give another out, "
+        "or resume=False to track over it"
+    )
+
+
 def _one_error_line(capsys, message: str, *, err: str | None = None) -> None:
     err = capsys.readouterr().err if err is None else err
     lines = [x for x in err.splitlines() if not x.startswith("meshmocap: loading")]
