@@ -11,6 +11,8 @@ The stages of a frame, in the order the driver runs them (:data:`FRAME_STAGES`):
   points and normals, the signed distance's set-up);
 * ``step``: the tracker's fit, with its own stages (``step.NAME``, the tracker's
   ``stage_seconds``) where it keeps them;
+* ``hold``: on a 4D capture, the pose fitted against the observations with the tracker's
+  surface, the tracker moved there (:mod:`meshmocap.estimate.pose.hold`);
 * ``checks``: the fit-quality assessment of every frame, and any re-seat;
 * ``refine``: the output surface refined towards the frame's observations
   (:class:`~meshmocap.geometry.refine.SurfaceRefiner`);
@@ -25,7 +27,7 @@ from collections.abc import Iterable
 import numpy as np
 
 #: The driver's stages of a frame, in order (module docstring).
-FRAME_STAGES = ("read", "observe", "step", "checks", "refine", "write")
+FRAME_STAGES = ("read", "observe", "step", "hold", "checks", "refine", "write")
 
 
 class StageTimer:

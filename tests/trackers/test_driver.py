@@ -193,3 +193,38 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
         P, _ = frame_points(walk[k])
         near = [KDTree(P).query(V[k])[0].mean() for V in (refined.vertices, plain.vertices)]
         assert near[0] < near[1]
+
+
+def test_a_4d_capture_holds_the_skeleton_against_its_meshes(mesh_folder, small_walk, tmp_path):
+    """On mesh files (a 4D capture) every frame's pose is fitted against the observed
+    surface together with the tracker's (``hold_skeleton`` in ``track.json``); the joints
+    stay on the truth; a capture folder's hulls are not held."""
+    from meshmocap.io.capture import SequenceCapture
+
+    t = load_template("neutral_5k")
+    seq = SequenceCapture(mesh_folder)
+    tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+    held = track_sequence(
+        tracker,
+        t,
+        seq,
+        tmp_path / "held",
+        TrackOptions(
+            show_progress=False,
+            light=None,
+            start=Start(0, small_walk[0].truth.rotations, small_walk[0].truth.root, "truth"),
+        ),
+    )
+    assert held.meta["hold_skeleton"] is True and all(held.healthy)
+    truth = np.stack([f.truth.joints for f in small_walk])
+    err = np.linalg.norm(held.joints - truth, axis=2)
+    assert err.mean() < 0.02  # measured 6 mm
+    tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+    hulls = track_sequence(
+        tracker,
+        t,
+        small_walk,
+        tmp_path / "hulls",
+        TrackOptions(init="truth", show_progress=False, light=None, positions=[0, 1]),
+    )
+    assert hulls.meta["hold_skeleton"] is False

@@ -53,6 +53,7 @@ from meshmocap.errors import (
 )
 from meshmocap.estimate.performer.capture_cache import cached_first_pose
 from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
+from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -150,9 +151,13 @@ def track_sequence(
     body = tracking_body(template, n_vertices=opts.light)
     meta["tracked_vertices"] = body.light.n_vertices
     meta.update(_built_on(tracker, body.light))
-    on = opts.refine == "on" or (opts.refine == "auto" and not getattr(capture, "cameras", None))
+    four_d = not getattr(capture, "cameras", None)  # mesh or point files: the surface itself
+    on = opts.refine == "on" or (opts.refine == "auto" and four_d)
     meta["refine_surface"] = on
     refiner = SurfaceRefiner(body.light.F, body.light.n_vertices) if on else None
+    # a 4D capture's surface is the performer's: the skeleton is held against it each frame
+    holder = SkeletonHold(body.light) if four_d and hasattr(tracker, "hold") else None
+    meta["hold_skeleton"] = holder is not None
     Path(out).mkdir(parents=True, exist_ok=True)
     report = on_frame or (lambda r: None)
     # one BLAS thread while tracking; a second run into the same folder is refused
@@ -193,6 +198,8 @@ def track_sequence(
                 if recover:
                     pose = _last_pose(out, [i for i in pool if i in done and i <= last])
                     recovery = Recovery(body.light, *pose)
+                if holder is not None:
+                    holder.last = _hold_start(body.light, out, [i for i in pool if i in done])
                 good = last
             while True:
                 r = track_frame(
@@ -205,6 +212,7 @@ def track_sequence(
                     retry=functools.partial(capture.young, k) if live else None,
                     timer=timer,
                     refiner=refiner,
+                    holder=holder,
                 )
                 if r is not None:
                     break
@@ -257,6 +265,7 @@ def track_frame(
     retry: Callable[[], bool] | None = None,
     timer: StageTimer | None = None,
     refiner: SurfaceRefiner | None = None,
+    holder: SkeletonHold | None = None,
 ) -> FrameResult | None:
     """Track one frame: the per-frame step of the driver and of live mode
     (:mod:`meshmocap.trackers.follow`).
@@ -278,6 +287,9 @@ def track_frame(
     refiner : SurfaceRefiner, optional
         Refines the result's vertices towards the frame's observed points (booked to
         ``refine``); the tracker's state is left as the fit made it.
+    holder : SkeletonHold, optional
+        Fits the pose against the frame's observed points together with the tracker's
+        surface, and moves the tracker there (:func:`held`; booked to ``hold``).
 
     Returns
     -------
@@ -299,6 +311,10 @@ def track_frame(
             r = _step(tracker, frame, timer)
             if not is_finite_result(r):
                 raise FitError("non-finite joints or vertices")
+            if holder is not None:
+                r = held(tracker, holder, frame, r)
+                if timer is not None:
+                    timer.lap("hold")
             if recovery is not None:
                 r = recovered(recovery, frame, r)
                 if timer is not None:
@@ -546,6 +562,29 @@ def recovered(recovery: Recovery, frame, r: FrameResult) -> FrameResult:
     return replace(
         r, flags=flags, message=message, energies={**r.energies, **q.energies()}, state=state
     )
+
+
+def held(tracker: Tracker, holder: SkeletonHold, frame, r: FrameResult) -> FrameResult:
+    """``r`` with the tracker moved onto the pose ``holder`` fits against ``frame``'s
+    observed points together with the tracker's surface (:mod:`meshmocap.estimate.pose.hold`),
+    from the pose of that surface; the frame's energies, flags and message are kept."""
+    R, root = holder.start(r.vertices, *holder.last)
+    R, root = holder.fit(*frame.points, r.vertices, R, root)
+    holder.last = (R, root)
+    h = tracker.hold(frame, R, root)
+    if not is_finite_result(h):
+        raise FitError("non-finite joints or vertices after holding the skeleton")
+    return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
+
+
+def _hold_start(template: Template, out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Where the skeleton hold starts: the articulated pose stored with the latest of
+    ``indices`` (the recovery's), else the template's rest pose."""
+    try:
+        return _last_pose(out, indices)
+    except InputError:
+        sk = template.skeleton
+        return np.tile(np.eye(3), (sk.n_joints, 1, 1)), sk.rest_positions[0].copy()
 
 
 def _tracker_pose(recovery: Recovery, r: FrameResult) -> tuple[np.ndarray, np.ndarray] | None:

@@ -188,6 +188,15 @@ class PatchTracker:
         self._place(self.template.pose(R, root))
         return self._result(frame.index, {}, 0)
 
+    def hold(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Move the patches and joints onto the template posed by ``R``, ``root`` (the pose
+        the driver held against the observations, :mod:`meshmocap.estimate.pose.hold`),
+        keeping the motion's history (velocity, σ, the classifier's last fit)."""
+        posed = self.template.pose(R, root)
+        self.R, self.c = fit_patches(self.model, posed.V)
+        self.X = posed.eval_joints.copy()
+        return self._result(frame.index, {}, 0)
+
     def _place(self, posed) -> None:
         """Patches and joints on a posed template; no velocity, a fresh classifier."""
         self.R, self.c = fit_patches(self.model, posed.V)

@@ -1,0 +1,180 @@
+"""The skeleton held by the observed surface: each frame's articulated pose fitted against
+the observations, from the pose of the tracker's surface, for 4D captures.
+
+On a clean 4D capture (one closed mesh per frame) a tracker's surface stays on the
+observations while its skeleton slides inside it: nearest-point data terms leave motion
+along the surface unconstrained, most of all for a cloud of patches, each free to slide as
+long as its neighbours follow (``docs/guide/own_4d.rst`` has the measurements).
+:class:`SkeletonHold` re-fits the pose every frame, starting from the pose of the
+tracker's own surface ``V`` (known correspondences,
+:func:`~meshmocap.estimate.pose.fit.pose_of_vertices`), by Gauss–Newton on
+
+    E(Θ) = E_md + E_dm + μ (1/m) Σ_i |v_i(Θ) − V_i|² + λ Σ_j |log(R_j R̂_jᵀ)|²
+
+where ``E_md``, ``E_dm`` are the mean squared point-to-plane residuals of the closest
+compatible pairs both ways between the skinned model points ``v_i(Θ)`` and the observed
+points (plus a tenth point-to-point, :func:`~meshmocap.body.articulated.closest_point_system`),
+within a reach shrinking over the iterations; the third term an optional pull towards the
+tracker's surface (its vertex correspondences; off by default: the tracker's surface is
+what slid) and the last a weak pull towards the pose of that surface ``R̂``. The whole
+skinned body is one rigid-per-part shape: a part cannot move along the surface without
+another leaving it. The tracking driver then moves the tracker onto the held pose (its
+``hold`` method: the patch tracker re-places its patches on the posed template, keeping
+its velocity; the articulated ICP continues from the pose).
+
+Units: metres and radians, world frame Z up.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pykdtree.kdtree import KDTree
+
+from meshmocap.body.articulated import (
+    FIXED_JOINTS,
+    articulated_model,
+    articulated_step,
+    closest_pairs,
+    closest_point_system,
+    pose_points,
+    residual_jacobian,
+    rotation_error,
+)
+from meshmocap.body.template import Template
+from meshmocap.errors import FitError, InputError
+from meshmocap.estimate.pose.fit import pose_of_vertices
+
+__all__ = ["SkeletonHold"]
+
+
+class SkeletonHold:
+    """The per-frame pose fit of a tracked template against its observations (module
+    docstring).
+
+    Parameters
+    ----------
+    template : Template
+        The tracked template (the driver's light body).
+    n_model_points : int
+        Template vertices fitted (area-weighted sample).
+    max_points : int
+        Observed points used at most (an even subsample).
+    iterations : int
+        Gauss–Newton iterations per frame.
+    max_distance : (float, float)
+        Metres: pairs farther apart are ignored, from the first value at the first
+        iteration shrinking geometrically to the second.
+    normal_cos : float
+        Pairs need ``n_model · n_data`` above this.
+    surface_weight : float
+        ``μ``: weight of the pull towards the tracker's surface (against the data terms'
+        mean squared residuals).
+    lambda_pose : float
+        ``λ``: weight of each joint's squared rotation away from the tracker's (m²/rad²).
+
+    Attributes
+    ----------
+    model_ : ArticulatedModel, the fitted points' skinning
+    last : (R (J, 3, 3), root (3,)), the last held pose (the driver's; the rest pose at first)
+    """
+
+    def __init__(
+        self,
+        template: Template,
+        *,
+        n_model_points: int = 1500,
+        max_points: int = 4000,
+        iterations: int = 10,
+        max_distance: tuple[float, float] = (0.1, 0.02),
+        normal_cos: float = 0.3,
+        surface_weight: float = 0.0,
+        lambda_pose: float = 1e-5,
+    ):
+        if int(iterations) < 1 or int(n_model_points) < 1 or int(max_points) < 1:
+            raise InputError(
+                "SkeletonHold: iterations, n_model_points and max_points must be ≥ 1, found "
+                f"{iterations}, {n_model_points}, {max_points}"
+            )
+        for name, v in (("surface_weight", surface_weight), ("lambda_pose", lambda_pose)):
+            if not (np.isfinite(v) and v >= 0):
+                raise InputError(f"SkeletonHold: {name} must be ≥ 0, found {v!r}")
+        self.template = template
+        self.model_ = articulated_model(template, n_points=int(n_model_points), seed=0)
+        self.max_points = int(max_points)
+        self.iterations = int(iterations)
+        self.max_distance = (float(max_distance[0]), float(max_distance[1]))
+        self.normal_cos = float(normal_cos)
+        self.mu, self.lam = float(surface_weight), float(lambda_pose)
+        sk = template.skeleton
+        self.free = np.array(
+            [j for j, n in enumerate(sk.names) if n not in FIXED_JOINTS], dtype=np.int64
+        )
+        self.active = np.concatenate(
+            [np.arange(3), (3 + 3 * self.free[:, None] + np.arange(3)).ravel()]
+        )
+        #: the last held pose (R, root), where the next frame's start is searched from
+        self.last = (np.tile(np.eye(3), (sk.n_joints, 1, 1)), sk.rest_positions[0].copy())
+
+    def start(self, V: np.ndarray, R: np.ndarray, root: np.ndarray):
+        """The pose (R (J, 3, 3), root (3,)) whose skinning is nearest to the tracker's
+        surface ``V`` (n, 3), from ``R``, ``root`` (e.g. the last held pose)."""
+        return pose_of_vertices(self.template, V, R, root, model=self.model_)
+
+    def fit(
+        self,
+        Y: np.ndarray,
+        NY: np.ndarray,
+        V: np.ndarray,
+        R: np.ndarray,
+        root: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The held pose.
+
+        Parameters
+        ----------
+        Y, NY : (p, 3) float64, the frame's observed points (metres) and outward unit normals
+        V : (n, 3) float64, the tracker's surface (the template's vertices), metres
+        R : (J, 3, 3) float64, ``root`` (3,): the pose of ``V`` (:meth:`start`), where the
+            fit starts and which it is pulled towards
+
+        Returns
+        -------
+        R : (J, 3, 3) float64, local rotations; root : (3,) float64, metres
+        """
+        Y = np.asarray(Y, dtype=np.float64)
+        NY = np.asarray(NY, dtype=np.float64)
+        if len(Y) > self.max_points:
+            pick = np.linspace(0, len(Y) - 1, self.max_points).astype(np.int64)
+            Y, NY = Y[pick], NY[pick]
+        Y = np.ascontiguousarray(Y)
+        tree = KDTree(Y)
+        sk = self.template.skeleton
+        R_ref = np.array(R, dtype=np.float64)
+        R, root = R_ref.copy(), np.array(root, dtype=np.float64)
+        target = np.asarray(V, dtype=np.float64)[self.model_.sample]
+        m = len(target)
+        idx = np.arange(m)
+        d0, d1 = self.max_distance
+        free, act = self.free, self.active
+        for it in range(self.iterations):
+            d = d0 * (d1 / d0) ** (it / max(self.iterations - 1, 1))
+            v, nv, a = pose_points(self.model_, R, root)
+            pairs = closest_pairs(tree, Y, NY, v, nv, max_distance=d, normal_cos=self.normal_cos)
+            if not any(len(i) for i, _ in pairs):
+                break
+            H, g = closest_point_system(v, a, pairs, (1.0, 1.0), Y, NY)
+            if self.mu > 0:  # the tracker's surface, correspondences known
+                r, Jr = residual_jacobian(v, a, idx, target, target, "point_to_point")
+                H += (self.mu / m) * (Jr.T @ Jr)
+                g += (self.mu / m) * (Jr.T @ r)
+            e = rotation_error(sk, R, root, R_ref)[free]
+            # the pull, in the columns of the free joints' rotations
+            lam3 = np.full(3 * len(free), self.lam)
+            cols = 3 + 3 * free[:, None] + np.arange(3)
+            H[cols.ravel(), cols.ravel()] += lam3
+            g[cols.ravel()] += lam3 * e.ravel()
+            try:
+                R, root, _ = articulated_step(sk, R, root, H[np.ix_(act, act)], g[act], active=act)
+            except FitError:  # a singular system: keep the pose reached
+                break
+        return R, root

@@ -1,0 +1,69 @@
+"""The skeleton held by the observed surface (:mod:`meshmocap.estimate.pose.hold`): a
+tracker's surface slid along the body (a thigh turned about its own axis, the pelvis
+shifted) is brought back by the fit against the observations, and bad options are refused
+in one line."""
+
+import numpy as np
+import pytest
+
+from meshmocap.body.procedural import procedural_motion
+from meshmocap.body.template import load_template
+from meshmocap.errors import InputError
+from meshmocap.estimate.pose.hold import SkeletonHold
+from meshmocap.geometry.mesh import vertex_normals
+from meshmocap.geometry.rotations import so3_exp
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """neutral_5k at frame 5 of a walk (observed: its own vertices and normals) and a
+    tracker's surface slid along it: the left thigh twisted 0.25 rad about its bone, the
+    right upper arm 0.2 rad, the root moved 2 cm."""
+    t = load_template("neutral_5k")
+    m = procedural_motion("walk", t, duration=0.5, fps=30.0)
+    R, root = m.rotations[5], m.root_positions[5]
+    posed = t.pose(R, root)
+    R0 = R.copy()
+    sk = t.skeleton
+    for name, angle in [("LeftUpLeg", 0.25), ("RightArm", 0.2)]:
+        j = sk.index(name)
+        axis = sk.rest_positions[sk.children[j][0]] - sk.rest_positions[j]
+        axis = axis / np.linalg.norm(axis)
+        R0[j] = R0[j] @ so3_exp(angle * axis)
+    root0 = root + np.array([0.02, 0.0, 0.0])
+    return t, posed, (R, root), (R0, root0)
+
+
+def _joint_error(t, R, root, posed) -> float:
+    """Mean evaluation-joint distance (metres) between a pose and the observed body."""
+    return float(np.linalg.norm(t.pose(R, root).eval_joints - posed.eval_joints, axis=1).mean())
+
+
+def test_the_hold_brings_a_slid_surface_back_onto_the_observed_body(scene):
+    t, posed, _, (R0, root0) = scene
+    slid = t.pose(R0, root0)
+    hold = SkeletonHold(t, n_model_points=800, iterations=8)
+    Rs, roots = hold.start(slid.V, R0, root0)  # the pose of the slid surface
+    before = _joint_error(t, Rs, roots, posed)
+    R1, root1 = hold.fit(posed.V, vertex_normals(posed.V, t.F), slid.V, Rs, roots)
+    after = _joint_error(t, R1, root1, posed)
+    assert before > 0.01  # measured 14 mm
+    assert after < 0.5 * before  # measured 4 mm
+    v_err = np.linalg.norm(t.pose(R1, root1).V - posed.V, axis=1).mean()
+    assert v_err < np.linalg.norm(slid.V - posed.V, axis=1).mean()
+
+
+def test_the_hold_leaves_the_true_pose_where_it_is(scene):
+    t, posed, (R, root), _ = scene
+    hold = SkeletonHold(t, n_model_points=800)
+    R1, root1 = hold.fit(posed.V, vertex_normals(posed.V, t.F), posed.V, R, root)
+    assert _joint_error(t, R1, root1, posed) < 0.002
+
+
+@pytest.mark.parametrize(
+    "kw", [{"iterations": 0}, {"surface_weight": -1.0}, {"lambda_pose": float("nan")}]
+)
+def test_bad_options_are_refused_in_one_line(scene, kw):
+    with pytest.raises(InputError, match="SkeletonHold") as e:
+        SkeletonHold(scene[0], **kw)
+    assert "\n" not in str(e.value)
