@@ -313,8 +313,8 @@ def track_frame(
                 raise FitError("non-finite joints or vertices")
             if holder is not None:
                 r = held(tracker, holder, frame, r)
-                if timer is not None:
-                    timer.lap("hold")
+            if timer is not None:
+                timer.lap("hold")
             if recovery is not None:
                 r = recovered(recovery, frame, r)
                 if timer is not None:
