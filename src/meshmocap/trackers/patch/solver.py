@@ -517,9 +517,13 @@ def add_bone(
     for end, (jj, coef) in enumerate(((model.bone_j, g), (model.bone_child, 1 - g))):
         sys.add_patch_joints(end, weight * (-(w * coef))[:, None, None] * A_t)
         sys.add_g(base + 3 * jj, weight * (-(w * coef))[:, None] * r)
-    for j1, c1 in ((model.bone_j, g), (model.bone_child, 1 - g)):
-        for j2, c2 in ((model.bone_j, g), (model.bone_child, 1 - g)):
-            sys.add_joints(j1, j2, weight * (w * c1 * c2)[:, None, None] * np.eye(3))
+    # joint–joint blocks: multiples of I, Σ_k w_k c_a c_b at (joint a, joint b), one sum
+    K = sys.pattern.n_joints
+    ends = ((model.bone_j, g), (model.bone_child, 1 - g))
+    at = np.concatenate([j1 * K + j2 for j1, _ in ends for j2, _ in ends])
+    coef = np.concatenate([w * c1 * c2 for _, c1 in ends for _, c2 in ends])
+    C = np.bincount(at, coef, minlength=K * K).reshape(K, K)
+    sys.JJ += weight * np.kron(C, np.eye(3))
     return value
 
 
