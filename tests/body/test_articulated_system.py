@@ -129,6 +129,24 @@ def test_nearest_compatible_is_the_first_compatible_of_k(setup):
         assert 0.1 * len(q) < len(qi) < len(q)  # some rejected, some found
 
 
+def test_vertex_normals_are_the_area_weighted_face_normals(setup):
+    """The compiled sums are NumPy's area-weighted face normals added to their corners, to
+    rounding, for the template and for a random soup with an unused vertex."""
+    from meshmocap.geometry.mesh import face_normals
+
+    rng = np.random.default_rng(2)
+    V0, F0 = setup[0].V, setup[0].F
+    for V, F in ((V0, F0), (rng.normal(size=(50, 3)), rng.integers(0, 49, size=(80, 3)))):
+        N = face_normals(V, F, normalize=False)
+        S = np.zeros((len(V), 3))
+        for c in range(3):
+            np.add.at(S, F[:, c], N)
+        n = np.linalg.norm(S, axis=1, keepdims=True)
+        want = np.divide(S, n, out=np.zeros_like(S), where=n > 0)
+        assert np.abs(vertex_normals(V, F) - want).max() < 1e-12
+    assert np.array_equal(vertex_normals(V, F)[-1], np.zeros(3))  # vertex 49: no face
+
+
 def test_vertex_normals_at_equals_every_normal_picked(setup):
     template = setup[0]
     V, F = template.V, template.F
