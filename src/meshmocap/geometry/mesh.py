@@ -45,8 +45,9 @@ def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     bincounts for a 41k-vertex hull, the same sums in the same order."""
     from meshmocap.geometry._mesh_kernels import normals_at_kernel
 
-    V = np.ascontiguousarray(V, dtype=np.float64)
-    F = np.ascontiguousarray(F, dtype=np.int64)
+    # writeable C arrays: the one signature compiled ahead (meshmocap.apps.kernels)
+    V = np.require(V, dtype=np.float64, requirements=["C", "W"])
+    F = np.require(F, dtype=np.int64, requirements=["C", "W"])
     out = normals_at_kernel(V, F, np.arange(len(V), dtype=np.int64), len(V))
     n = np.linalg.norm(out, axis=1, keepdims=True)
     return np.divide(out, n, out=np.zeros_like(out), where=n > 0)
