@@ -7,6 +7,8 @@
 * :mod:`~meshmocap.estimate.pose.library` — the candidate poses: the bundled pose library
   on a template, the seed poses, the body frame;
 * :mod:`~meshmocap.estimate.pose.first_pose` — the global search of the first pose;
+* :mod:`~meshmocap.estimate.pose.keyframe` — the same search at a frame inside a lost run,
+  helped by the tracked pose (its heading, its limbs not lost): cheap enough to run often;
 * :mod:`~meshmocap.estimate.pose.start` — how a track's first pose was found, as a record
   (:class:`~meshmocap.io.results.Start`): made from the search's result, its frame flags
   and its message made from it.

@@ -161,17 +161,23 @@ def coarse_candidates(
     n_best: int = 12,
     n_shifted: int = 300,
     shifts: int = 3,
+    headings: np.ndarray | None = None,
 ) -> list[PoseFit]:
     """The ``n_best`` most promising distinct candidates for one frame: every pose of
     ``poses`` at ``n_headings`` headings, placed with the posed sample's centroid on the
     observed points', scored at once (:meth:`FrameScorer.score`); the ``n_shifted`` best
     moved by ``shifts`` ICP translation steps (:meth:`FrameScorer.shift`) and scored
     again; the best kept greedily, each with some evaluation joint more than
-    :data:`DISTINCT` from every one kept before. ``score`` of each is the coarse score."""
+    :data:`DISTINCT` from every one kept before. ``score`` of each is the coarse score.
+    ``headings`` (h,) float64, radians: the headings tried instead (e.g. a few about a
+    known one)."""
     sk = template.skeleton
     sample = body_sample(template)
     N = len(poses.R)
-    headings = 2 * np.pi * np.arange(n_headings) / n_headings
+    if headings is None:
+        headings = 2 * np.pi * np.arange(n_headings) / n_headings
+    headings = np.atleast_1d(np.asarray(headings, dtype=np.float64))
+    n_headings = len(headings)
     G, P = forward_kinematics(sk, poses.R, np.zeros((N, 3)))
     X0 = np.einsum("nmab,mb->nma", G[:, sample.joint], sample.offset) + P[:, sample.joint]
     c, s = np.cos(headings), np.sin(headings)
@@ -318,27 +324,77 @@ def initial_pose(
                 starts.append(
                     PoseFit(R, _centred_root(coarse, R, centre), 0.0, f"{name}@{deg:.0f}°")
                 )
+    return refined_search(
+        template,
+        P,
+        N,
+        starts,
+        poses=poses if hull is not None else None,
+        scorer=scorer if hull is not None else None,
+        keep=keep,
+        limb_hypotheses=limb_hypotheses,
+        coarse_iterations=coarse_iterations,
+        iterations=iterations,
+        limb_directions=limb_directions,
+        cameras=cameras,
+        masks=masks,
+        field=field,
+        seed=seed,
+        coarse=coarse,
+    )
+
+
+def refined_search(
+    template: Template,
+    P: np.ndarray,
+    N: np.ndarray,
+    starts: list[PoseFit],
+    *,
+    poses: LibraryPoses | None = None,
+    scorer: FrameScorer | None = None,
+    limbs: tuple[str, ...] = tuple(LIMBS),
+    keep: int = 3,
+    limb_hypotheses: int = 3,
+    coarse_iterations: int = 8,
+    iterations: int = 30,
+    limb_directions: int = 10,
+    fine_points: int = 5000,
+    fine_model_points: int = 1500,
+    cameras: list | None = None,
+    masks: list | None = None,
+    field: DistanceGrid | None = None,
+    seed: int = 0,
+    coarse: PoseFitter | None = None,
+) -> InitResult:
+    """Steps 2 and 3 of the search (module docstring) from the coarse ``starts``: each
+    fitted coarsely and ranked (:func:`ranking_key`), the ``keep`` best refined limb by
+    limb (each of ``limbs``: from the library's hypotheses where ``poses`` and ``scorer``
+    are given, else re-seeded over the sphere) and fitted on ``fine_points`` observed
+    points; the winner, its runner-up and its lost limbs. Arguments as
+    :func:`initial_pose`'s; ``coarse``, the coarse fitter where the caller has it.
+    """
+    if coarse is None:
+        Pc, Nc = subsample_points(P, N, 2000, seed)
+        coarse = PoseFitter(template, Pc, Nc, n_model_points=500, field=field, seed=seed)
     rank = ranking_key(template, cameras, masks)
     with phase(f"fitting the best {len(starts)} candidates"):
         fits = [_refit(coarse, f, coarse_iterations, (0.3, 0.1), 1e-3) for f in starts]
         keys = [rank(f) for f in fits]
     fits = [fits[i] for i in np.argsort(keys)]
-    Pf, Nf = subsample_points(P, N, 5000, seed)
-    fine = PoseFitter(template, Pf, Nf, n_model_points=1500, field=field, seed=seed)
+    Pf, Nf = subsample_points(P, N, fine_points, seed)
+    fine = PoseFitter(template, Pf, Nf, n_model_points=fine_model_points, field=field, seed=seed)
     refined = []
     for k, f in enumerate(fits[:keep], start=1):
         with phase(f"refining the best {min(keep, len(fits))} candidates ({k} of them)"):
-            if hull is not None:  # limb by limb from the library
+            if poses is not None and scorer is not None:  # limb by limb from the library
                 f = refine_limbs_from_library(
-                    coarse, f, poses, scorer, n_best=limb_hypotheses, key=rank
+                    coarse, f, poses, scorer, limbs=limbs, n_best=limb_hypotheses, key=rank
                 )
-            else:
-                f = refine_limbs(
-                    coarse, f, limbs=tuple(LIMBS), directions=limb_directions, key=rank
-                )
+            elif limbs:
+                f = refine_limbs(coarse, f, limbs=limbs, directions=limb_directions, key=rank)
             f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
             # then settle on the near surface, barely held (a long pull undoes small moves)
-            f = _refit(fine, f, iterations // 2, (0.04, 0.01), 1e-6)
+            f = _refit(fine, f, max(iterations // 2, 1), (0.04, 0.01), 1e-6)
         refined.append(f)
     rk = [rank(f) for f in refined]
     order = np.argsort(rk)

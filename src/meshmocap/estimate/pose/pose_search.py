@@ -45,13 +45,16 @@ __all__ = [
 def farthest_point_indices(X: np.ndarray, n: int, *, first: int = 0) -> np.ndarray:
     """(min(n, len(X)),) int64: indices of ``X`` (k, 3) picked by farthest-point sampling
     from row ``first`` (each the point farthest from those already picked)."""
+    X = np.asarray(X, dtype=np.float64)
     n = min(int(n), len(X))
     pick = np.empty(n, dtype=np.int64)
     pick[0] = first
-    d = np.linalg.norm(X - X[first], axis=1)
+    diff = X - X[first]
+    d = np.einsum("ij,ij->i", diff, diff)  # squared: the same order, half the time
     for k in range(1, n):
         pick[k] = int(np.argmax(d))
-        d = np.minimum(d, np.linalg.norm(X - X[pick[k]], axis=1))
+        np.subtract(X, X[pick[k]], out=diff)
+        np.minimum(d, np.einsum("ij,ij->i", diff, diff), out=d)
     return pick
 
 
