@@ -16,7 +16,9 @@ Part 2 (``--crane``), the crane archive (../shared/data/meshes/crane, 175 frames
 ``--crane-frames`` N: the first N): ``meshmocap track crane.tar.gz --up y --method M
 --refine R`` then ``meshmocap eval``: the per-vertex error of the tracked first frame's
 vertices against the files, mean over the frames, the first and last fifths (and their
-ratio: issue 37 asks ≤ 1.3), and the worst frame; each method with the output surface
+ratio: issue 37 asks ≤ 1.3), the worst frame, and the error's parts along the true
+surface's normal and along the surface (tangential: a vertex slid to another point of the
+body; mean over every 5th frame); each method with the output surface
 refined towards the observations (``--refine on``, the default for mesh files) and as the
 skeleton's skin leaves it (``off``), the same tracking in the same run (the refinement
 never feeds back), and the difference of their seconds per frame: the refinement's cost.
@@ -51,6 +53,7 @@ import trimesh
 from meshmocap.analysis.evaluate import evaluate
 from meshmocap.body.pose_fit import pose_from_surface
 from meshmocap.cli import main
+from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.io.capture import Capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import open_tracked_capture, read_track, tracked_template
@@ -157,11 +160,12 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
             ev = evaluate(t, open_tracked_capture(t.meta), silhouettes=False, surface_frames=0)
             c = ev.correspondence
             if c is None or not len(c.per_frame):
-                rows.append([method, refine, "not scored (no file connectivity)"] + [""] * 9)
+                rows.append([method, refine, "not scored (no file connectivity)"] + [""] * 11)
                 continue
             per = c.per_frame
             fifth = max(1, len(per) // 5)
             first, last = float(per[:fifth].mean()), float(per[-fifth:].mean())
+            normal, tangential = surface_split(t)
             step[refine] = float(np.median(t.seconds[1:])) if len(t.seconds) > 1 else np.nan
             rows.append(
                 [
@@ -175,6 +179,8 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
                     last / first if first > 0 else float("nan"),
                     float(per.max()),
                     int(c.frames[int(np.argmax(per))]),
+                    normal,
+                    tangential,
                     step[refine],
                     wall,
                 ]
@@ -182,6 +188,24 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
         if len(step) == 2:
             rows[-1][1] = f"on ({step['on'] - step['off']:+.2f} s)"
     return rows
+
+
+def surface_split(t, every: int = 5) -> tuple[float, float]:
+    """The per-vertex error of a track against its files (every ``every``-th frame), split
+    into its parts along the true surface's normal and along the surface (tangential: a
+    vertex slid to another point of the body, which no refinement along the normals can
+    see), mm, mean over vertices and frames."""
+    cap = open_tracked_capture(t.meta)
+    pos = {int(f): k for k, f in enumerate(cap.indices)}
+    normal, tangential = [], []
+    for k in range(0, len(t.frames), every):
+        V, F = cap[pos[int(t.frames[k])]].hull_mesh
+        N = vertex_normals(V, F)
+        e = t.vertices[k] - V
+        en = np.einsum("ij,ij->i", e, N)
+        normal.append(np.abs(en).mean())
+        tangential.append(np.linalg.norm(e - en[:, None] * N, axis=1).mean())
+    return float(np.mean(normal)) * 1000.0, float(np.mean(tangential)) * 1000.0
 
 
 def crane(args, work: Path) -> list[list]:
@@ -302,6 +326,8 @@ def cli() -> None:
         "last/first",
         "worst frame",
         "(frame)",
+        "normal",
+        "tangential",
         "s/frame",
         "wall s",
     ]
