@@ -195,15 +195,17 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
         assert near[0] < near[1]
 
 
+@pytest.mark.slow
 def test_a_4d_capture_holds_the_skeleton_against_its_meshes(mesh_folder, small_walk, tmp_path):
-    """On mesh files (a 4D capture) every frame's pose is fitted against the observed
-    surface together with the tracker's (``hold_skeleton`` in ``track.json``); the joints
-    stay on the truth; a capture folder's hulls are not held."""
+    """On mesh files (a 4D capture) the patch tracker's pose is fitted every frame against
+    the observed surface, from the pose of its own (``hold_skeleton`` in ``track.json``);
+    the joints stay on the truth; a capture folder's hulls are not held, nor is articulated
+    ICP (its pose is such a fit already)."""
     from meshmocap.io.capture import SequenceCapture
 
     t = load_template("neutral_5k")
     seq = SequenceCapture(mesh_folder)
-    tracker = make_tracker("articulated_icp", template=t, max_iter=5)
+    tracker = make_tracker("patch", template=t)
     held = track_sequence(
         tracker,
         t,
@@ -212,13 +214,14 @@ def test_a_4d_capture_holds_the_skeleton_against_its_meshes(mesh_folder, small_w
         TrackOptions(
             show_progress=False,
             light=None,
+            positions=[0, 1, 2],
             start=Start(0, small_walk[0].truth.rotations, small_walk[0].truth.root, "truth"),
         ),
     )
     assert held.meta["hold_skeleton"] is True and all(held.healthy)
-    truth = np.stack([f.truth.joints for f in small_walk])
+    truth = np.stack([small_walk[k].truth.joints for k in range(3)])
     err = np.linalg.norm(held.joints - truth, axis=2)
-    assert err.mean() < 0.02  # measured 6 mm
+    assert err.mean() < 0.01  # measured 0.6 mm
     tracker = make_tracker("articulated_icp", template=t, max_iter=5)
     hulls = track_sequence(
         tracker,
@@ -228,3 +231,17 @@ def test_a_4d_capture_holds_the_skeleton_against_its_meshes(mesh_folder, small_w
         TrackOptions(init="truth", show_progress=False, light=None, positions=[0, 1]),
     )
     assert hulls.meta["hold_skeleton"] is False
+    icp = make_tracker("articulated_icp", template=t, max_iter=5)
+    plain = track_sequence(
+        icp,
+        t,
+        seq,
+        tmp_path / "icp",
+        TrackOptions(
+            show_progress=False,
+            light=None,
+            positions=[0, 1],
+            start=Start(0, small_walk[0].truth.rotations, small_walk[0].truth.root, "truth"),
+        ),
+    )
+    assert plain.meta["hold_skeleton"] is False

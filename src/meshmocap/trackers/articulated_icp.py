@@ -241,13 +241,6 @@ class ArticulatedICP:
         self.prev = (self.R.copy(), self.root.copy())
         return self._result(frame.index, {}, 0)
 
-    def hold(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
-        """Continue from the pose ``R`` (J, 3, 3), ``root`` (3,) (the pose the driver held
-        against the observations), keeping the previous one."""
-        self.R = np.array(R, dtype=np.float64)
-        self.root = np.array(root, dtype=np.float64)
-        return self._result(frame.index, {}, 0)
-
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore the pose (and the previous one, for prediction) saved with a frame."""
         self.R, self.root = state["R"].astype(np.float64), state["root"].astype(np.float64)

@@ -39,6 +39,7 @@ def _joint_error(t, R, root, posed) -> float:
     return float(np.linalg.norm(t.pose(R, root).eval_joints - posed.eval_joints, axis=1).mean())
 
 
+@pytest.mark.slow
 def test_the_hold_brings_a_slid_surface_back_onto_the_observed_body(scene):
     t, posed, _, (R0, root0) = scene
     slid = t.pose(R0, root0)
@@ -53,6 +54,7 @@ def test_the_hold_brings_a_slid_surface_back_onto_the_observed_body(scene):
     assert v_err < np.linalg.norm(slid.V - posed.V, axis=1).mean()
 
 
+@pytest.mark.slow
 def test_the_hold_leaves_the_true_pose_where_it_is(scene):
     t, posed, (R, root), _ = scene
     hold = SkeletonHold(t, n_model_points=800)

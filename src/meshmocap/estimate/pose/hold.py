@@ -19,8 +19,8 @@ tracker's surface (its vertex correspondences; off by default: the tracker's sur
 what slid) and the last a weak pull towards the pose of that surface ``R̂``. The whole
 skinned body is one rigid-per-part shape: a part cannot move along the surface without
 another leaving it. The tracking driver then moves the tracker onto the held pose (its
-``hold`` method: the patch tracker re-places its patches on the posed template, keeping
-its velocity; the articulated ICP continues from the pose).
+``hold`` method, where it has one: the patch tracker re-places its patches on the posed
+template, keeping its velocity; articulated ICP's own pose is such a fit already).
 
 Units: metres and radians, world frame Z up.
 """
