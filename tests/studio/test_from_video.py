@@ -12,7 +12,8 @@ from meshmocap.io.cameras import read_cameras
 from meshmocap.io.capture import read_meta
 from meshmocap.io.silhouettes import read_mask
 from meshmocap.io.video import write_video
-from meshmocap.studio.from_video import silhouettes_from_video
+from meshmocap.studio.from_video import silhouette_agreement, silhouettes_from_video
+from meshmocap.studio.hulls import compute_hulls
 
 W, H, N = 64, 48, 10
 
@@ -100,6 +101,9 @@ def test_videos_to_a_capture_folder(tmp_path):
     assert _iou(out, truth) > 0.85  # learned background: the ball never stays
     again = silhouettes_from_video(videos, calib, out, scale=1.0, show_progress=False)
     assert again.written == 0  # resumes: every frame is there
+    compute_hulls(out, voxel_size=0.02, show_progress=False)
+    agree = silhouette_agreement(out)
+    assert agree.shape == (N, 4) and np.nanmean(agree) > 0.8
     with_plates = tmp_path / "plated"
     silhouettes_from_video(videos, calib, with_plates, plates=plates, scale=1.0)
     assert _iou(with_plates, truth) > 0.9

@@ -49,9 +49,10 @@ from meshmocap.geometry.foreground import (
     learn_background,
     others_reach,
 )
+from meshmocap.geometry.silhouette import silhouette
 from meshmocap.io.calibration import read_calibration
 from meshmocap.io.cameras import write_cameras
-from meshmocap.io.capture import frame_name, read_meta, write_meta
+from meshmocap.io.capture import Capture, CaptureFrame, frame_name, read_meta, write_meta
 from meshmocap.io.silhouettes import write_mask
 from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_footage, read_frames
 
@@ -213,6 +214,42 @@ def silhouettes_from_video(
         if empty[n]:
             notes.append(f"{n}: {empty[n]} of {len(todo)} frames without foreground")
     return VideoRun(root, numbers, len(todo), cams, notes)
+
+
+def silhouette_agreement(
+    capture: str | os.PathLike[str], *, frames: Sequence[int] | None = None
+) -> np.ndarray:
+    """How well each camera's silhouette agrees with the reprojection of the visual hull.
+
+    The check of footage without ground truth: the hull is carved from all the cameras,
+    so a camera whose mask holds clutter the others do not see, or misses a limb they see,
+    disagrees with it.
+
+    Parameters
+    ----------
+    capture : path
+        A capture folder with ``silhouettes/`` and ``hulls/`` (``meshmocap hull``).
+    frames : sequence of int, optional
+        Frame numbers (default: every frame with a hull).
+
+    Returns
+    -------
+    (n_frames, n_cameras) float64
+        Intersection over union of each mask and the hull's silhouette in that camera
+        (NaN for a frame without hull).
+    """
+    cap = Capture(capture)
+    numbers = cap.indices if frames is None else list(frames)
+    out = np.full((len(numbers), len(cap.cameras)), np.nan)
+    for i, k in enumerate(numbers):
+        frame = CaptureFrame(k, cap)
+        if frame.missing is not None:
+            continue
+        V, F = frame.hull_mesh
+        for j, (cam, mask) in enumerate(zip(cap.cameras, frame.silhouettes, strict=True)):
+            hull = silhouette(V, F, cam, assume_closed=True)
+            out[i, j] = (hull & mask).sum() / max(int((hull | mask).sum()), 1)
+    return out
 
 
 # ----------------------------------------------------------------------------- helpers
