@@ -2,11 +2,12 @@
 Pose2Sim demonstration judged by multi-view consistency.
 
 Rendered: a synthetic capture (``meshmocap synth``, the walk, HumanEva-like four cameras)
-is rendered as colour video: a Lambert-shaded body with a striped texture, a room (a tiled
-floor, textured walls), the body's shadow on the floor, sensor noise (σ = 3 grey levels)
-and H.264 compression (CRF 23). ``meshmocap silhouettes`` segments it with the empty-scene
-plates and without them (a background learned over the video); the masks are scored by
-IoU against the capture's true silhouettes.
+(every 4th frame: the subject crosses the volume) is rendered as colour video: a
+Lambert-shaded body with a striped texture, a room (a tiled floor, textured walls), the
+body's shadow on the floor, sensor noise (σ = 3 grey levels) and H.264 compression (CRF 23).
+The plates are frames of each camera's video of the empty room. ``meshmocap silhouettes``
+segments it with the empty-scene plates and without them (a background learned over the
+video); the masks are scored by IoU against the capture's true silhouettes.
 
 Real: ``meshmocap silhouettes`` then ``meshmocap hull`` on the Pose2Sim demo
 (``../shared/data/video/pose2sim_demo``); each camera's mask against the reprojection of
@@ -29,7 +30,7 @@ from meshmocap.geometry.raster import rasterize
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.io.capture import Capture, read_truth
 from meshmocap.io.silhouettes import read_mask
-from meshmocap.io.video import write_video
+from meshmocap.io.video import read_frames, write_video
 from meshmocap.studio.from_video import silhouette_agreement, silhouettes_from_video
 from meshmocap.studio.hulls import compute_hulls
 from meshmocap.studio.synth import SynthSpec, synthesize
@@ -43,14 +44,14 @@ def room(cam, seed: int) -> np.ndarray:
     v, u = np.mgrid[: cam.height, : cam.width]
     d = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3) @ np.linalg.inv(cam.K).T @ cam.R
     c = cam.centre
-    s = np.where(d[:, 2] < -1e-6, -c[2] / np.minimum(d[:, 2], -1e-6), np.inf)
+    s = np.where(d[:, 2] < -1e-6, -c[2] / np.minimum(d[:, 2], -1e-6), 1e6)
     hit = c + s[:, None] * d
-    floor = (np.isfinite(s) & (np.hypot(hit[:, 0], hit[:, 1]) < 5.0)).reshape(cam.shape)
+    floor = ((s < 1e6) & (np.hypot(hit[:, 0], hit[:, 1]) < 5.0)).reshape(cam.shape)
     tiles = ((np.floor(hit[:, 0] / 0.5) + np.floor(hit[:, 1] / 0.5)) % 2).reshape(cam.shape)
     img = np.empty((*cam.shape, 3))
     img[...] = np.array([150.0, 140.0, 120.0])  # walls
     tex = ndimage.gaussian_filter(rng.normal(0, 1, (*cam.shape, 3)), (6, 6, 0))
-    img += 120 * tex / tex.std()
+    img += 40 * tex / tex.std()
     img[floor] = np.where(tiles[floor, None] > 0, [170.0, 165.0, 160.0], [110.0, 105.0, 100.0])
     return np.clip(img, 0, 255)
 
@@ -73,7 +74,8 @@ def render(V, F, colour, cam, background, rng) -> np.ndarray:
 
 def rendered(work: Path, n_frames: int) -> dict[str, float]:
     cap_dir = work / "synth"
-    cap = synthesize(cap_dir, SynthSpec(motion="walk", stop=n_frames), show_progress=False)
+    spec = SynthSpec(motion="walk", stop=4 * n_frames, step=4)  # 15 fps: the walk crosses
+    cap = synthesize(cap_dir, spec, show_progress=False)
     F = cap.truth_faces
     V0 = read_truth(cap_dir / "truth" / "00000.npz").vertices
     z = V0[:, 2]
@@ -87,7 +89,12 @@ def rendered(work: Path, n_frames: int) -> dict[str, float]:
     t0 = time.perf_counter()
     for j, cam in enumerate(cap.cameras):
         bg = room(cam, j)
-        Image.fromarray(bg.astype(np.uint8)).save(plates / f"{cam.name}.png")
+        # the plate is a frame of the same camera's video of the empty room (compressed too)
+        empty = [np.clip(bg + rng.normal(0, 3.0, bg.shape), 0, 255).astype(np.uint8)] * 2
+        write_video(work / "plate.mp4", empty, fps=cap.fps, quality=23)
+        Image.fromarray(next(read_frames(work / "plate.mp4", [0]))[1]).save(
+            plates / f"{cam.name}.png"
+        )
         frames = [
             render(read_truth(cap_dir / "truth" / f"{k:05d}.npz").vertices, F, colour, cam, bg, rng)
             for k in cap.indices
@@ -103,9 +110,9 @@ def rendered(work: Path, n_frames: int) -> dict[str, float]:
         silhouettes_from_video(videos, cap_dir / "cameras.json", dest, show_progress=False, **kw)
         ious = []
         for cam in cap.cameras:
-            for k in cap.indices:
+            for j, k in enumerate(cap.indices):  # video frame j is capture frame k
                 t = read_mask(cap_dir / "silhouettes" / cam.name / f"{k:05d}.png")
-                m = read_mask(dest / "silhouettes" / cam.name / f"{k:05d}.png")
+                m = read_mask(dest / "silhouettes" / cam.name / f"{j:05d}.png")
                 ious.append((t & m).sum() / max((t | m).sum(), 1))
         out[label] = float(np.mean(ious))
         print(

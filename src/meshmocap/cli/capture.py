@@ -72,6 +72,7 @@ def _cmd_silhouettes(args: argparse.Namespace) -> int:
         plates=args.plates,
         scale=args.scale,
         voxel_size=args.voxel_size,
+        misses=args.misses,
         overwrite=args.restart,
     )
     for note in run.notes:
@@ -212,14 +213,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument(
         "--scale",
         type=number(0.1, 1, "of the image size"),
-        default=0.5,
-        help="segmentation resolution relative to the images (default: %(default)s)",
+        help="segmentation resolution relative to the images (default: about 1000 pixels "
+        "on the longest side)",
     )
     v.add_argument(
         "--voxel-size",
         type=number(0.005, 0.2, "metres"),
         default=0.03,
         help="voxel edge of the multi-view consistency carving, metres (default: %(default)s)",
+    )
+    v.add_argument(
+        "--misses",
+        type=number(0, 10, integer=True),
+        default=0,
+        help="other cameras allowed to miss what a camera keeps (default: %(default)s: a "
+        "pixel's ray must meet the volume carved from all the others)",
     )
     add_restart(v, "segment every frame again")
     v.set_defaults(func=_cmd_silhouettes)

@@ -11,10 +11,11 @@ a sample of frames; the sample's masks made consistent across the cameras; then 
 again without the pixels where the other cameras' carved volume says the subject stood.
 That second pass removes the ghost a slow subject leaves in a plain median (what one camera
 cannot tell, the others can). Each frame's masks are then made consistent across cameras
-(a pixel whose ray misses the volume carved from the other cameras is dropped), cleaned
+(a pixel whose ray misses the volume carved from all the other cameras is dropped), cleaned
 (holes filled, small components dropped) and written at the calibration's image size.
-Segmentation runs at ``scale`` of the image size (0.5: a quarter of the pixels) with the
-cameras scaled to match; the masks are resampled to the full size.
+Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
+longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
+resampled to the full size.
 
 Frames are matched by index: capture frame ``k`` is frame ``k + offsets[camera]`` of that
 camera's footage. The run resumes: frames whose masks exist for every camera are kept (and
@@ -57,6 +58,7 @@ from meshmocap.io.silhouettes import write_mask
 from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_footage, read_frames
 
 _CODEC_CROP = 16  # largest encoder crop taken for the same image (macroblock size)
+_SEGMENT_PX = 1000  # default segmentation resolution: the longest side, pixels
 
 
 @dataclass(frozen=True)
@@ -87,8 +89,9 @@ def silhouettes_from_video(
     frames: slice | None = None,
     offsets: Mapping[str, int] | None = None,
     plates: str | os.PathLike[str] | None = None,
-    scale: float = 0.5,
+    scale: float | None = None,
     voxel_size: float = 0.03,
+    misses: int = 0,
     model_frames: int = 60,
     overwrite: bool = False,
     show_progress: bool | None = None,
@@ -112,10 +115,15 @@ def silhouettes_from_video(
         Capture frame ``k`` is frame ``k + offset`` of that camera (default 0).
     plates : path, optional
         A folder with an empty-scene image per camera (``<camera>.png``, ``.jpg``...).
-    scale : float
-        Segmentation resolution relative to the images (0.1 to 1).
+    scale : float, optional
+        Segmentation resolution relative to the images (0.1 to 1; default: the largest
+        image's longest side brought to about 1000 pixels, no larger than the images).
     voxel_size : float
         Voxel edge of the multi-view consistency carving, metres.
+    misses : int
+        Other cameras that may miss a point the consistency keeps (0: a pixel's ray must
+        meet the hull of all the other cameras; 1 keeps what one camera lost, and the
+        clutter two cameras see).
     model_frames : int
         Frames sampled (evenly) to learn a background without plate.
     overwrite : bool
@@ -136,10 +144,12 @@ def silhouettes_from_video(
     InputError
         Bad options (an offset for an unknown camera, no frame in common).
     """
-    if not (isinstance(scale, int | float) and 0.1 <= scale <= 1.0):
+    if scale is not None and not (isinstance(scale, int | float) and 0.1 <= scale <= 1.0):
         raise InputError(f"silhouettes: scale must be between 0.1 and 1, found {scale!r}")
     if not (isinstance(voxel_size, int | float) and 0.005 <= voxel_size <= 0.2):
         raise InputError(f"silhouettes: voxel_size must be 0.005 to 0.2 m, found {voxel_size!r}")
+    if not (isinstance(misses, int) and misses >= 0):
+        raise InputError(f"silhouettes: misses must be a whole number ≥ 0, found {misses!r}")
     if not (isinstance(model_frames, int) and model_frames >= 3):
         raise InputError(f"silhouettes: model_frames must be at least 3, found {model_frames!r}")
     cams = (
@@ -188,6 +198,8 @@ def silhouettes_from_video(
     ]
     if not todo:
         return VideoRun(root, numbers, 0, cams, notes)
+    if scale is None:
+        scale = min(1.0, _SEGMENT_PX / max(max(c.width, c.height) for c in cams))
     small = [_scaled(c, scale) for c in cams]
     models = _backgrounds(
         root, cams, small, footage, offsets, every, plates, model_frames, voxel_size, overwrite
@@ -205,7 +217,7 @@ def silhouettes_from_video(
             clean_mask(foreground_mask(im, *models[n]), keep=0.0)
             for im, n in zip(images, names, strict=True)
         ]
-        masks = consistent_masks(masks, small, voxel_size=voxel_size)
+        masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
