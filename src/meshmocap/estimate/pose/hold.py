@@ -32,12 +32,17 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
+    POINT_MIX,
+    POINT_MIX_PAIRS,
     articulated_model,
     articulated_step,
-    closest_pairs,
-    closest_point_system,
-    pose_points,
-    residual_jacobian,
+    nearest_compatible,
+)
+from meshmocap.body.articulated_system import (
+    moment_plan,
+    normal_equations,
+    pair_moments,
+    posed_model,
     rotation_error,
 )
 from meshmocap.body.template import Template
@@ -100,6 +105,7 @@ class SkeletonHold:
                 raise InputError(f"SkeletonHold: {name} must be ≥ 0, found {v!r}")
         self.template = template
         self.model_ = articulated_model(template, n_points=int(n_model_points), seed=0)
+        self.plan_ = moment_plan(self.model_)
         self.max_points = int(max_points)
         self.iterations = int(iterations)
         self.max_distance = (float(max_distance[0]), float(max_distance[1]))
@@ -155,26 +161,41 @@ class SkeletonHold:
         m = len(target)
         idx = np.arange(m)
         d0, d1 = self.max_distance
-        free, act = self.free, self.active
+        act, rot = self.active, self.active[3:]
         for it in range(self.iterations):
             d = d0 * (d1 / d0) ** (it / max(self.iterations - 1, 1))
-            v, nv, a = pose_points(self.model_, R, root)
-            pairs = closest_pairs(tree, Y, NY, v, nv, max_distance=d, normal_cos=self.normal_cos)
-            if not any(len(i) for i, _ in pairs):
+            posed = posed_model(self.plan_, R, root)
+            v, nv = posed.v, posed.n
+            cand = dict(k=8, max_distance=d, normal_cos=self.normal_cos)
+            i1, k1 = nearest_compatible(tree, NY, v, nv, **cand)  # model → data
+            k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
+            if not (len(i1) or len(i2)):
                 break
-            H, g = closest_point_system(v, a, pairs, (1.0, 1.0), Y, NY)
+            # closest_point_system's energy as per-model-point moments (they add): each
+            # direction's mean point-to-plane residual, a tenth of a subsample's
+            # point-to-point, and the optional pull towards the tracker's surface
+            S, b = np.zeros((m, 3, 3)), np.zeros((m, 3))
+            for ii, kk in ((i1, k1), (i2, k2)):
+                if not len(ii):
+                    continue
+                w = np.full(len(ii), 1.0 / len(ii))
+                S1, b1, _ = pair_moments(v, ii, Y[kk], NY[kk], w, "point_to_plane")
+                sub = slice(None, None, max(1, len(ii) // POINT_MIX_PAIRS))
+                ws = np.full(len(ii[sub]), POINT_MIX / len(ii[sub]))
+                S2, b2, _ = pair_moments(v, ii[sub], Y[kk[sub]], NY[kk[sub]], ws, "point_to_point")
+                S, b = S + S1 + S2, b + b1 + b2
             if self.mu > 0:  # the tracker's surface, correspondences known
-                r, Jr = residual_jacobian(v, a, idx, target, target, "point_to_point")
-                H += (self.mu / m) * (Jr.T @ Jr)
-                g += (self.mu / m) * (Jr.T @ r)
-            e = rotation_error(sk, R, root, R_ref)[free]
-            # the pull, in the columns of the free joints' rotations
-            lam3 = np.full(3 * len(free), self.lam)
-            cols = 3 + 3 * free[:, None] + np.arange(3)
-            H[cols.ravel(), cols.ravel()] += lam3
-            g[cols.ravel()] += lam3 * e.ravel()
+                w = np.full(m, self.mu / m)
+                S3, b3, _ = pair_moments(v, idx, target, target, w, "point_to_point")
+                S, b = S + S3, b + b3
+            H, g = normal_equations(self.plan_, posed, S, b)
+            e = rotation_error(self.plan_, posed, R, R_ref)  # (J, 3)
+            H[rot, rot] += self.lam
+            g[rot] += self.lam * e.ravel()[rot - 3]
             try:
-                R, root, _ = articulated_step(sk, R, root, H[np.ix_(act, act)], g[act], active=act)
+                R, root, _ = articulated_step(
+                    sk, R, root, H[np.ix_(act, act)], g[act], active=act, G=posed.G
+                )
             except FitError:  # a singular system: keep the pose reached
                 break
         return R, root
