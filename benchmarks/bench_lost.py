@@ -45,6 +45,8 @@ from meshmocap.io.results import read_track
 from meshmocap.trackers.driver import read_track_frame
 
 BAD_MM = 150.0
+#: The share of good frames a fitted rule may flag (``--good-rate``).
+GOOD_RATE = 0.04
 
 
 def track_template(track_dir: Path, capture_name: str, subjects: list[Path]):
@@ -155,7 +157,7 @@ def _row(label: str, n: int, s: dict, o: dict, rule: str) -> str:
     )
 
 
-def _as_tracked(rows: list[dict]) -> dict:
+def as_tracked(rows: list[dict]) -> dict:
     """The counts of the ``lost`` flags the tracks carry (the rule they were made with)."""
     b = [(r["error"] > BAD_MM).any(axis=1) for r in rows]
     return dict(
@@ -166,7 +168,7 @@ def _as_tracked(rows: list[dict]) -> dict:
     )
 
 
-def _fit(rows: list[dict], good_rate: float) -> LostRule:
+def rule_of(rows: list[dict], good_rate: float) -> LostRule:
     return fit_rule(
         [r["evidence"] for r in rows],
         [(r["error"] > BAD_MM).any(axis=1) for r in rows],
@@ -180,7 +182,9 @@ def main() -> None:
     ap.add_argument("--captures", nargs="+", required=True)
     ap.add_argument("--subjects", nargs="*", default=[])
     ap.add_argument("--work", default="/tmp/meshmocap-lost")
-    ap.add_argument("--good-rate", type=float, default=0.04, help="budget of good frames flagged")
+    ap.add_argument(
+        "--good-rate", type=float, default=GOOD_RATE, help="budget of good frames flagged"
+    )
     ap.add_argument("--write", action="store_true", help="ship the rule fitted on all frames")
     args = ap.parse_args()
     args.subjects = args.subjects or [str(Path(t).parent / "subjects") for t in args.tracks]
@@ -197,8 +201,8 @@ def main() -> None:
     tot, old = dict.fromkeys(keys, 0), dict.fromkeys(keys, 0)
     for c in cats:
         test = [r for r in rows if r["category"] == c]
-        rule = _fit([r for r in rows if r["category"] != c], args.good_rate)
-        s, o = score(rule, test), _as_tracked(test)
+        rule = rule_of([r for r in rows if r["category"] != c], args.good_rate)
+        s, o = score(rule, test), as_tracked(test)
         for k in keys:
             tot[k] += s[k]
             old[k] += o[k]
@@ -207,7 +211,7 @@ def main() -> None:
     by_method = {}
     for r in rows:
         by_method.setdefault(r["method"], []).append(r)
-    full = _fit(rows, args.good_rate)
+    full = rule_of(rows, args.good_rate)
     print(f"\nfitted on all frames: {full.describe()}; in-sample per tracker:")
     for m, rs in sorted(by_method.items()):
         s = score(full, rs)
