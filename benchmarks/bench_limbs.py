@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshmocap.body.light import tracking_body
 from meshmocap.body.template import load_template
 from meshmocap.estimate.performer.tracking_template import tracking_template
 from meshmocap.io.clips import clip_on
@@ -234,8 +235,9 @@ def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], 
                     template_info=choice.info,
                     init_options={"exclude_trials": excluded(trial)},
                 )
+            tracker = make_tracker(method, template=tracking_body(template).light)  # as tracked
             with _Clock() as c:
-                track = track_sequence(make_tracker(method), template, cap, out, opts)
+                track = track_sequence(tracker, template, cap, out, opts)
             cost[f"{method} {path} {passes}"] = c.cpu
             e = joint_errors(track, cap)
             row = dict(
