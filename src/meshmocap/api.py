@@ -302,6 +302,7 @@ def track(
     resume: bool = True,
     recover: bool = True,
     refine: Literal["auto", "on", "off"] = "auto",
+    passes: Literal["two-way", "forward"] = "two-way",
     vertices: bool = True,
     show_progress: bool | None = None,
     log: Callable[[str], object] | None = None,
@@ -314,7 +315,7 @@ def track(
     How to track is one record, :class:`~meshmocap.trackers.options.TrackOptions`, which
     the command line and the driver share: give it as ``options``, or give its fields as
     keywords (``frames``, ``positions``, ``init``, ``resume``, ``recover``, ``refine``,
-    ``vertices``, ``show_progress``), which build it; a keyword set to other than its
+    ``passes``, ``vertices``, ``show_progress``), which build it; a keyword set to other than its
     default replaces that field of a given record.
 
     Parameters
@@ -355,6 +356,10 @@ def track(
         (:class:`~meshmocap.trackers.options.TrackOptions`: ``"auto"`` for mesh and
         point-cloud files, not a capture folder's visual hulls); ``"off"`` outputs the
         tracked skeleton's surface as it is.
+    passes : {"two-way", "forward"}
+        After the forward pass, the two-way pass over the frames it flagged lost
+        (:mod:`meshmocap.trackers.two_way`; not for a live capture), or the forward pass
+        alone.
     vertices : bool
         Read the tracked vertices back into the result (False for long runs: ``vertices``
         is then empty; exports read them from the folder).
@@ -385,6 +390,7 @@ def track(
         resume=resume,
         recover=recover,
         refine=refine,
+        passes=passes,
         vertices=vertices,
         show_progress=show_progress,
     )

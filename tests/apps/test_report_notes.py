@@ -62,6 +62,29 @@ def test_skipped_and_flagged_frames_say_why(scored):
     assert "Frames not scored or flagged" not in [t.title for t in evaluation_tables(clean)]
 
 
+def test_frames_the_two_way_pass_changed_are_listed_and_marked(scored, synth_capture):
+    from meshmocap.apps.player import player_from_tracks
+    from meshmocap.apps.report import report_html
+
+    track, ev = scored
+    two_way = {
+        "changed": [
+            {"frames": [1, 2], "keyframe": 3, "direction": "backward", "limbs": ["left_arm"]}
+        ]
+    }
+    track = replace(track, meta={**track.meta, "two_way": two_way})
+    rows = {r[0]: r for r in frame_rows(ev, track)}
+    _, n, frames, why = rows["changed: two-way pass"]
+    assert (n, frames) == (2, "1–2") and "keyframe 3, backward: left_arm" in why
+    # the player's timeline: frame 1 lost and changed, frame 2 changed
+    cap = synth_capture("walk", stop=4)
+    player = player_from_tracks(cap, [track], hull_points=0, truth=False)
+    assert player.tracks[0].marks.tolist() == [0, 3, 2, 0]
+    html = report_html(title="t", players=[player])
+    assert html.count("<rect") == 2 and "changed by the two-way pass" in html
+    assert 'class="mm-timeline"' in html
+
+
 def _bones(ev):
     (bones,) = [t for t in evaluation_tables(ev) if t.title.startswith("Bone lengths")]
     return bones

@@ -41,7 +41,7 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, frame_name, read_hull
 from meshmocap.io.gltf import Z_UP_TO_Y_UP, gltf_bytes, morph_gltf
-from meshmocap.io.results import Track, tracked_template
+from meshmocap.io.results import Track, tracked_template, two_way_changes
 
 #: Colours of the player's tracks (RGB), in order: blue, crimson, amber, purple, dark cyan.
 PALETTE = ((50, 100, 220), (210, 50, 110), (225, 150, 20), (130, 70, 200), (0, 140, 170))
@@ -68,6 +68,7 @@ class PlayerTrack:
     rows : (T,) int64, row of each player frame in ``joints``; -1: not tracked
     parents : tuple of int or None, parent of each joint (-1: root)
     vertex_error_mm : float, mean distance of the shown mesh to the tracked one
+    marks : (T,) int8, each player frame's mark on the timeline (:data:`MARKS`; 0: none)
     """
 
     name: str
@@ -77,6 +78,12 @@ class PlayerTrack:
     rows: np.ndarray
     parents: tuple[int, ...] | None
     vertex_error_mm: float = float("nan")
+    marks: np.ndarray | None = None
+
+
+#: What a timeline mark means (:attr:`PlayerTrack.marks`): bit 1 the frame is flagged
+#: ``lost``, bit 2 the two-way pass replaced it (:mod:`meshmocap.trackers.two_way`).
+MARKS = {1: "flagged lost", 2: "changed by the two-way pass"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -253,6 +260,11 @@ def player_from_tracks(
             g = morph_gltf(t.vertices[rows], t.faces, times, name=name, color=color)
             glb, first, err = gltf_bytes(g), int(t.frames[rows[0]]), 0.0
         parents = t.meta.get("eval_parents")
+        shown = rows[player_rows[player_rows >= 0]]  # the track's row of each shown frame
+        lost = np.array([bool(t.flags) and "lost" in t.flags[r] for r in shown], dtype=np.int8)
+        changed = np.isin(t.frames[shown], list(two_way_changes(t.meta)))
+        marks = np.zeros(len(frames), np.int8)
+        marks[player_rows >= 0] = lost + 2 * changed
         ptracks.append(
             PlayerTrack(
                 name,
@@ -262,6 +274,7 @@ def player_from_tracks(
                 player_rows,
                 tuple(int(p) for p in parents) if parents else None,
                 err,
+                marks,
             )
         )
     true_J = parents = None

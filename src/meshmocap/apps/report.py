@@ -33,6 +33,7 @@ from meshmocap.apps.evaluation_files import write_evaluation
 from meshmocap.apps.gait_files import GAIT_HEADERS, gait_report
 from meshmocap.apps.player import (
     HULL_COLOR,
+    MARKS,
     PALETTE,
     TRUTH_COLOR,
     Player,
@@ -223,7 +224,10 @@ h1{font-size:22px;margin:4px 0}h2{font-size:18px;margin:18px 0 8px}
 .mm-canvas{display:block;width:100%;height:560px;background:#f3f5f8;border-radius:4px;
  touch-action:none;cursor:grab;outline:none}
 .mm-controls,.mm-layers{display:flex;gap:10px;align-items:center;flex-wrap:wrap;margin-top:6px}
-.mm-slider{flex:1;min-width:200px}.mm-label{font-variant-numeric:tabular-nums;color:#444}
+.mm-slider{flex:1;min-width:200px}.mm-timeline{display:flex;gap:10px;align-items:center;margin-top:2px}
+.mm-timeline span{min-width:9em;color:#444;font-size:12px}
+.mm-timeline svg{flex:1;height:8px;background:#eef0f3}
+.mm-label{font-variant-numeric:tabular-nums;color:#444}
 .mm-swatch{display:inline-block;width:12px;height:12px;border-radius:2px;margin-right:4px;
  vertical-align:-1px}
 .mm-table{border-collapse:collapse;margin:8px 24px 16px 0;font-size:13px;display:inline-table;
@@ -299,6 +303,37 @@ def image_uri(image: ImageSource) -> str:
     return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
 
 
+#: The timeline's colours per mark (:data:`~meshmocap.apps.player.MARKS`): lost, changed by
+#: the two-way pass, both (changed and still lost).
+_MARK_COLORS = {1: "#d62728", 2: "#1f77b4", 3: "#9467bd"}
+
+
+def _timeline(player: Player) -> str:
+    """One strip per track under the slider: its frames flagged lost and those the two-way
+    pass changed, as coloured ticks (an inline SVG, one unit per frame); empty when no
+    track has a mark."""
+    marked = [t for t in player.tracks if t.marks is not None and np.any(t.marks)]
+    if not marked:
+        return ""
+    n = len(player.frames)
+    rows = []
+    for t in marked:
+        ticks = "".join(
+            f'<rect x="{i}" width="1" height="1" fill="{_MARK_COLORS[int(m)]}"/>'
+            for i, m in enumerate(t.marks.tolist())
+            if m
+        )
+        rows.append(
+            f'<div class="mm-timeline"><span>{_esc(t.name)}</span>'
+            f'<svg viewBox="0 0 {n} 1" preserveAspectRatio="none">{ticks}</svg></div>'
+        )
+    key = "".join(
+        f'<span><span class="mm-swatch" style="background:{_MARK_COLORS[m]}"></span>{what}</span>'
+        for m, what in ((*MARKS.items(), (3, "changed, still lost")))
+    )
+    return "".join(rows) + f'<div class="mm-layers">{key}</div>\n'
+
+
 def _player_html(player: Player, k: int) -> str:
     payload = json.dumps(player_payload(player), separators=(",", ":")).replace("</", "<\\/")
     boxes = "".join(
@@ -335,6 +370,7 @@ def _player_html(player: Player, k: int) -> str:
         f'<div class="mm-controls"><button type="button" class="mm-play">▶ Play</button>'
         f'<input type="range" class="mm-slider" min="0" max="{len(player.frames) - 1}" value="0">'
         f'<span class="mm-label"></span><select class="mm-speed">{speeds}</select></div>\n'
+        f"{_timeline(player)}"
         f'<div class="mm-layers">{boxes}</div>\n<div class="mm-layers">{legend}</div>\n'
         f'<script type="application/json" class="mm-data">{payload}</script>\n</div>\n'
     )

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from meshmocap.analysis.evaluate import Evaluation
-from meshmocap.io.results import FRAME_FLAGS, Track
+from meshmocap.io.results import FRAME_FLAGS, Track, two_way_changes
 
 #: Why a frame carries a flag (:data:`meshmocap.io.results.FRAME_FLAGS`), when the track's
 #: own message is empty.
@@ -23,6 +23,11 @@ FLAG_REASONS = {
     "lost": "the fit fell below the tracker's quality threshold",
     "reinit": "the tracker re-initialised the body or some limbs here",
 }
+#: Why frames were changed by the two-way pass (then where from, per stretch).
+TWO_WAY_REASON = (
+    "the forward pass had a limb lost there; replaced by a track from a whole-body search "
+    "at a later or nearby keyframe, which the evidence preferred: "
+)
 OUT_OF_VIEW = (
     "the subject's true surface leaves a camera's image, so the visual hull is truncated "
     "there: the frames are not scored, rather than blamed on the tracker"
@@ -77,6 +82,20 @@ def frame_rows(ev: Evaluation, track: Track | None = None) -> list[tuple[str, in
                     why or FLAG_REASONS[flag],
                 )
             )
+    changed = two_way_changes(track.meta) if track is not None else {}
+    k = [i for i, f in enumerate(track.frames.tolist()) if f in changed] if changed else []
+    if k:
+        said = list(dict.fromkeys(changed[int(track.frames[i])] for i in k))
+        rows.append(
+            (
+                "changed: two-way pass",
+                len(k),
+                frame_ranges(track.frames[k]),
+                TWO_WAY_REASON
+                + "; ".join(said[:3])
+                + (f"; … ({len(said) - 3} more)" if len(said) > 3 else ""),
+            )
+        )
     return rows
 
 

@@ -128,6 +128,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
             resume=not args.restart,
             recover=not args.no_recover,
             refine=args.refine,
+            passes=args.passes,
             vertices=False,
             show_progress=False if live else None,
         )
@@ -373,6 +374,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "normals (the joints are the skeleton's either way; default auto: on for mesh and "
         "point-cloud files, off for a capture folder's visual hulls, which are larger "
         "than the body)",
+    )
+    k.add_argument(
+        "--passes",
+        default="two-way",
+        choices=["two-way", "forward"],
+        help="two-way (default): after the forward pass, track the runs of frames it "
+        "flagged lost again from whole-body searches at keyframes, backward and forward, "
+        "and keep per frame what the evidence prefers (track.json says which frames changed "
+        "and from which keyframe); forward: the forward pass alone. Live mode (--follow) "
+        "is forward only",
     )
     k.add_argument(
         "--no-recover",

@@ -300,11 +300,12 @@ def start_track(
     full = {"format": FORMAT, **meta}
     if meta_path.is_file() and resume:
         old = _read_json(meta_path)
-        found = {k: old.pop(k) for k in (START_KEY, SKIPPED_KEY) if k in old}  # by the run
+        found = {k: old.pop(k) for k in (START_KEY, SKIPPED_KEY, TWO_WAY_KEY) if k in old}
         for key, value in RETIRED_SETTINGS.items():  # a setting that is gone, as it was
             if key in old and old[key] == value:
                 del old[key]
-        if old != json.loads(json.dumps(full)):
+        # the passes may change: a forward track is resumed by adding the two-way pass
+        if _but(old, PASSES_KEY) != _but(json.loads(json.dumps(full)), PASSES_KEY):
             raise FormatError(
                 f"{meta_path}: holds a track made with other settings; use another folder"
             )
@@ -337,6 +338,55 @@ def write_start(path: str | os.PathLike, start: Start) -> None:
     meta_path = Path(path) / "track.json"
     meta = {**_read_json(meta_path), START_KEY: start_json(start)}
     write_text_atomic(meta_path, json.dumps(meta, indent=2) + "\n")
+
+
+#: The key of ``track.json`` that records the two-way pass (:func:`write_two_way`).
+TWO_WAY_KEY = "two_way"
+#: The key of ``track.json`` that says which passes the track was made with.
+PASSES_KEY = "passes"
+
+
+def _but(meta: dict, key: str) -> dict:
+    return {k: v for k, v in meta.items() if k != key}
+
+
+def write_two_way(path: str | os.PathLike, record: dict) -> None:
+    """Record what the two-way pass did (:mod:`meshmocap.trackers.two_way`, a JSON-ready
+    dict) in the ``track.json`` of the track folder ``path``, atomically."""
+    meta_path = Path(path) / "track.json"
+    meta = {**_read_json(meta_path), TWO_WAY_KEY: record}
+    write_text_atomic(meta_path, json.dumps(meta, indent=2) + "\n")
+
+
+def read_two_way(path: str | os.PathLike) -> dict | None:
+    """The two-way pass's record in the ``track.json`` of the track folder ``path`` (None:
+    no pass has finished there)."""
+    meta_path = Path(path) / "track.json"
+    if not meta_path.is_file():
+        return None
+    record = _read_json(meta_path).get(TWO_WAY_KEY)
+    return record if isinstance(record, dict) else None
+
+
+def two_way_changes(meta: dict) -> dict[int, str]:
+    """The frames the two-way pass replaced, from a track's ``track.json`` contents
+    ``meta``: frame number → where from (``"keyframe K, backward: left_arm"``); empty
+    when no pass changed any."""
+    record = meta.get(TWO_WAY_KEY)
+    out: dict[int, str] = {}
+    if not isinstance(record, dict):
+        return out
+    for c in record.get("changed", ()):
+        try:
+            first, last = (int(v) for v in c["frames"])
+            limbs = ", ".join(str(n) for n in c.get("limbs", ()))
+            why = f"keyframe {int(c['keyframe'])}, {c['direction']}" + (
+                f": {limbs}" if limbs else ""
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FormatError(f"track.json: a bad two-way change {c!r} ({exc})") from None
+        out.update({i: why for i in range(first, last + 1)})
+    return out
 
 
 def read_start(path: str | os.PathLike) -> Start | None:

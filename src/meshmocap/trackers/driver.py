@@ -135,6 +135,7 @@ def track_sequence(
     if not positions:
         raise InputError(f"track: {capture.path} has no frames to track")
     init, recover, init_options = opts.init, opts.recover, opts.init_options
+    two_way = opts.passes == "two-way" and recover and not live
     indices = [int(capture.indices[k]) for k in positions]  # without reading the frames
     meta = {
         "method": tracker.name,
@@ -146,6 +147,7 @@ def track_sequence(
         "options": tracker.options(),
         "init": init,
         "recover": recover,
+        "passes": "two-way" if two_way else "forward",
         **(opts.template_info or {}),
     }
     body = tracking_body(template, n_vertices=opts.light)
@@ -193,10 +195,11 @@ def track_sequence(
         for k in progress(todo, label=tracker.name, enabled=opts.show_progress):
             index = int(capture.indices[k])
             if good is None:  # the first frame to track: from the state of the one before
-                last = max((i for i in pool if i in done and i < index), default=indices[0])
+                before = list(pool[: list(pool).index(index)])  # in the track's order
+                last = next((i for i in reversed(before) if i in done), indices[0])
                 resume_tracker(tracker, body.light, out, last)
                 if recover:
-                    pose = _last_pose(out, [i for i in pool if i in done and i <= last])
+                    pose = _last_pose(out, [i for i in before if i in done])
                     recovery = Recovery(body.light, *pose)
                 if holder is not None:
                     holder.last = _hold_start(body.light, out, [i for i in pool if i in done])
@@ -222,6 +225,21 @@ def track_sequence(
             if timer is not None:
                 timer.lap("write")
             report(r)
+        if two_way:
+            from meshmocap.trackers.two_way import two_way_pass  # it runs this module's steps
+
+            if tracker.template is not body.light:  # a finished run resumed: nothing set up
+                tracker.setup(body.light)
+            two_way_pass(
+                tracker,
+                body,
+                capture,
+                out,
+                frames=positions,
+                refiner=refiner,
+                exclude_trials=tuple((init_options or {}).get("exclude_trials", ())),
+                show_progress=opts.show_progress,
+            )
     return read_track(out, vertices=opts.vertices)
 
 
@@ -559,6 +577,8 @@ def recovered(recovery: Recovery, frame, r: FrameResult) -> FrameResult:
         flags += ("lost",)
         message = f"lost {q.describe()}"
     state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
+    if q.evidence is not None:  # what the two-way pass weighs its hypotheses by
+        state["evidence"] = q.evidence
     return replace(
         r, flags=flags, message=message, energies={**r.energies, **q.energies()}, state=state
     )

@@ -27,12 +27,15 @@ from meshmocap.errors import InputError
 from meshmocap.io.live import LiveCapture
 from meshmocap.io.start import Start
 
-__all__ = ["Init", "Refine", "TrackOptions"]
+__all__ = ["Init", "Passes", "Refine", "TrackOptions"]
 
 #: How the first frame's pose is found: from the capture alone, or from its ground truth.
 Init = Literal["auto", "truth"]
 #: When the output surface is refined towards the observations (:class:`TrackOptions`).
 Refine = Literal["auto", "on", "off"]
+#: The passes over a capture on disk (:class:`TrackOptions`): the forward pass, then the
+#: two-way pass over its lost runs (:mod:`meshmocap.trackers.two_way`); or the forward alone.
+Passes = Literal["two-way", "forward"]
 
 #: The name the record's errors speak under (the user's call: ``meshmocap.track``).
 _OWNER = "track"
@@ -95,6 +98,13 @@ class TrackOptions:
         The pose of its frame (:attr:`~meshmocap.io.start.Start.frame`) when it is already
         known (a template made from that very frame): with ``init="auto"``, the track
         starts there without a search.
+    passes : {"two-way", "forward"}
+        After the forward pass, the two-way pass over the runs of frames it flagged
+        ``lost`` (:mod:`meshmocap.trackers.two_way`: whole-body searches at keyframes,
+        tracked backward and forward from them, per frame the hypothesis the evidence
+        prefers), or the forward pass alone. The two-way pass needs ``recover`` and a
+        capture on disk: a live capture is tracked forward only. ``track.json`` records
+        which (``passes``) and what the two-way pass changed (``two_way``).
     """
 
     frames: slice | Sequence[int] | None = None
@@ -109,6 +119,7 @@ class TrackOptions:
     init_options: dict | None = None
     template_info: dict | None = None
     start: Start | None = None
+    passes: Passes = "two-way"
 
     def __post_init__(self) -> None:
         for name in ("frames", "positions"):
@@ -124,6 +135,7 @@ class TrackOptions:
             check_type(_OWNER, "show_progress", self.show_progress, bool, "True or False")
         check_choice(_OWNER, "init", self.init, get_args(Init))
         check_choice(_OWNER, "refine", self.refine, get_args(Refine))
+        check_choice(_OWNER, "passes", self.passes, get_args(Passes))
         if self.light is not None:
             check_type(_OWNER, "light", self.light, (int, np.integer), "a vertex count or None")
             if self.light < 1:

@@ -1,0 +1,589 @@
+"""The two-way pass: after the forward pass over a capture on disk, the frames it flagged
+``lost`` are tracked again from whole-body searches at keyframes inside and after each run,
+backward and forward, and per frame the hypothesis the evidence prefers is kept.
+
+1. **Runs.** Runs of frames the forward pass flagged ``lost`` (in the track's frame order;
+   runs closer than :data:`MERGE_GAP` frames are one run; runs shorter than
+   :data:`MIN_RUN` frames are left as they are).
+2. **Keyframes.** For each run, whole-body searches (:func:`keyframe_search`) at the first
+   frame after the run, then at the middle of the longest stretch of the run that no kept
+   hypothesis explains yet, until every stretch is explained or :func:`max_keyframes`
+   are kept. A keyframe is kept only where the tracker seated at the found pose passes the
+   lost rule on that frame (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`,
+   the same rule as the forward pass's flags).
+3. **Hypotheses.** From each kept keyframe the same tracker (the forward pass's state at
+   that frame, re-seated at the found pose, :meth:`~meshmocap.trackers.base.Tracker.reseat`)
+   tracks backward to :data:`MARGIN` frames before the run and, from a keyframe inside it,
+   forward to :data:`MARGIN` frames after it, each frame scored by its own
+   :class:`~meshmocap.estimate.recovery.reinit.Recovery`; a hypothesis stops early once it
+   has been lost itself for :data:`STOP_LOST` frames in a row.
+4. **Choice.** Per frame, the forward track or a hypothesis: dynamic programming over the
+   frames (:func:`choose`) of the evidence's cost (:func:`evidence_cost`: limbs lost, then
+   how far the fit is off the observations) plus a cost per switch that grows with the
+   distance between the two poses at the switch (the choice switches where they agree).
+   Whole frames are chosen: the chosen track's vertices, joints and state as tracked.
+5. **Result.** The chosen frames are written into the track folder (the forward pass's
+   frame kept in ``two_way/forward/``), the flags of every frame of the run's span
+   recomputed by the same rule on the result, and ``track.json`` records the pass
+   (``"two_way"``: the runs, each keyframe and whether it was kept, which frames changed,
+   from which keyframe and direction, and the limbs the forward pass had lost there). Where
+   no keyframe is kept, the frames stay as they were, flagged.
+
+Everything the pass makes is kept under ``TRACK/two_way/`` (keyframe searches in
+``keys/``, each hypothesis track in ``kNNNNN-backward/`` or ``kNNNNN-forward/``, written
+frame by frame atomically), so a pass killed midway resumes where it stopped: a finished
+search or hypothesis is read back, an unfinished hypothesis is tracked again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from meshmocap._atomic import atomic_open, write_text_atomic
+from meshmocap._npz import read_npz
+from meshmocap._progress import phase
+from meshmocap.body.light import TrackingBody
+from meshmocap.estimate.pose.first_pose import InitResult, initial_pose_of_frame
+from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, shipped_rule
+from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.quality import LIMB_PARTS
+from meshmocap.estimate.recovery.reinit import Recovery
+from meshmocap.geometry.refine import SurfaceRefiner
+from meshmocap.io.results import (
+    FrameResult,
+    frame_path,
+    read_two_way,
+    write_frame,
+    write_two_way,
+)
+from meshmocap.trackers.base import Tracker
+from meshmocap.trackers.driver import read_track_frame, recovered, track_frame
+
+__all__ = [
+    "MARGIN",
+    "MERGE_GAP",
+    "MIN_RUN",
+    "STOP_LOST",
+    "SWITCH",
+    "SWITCH_PER_METRE",
+    "TwoWay",
+    "choose",
+    "evidence_cost",
+    "flagged_runs",
+    "keyframe_search",
+    "max_keyframes",
+    "two_way_pass",
+]
+
+#: Flagged runs this many frames apart or closer are one run.
+MERGE_GAP = 3
+#: Runs of fewer flagged frames are left as the forward pass made them.
+MIN_RUN = 3
+#: Frames a hypothesis tracks past its run at each end (where it meets the forward track).
+MARGIN = 4
+#: A hypothesis stops once it has been lost itself for this many frames in a row.
+STOP_LOST = 6
+#: Cost of a switch between two tracks (in lost limbs), plus :data:`SWITCH_PER_METRE`
+#: per metre of mean joint distance between them at the switch.
+SWITCH = 0.5
+SWITCH_PER_METRE = 10.0
+#: Cost per frame of a hypothesis over the forward track (the forward track wins ties).
+PREFER_FORWARD = 0.05
+#: Weight of the fit's continuous evidence (the largest share of a limb outside, buried or
+#: unexplained, in units of its threshold, at most 1 per limb) next to the lost limbs.
+FIT_WEIGHT = 0.1
+#: Frames of a run per kept keyframe (:func:`max_keyframes`).
+FRAMES_PER_KEY = 50
+#: The folder of the pass's intermediate results, inside the track folder.
+FOLDER = "two_way"
+
+
+@dataclass(frozen=True)
+class TwoWay:
+    """What the two-way pass did (also in ``track.json``'s ``"two_way"``).
+
+    Attributes
+    ----------
+    runs : tuple of (int, int), first and last frame of each run of flagged frames worked on
+    keyframes : tuple of dict, each searched keyframe: ``frame``, ``run`` (its first frame),
+        ``kept`` (bool), ``label`` (the search's winner), ``lost`` (limbs the lost rule
+        found on it, where not kept)
+    changed : tuple of dict, each stretch of frames replaced: ``frames`` (first, last),
+        ``keyframe``, ``direction`` (``"backward"`` or ``"forward"``), ``limbs`` (those the
+        forward pass had flagged lost there; the whole frame is replaced)
+    flagged : (int, int), frames flagged ``lost`` before and after the pass
+    seconds : float, wall time of the pass
+    """
+
+    runs: tuple[tuple[int, int], ...] = ()
+    keyframes: tuple[dict, ...] = ()
+    changed: tuple[dict, ...] = ()
+    flagged: tuple[int, int] = (0, 0)
+    seconds: float = 0.0
+
+    def as_json(self) -> dict:
+        """JSON-ready, with ``"complete": true``."""
+        return {
+            "runs": [list(r) for r in self.runs],
+            "keyframes": list(self.keyframes),
+            "changed": list(self.changed),
+            "flagged": list(self.flagged),
+            "seconds": round(float(self.seconds), 3),
+            "complete": True,
+        }
+
+    def describe(self) -> str:
+        """One line: runs, keyframes kept, frames changed, flags before → after."""
+        n = sum(c["frames"][1] - c["frames"][0] + 1 for c in self.changed)
+        kept = sum(bool(k["kept"]) for k in self.keyframes)
+        return (
+            f"two-way pass: {len(self.runs)} lost runs, {kept} of {len(self.keyframes)} "
+            f"keyframes kept, {n} frames changed, frames flagged lost {self.flagged[0]} → "
+            f"{self.flagged[1]} ({self.seconds:.0f} s)"
+        )
+
+
+def keyframe_search(
+    template,
+    frame,
+    *,
+    near: tuple[np.ndarray, np.ndarray] | None = None,
+    lost: tuple[str, ...] = (),
+    exclude_trials: tuple[str, ...] = (),
+) -> InitResult:
+    """The whole-body pose of ``frame`` found from the frame alone (the pass's one call of a
+    search): ``template`` the full body; ``near`` the tracked pose ``(R (J, 3, 3), root
+    (3,))`` at that frame and ``lost`` its lost limbs (hints a search may use);
+    ``exclude_trials`` pose-library trials left out."""
+    return initial_pose_of_frame(template, frame, exclude_trials=tuple(exclude_trials))
+
+
+def flagged_runs(
+    flagged: Sequence[bool], *, merge_gap: int = MERGE_GAP, min_run: int = MIN_RUN
+) -> list[tuple[int, int]]:
+    """Runs ``(first, last)`` (positions, inclusive) of True in ``flagged`` (T,), runs at
+    most ``merge_gap`` positions apart merged, runs shorter than ``min_run`` dropped."""
+    f = np.asarray(flagged, dtype=bool)
+    d = np.diff(np.concatenate([[0], f.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    runs: list[list[int]] = []
+    for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+        if runs and a - runs[-1][1] - 1 <= merge_gap:
+            runs[-1][1] = b
+        else:
+            runs.append([a, b])
+    return [(a, b) for a, b in runs if b - a + 1 >= min_run]
+
+
+def max_keyframes(length: int) -> int:
+    """Keyframes kept at most for a run of ``length`` frames: one after it, and one per
+    :data:`FRAMES_PER_KEY` frames of it."""
+    return 1 + max(1, -(-int(length) // FRAMES_PER_KEY))
+
+
+def evidence_cost(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
+    """(...) float64: the cost of frames of ``evidence`` (..., L, E)
+    (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`): the number of limbs
+    ``rule`` finds lost, plus :data:`FIT_WEIGHT` times the sum over limbs of the largest
+    fit measure (outside, buried, unexplained) in units of its threshold (at most 1 each):
+    fewer lost limbs first, then the closer fit."""
+    rule = rule or shipped_rule()
+    th = np.asarray(rule.thresholds, dtype=np.float64)
+    e = np.asarray(evidence, dtype=np.float64)
+    lost = rule.limb_lost(e).sum(axis=-1)
+    fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
+    finite = np.isfinite(th[fit])
+    ratio = np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0)
+    return lost + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0).sum(axis=-1)
+
+
+def choose(
+    cost: np.ndarray,
+    joints: np.ndarray,
+    *,
+    switch: float = SWITCH,
+    per_metre: float = SWITCH_PER_METRE,
+    start: int | None = None,
+    end: int | None = None,
+) -> np.ndarray:
+    """The track chosen per frame: the path through ``cost`` of least total cost plus, per
+    switch from track ``h`` to ``g`` at frame ``t``, ``switch + per_metre ·`` the mean
+    distance between their joints at ``t`` (dynamic programming over the frames).
+
+    Parameters
+    ----------
+    cost : (T, H) float64, each track's cost per frame (``inf`` where it has no frame)
+    joints : (T, H, K, 3) float64, metres, each track's joints (anything where absent)
+    start, end : int, optional, the track the path must begin (end) on
+
+    Returns
+    -------
+    (T,) int64, the chosen track per frame
+    """
+    c = np.asarray(cost, dtype=np.float64)
+    T, H = c.shape
+    J = np.nan_to_num(np.asarray(joints, dtype=np.float64))
+    # (T, H, H) mean joint distance between every pair of tracks per frame
+    D = np.linalg.norm(J[:, :, None] - J[:, None, :], axis=-1).mean(axis=-1)
+    step = switch + per_metre * D
+    step[:, np.arange(H), np.arange(H)] = 0.0
+    acc = c[0].copy()
+    if start is not None:
+        acc[np.arange(H) != start] = np.inf
+    back = np.zeros((T, H), dtype=np.int64)
+    for t in range(1, T):  # over frames (not points): T is a run's length
+        total = acc[:, None] + step[t]  # from h (rows) to g (columns)
+        back[t] = np.argmin(total, axis=0)
+        acc = total[back[t], np.arange(H)] + c[t]
+    h = int(end) if end is not None else int(np.argmin(acc))
+    path = np.empty(T, dtype=np.int64)
+    for t in range(T - 1, -1, -1):
+        path[t] = h
+        h = back[t, h]
+    return path
+
+
+# --- the pass over a track folder ------------------------------------------------------
+
+
+def two_way_pass(
+    tracker: Tracker,
+    body: TrackingBody,
+    capture,
+    out: str | os.PathLike,
+    *,
+    frames: Sequence[int],
+    refiner: SurfaceRefiner | None = None,
+    exclude_trials: tuple[str, ...] = (),
+    rule: LostRule | None = None,
+    show_progress: bool | None = None,
+) -> TwoWay:
+    """Run the two-way pass (module docstring) over the finished forward track in ``out``.
+
+    Parameters
+    ----------
+    tracker : Tracker
+        The forward pass's tracker (set up for ``body.light``; its state is changed).
+    body : TrackingBody, the tracked body (searches on its template, tracking on its light)
+    capture : Capture or SequenceCapture, the frames the track was made from
+    out : path, the track folder
+    frames : sequence of int, the positions in ``capture`` tracked, in the track's order
+    refiner : SurfaceRefiner, optional, as the forward pass refined its surfaces
+    exclude_trials : tuple of str, pose-library trials the searches leave out
+    rule : LostRule, optional, the lost rule (default: the shipped one)
+
+    Returns
+    -------
+    TwoWay
+        What the pass did; also written to ``track.json`` (``"two_way"``). A folder whose
+        pass is complete is returned as recorded.
+    """
+    done = read_two_way(out)
+    if done is not None and done.get("complete"):
+        return _of_json(done)
+    t0 = time.perf_counter()
+    work = Path(out) / FOLDER
+    order = [int(capture.indices[k]) for k in frames]
+    where = {i: k for i, k in zip(order, frames, strict=True)}
+    fwd = [_forward_frame(out, i) for i in order]
+    flagged = np.array(["lost" in r.flags for r in fwd])
+    runs = flagged_runs(flagged)
+    keys: list[dict] = []
+    changed: list[dict] = []
+    run = _Run(tracker, body, capture, out, work, order, where, refiner, exclude_trials, rule)
+    for a, b in runs:
+        with phase(
+            f"two-way pass: lost frames {order[a]}–{order[b]}, searching and tracking",
+            enabled=show_progress,
+        ):
+            k, c = run.revise(fwd, a, b)
+        keys += k
+        changed += c
+    after = sum("lost" in read_track_frame(out, i).flags for i in order)
+    result = TwoWay(
+        runs=tuple((order[a], order[b]) for a, b in runs),
+        keyframes=tuple(keys),
+        changed=tuple(changed),
+        flagged=(int(flagged.sum()), int(after)),
+        seconds=time.perf_counter() - t0,
+    )
+    write_two_way(out, result.as_json())
+    return result
+
+
+def _of_json(d: dict) -> TwoWay:
+    return TwoWay(
+        runs=tuple(tuple(r) for r in d.get("runs", ())),
+        keyframes=tuple(d.get("keyframes", ())),
+        changed=tuple(d.get("changed", ())),
+        flagged=tuple(d.get("flagged", (0, 0))),
+        seconds=float(d.get("seconds", 0.0)),
+    )
+
+
+def _forward_frame(out, index: int) -> FrameResult:
+    """Frame ``index`` as the forward pass made it (kept in ``two_way/forward/`` once the
+    pass has replaced it)."""
+    kept = Path(out) / FOLDER / "forward"
+    if frame_path(kept, index).is_file():
+        return read_track_frame(kept, index)
+    return read_track_frame(out, index)
+
+
+@dataclass
+class _Hyp:
+    """A hypothesis track: its frames by frame number (cost, joints, result)."""
+
+    keyframe: int
+    direction: str
+    results: dict[int, FrameResult]
+
+
+class _Run:
+    """The pass over one run at a time (:func:`two_way_pass`)."""
+
+    def __init__(self, tracker, body, capture, out, work, order, where, refiner, excl, rule):
+        self.tracker, self.body, self.capture = tracker, body, capture
+        self.out, self.work = Path(out), Path(work)
+        self.order, self.where = order, where
+        self.refiner, self.exclude, self.rule = refiner, tuple(excl), rule
+        self.pos = {i: p for p, i in enumerate(order)}
+
+    def frame(self, i: int):
+        return self.capture[self.where[i]]
+
+    def revise(self, fwd: list[FrameResult], a: int, b: int) -> tuple[list[dict], list[dict]]:
+        """Search keyframes for the run ``a..b`` (positions in the order), track hypotheses
+        from the kept ones, choose per frame and write; returns (keyframes, changed)."""
+        T = len(self.order)
+        lo, hi = max(a - MARGIN, 0), min(b + MARGIN, T - 1)
+        hyps: list[_Hyp] = []
+        keys: list[dict] = []
+        tried: set[int] = set()
+        explained = np.zeros(b - a + 1, dtype=bool)
+        candidates = [b + 1] if b + 1 < T else []
+        most = max_keyframes(b - a + 1)
+        while sum(bool(k["kept"]) for k in keys) < most and len(tried) < most + 2:
+            if candidates:
+                p = candidates.pop()
+            else:
+                p = _middle_of_longest(explained, tried, a)
+                if p is None:
+                    break
+            tried.add(p)
+            key, seated = self.keyframe(fwd, p, a)
+            keys.append(key)
+            if seated is None:
+                continue
+            back = self.hypothesis(seated, p, range(p - 1, lo - 1, -1), "backward")
+            hyps.append(back)
+            if p <= b:
+                hyps.append(self.hypothesis(seated, p, range(p + 1, hi + 1), "forward"))
+            for h in hyps:
+                for i, r in h.results.items():
+                    k = self.pos[i] - a
+                    if 0 <= k < len(explained) and "lost" not in r.flags:
+                        explained[k] = True
+            if explained.all():
+                break
+        if not hyps:
+            return keys, []
+        return keys, self.write_choice(fwd, hyps, lo, hi)
+
+    def keyframe(self, fwd, p: int, a: int) -> tuple[dict, FrameResult | None]:
+        """Search frame at position ``p``; the seated result where kept (else None)."""
+        i = self.order[p]
+        frame = self.frame(i)
+        state = fwd[p].state
+        near = (state["pose_R"], state["pose_root"]) if "pose_R" in state else None
+        cached = self.work / "keys" / f"{i:05d}.npz"
+        if cached.is_file():
+            z = read_npz(cached, "two-way keyframe")
+            R, root, label = z["R"], z["root"], str(z["label"])
+        else:
+            lost = self.lost_limbs(fwd[p])
+            res = keyframe_search(
+                self.body.template, frame, near=near, lost=lost, exclude_trials=self.exclude
+            )
+            R, root, label = res.R, res.root, res.label
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_open(cached) as f:
+                np.savez(f, R=R, root=root, label=np.str_(label))
+        self.tracker.set_state(fwd[p].state)
+        r = self.tracker.reseat(frame, R, root)
+        recovery = Recovery(self.body.light, R, root, rule=self.rule)
+        r = replace(recovered(recovery, frame, r), index=i)
+        if self.refiner is not None:
+            r = replace(r, vertices=self.refiner.refine(r.vertices, *observed(frame).points))
+        kept = "lost" not in r.flags
+        key = {"frame": i, "run": self.order[a], "kept": kept, "label": label}
+        if not kept:
+            key["lost"] = list(self.lost_limbs(r))
+        return key, (r if kept else None)
+
+    def hypothesis(self, seated: FrameResult, p: int, steps: range, direction: str) -> _Hyp:
+        """Track from the seated keyframe at position ``p`` over ``steps`` (positions)."""
+        i0 = self.order[p]
+        folder = self.work / f"k{i0:05d}-{direction}"
+        marker = folder / "done.json"
+        if marker.is_file():
+            done = json.loads(marker.read_text())["frames"]
+            return _Hyp(i0, direction, {i: read_track_frame(folder, i) for i in done})
+        if folder.exists():  # an unfinished hypothesis: tracked again
+            shutil.rmtree(folder)
+        (folder / "frames").mkdir(parents=True)
+        write_frame(folder, seated)
+        self.tracker.set_state(seated.state)
+        R, root = seated.state["pose_R"], seated.state["pose_root"]
+        recovery = Recovery(self.body.light, R, root, rule=self.rule)
+        recovery.assess(self.frame(i0), seated.vertices)  # its history starts at the keyframe
+        results: dict[int, FrameResult] = {i0: seated}
+        good, lost_in_row = i0, 0
+        for q in steps:
+            i = self.order[q]
+            r = track_frame(
+                self.tracker,
+                lambda i=i: self.frame(i),
+                i,
+                folder,
+                good,
+                recovery=recovery,
+                refiner=self.refiner,
+            )
+            write_frame(folder, r)
+            results[i] = r
+            good = i if r.healthy else good
+            lost_in_row = lost_in_row + 1 if "lost" in r.flags else 0
+            if lost_in_row >= STOP_LOST:
+                break
+        write_text_atomic(marker, json.dumps({"frames": sorted(results)}) + "\n")
+        return _Hyp(i0, direction, results)
+
+    def write_choice(self, fwd, hyps: list[_Hyp], lo: int, hi: int) -> list[dict]:
+        """Choose per frame over positions ``lo..hi`` (:func:`choose`), write the chosen
+        frames and the span's recomputed flags; returns the stretches changed."""
+        span = self.order[lo : hi + 1]
+        T, H = len(span), 1 + len(hyps)
+        K = fwd[lo].joints.shape[0]
+        cost = np.full((T, H), np.inf)
+        joints = np.zeros((T, H, K, 3))
+        for t, i in enumerate(span):
+            cost[t, 0] = self.cost(fwd[lo + t])
+            joints[t, 0] = fwd[lo + t].joints
+            for h, hyp in enumerate(hyps, start=1):
+                r = hyp.results.get(i)
+                if r is not None:
+                    cost[t, h] = self.cost(r) + PREFER_FORWARD
+                    joints[t, h] = r.joints
+        start = 0 if lo > 0 else None
+        end = 0 if hi < len(self.order) - 1 else None
+        path = choose(cost, joints, start=start, end=end)
+        chosen = [
+            fwd[lo + t] if h == 0 else hyps[h - 1].results[i]
+            for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True))
+        ]
+        chosen = self.reflagged(fwd, lo, chosen)
+        kept = self.out / FOLDER / "forward"
+        (kept / "frames").mkdir(parents=True, exist_ok=True)
+        for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True)):
+            r = chosen[t]
+            if h > 0:
+                hyp = hyps[h - 1]
+                note = f"two-way: from keyframe {hyp.keyframe} ({hyp.direction})"
+                r = replace(r, message=f"{r.message}; {note}" if r.message else note)
+            old = fwd[lo + t]
+            if h == 0 and r.flags == old.flags and r.message == old.message:
+                continue
+            if not frame_path(kept, i).is_file():
+                write_frame(kept, old)
+            write_frame(self.out, replace(r, index=i))
+        lost = [self.lost_limbs(r) for r in fwd[lo : hi + 1]]
+        return _stretches(span, path, hyps, lost)
+
+    def lost_limbs(self, r: FrameResult) -> tuple[str, ...]:
+        """The limbs the lost rule finds lost on a frame, from its recorded evidence."""
+        ev = r.state.get("evidence")
+        if "lost" not in r.flags or ev is None:
+            return ()
+        return lost_limbs(ev, self.rule)
+
+    def cost(self, r: FrameResult) -> float:
+        """The evidence's cost of a frame (:func:`evidence_cost`); a frame without recorded
+        evidence: its lost flag."""
+        ev = r.state.get("evidence")
+        if ev is None or np.shape(ev) != (len(LIMB_PARTS), len(EVIDENCE)):
+            return float(len(LIMB_PARTS)) if "lost" in r.flags else 0.0
+        return float(evidence_cost(ev, self.rule))
+
+    def reflagged(self, fwd, lo: int, chosen: list[FrameResult]) -> list[FrameResult]:
+        """The chosen frames flagged again by the lost rule, in time order, by one
+        :class:`Recovery` started at the frame before the span."""
+        first = fwd[max(lo - 1, 0)]
+        st = first.state
+        if "pose_R" not in st:
+            return chosen
+        recovery = Recovery(
+            self.body.light,
+            st["pose_R"],
+            st["pose_root"],
+            rule=self.rule,
+        )
+        if lo > 0:
+            recovery.assess(self.frame(first.index), first.vertices)
+        out = []
+        for r, old in zip(chosen, fwd[lo:], strict=False):
+            q = recovery.assess(self.frame(r.index), r.vertices)
+            if not r.healthy or (r is old and r.index == self.order[0]):
+                out.append(r)  # failed or missing, or the start as found: as it is
+                continue
+            flags = tuple(f for f in r.flags if f != "lost") + (("lost",) if q.lost else ())
+            message = f"lost {q.describe()}" if q.lost else ""
+            state = {**r.state, "pose_R": recovery.R, "pose_root": recovery.root}
+            state["evidence"] = q.evidence
+            out.append(replace(r, flags=flags, message=message, state=state))
+        return out
+
+
+def _middle_of_longest(explained: np.ndarray, tried: set[int], a: int) -> int | None:
+    """The position (``a`` + offset) of the middle of the longest stretch of False in
+    ``explained`` at least :data:`MIN_RUN` long and not within :data:`MIN_RUN` of a tried
+    position; None when there is none."""
+    runs = flagged_runs(~explained, merge_gap=0, min_run=MIN_RUN)
+    for s, e in sorted(runs, key=lambda r: r[0] - r[1]):
+        p = a + (s + e) // 2
+        if all(abs(p - q) > MIN_RUN for q in tried):
+            return p
+    return None
+
+
+def _stretches(span, path, hyps, lost_per_frame) -> list[dict]:
+    """Stretches of consecutive frames taken from one hypothesis (``changed``)."""
+    out: list[dict] = []
+    for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True)):
+        if h == 0:
+            continue
+        lost = list(lost_per_frame[t])
+        last = out[-1] if out else None
+        if last and last["_h"] == h and last["frames"][1] == span[t - 1]:
+            last["frames"][1] = i
+            last["limbs"] = sorted(set(last["limbs"]) | set(lost), key=list(LIMB_PARTS).index)
+        else:
+            hyp = hyps[h - 1]
+            out.append(
+                {
+                    "frames": [i, i],
+                    "keyframe": hyp.keyframe,
+                    "direction": hyp.direction,
+                    "limbs": lost,
+                    "_h": h,
+                }
+            )
+    return [{k: v for k, v in c.items() if k != "_h"} for c in out]
