@@ -42,7 +42,7 @@ from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import read_track
-from meshmocap.trackers.driver import read_track_frame
+from meshmocap.trackers.frame_step import read_track_frame
 
 BAD_MM = 150.0
 #: The share of good frames a fitted rule may flag (``--good-rate``).

@@ -17,7 +17,7 @@ from meshmocap.io.results import (
     write_start,
 )
 from meshmocap.io.start import Start
-from meshmocap.trackers.driver import read_track_frame
+from meshmocap.trackers.frame_step import read_track_frame
 
 
 def _result(index, **kw):

@@ -19,7 +19,8 @@ from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.results import read_track, write_frame
 from meshmocap.trackers import two_way
-from meshmocap.trackers.driver import read_track_frame, track_sequence
+from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.frame_step import read_track_frame
 from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 from meshmocap.trackers.two_way import (

@@ -52,6 +52,7 @@ from meshmocap._npz import read_npz
 from meshmocap._progress import phase
 from meshmocap.body.light import TrackingBody
 from meshmocap.estimate.pose.first_pose import InitResult, initial_pose_of_frame
+from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, shipped_rule
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
@@ -65,7 +66,7 @@ from meshmocap.io.results import (
     write_two_way,
 )
 from meshmocap.trackers.base import Tracker
-from meshmocap.trackers.driver import read_track_frame, recovered, track_frame
+from meshmocap.trackers.frame_step import read_track_frame, recovered, track_frame
 
 __all__ = [
     "MARGIN",
@@ -262,6 +263,7 @@ def two_way_pass(
     *,
     frames: Sequence[int],
     refiner: SurfaceRefiner | None = None,
+    hold: bool = False,
     exclude_trials: tuple[str, ...] = (),
     rule: LostRule | None = None,
     show_progress: bool | None = None,
@@ -277,6 +279,8 @@ def two_way_pass(
     out : path, the track folder
     frames : sequence of int, the positions in ``capture`` tracked, in the track's order
     refiner : SurfaceRefiner, optional, as the forward pass refined its surfaces
+    hold : bool, hold each hypothesis's skeleton against the observed surface, as the
+        forward pass does on a 4D capture (:class:`~meshmocap.estimate.pose.hold.SkeletonHold`)
     exclude_trials : tuple of str, pose-library trials the searches leave out
     rule : LostRule, optional, the lost rule (default: the shipped one)
 
@@ -299,6 +303,7 @@ def two_way_pass(
     keys: list[dict] = []
     changed: list[dict] = []
     run = _Run(tracker, body, capture, out, work, order, where, refiner, exclude_trials, rule)
+    run.hold = hold
     for a, b in runs:
         with phase(
             f"two-way pass: lost frames {order[a]}–{order[b]}, searching and tracking",
@@ -355,6 +360,7 @@ class _Run:
         self.out, self.work = Path(out), Path(work)
         self.order, self.where = order, where
         self.refiner, self.exclude, self.rule = refiner, tuple(excl), rule
+        self.hold = False
         self.pos = {i: p for p, i in enumerate(order)}
 
     def frame(self, i: int):
@@ -445,6 +451,9 @@ class _Run:
         R, root = seated.state["pose_R"], seated.state["pose_root"]
         recovery = Recovery(self.body.light, R, root, rule=self.rule)
         recovery.assess(self.frame(i0), seated.vertices)  # its history starts at the keyframe
+        holder = SkeletonHold(self.body.light) if self.hold else None
+        if holder is not None:
+            holder.last = (np.asarray(R, dtype=np.float64), np.asarray(root, dtype=np.float64))
         results: dict[int, FrameResult] = {i0: seated}
         good, lost_in_row = i0, 0
         for q in steps:
@@ -457,6 +466,7 @@ class _Run:
                 good,
                 recovery=recovery,
                 refiner=self.refiner,
+                holder=holder,
             )
             write_frame(folder, r)
             results[i] = r
