@@ -1,7 +1,8 @@
 """The sequence driver shared by every tracker: streams frames, writes results frame by
 frame, shows progress, resumes interrupted runs and never emits NaN.
 
-One function tracks a frame, here and in live mode (:func:`track_frame`). A frame whose fit
+One function tracks a frame, here, in live mode and in the two-way pass
+(:func:`~meshmocap.trackers.frame_step.track_frame`). A frame whose fit
 raises :class:`~meshmocap.errors.FitError` (or a numerical error) or returns non-finite
 values is flagged ``failed`` (``healthy = False``, with the reason), the tracker is reset
 to the last good state, and tracking continues with the next frame; the flagged frame

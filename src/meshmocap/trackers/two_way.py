@@ -69,9 +69,13 @@ from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.frame_step import read_track_frame, recovered, track_frame
 
 __all__ = [
+    "FIT_WEIGHT",
+    "FOLDER",
+    "FRAMES_PER_KEY",
     "MARGIN",
     "MERGE_GAP",
     "MIN_RUN",
+    "PREFER_FORWARD",
     "STOP_LOST",
     "SWITCH",
     "SWITCH_PER_METRE",
