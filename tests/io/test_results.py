@@ -8,13 +8,17 @@ import pytest
 
 from meshmocap.errors import FormatError, InputError
 from meshmocap.io.results import (
+    TWO_WAY_FOLDER,
     FrameResult,
     frame_path,
     read_start,
     read_track,
+    read_two_way,
     start_track,
+    two_way_changes,
     write_frame,
     write_start,
+    write_two_way,
 )
 from meshmocap.io.start import Start
 from meshmocap.trackers.frame_step import read_track_frame
@@ -103,3 +107,21 @@ def test_a_track_made_before_the_limb_only_reseat_was_removed_resumes(tmp_path):
     start_track(tmp_path / "on", {**meta, "reseat": True}, F)
     with pytest.raises(FormatError, match="other settings"):
         start_track(tmp_path / "on", meta, F)
+
+
+def test_the_two_way_record_and_passes_survive_a_resume_and_not_a_restart(tmp_path):
+    """A forward track resumes with the two-way pass (``passes`` may change); the pass's
+    record and folder are kept on a resume and cleared when the run starts over."""
+    meta, F = {"method": "test", "passes": "forward"}, np.array([[0, 1, 2]])
+    start_track(tmp_path, meta, F)
+    write_frame(tmp_path, _result(0))
+    record = {"changed": [{"frames": [3, 5], "keyframe": 6, "direction": "backward"}]}
+    write_two_way(tmp_path, record)
+    (tmp_path / TWO_WAY_FOLDER / "keys").mkdir(parents=True)
+    assert start_track(tmp_path, {**meta, "passes": "two-way"}, F) == [0]
+    assert read_two_way(tmp_path) == record
+    assert set(two_way_changes(read_track(tmp_path).meta)) == {3, 4, 5}
+    start_track(tmp_path, meta, F, resume=False)
+    assert read_two_way(tmp_path) is None and not (tmp_path / TWO_WAY_FOLDER).exists()
+    with pytest.raises(FormatError, match="two-way change"):
+        two_way_changes({"two_way": {"changed": [{"frames": "x"}]}})

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -313,6 +314,7 @@ def start_track(
     else:
         for p in (path / "frames").glob("*.npz"):
             p.unlink()
+        shutil.rmtree(path / TWO_WAY_FOLDER, ignore_errors=True)  # an earlier run's pass
     write_text_atomic(meta_path, json.dumps(full, indent=2) + "\n")
     with atomic_open(path / "faces.npy") as f:
         np.save(f, np.asarray(faces, dtype=np.int32))
@@ -342,6 +344,8 @@ def write_start(path: str | os.PathLike, start: Start) -> None:
 
 #: The key of ``track.json`` that records the two-way pass (:func:`write_two_way`).
 TWO_WAY_KEY = "two_way"
+#: The folder of a track folder that holds the two-way pass's searches and tracks.
+TWO_WAY_FOLDER = "two_way"
 #: The key of ``track.json`` that says which passes the track was made with.
 PASSES_KEY = "passes"
 

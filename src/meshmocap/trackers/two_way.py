@@ -59,6 +59,7 @@ from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.geometry.refine import SurfaceRefiner
 from meshmocap.io.results import (
+    TWO_WAY_FOLDER,
     FrameResult,
     frame_path,
     read_two_way,
@@ -108,7 +109,7 @@ FIT_WEIGHT = 0.1
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
 #: The folder of the pass's intermediate results, inside the track folder.
-FOLDER = "two_way"
+FOLDER = TWO_WAY_FOLDER
 
 
 @dataclass(frozen=True)
