@@ -20,7 +20,9 @@ ground truth (``init="truth"``); how is recorded (:class:`~meshmocap.io.start.St
 ``track.json``), and an uncertain start flags its frame ``lost``. With ``recover``, every
 fitted frame is scored (:class:`~meshmocap.estimate.recovery.reinit.Recovery`): a frame
 with a limb lost is flagged ``lost`` (the message names the limbs); the track is left as
-the tracker made it.
+the tracker made it, except live: there a run of lost frames is searched for again at its
+current frame and the tracker re-seated where the search's pose passes the same rule
+(:mod:`~meshmocap.trackers.live_search`, flag ``reinit``).
 
 How a capture is tracked (its frames, the start, resuming, recovery, the surface
 refinement) is one record, :class:`~meshmocap.trackers.options.TrackOptions`, shared
@@ -75,6 +77,7 @@ from meshmocap.trackers.frame_step import (
     read_track_frame,
     track_frame,
 )
+from meshmocap.trackers.live_search import LiveSearch
 from meshmocap.trackers.options import Init, TrackOptions
 
 
@@ -182,6 +185,11 @@ def track_sequence(
             todo = [k for k in positions[1:] if capture.indices[k] not in done]
         pool = capture.indices if live else indices
         recovery, good = None, None
+        # live, a lost run is searched for again at its current frame (causal: live_search)
+        searcher = None
+        if live and recover:
+            exclude = tuple((init_options or {}).get("exclude_trials", ()))
+            searcher = LiveSearch(body.light, exclude_trials=exclude)
         for k in progress(todo, label=tracker.name, enabled=opts.show_progress):
             index = int(capture.indices[k])
             if good is None:  # the first frame to track: from the state of the one before
@@ -210,6 +218,9 @@ def track_sequence(
                 if r is not None:
                     break
                 time.sleep(capture.poll)  # a live file still being written: read it again
+            if searcher is not None and recovery is not None:
+                read = functools.partial(capture.__getitem__, k)
+                r, recovery = searcher.after(tracker, recovery, read, r)
             good = index if r.healthy else good
             write_frame(out, r)
             if timer is not None:

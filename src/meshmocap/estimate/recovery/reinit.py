@@ -97,6 +97,8 @@ class Recovery:
         self._limb_vertices = np.flatnonzero(np.isin(self.labels, limbs))
         self.missing: set[str] = set()
         self.fits_well: dict[str, int] = {}
+        #: the last frame's quality as :meth:`assess` returned it (``lost``: the rule's)
+        self.quality: FitQuality | None = None
 
     def _inputs(self, frame):
         obs = observed(frame)
@@ -162,13 +164,14 @@ class Recovery:
                 self.held[idx] = R[idx]
         lost = lost_limbs(evidence, self.rule)
         reasons = lost_reasons(evidence, self.rule)
-        return replace(
+        self.quality = replace(
             q,
             lost=lost,
             unseen={n: float(n in self.missing) for n in unseen},
             evidence=evidence,
             reasons=reasons,
         )
+        return self.quality
 
     def _evidence(self, q: FitQuality, V, R, root, joints) -> np.ndarray:
         """(L, E) the frame's evidence (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`,
