@@ -58,6 +58,30 @@ def test_the_search_refuses_a_wrong_limb_or_pose_in_one_line(scene):
         keyframe_pose(t, frame, near=(near[0][:3], near[1]), lost=("left_arm",))
 
 
+def test_a_lost_torso_drops_the_tracked_heading_and_a_lost_head_is_no_limb(scene, monkeypatch):
+    # the lost rule's parts are taken as they come (the stages stubbed: what they are given)
+    from meshmocap.estimate.pose import keyframe
+
+    t, _, _, _, frame, near = scene
+    seen = {}
+
+    def coarse(*args, headings=None, **kwargs):
+        seen.setdefault("headings", []).append(headings)
+        return []
+
+    def refined(*args, limbs=(), **kwargs):
+        seen["limbs"] = limbs
+        return "result"
+
+    monkeypatch.setattr(keyframe, "coarse_candidates", coarse)
+    monkeypatch.setattr(keyframe, "refined_search", refined)
+    monkeypatch.setattr(keyframe, "_hybrids", lambda *a: [])
+    assert keyframe_pose(t, frame, near=near, lost=("head", "left_arm")) == "result"
+    assert seen["limbs"] == ("left_arm",) and len(seen["headings"][-1]) == 7  # about near's
+    keyframe_pose(t, frame, near=near, lost=("torso", "left_arm"))
+    assert seen["headings"][-1] is None and len(seen["limbs"]) == 4  # all around, every limb
+
+
 @pytest.mark.slow
 def test_the_lost_arm_is_found_again_from_the_tracked_pose(scene):
     # ~3 s: headings about the tracked one, the library narrowed by the kept limbs

@@ -52,6 +52,7 @@ from meshmocap.estimate.pose.pose_search import (
 )
 from meshmocap.estimate.recovery.limbs import LIMBS, limb_joint_indices
 from meshmocap.estimate.recovery.observe import observed
+from meshmocap.estimate.recovery.quality import LIMB_PARTS
 
 __all__ = [
     "DIVERSE_POSES",
@@ -187,7 +188,10 @@ def keyframe_pose(
         heading and the whole library are searched.
     lost : tuple of str
         The limbs of ``near`` that are lost (:data:`~meshmocap.estimate.recovery.limbs.LIMBS`
-        keys): those are searched limb by limb (without ``near``: every limb).
+        keys): those are searched limb by limb (without ``near``: every limb). The lost
+        rule's other parts (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`) are
+        taken too: a lost ``"torso"`` leaves ``near`` out (its heading is not trusted), a
+        lost ``"head"`` changes nothing.
     exclude_trials : tuple of str
         Library trials left out of the search
         (:func:`~meshmocap.estimate.pose.library.library_poses`).
@@ -199,9 +203,12 @@ def keyframe_pose(
         check finds lost).
     """
     lost = tuple(lost)
-    bad = [limb for limb in lost if limb not in LIMBS]
+    bad = [limb for limb in lost if limb not in LIMB_PARTS]
     if bad:
-        raise InputError(f"keyframe: lost limbs must be among {list(LIMBS)}, found {bad}")
+        raise InputError(f"keyframe: lost limbs must be among {list(LIMB_PARTS)}, found {bad}")
+    if "torso" in lost:  # the tracked heading is not to be trusted either
+        near = None
+    lost = tuple(limb for limb in lost if limb in LIMBS)
     obs = observed(frame)
     P, N = obs.points
     if len(P) < 50:
