@@ -212,3 +212,15 @@ def test_every_tracker_steps_backward_as_accurately_as_forward(method, walk, tmp
     # measured: cage 4.5 mm forward, 3.4 backward
     assert err["backward"] < err["forward"] + 1.0, err
     assert err["backward"] < 25, err
+
+
+def test_the_keyframe_search_is_the_keyframe_pose_with_the_tracked_hints(monkeypatch):
+    seen = {}
+    monkeypatch.setattr(two_way, "keyframe_pose", lambda t, f, **kw: seen.update(kw) or "found")
+    near = (np.eye(3)[None].repeat(31, axis=0), np.zeros(3))
+    found = two_way.keyframe_search(
+        "template", "frame", near=near, lost=("torso", "left_arm"), exclude_trials=("05_03",)
+    )
+    # the limbs the search refits (the lost rule's torso and head are not among them)
+    assert found == "found" and seen["lost"] == ("left_arm",)
+    assert seen["near"] is near and seen["exclude_trials"] == ("05_03",)

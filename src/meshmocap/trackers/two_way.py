@@ -51,9 +51,11 @@ from meshmocap._atomic import atomic_open, write_text_atomic
 from meshmocap._npz import read_npz
 from meshmocap._progress import phase
 from meshmocap.body.light import TrackingBody
-from meshmocap.estimate.pose.first_pose import InitResult, initial_pose_of_frame
+from meshmocap.estimate.pose.first_pose import InitResult
 from meshmocap.estimate.pose.hold import SkeletonHold
+from meshmocap.estimate.pose.keyframe import keyframe_pose
 from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, shipped_rule
+from meshmocap.estimate.recovery.limbs import LIMBS
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -168,8 +170,10 @@ def keyframe_search(
     """The whole-body pose of ``frame`` found from the frame alone (the pass's one call of a
     search): ``template`` the full body; ``near`` the tracked pose ``(R (J, 3, 3), root
     (3,))`` at that frame and ``lost`` its lost limbs (hints a search may use);
-    ``exclude_trials`` pose-library trials left out."""
-    return initial_pose_of_frame(template, frame, exclude_trials=tuple(exclude_trials))
+    ``exclude_trials`` pose-library trials left out
+    (:func:`~meshmocap.estimate.pose.keyframe.keyframe_pose`)."""
+    lost = tuple(n for n in lost if n in LIMBS)  # the search's limbs (not the torso, head)
+    return keyframe_pose(template, frame, near=near, lost=lost, exclude_trials=exclude_trials)
 
 
 def flagged_runs(
