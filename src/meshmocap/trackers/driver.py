@@ -11,6 +11,10 @@ dropped, or its hull or mesh file is absent or unreadable) is flagged ``missing`
 reason, and the tracker coasts across it the same way: the next real frame is fitted from
 the last good state.
 
+After the forward pass over a capture on disk, the two-way pass
+(:mod:`meshmocap.trackers.two_way`, ``TrackOptions.passes``) tracks the runs of frames it
+flagged ``lost`` again from whole-body searches at keyframes, backward and forward.
+
 Only one process writes into a track folder at a time: a second one is refused in one line
 (``meshmocap._atomic.folder_lock``, released by the kernel when a run dies).
 
@@ -79,6 +83,7 @@ from meshmocap.trackers.frame_step import (
 )
 from meshmocap.trackers.live_search import LiveSearch
 from meshmocap.trackers.options import Init, TrackOptions
+from meshmocap.trackers.two_way import two_way_pass
 
 
 def track_sequence(
@@ -227,8 +232,6 @@ def track_sequence(
                 timer.lap("write")
             report(r)
         if two_way:
-            from meshmocap.trackers.two_way import two_way_pass  # it runs this module's steps
-
             if tracker.template is not body.light:  # a finished run resumed: nothing set up
                 tracker.setup(body.light)
             two_way_pass(
