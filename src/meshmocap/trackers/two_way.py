@@ -55,7 +55,6 @@ from meshmocap.estimate.pose.first_pose import InitResult
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.keyframe import keyframe_pose
 from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, shipped_rule
-from meshmocap.estimate.recovery.limbs import LIMBS
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -172,7 +171,6 @@ def keyframe_search(
     (3,))`` at that frame and ``lost`` its lost limbs (hints a search may use);
     ``exclude_trials`` pose-library trials left out
     (:func:`~meshmocap.estimate.pose.keyframe.keyframe_pose`)."""
-    lost = tuple(n for n in lost if n in LIMBS)  # the search's limbs (not the torso, head)
     return keyframe_pose(template, frame, near=near, lost=lost, exclude_trials=exclude_trials)
 
 
