@@ -7,7 +7,7 @@ along the surface unconstrained, most of all for a cloud of patches, each free t
 long as its neighbours follow (``docs/guide/own_4d.rst`` has the measurements).
 :class:`SkeletonHold` re-fits the pose every frame, starting from the pose of the
 tracker's own surface ``V`` (known correspondences,
-:func:`~meshmocap.estimate.pose.fit.pose_of_vertices`), by Gauss–Newton on
+:func:`~meshmocap.estimate.pose.fit.pose_of_vertices`), by Gauss–Newton on::
 
     E(Θ) = E_md + E_dm + μ (1/m) Σ_i |v_i(Θ) − V_i|² + λ Σ_j |log(R_j R̂_jᵀ)|²
 
