@@ -94,7 +94,7 @@ def foreground_mask(
     noise: np.ndarray | float = _MIN_NOISE,
     *,
     threshold: float = 4.0,
-    min_difference: float = 18.0,
+    min_difference: float = 25.0,
     shadow_low: float = 0.45,
     blur: float = 0.0,
 ) -> np.ndarray:
@@ -145,7 +145,7 @@ def clean_mask(
     mask: np.ndarray,
     *,
     open_px: int = 1,
-    close_px: int = 3,
+    close_px: int = 1,
     keep: float = 0.15,
     min_area: float = 5e-4,
 ) -> np.ndarray:
