@@ -43,9 +43,11 @@ ICP are listed.
 Cost. Per capture the CPU seconds of each stage are printed (synthesis, each track, the
 evidence replay) and, at the end, the projected wall time of the whole default set on two
 quiet cores (``--jobs 2``: captures tracked in two processes, one BLAS thread each). The
-defaults (12 captures, the three trackers, both passes, 150 frames) are sized to fit 45
-minutes there. ``--quick``: 3 trials × 60 frames × articulated ICP. Captures and tracks
-are cached in ``--work``; the tables are printed and written to ``--work``/results.md.
+defaults (12 captures, each trial by one performer in turn, the three trackers, both
+passes, 150 frames) are meant to fit 45 minutes there; the projection says whether they
+do (the performer's body estimate is the largest single stage per capture). ``--quick``:
+3 trials × 60 frames × articulated ICP. Captures and tracks are cached in ``--work``; the
+tables are printed and written to ``--work``/results.md.
 
 Run: ``python benchmarks/bench_limbs.py [--quick] [--trials ...] [--methods ...]
 [--passes forward two-way] [--frames 150] [--jobs 2] [--work /tmp/meshmocap-limbs]``.
@@ -188,6 +190,18 @@ def start_from(forward: Path, out: Path) -> None:
     tmp.rename(out)
 
 
+def made_forward(out: Path) -> None:
+    """Say in the ``track.json`` of a track cached by a tree without the two-way pass (no
+    ``passes`` key) what it was, the forward pass's, so that this tree resumes it."""
+    meta_path = out / "track.json"
+    if not has_passes() or not meta_path.is_file():
+        return
+    meta = json.loads(meta_path.read_text())
+    if "passes" not in meta:
+        meta["passes"] = "forward"
+        meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+
+
 def evidence_of(track_dir: Path, cap, template) -> dict:
     """The ``lost`` evidence replayed over a track as the driver computes it
     (``bench_lost.track_evidence``), cached beside the track folder."""
@@ -222,6 +236,7 @@ def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], 
     for method in args.methods:
         for path, passes in runs:
             out = work / "tracks" / name / f"{method}-{path}"
+            made_forward(out)
             if path == "default" and passes == "two-way":
                 out = out.with_name(f"{method}-two-way")
                 start_from(out.with_name(f"{method}-default"), out)
