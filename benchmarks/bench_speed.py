@@ -64,8 +64,12 @@ from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_cap
 from meshmocap.body.template import load_template
 from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
-from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
+
+try:  # a tree from before the driver's options record (issue 43's old main) takes keywords
+    from meshmocap.trackers.options import TrackOptions
+except ImportError:
+    TrackOptions = None
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 METHODS = ("cage", "patch", "articulated_icp")
@@ -167,13 +171,16 @@ def child_stages(args) -> dict:
         timer = kw["timer"] = StageTimer()
     else:
         timer = WrapTimer(driver, tracker)
+    settings = dict(resume=False, show_progress=False, init="truth")
+    if TrackOptions is not None:
+        settings = {"options": TrackOptions(**settings)}
     c0 = time.process_time()
     track = driver.track_sequence(
         tracker,
         template,
         capture,
         Path(args.work) / "tracks" / f"stages-{args.methods[0]}",
-        TrackOptions(resume=False, show_progress=False, init="truth"),
+        **settings,
         **kw,
     )
     truth = np.stack([f.truth.joints for f in capture])
