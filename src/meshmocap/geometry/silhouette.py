@@ -30,6 +30,9 @@ from meshmocap.geometry.camera import Camera
 #: Triangles :func:`fill_triangles` fills: all, or those of positive signed area.
 Orientation = Literal["any", "positive"]
 _CHUNK = 2_000_000  # (triangle, row) pairs per chunk: bounds memory for huge triangles
+#: :func:`covered_pixels` cuts only its pixels' rows up to this many distinct rows, and
+#: fills the whole image beyond (as fast for a 12k-vertex body's ~250 rows at 640×480).
+_FEW_ROWS = 100
 
 
 def silhouette(
@@ -187,6 +190,9 @@ def covered_pixels(
     out = np.zeros(len(pixels), dtype=bool)
     H, W = int(shape[0]), int(shape[1])
     rows, where = np.unique(pixels[:, 1], return_inverse=True)
+    if len(rows) > _FEW_ROWS:  # most of the image's rows: filling it whole is cheaper
+        mask = fill_triangles(uv, F, shape, valid=valid, orientation=orientation)
+        return mask[pixels[:, 1], pixels[:, 0]]
     prep = _prepare(uv, F, H, W, valid, orientation, rows=rows)
     if prep is None or len(pixels) == 0:
         return out
