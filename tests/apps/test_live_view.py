@@ -45,5 +45,7 @@ def test_follow_view_records_every_frame(synth_capture, tmp_path, monkeypatch, c
 
 
 def test_view_goes_with_follow(tmp_path, capsys):
-    assert main(["track", str(tmp_path), "--view", "--out", str(tmp_path / "t")]) == 2
+    cap = tmp_path / "capture"
+    cap.mkdir()
+    assert main(["track", str(cap), "--view", "--out", str(tmp_path / "t")]) == 2
     assert "track: --view goes with --follow" in capsys.readouterr().err
