@@ -101,6 +101,7 @@ STOP_LOST = 6
 #: Cost of a switch between two tracks (in lost limbs), plus :data:`SWITCH_PER_METRE`
 #: per metre of mean joint distance between them at the switch.
 SWITCH = 0.5
+#: Cost of a switch per metre of mean joint distance between the two tracks at the switch.
 SWITCH_PER_METRE = 10.0
 #: Cost per frame of a hypothesis over the forward track (the forward track wins ties).
 PREFER_FORWARD = 0.05
