@@ -413,8 +413,11 @@ class _Run:
         return keys, self.write_choice(fwd, hyps, lo, hi)
 
     def keyframe(self, fwd, p: int, a: int) -> tuple[dict, FrameResult | None]:
-        """Search frame at position ``p``; the seated result where kept (else None)."""
+        """Search frame at position ``p``; the seated result where kept (else None). A
+        frame the forward pass found without observation (``missing``) is not searched."""
         i = self.order[p]
+        if "missing" in fwd[p].flags:
+            return {"frame": i, "run": self.order[a], "kept": False, "label": "missing"}, None
         frame = self.frame(i)
         state = fwd[p].state
         near = (state["pose_R"], state["pose_root"]) if "pose_R" in state else None
