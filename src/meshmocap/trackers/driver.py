@@ -202,8 +202,8 @@ def track_sequence(
                 last = next((i for i in reversed(before) if i in done), indices[0])
                 resume_tracker(tracker, body.light, out, last)
                 if recover:
-                    pose = _last_pose(out, [i for i in before if i in done])
-                    recovery = Recovery(body.light, *pose)
+                    pose, assessed = _last_pose(out, [i for i in before if i in done])
+                    recovery = Recovery(body.light, *pose, assessed=assessed)
                 if holder is not None:
                     holder.last = _hold_start(body.light, out, [i for i in before if i in done])
                 good = last
@@ -404,16 +404,19 @@ def _hold_start(template: Template, out, indices: list[int]) -> tuple[np.ndarray
     """Where the skeleton hold starts: the articulated pose stored with the latest of
     ``indices`` (the recovery's), else the template's rest pose."""
     try:
-        return _last_pose(out, indices)
+        return _last_pose(out, indices)[0]
     except InputError:
         sk = template.skeleton
         return np.tile(np.eye(3), (sk.n_joints, 1, 1)), sk.rest_positions[0].copy()
 
 
-def _last_pose(out, indices: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """The articulated pose stored with the latest of ``indices`` that has one."""
+def _last_pose(out, indices: list[int]) -> tuple[tuple[np.ndarray, np.ndarray], bool]:
+    """The articulated pose stored with the latest of ``indices`` that has one, and whether
+    the recovery assessed that frame (it stored its evidence: a resumed run measures the next
+    frame's motion from there, as the run that wrote it would have)."""
     for i in reversed(indices):
         st = read_state(out, i)
         if "pose_R" in st:
-            return st["pose_R"].astype(np.float64), st["pose_root"].astype(np.float64)
+            pose = st["pose_R"].astype(np.float64), st["pose_root"].astype(np.float64)
+            return pose, "evidence" in st
     raise InputError(f"track: {out} holds no pose to resume recovery from; use --restart")

@@ -67,6 +67,10 @@ class Recovery:
     rule : LostRule, optional
         The rule that flags limbs lost from each frame's evidence
         (:func:`~meshmocap.estimate.recovery.evidence.lost_limbs`; default: the shipped one).
+    assessed : bool
+        ``(R, root)`` is the pose of a frame already assessed (a resumed run): the next
+        frame's motion (the ``speed`` evidence) is measured from it, as in the run that
+        assessed it; otherwise the first frame assessed has no motion.
     """
 
     def __init__(
@@ -76,14 +80,17 @@ class Recovery:
         root: np.ndarray,
         *,
         rule: LostRule | None = None,
+        assessed: bool = False,
     ):
         self.template = template
         #: the rule that flags a limb lost from the frame's evidence (default: shipped)
         self.rule = rule
-        #: joint positions (J, 3) of the poses of the last frames assessed, oldest first
-        self.history: list[np.ndarray] = []
         self.labels = limb_labels(template)
         self.R, self.root = np.array(R, dtype=np.float64), np.array(root, dtype=np.float64)
+        #: joint positions (J, 3) of the poses of the last frames assessed, oldest first
+        self.history: list[np.ndarray] = (
+            [forward_kinematics(template.skeleton, self.R, self.root)[1]] if assessed else []
+        )
         sk = template.skeleton
         #: each limb's joints (an arm's from the clavicle), their rotations when the limb was
         #: last seen, and the limbs the observations miss now
