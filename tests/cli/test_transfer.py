@@ -63,5 +63,7 @@ def test_a_folder_without_track_is_one_line(tmp_path, capsys):
     argv = ["transfer", str(tmp_path / "none"), "heavy_male", "--out", str(tmp_path / "x")]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("meshmocap: error:") and "is not a track folder" in err and "\n" not in err
+    assert (
+        err.startswith("meshmocap: error:") and "is not a track folder" in err and "\n" not in err
+    )
     assert not (tmp_path / "x").exists()
