@@ -191,21 +191,20 @@ def track_sequence(
         pool = capture.indices if live else indices
         recovery, good = None, None
         # live, a lost run is searched for again at its current frame (causal: live_search)
-        searcher = None
-        if live and recover:
-            exclude = tuple((init_options or {}).get("exclude_trials", ()))
-            searcher = LiveSearch(body.light, exclude_trials=exclude)
+        exclude = tuple((init_options or {}).get("exclude_trials", ()))
+        searcher = LiveSearch(body.light, exclude_trials=exclude) if live and recover else None
         for k in progress(todo, label=tracker.name, enabled=opts.show_progress):
             index = int(capture.indices[k])
             if good is None:  # the first frame to track: from the state of the one before
-                before = list(pool[: list(pool).index(index)])  # in the track's order
-                last = next((i for i in reversed(before) if i in done), indices[0])
+                order = list(pool)
+                before = [i for i in order[: order.index(index)] if i in done]  # track's order
+                last = before[-1] if before else indices[0]
                 resume_tracker(tracker, body.light, out, last)
                 if recover:
-                    pose, assessed = _last_pose(out, [i for i in before if i in done])
+                    pose, assessed = _last_pose(out, before)
                     recovery = Recovery(body.light, *pose, assessed=assessed)
                 if holder is not None:
-                    holder.last = _hold_start(body.light, out, [i for i in before if i in done])
+                    holder.last = _hold_start(body.light, out, before)
                 good = last
             while True:
                 r = track_frame(
@@ -242,7 +241,7 @@ def track_sequence(
                 frames=positions,
                 refiner=refiner,
                 hold=holder is not None,
-                exclude_trials=tuple((init_options or {}).get("exclude_trials", ())),
+                exclude_trials=exclude,
                 show_progress=opts.show_progress,
             )
     return read_track(out, vertices=opts.vertices)
