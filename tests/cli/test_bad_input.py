@@ -521,7 +521,8 @@ INPUTS: list[Case] = [
             "--frames",
             "0:3",
         ],
-        "track.json: holds a track made with other settings; use another folder",
+        "track.json: holds a track made with other settings (frames: [0, 1] there, "
+        "[0, 1, 2] now); use another folder",
     ),
     (
         "track_locked",

@@ -8,6 +8,7 @@ import pytest
 
 from meshmocap.errors import FormatError, InputError
 from meshmocap.io.results import (
+    FORMAT,
     TWO_WAY_FOLDER,
     FrameResult,
     frame_path,
@@ -107,6 +108,46 @@ def test_a_track_made_before_the_limb_only_reseat_was_removed_resumes(tmp_path):
     start_track(tmp_path / "on", {**meta, "reseat": True}, F)
     with pytest.raises(FormatError, match="other settings"):
         start_track(tmp_path / "on", meta, F)
+
+
+def test_a_track_made_before_the_settings_added_since_resumes_as_it_was_made(tmp_path):
+    """A folder written before ``track.json`` recorded the passes, the skeleton hold, the
+    surface refinement, the cage's body and the patch term scales (and under the cage's old
+    option name) resumes where the run now has the values tracks were made with then; where
+    it has another, it is refused naming the setting."""
+    F = np.array([[0, 1, 2]])
+    before = {
+        "method": "test",
+        "recover": True,
+        "reseat": False,
+        "options": {"lambda_rigid": 1.0, "local_damping": 3e-5},
+    }
+    now = {
+        "method": "test",
+        "recover": True,
+        "passes": "two-way",
+        "hold_skeleton": False,
+        "refine_surface": False,
+        "cage_body": "template",
+        "options": {
+            "lambda_rigid": 1.0,
+            "anchor_weight": 3e-5,
+            "rigidity_scale": 10.0,
+            "bone_scale": 100.0,
+        },
+    }
+    for name in ("old", "held", "scaled"):
+        (tmp_path / name / "frames").mkdir(parents=True)
+        (tmp_path / name / "track.json").write_text(json.dumps({"format": FORMAT, **before}))
+        write_frame(tmp_path / name, _result(0))
+    assert start_track(tmp_path / "old", now, F) == [0]  # resumed as it was made
+    assert json.loads((tmp_path / "old" / "track.json").read_text())["hold_skeleton"] is False
+    with pytest.raises(FormatError, match=r"\(hold_skeleton: false there, true now\)"):
+        start_track(tmp_path / "held", {**now, "hold_skeleton": True}, F)
+    paper = {**now["options"], "rigidity_scale": 1.0}
+    with pytest.raises(FormatError, match=r"\(options.rigidity_scale: 10.0 there, 1.0 now\)"):
+        start_track(tmp_path / "scaled", {**now, "options": paper}, F)
+    assert start_track(tmp_path / "held", now, F) == [0]  # refused: left as it was
 
 
 def test_the_two_way_record_and_passes_survive_a_resume_and_not_a_restart(tmp_path):

@@ -302,13 +302,14 @@ def start_track(
     if meta_path.is_file() and resume:
         old = _read_json(meta_path)
         found = {k: old.pop(k) for k in (START_KEY, SKIPPED_KEY, TWO_WAY_KEY) if k in old}
-        for key, value in RETIRED_SETTINGS.items():  # a setting that is gone, as it was
-            if key in old and old[key] == value:
-                del old[key]
+        now = json.loads(json.dumps(full))
+        old = as_made_now(old, now)
         # the passes may change: a forward track is resumed by adding the two-way pass
-        if _but(old, PASSES_KEY) != _but(json.loads(json.dumps(full)), PASSES_KEY):
+        differ = _difference(_but(old, PASSES_KEY), _but(now, PASSES_KEY))
+        if differ:
             raise FormatError(
-                f"{meta_path}: holds a track made with other settings; use another folder"
+                f"{meta_path}: holds a track made with other settings ({differ}); "
+                "use another folder"
             )
         full.update(found)
     else:
@@ -325,6 +326,80 @@ def start_track(
 #: now does: a folder written with that value resumes, one written otherwise does not
 #: (``reseat``: the limb-only re-seat, removed; off, a track was the tracker's alone).
 RETIRED_SETTINGS = {"reseat": False}
+
+#: Settings ``track.json`` records now and a folder written before them lacks, with the
+#: value every track was made with then: such a folder resumes where the run now has that
+#: value and is refused otherwise (``passes``: the forward pass alone; ``hold_skeleton``,
+#: ``refine_surface``: neither the skeleton hold nor the surface refinement ran).
+ADDED_SETTINGS = {"passes": "forward", "hold_skeleton": False, "refine_surface": False}
+
+#: Tracker options (``track.json``'s ``"options"``) added since, with the value the tracker
+#: used before they were options (the patch tracker's fixed term scales).
+ADDED_OPTIONS = {"rigidity_scale": 10.0, "bone_scale": 100.0}
+
+#: Tracker options renamed since, old name → new name (the cage's anchor term's weight).
+RENAMED_OPTIONS = {"local_damping": "anchor_weight"}
+
+#: What ``track.json`` records of how the run was set up rather than asked for (the body the
+#: cage built on, decided by its options and the template): a folder written before it was
+#: recorded takes the value found now.
+ADDED_RECORDS = ("cage_body",)
+
+
+def as_made_now(old: dict, now: dict) -> dict:
+    """``track.json``'s settings ``old`` (a folder's) as a track made now would record them:
+    retired settings at the value they had dropped (:data:`RETIRED_SETTINGS`), settings and
+    tracker options added since given the value tracks were made with before
+    (:data:`ADDED_SETTINGS`, :data:`ADDED_OPTIONS`, :data:`RENAMED_OPTIONS`), records added
+    since taken from ``now`` (:data:`ADDED_RECORDS`). Only keys that ``now`` has are added;
+    ``old`` is not changed."""
+    old = dict(old)
+    for key, value in RETIRED_SETTINGS.items():  # a setting that is gone, as it was
+        if key in old and old[key] == value:
+            del old[key]
+    for key, value in ADDED_SETTINGS.items():
+        if key in now and key not in old:
+            old[key] = value
+    for key in ADDED_RECORDS:
+        if key in now and key not in old:
+            old[key] = now[key]
+    options, options_now = old.get("options"), now.get("options")
+    if isinstance(options, dict) and isinstance(options_now, dict):
+        options = dict(options)
+        for name, renamed in RENAMED_OPTIONS.items():
+            if name in options and renamed in options_now and renamed not in options:
+                options[renamed] = options.pop(name)
+        for name, value in ADDED_OPTIONS.items():
+            if name in options_now and name not in options:
+                options[name] = value
+        old["options"] = options
+    return old
+
+
+def _difference(old: dict, now: dict, prefix: str = "") -> str:
+    """The first setting where ``old`` and ``now`` differ, as ``key: A there, B now``
+    (nested dicts named ``options.key``); empty where they agree."""
+    for key in sorted(set(old) | set(now)):
+        a, b = old.get(key, _ABSENT), now.get(key, _ABSENT)
+        if a == b:
+            continue
+        if isinstance(a, dict) and isinstance(b, dict):
+            return _difference(a, b, f"{prefix}{key}.")
+        return f"{prefix}{key}: {_short(a)} there, {_short(b)} now"
+    return ""
+
+
+_ABSENT = object()
+
+
+def _short(value) -> str:
+    if value is _ABSENT:
+        return "absent"
+    if isinstance(value, list) and len(value) > 4:
+        return f"{len(value)} values"
+    text = json.dumps(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
 
 #: The key of ``track.json`` that holds the start (:func:`write_start`).
 START_KEY = "start"
