@@ -1,5 +1,7 @@
 """Silhouettes from calibrated multi-view footage, end to end on a small scene made in code."""
 
+import shutil
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -7,6 +9,7 @@ from PIL import Image
 from meshmocap.cli import main
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.raster import rasterize
 from meshmocap.io.calibration import write_calibration
 from meshmocap.io.cameras import read_cameras
 from meshmocap.io.capture import read_meta
@@ -141,3 +144,50 @@ def test_user_errors_are_one_line(tmp_path, capsys):
         silhouettes_from_video(videos, calib, tmp_path / "o", offsets={"cam0": 20})
     code = _cli(videos, calib, str(tmp_path / "o"), "--offset", "cam0")
     assert code == 2 and "expected CAMERA=FRAMES" in capsys.readouterr().err
+
+
+def _render(V, F, cam, background, rng):
+    """A camera's colour frame of a body: Lambert-shaded, two-toned, over ``background``,
+    with sensor noise."""
+    uv, depth = cam.project(V)
+    face, _ = rasterize(uv, depth, F, cam.shape)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    upper = V[F].mean(axis=1)[:, 2] > np.median(V[:, 2])
+    colour = np.where(upper[:, None], [200.0, 70.0, 50.0], [40.0, 60.0, 160.0])
+    shade = 0.4 + 0.6 * np.abs(n @ np.array([0.3, 0.2, -0.93]))
+    img = background.copy()
+    body = face >= 0
+    img[body] = colour[face[body]] * shade[face[body], None]
+    return np.clip(img + rng.normal(0, 2, img.shape), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.slow
+def test_rendered_video_silhouettes_hull_track_report(synth_capture, tmp_path, capsys):
+    """The whole path from footage with default options: silhouettes → hull → track →
+    report, whose section "Cameras" draws the track over each camera's video frames."""
+    cap = synth_capture("walk", stop=3)
+    rng = np.random.default_rng(2)
+    videos, plates = tmp_path / "videos", tmp_path / "plates"
+    videos.mkdir()
+    plates.mkdir()
+    for j, cam in enumerate(cap.cameras):
+        y, x = np.mgrid[: cam.height, : cam.width]
+        room = np.stack([120 + 40 * np.sin(x / 9 + j), 150 + 30 * np.cos(y / 7), 0 * x + 110], -1)
+        Image.fromarray(room.astype(np.uint8)).save(plates / f"{cam.name}.png")
+        frames = [_render(f.truth.vertices, cap.truth_faces, cam, room, rng) for f in cap]
+        write_video(videos / f"{cam.name}.mp4", frames, fps=cap.fps, quality=12)
+    out = tmp_path / "capture"
+    assert _cli(videos, cap.path / "cameras.json", out, "--plates", str(plates)) == 0
+    truth = {c.name: np.array([f.silhouettes[j] for f in cap]) for j, c in enumerate(cap.cameras)}
+    assert _iou(out, truth) > 0.9
+    assert main(["hull", str(out), "--voxel-size", "0.02"]) == 0
+    shutil.copytree(cap.path / "truth", out / "truth")  # the start from the truth: no search
+    track = ["track", str(out), "--out", str(tmp_path / "track"), "--method", "articulated_icp"]
+    assert main([*track, "--template", "neutral_5k", "--init", "truth"]) == 0
+    report = tmp_path / "report.html"
+    args = ["report", str(out), str(tmp_path / "track"), "--out", str(report)]
+    assert main([*args, "--surface-frames", "0", "--camera-frames", "2"]) == 0
+    text = report.read_text()
+    assert "<h2>Cameras</h2>" in text and text.count("data:image/jpeg;base64,") == 2
+    assert 'alt="frame 0 (' in text and "cannot be read" not in text

@@ -42,7 +42,9 @@ from meshmocap.apps.player import (
     player_payload,
     track_templates,
 )
+from meshmocap.apps.report_cameras import camera_views
 from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
+from meshmocap.body.template import EVAL_PARENTS
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture
 from meshmocap.io.results import Track, open_tracked_capture, read_track
@@ -454,6 +456,18 @@ def gait_section(
     return Section("Gait", (table,), g.images)
 
 
+def cameras_section(capture: Capture, track: Track, name: str, *, frames: int = 4) -> Section:
+    """Each camera's frames with the track's skeleton and the silhouette's outline drawn
+    over them (:func:`~meshmocap.apps.report_cameras.camera_views`)."""
+    parents = np.asarray(track.meta.get("eval_parents", EVAL_PARENTS), np.int64)
+    pictures, note = camera_views(capture, track, parents, frames=frames)
+    text = (
+        f"{name}'s skeleton (red, joints yellow) projected into each camera, over the "
+        "silhouette's outline (green)" + (f"; {note}" if note else "")
+    )
+    return Section("Cameras", images=tuple(pictures), text=text)
+
+
 def build_report(
     out: str | os.PathLike,
     capture: str | os.PathLike | Capture | SequenceCapture,
@@ -463,6 +477,7 @@ def build_report(
     max_frames: int | None = None,
     silhouettes: bool = True,
     surface_frames: int = 8,
+    camera_frames: int = 4,
     title: str | None = None,
 ) -> Path:
     """Evaluate ``tracks`` on ``capture`` and write a report to ``out`` (``.html``): a
@@ -479,6 +494,10 @@ def build_report(
     max_frames : int, optional, at most this many frames in the player (default: every
         frame the size budget allows, :func:`~meshmocap.apps.player.player_from_tracks`)
     silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
+    camera_frames : int
+        Frames of the section "Cameras" (each camera's video frame or silhouette with the
+        first track's skeleton drawn over it, :mod:`meshmocap.apps.report_cameras`); 0 for
+        none. A capture without cameras has no such section.
     """
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]
     if not trs:
@@ -510,6 +529,8 @@ def build_report(
             tables = tuple(evaluation_tables(ev, track=t))
             sections.append(Section(f"Evaluation: {name}", tables, pics))
     sections.append(gait_section(cap, trs, names))
+    if camera_frames and isinstance(cap, Capture) and cap.cameras:
+        sections.insert(0, cameras_section(cap, trs[0], names[0], frames=camera_frames))
     player = player_from_tracks(
         cap,
         trs,

@@ -62,6 +62,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
                 max_frames=args.max_frames,
                 silhouettes=not args.no_silhouettes,
                 surface_frames=args.surface_frames,
+                camera_frames=args.camera_frames,
             )
     size = path.stat().st_size / 1e6
     print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - t0:.1f} s); open it in a browser")
@@ -184,6 +185,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=number(0, 10_000, integer=True),
         default=8,
         help="frames for surface distances",
+    )
+    o.add_argument(
+        "--camera-frames",
+        type=number(0, 1000, integer=True),
+        default=4,
+        help="frames shown per camera with the skeleton drawn over them (0: none; "
+        "default: %(default)s)",
     )
     o.set_defaults(func=_cmd_report)
     b = sub.add_parser(

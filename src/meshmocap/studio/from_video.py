@@ -3,7 +3,8 @@
 :func:`silhouettes_from_video` writes the capture folder that ``meshmocap hull``,
 ``track`` and ``report`` read (:mod:`meshmocap.io.capture`): ``cameras.json`` (from any
 calibration :func:`~meshmocap.io.calibration.read_calibration` reads), ``capture.json``
-(the frame rate, the frames) and ``silhouettes/<camera>/NNNNN.png``.
+(the frame rate, the frames, each camera's footage and frame offset) and
+``silhouettes/<camera>/NNNNN.png``.
 
 Per camera, the background is an empty-scene plate when one is given, otherwise learned
 over the footage in two passes (:mod:`meshmocap.geometry.foreground`): a temporal median of
@@ -188,7 +189,14 @@ def silhouettes_from_video(
             raise InputError(f"silhouettes: {root} holds another kind of capture; use a new folder")
     write_cameras(root / "cameras.json", cams)
     fps = next((f.fps for f in footage.values() if f.fps), None)
-    meta = {"source": "video", "frames": numbers, "cameras": names}
+    meta = {
+        "source": "video",
+        "frames": numbers,
+        "cameras": names,
+        # where each camera's frames come from: the report draws the track over them
+        "videos": {n: str(paths[n].resolve()) for n in names},
+        "offsets": {n: int(offsets.get(n, 0)) for n in names},
+    }
     write_meta(root / "capture.json", meta | ({"fps": fps} if fps else {}))
     todo = [
         k
