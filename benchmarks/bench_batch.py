@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.apps.batch import ONE_THREAD  # the workers' thread settings, used by both
+from meshmocap.apps.batch.run import ONE_THREAD  # the workers' thread settings, used by both
 from meshmocap.io.results import read_track
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize

@@ -2,7 +2,7 @@
 ablations of the paper, and speed with a per-stage breakdown.
 
 Protocol: synthetic ``humaneva4`` captures from the studio at 60 fps
-(:func:`meshmocap.apps.bench.make_capture`, the captures of ``meshmocap bench``) of
+(:func:`meshmocap.apps.bench.captures.make_capture`, the captures of ``meshmocap bench``) of
 CMU 05_01.amc (walk, whole clip) and 09_01.bvh (run, from frame 4: the BVH blends out of
 a T-pose first); subject = tracking template ``neutral_5k``; first frame from ground truth;
 visual hulls carved at 1 cm. The pose manifold (q = 2, 120 poses) is learned from the
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench_captures import make_capture, parse_capture
+from meshmocap.apps.bench.captures import make_capture, parse_capture
 from meshmocap.body.template import load_template
 from meshmocap.trackers.cage.manifold import PoseManifold, learn_pose_manifold
 from meshmocap.trackers.cage.tracker import STAGES

@@ -2,7 +2,7 @@
 the clips the bundled pose library holds out.
 
 Protocol (the papers'): synthetic ``humaneva4`` captures (4 cameras, 60 fps) of the
-``meshmocap bench`` clips (:data:`meshmocap.apps.bench_captures.CMU_CLIPS`: 05_01 walk,
+``meshmocap bench`` clips (:data:`meshmocap.apps.bench.captures.CMU_CLIPS`: 05_01 walk,
 09_01 run from frame 4, 01_01 forward jumps, 49_18 balance on one leg, 16_01 a jump at its
 true 120 fps) and their ``degraded`` variants (boundary jitter, holes, spurious blobs, a
 missed limb); subject = tracking template ``neutral_5k``; first frame from ground truth;
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench_captures import BenchCapture, make_capture, parse_capture
+from meshmocap.apps.bench.captures import BenchCapture, make_capture, parse_capture
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.options import TrackOptions

@@ -7,7 +7,7 @@ procedural walk, ``--frames`` frames, for each bundled template and for a **skir
 vertices between the knees and 5 cm above the hips pushed out to a cone 16 cm in radius at
 the top flaring at ``--flare`` degrees; skinned as the legs they were, so the skirt swings
 with them); the **crane** (``../shared/data``; ``ring8`` hulls of its 175 frames, the
-tracking template its frame 0 rigged by :func:`~meshmocap.apps.bench_captures.mesh_template`)
+tracking template its frame 0 rigged by :func:`~meshmocap.apps.bench.captures.mesh_template`)
 when ``--crane``. Every capture is tracked by ``cage`` with default options (its manifold
 the default one of the body it builds its cage on), first pose from the truth; the skirt
 and the crane with the cage on the template where it builds (``body="auto"``) and on the
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_capture
+from meshmocap.apps.bench.captures import make_capture, mesh_template, parse_capture
 from meshmocap.body.template import Template, bundled_templates, load_template, save_template
 from meshmocap.errors import MeshmocapError
 from meshmocap.studio.synth import SynthSpec, synthesize

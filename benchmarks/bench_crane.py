@@ -52,7 +52,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 
 from meshmocap.analysis.metrics import correspondence_error
-from meshmocap.apps.bench import code_digest
+from meshmocap.apps.bench.run import code_digest
 from meshmocap.body.autorig import fit_sequence, rig_mesh
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.errors import MeshError

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.apps.export import export_track
+from meshmocap.apps.files.export import export_track
 from meshmocap.body.template import load_template
 from meshmocap.io.bvh import read_bvh
 from meshmocap.io.results import read_track

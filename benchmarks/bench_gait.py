@@ -38,7 +38,7 @@ import numpy as np
 
 import meshmocap
 from meshmocap.analysis.gait import compare_gaits, gait_analysis, track_gait
-from meshmocap.apps.bench import bench_manifold
+from meshmocap.apps.bench.run import bench_manifold
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template
 from meshmocap.geometry.camera import in_view

@@ -1,11 +1,11 @@
 """Patch tracker acceptance benchmark (issue: patch tracker, in full): a thin wrapper over
-:func:`meshmocap.apps.bench.run_bench` (``meshmocap bench``) on the CMU clips.
+:func:`meshmocap.apps.bench.run.run_bench` (``meshmocap bench``) on the CMU clips.
 
 Protocol: synthetic captures from the studio at 60 fps, subject = tracking template unless
 stated, first frame initialised from ground truth, visual hulls carved at 1 cm from the
 rig's silhouettes; every tracker is scored with ``meshmocap.analysis.evaluate`` against
 the capture's ground truth (15 evaluation joints; bone-length std over the tracked
-skeleton). Clips (../shared/data/mocap/cmu, ``meshmocap.apps.bench.CMU_CLIPS``):
+skeleton). Clips (../shared/data/mocap/cmu, ``meshmocap.apps.bench.captures.CMU_CLIPS``):
 05_01.amc (walk, whole), 09_01.bvh (run, whole from frame 4), 01_01.amc (jumps and a turn,
 first 600 frames at 60 fps).
 
@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench import run_bench
-from meshmocap.apps.bench_captures import CMU_CLIPS, make_capture, parse_capture
-from meshmocap.apps.bench_report import markdown_table
+from meshmocap.apps.bench.captures import CMU_CLIPS, make_capture, parse_capture
+from meshmocap.apps.bench.report import markdown_table
+from meshmocap.apps.bench.run import run_bench
 from meshmocap.body.template import load_template
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.options import TrackOptions

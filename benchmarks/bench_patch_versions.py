@@ -35,7 +35,7 @@ THREADS = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREA
 
 
 def _capture(name: str, frames: int, work: Path):
-    from meshmocap.apps.bench_captures import BenchCapture, make_capture, parse_capture
+    from meshmocap.apps.bench.captures import BenchCapture, make_capture, parse_capture
 
     if name == "05_03":  # a dance by subject 5, not among the bench's clips
         path = DATA / "mocap" / "cmu" / "library" / "05_03.amc"

@@ -24,7 +24,7 @@ markdown, to paste into a change's note.
 
 **Part 2, against trimesh** (``--crane``): the MIT crane (``../shared/data``), ``ring8``
 hulls at 1 cm as ``meshmocap bench`` makes them, the tracking template frame 0's true mesh
-rigged (10,002 vertices, :func:`~meshmocap.apps.bench_captures.mesh_template`). Frames 2,
+rigged (10,002 vertices, :func:`~meshmocap.apps.bench.captures.mesh_template`). Frames 2,
 4, …, 40 are tracked by each method after frame 0 (the template's own pose), and
 ``trimesh.registration.nricp_amberg`` (Amberg et al. 2007, default schedule) registers the
 same template to the hull mesh of each of those frames, from the template as it is
@@ -60,7 +60,7 @@ import numpy as np
 
 from _trees import add_tree_args, load, python_in, run_child, tree_env
 from meshmocap.analysis.metrics import correspondence_error
-from meshmocap.apps.bench_captures import make_capture, mesh_template, parse_capture
+from meshmocap.apps.bench.captures import make_capture, mesh_template, parse_capture
 from meshmocap.body.template import load_template
 from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
@@ -214,7 +214,7 @@ def stages_table(args, work: Path) -> None:
         template = load_template(name)
         # made by the first tree (the old one): a newer tree reads older captures
         code = (
-            "from meshmocap.apps.bench_captures import make_capture, parse_capture; "
+            "from meshmocap.apps.bench.captures import make_capture, parse_capture; "
             f"print(make_capture(parse_capture('walk', frames={args.frames}), "
             f"{str(work / args.trees[0])!r}, template={name!r}, show_progress=False).path)"
         )

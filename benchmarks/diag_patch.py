@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from pykdtree.kdtree import KDTree
 
-from meshmocap.apps.bench_captures import DEGRADED
+from meshmocap.apps.bench.captures import DEGRADED
 from meshmocap.body.template import load_template
 from meshmocap.errors import FitError
 from meshmocap.geometry.proximity import point_to_surface

@@ -63,7 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap.analysis.evaluate import out_of_view_frames
-from meshmocap.apps.bench_captures import DEGRADED
+from meshmocap.apps.bench.captures import DEGRADED
 from meshmocap.body.template import load_template
 from meshmocap.studio.degrade import Degradation
 from meshmocap.studio.synth import SynthSpec, synthesize

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Rebuild src/meshmocap/apps/report_assets/three.min.js, the three.js build inlined in HTML
+# Rebuild src/meshmocap/apps/report/assets/three.min.js, the three.js build inlined in HTML
 # reports: the classes listed in tools/three_entry.js, GLTFLoader and OrbitControls, bundled
 # and minified by esbuild into one classic script that defines window.MMTHREE. Needs node and
 # npm (the npm registry); the project itself needs neither.
@@ -12,7 +12,7 @@ trap 'rm -rf "$work"' EXIT
 cp tools/three_entry.js "$work/entry.js"
 (cd "$work" && npm init -y >/dev/null && npm install --silent --no-audit --no-fund \
     "three@$THREE" esbuild@0.28.2)
-assets=src/meshmocap/apps/report_assets
+assets=src/meshmocap/apps/report/assets
 cp "$work/node_modules/three/LICENSE" "$assets/three.LICENSE.txt"
 {
     printf '/*! three.js %s (npm three@%s): GLTFLoader, OrbitControls and the core classes\n' \

@@ -89,23 +89,23 @@ UNTESTED: dict[str, str] = {
     "meshmocap.analysis.tables": (
         "the score tables: tests/analysis/test_metrics.py and tests/analysis/test_evaluate.py"
     ),
-    "meshmocap.apps.batch_items": "batch items: tests/apps/test_batch.py",
-    "meshmocap.apps.batch_report": (
-        "batch's report: tests/apps/test_batch.py (the batch command in process)"
+    "meshmocap.apps.batch.items": "batch items: tests/apps/batch/test_run.py",
+    "meshmocap.apps.batch.report": (
+        "batch's report: tests/apps/batch/test_run.py (the batch command in process)"
     ),
-    "meshmocap.apps.batch_summary": "batch's summary: tests/apps/test_batch.py",
-    "meshmocap.apps.bench_captures": "bench's captures: tests/apps/test_bench.py",
-    "meshmocap.apps.bench_plots": (
-        "bench's plots: tests/apps/test_bench.py (table, markdown and plots written)"
+    "meshmocap.apps.batch.summary": "batch's summary: tests/apps/batch/test_run.py",
+    "meshmocap.apps.bench.captures": "bench's captures: tests/apps/bench/test_run.py",
+    "meshmocap.apps.bench.plots": (
+        "bench's plots: tests/apps/bench/test_run.py (table, markdown and plots written)"
     ),
-    "meshmocap.apps.bench_rows": (
-        "bench's rows: tests/apps/test_bench.py and tests/trackers/patch/test_residuals.py"
+    "meshmocap.apps.bench.rows": (
+        "bench's rows: tests/apps/bench/test_run.py and tests/trackers/patch/test_residuals.py"
     ),
-    "meshmocap.apps.evaluation_files": "eval's files: tests/analysis/test_evaluate.py",
-    "meshmocap.apps.gait_files": "gait's files: tests/analysis/test_gait.py",
-    "meshmocap.apps.latent_plot": "the latent-space plot: tests/models/test_gplvm.py",
-    "meshmocap.apps.plots": "the evaluation plots: tests/analysis/test_metrics.py",
-    "meshmocap.apps.render": (
+    "meshmocap.apps.files.evaluation": "eval's files: tests/analysis/test_evaluate.py",
+    "meshmocap.apps.files.gait": "gait's files: tests/analysis/test_gait.py",
+    "meshmocap.apps.figures.latent": "the latent-space plot: tests/models/test_gplvm.py",
+    "meshmocap.apps.figures.evaluation": "the evaluation plots: tests/analysis/test_metrics.py",
+    "meshmocap.apps.figures.render": (
         "contact sheets: tests/geometry/test_raster.py and the render command in "
         "tests/cli/test_commands.py"
     ),
@@ -117,7 +117,7 @@ UNTESTED: dict[str, str] = {
         "foot contact: tests/body/test_procedural.py and tests/body/test_retarget.py"
     ),
     "meshmocap.body.markers": (
-        "virtual markers: tests/apps/test_export.py and tests/io/test_exports.py"
+        "virtual markers: tests/apps/files/test_export.py and tests/io/test_exports.py"
     ),
     "meshmocap.body.motion": (
         "the Motion record: tests/body/test_retarget.py and tests/body/test_skeleton.py"
@@ -128,7 +128,7 @@ UNTESTED: dict[str, str] = {
     "meshmocap.body.shape_space": "the body shape space: tests/models/test_shape_space.py",
     "meshmocap.body.skinning": "linear blend skinning: tests/body/test_template.py",
     "meshmocap.cli._args": "argument types: the one-line refusals of tests/cli/test_bad_input.py",
-    "meshmocap.cli.batch": "the batch command in process: tests/apps/test_batch.py",
+    "meshmocap.cli.batch": "the batch command in process: tests/apps/batch/test_run.py",
     "meshmocap.cli.capture": (
         "synth and hull in process: tests/io/test_faults.py, tests/studio/test_synth.py, "
         "tests/cli/test_bad_input.py"
@@ -136,9 +136,9 @@ UNTESTED: dict[str, str] = {
     "meshmocap.cli.demo": "the demo command in process: tests/cli/test_commands.py",
     "meshmocap.cli.evaluation": (
         "eval, report and bench in process: tests/analysis/test_evaluate.py, "
-        "tests/apps/test_report.py, tests/apps/test_bench.py"
+        "tests/apps/report/test_page.py, tests/apps/bench/test_run.py"
     ),
-    "meshmocap.cli.export": "the export command in process: tests/apps/test_export.py",
+    "meshmocap.cli.export": "the export command in process: tests/apps/files/test_export.py",
     "meshmocap.cli.gait": "the gait command in process: tests/analysis/test_gait.py",
     "meshmocap.cli.motion": "templates, retarget and render in process: tests/cli/test_commands.py",
     "meshmocap.cli.subject": (
@@ -173,7 +173,7 @@ UNTESTED: dict[str, str] = {
     "meshmocap.io.c3d": "the C3D writer: tests/io/test_exports.py",
     "meshmocap.io.clips": "motion clips: tests/body/test_pose_library.py",
     "meshmocap.io.gltf": (
-        "the glTF writer: tests/io/test_exports.py and tests/apps/test_export.py (the Khronos"
+        "the glTF writer: tests/io/test_exports.py and tests/apps/files/test_export.py (the Khronos"
         " validator)"
     ),
     "meshmocap.io.guards": "output and track-folder checks: tests/cli/test_bad_input.py",

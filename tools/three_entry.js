@@ -1,5 +1,5 @@
-// The three.js classes the report player uses (src/meshmocap/apps/report_assets/player.js),
-// bundled into report_assets/three.min.js by tools/build_three.sh.
+// The three.js classes the report player uses (src/meshmocap/apps/report/assets/player.js),
+// bundled into src/meshmocap/apps/report/assets/three.min.js by tools/build_three.sh.
 export {
   AmbientLight, AnimationMixer, BufferAttribute, BufferGeometry, Color, DirectionalLight,
   Float32BufferAttribute, GridHelper, Group, HemisphereLight, LineBasicMaterial, LineSegments,

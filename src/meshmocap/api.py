@@ -32,7 +32,7 @@ from meshmocap.analysis.evaluate import Evaluation
 from meshmocap.analysis.evaluate import evaluate as evaluate_track
 from meshmocap.analysis.evaluate import summary as evaluation_summary
 from meshmocap.analysis.gait import Gait, track_gait
-from meshmocap.apps.export import ExportFormat, ExportResult, export_track, track_fps
+from meshmocap.apps.files.export import ExportFormat, ExportResult, export_track, track_fps
 from meshmocap.apps.kernels import kernels_of, start_compiling
 from meshmocap.body.light import tracking_body
 from meshmocap.body.template import Template
@@ -264,7 +264,7 @@ class TrackResult:
         self, out: str | os.PathLike, *, format: ExportFormat | None = None, **options
     ) -> ExportResult:
         """Write the track as ``out`` (``.bvh``, ``.glb``, ``.gltf``, ``.c3d``, ``.trc``,
-        ``.csv``): :func:`meshmocap.apps.export.export_track`, options included."""
+        ``.csv``): :func:`meshmocap.apps.files.export.export_track`, options included."""
         check_type("TrackResult.export", "out", out, _PATH, "a file path (str or os.PathLike)")
         if format is not None:
             check_choice("TrackResult.export", "format", format, get_args(ExportFormat))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from meshmocap.analysis.evaluate import evaluate, summary
-from meshmocap.apps.evaluation_files import write_evaluation
+from meshmocap.apps.files.evaluation import write_evaluation
 from meshmocap.cli import main
 from meshmocap.errors import InputError
 from meshmocap.io.capture import read_truth, write_truth

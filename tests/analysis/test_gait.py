@@ -14,7 +14,7 @@ from meshmocap.analysis.gait import (
     track_gait,
 )
 from meshmocap.analysis.gait_signals import flexion_angles
-from meshmocap.apps.gait_files import write_gait
+from meshmocap.apps.files.gait import write_gait
 from meshmocap.body.procedural import jog, squat, walk
 from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS, load_template
 from meshmocap.cli import main
@@ -247,7 +247,7 @@ def test_gait_command_writes_tables_and_plots(folders, tmp_path, capsys):
 def test_report_gait_section(folders):
     """The report's gait section: truth and track rows, the comparison, notes and plots; a
     clip without walking says why instead of numbers."""
-    from meshmocap.apps.report import gait_section, table_html
+    from meshmocap.apps.report.page import gait_section, table_html
 
     cap, track, squat_cap = folders
     s = gait_section(cap, [read_track(track)], ["jittered"])

@@ -19,7 +19,7 @@ from meshmocap.analysis.metrics import (
     surface_distance,
 )
 from meshmocap.analysis.tables import format_table, table, write_csv
-from meshmocap.apps.plots import (
+from meshmocap.apps.figures.evaluation import (
     plot_bone_lengths,
     plot_frame_errors,
     plot_joint_errors,

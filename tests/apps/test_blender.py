@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from external import SCRIPTS, included_script, require_module, walk_track
-from meshmocap.apps.export import export_track
+from meshmocap.apps.files.export import export_track
 from meshmocap.body.template import load_template
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import read_track

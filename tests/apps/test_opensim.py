@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from external import SCRIPTS, included_script, require_module, walk_track
-from meshmocap.apps.export import export_track
+from meshmocap.apps.files.export import export_track
 from meshmocap.cli import main
 
 SCRIPT = SCRIPTS / "opensim_ik.py"

@@ -171,7 +171,7 @@ def test_crane_frame0_joints_are_inside_the_body(crane0):
 def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
     import math
 
-    from meshmocap.apps.bench import run_bench
+    from meshmocap.apps.bench.run import run_bench
 
     archive = shared_data / "meshes" / "crane" / "crane_mesh_0000-0174.tar.gz"
     if not archive.is_file():

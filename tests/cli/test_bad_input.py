@@ -986,7 +986,7 @@ def test_a_copy_of_the_tracks_capture_is_accepted_and_a_moved_one_needs_force(
 def test_os_and_memory_errors_while_working_end_in_one_line(tmp_path, trk, capsys, monkeypatch):
     import errno
 
-    import meshmocap.apps.export as export
+    import meshmocap.apps.files.export as export
 
     def full(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))

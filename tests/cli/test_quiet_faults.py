@@ -151,7 +151,7 @@ def test_eval_and_the_report_of_a_skipped_frame_keep_the_per_vertex_error(
     damaged, tmp_path, capsys
 ):
     from meshmocap import api
-    from meshmocap.apps.report_notes import frame_rows
+    from meshmocap.apps.report.notes import frame_rows
 
     cap, before, trk, _, _ = damaged
     assert main(["eval", str(cap), str(trk), "--surface-frames", "2"]) == 0

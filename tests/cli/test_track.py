@@ -73,7 +73,7 @@ def test_a_4d_capture_in_mm_and_y_up_is_scored_in_its_own_frame(cap, tmp_path, c
 
 @pytest.mark.slow
 def test_a_report_shows_the_input_where_the_track_is(cap, tmp_path):
-    from meshmocap.apps.report import build_report
+    from meshmocap.apps.report.page import build_report
 
     seq = tmp_path / "seq"
     _truth_files(cap, seq, (0, 1))

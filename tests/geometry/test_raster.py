@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from meshmocap.apps.render import contact_sheet, framing_view, render_mesh, render_motion
+from meshmocap.apps.figures.render import contact_sheet, framing_view, render_mesh, render_motion
 from meshmocap.body.motion import Motion
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import intrinsics, look_at, project

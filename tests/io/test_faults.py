@@ -483,7 +483,7 @@ def test_exports_mark_coasted_frames_as_gaps_and_name_frames_never_tracked(kille
 
     import ezc3d
 
-    from meshmocap.apps.export import export_track
+    from meshmocap.apps.files.export import export_track
     from meshmocap.errors import MissingFrameWarning
     from meshmocap.io.trc import read_trc
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from meshmocap.apps.latent_plot import plot_latent_space
+from meshmocap.apps.figures.latent import plot_latent_space
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import rbf, sqdist
 from meshmocap.models.gplvm import GPLVM, LatentProblem

@@ -4,7 +4,7 @@ Inputs are in the library's units (metres, world frame Z up); joint, bone and
 correspondence results are in **millimetres**, surface distances in **metres**, silhouette
 errors are ratios (0.05 = 5 %). Results are small frozen dataclasses that
 :mod:`meshmocap.analysis.tables` prints or writes as CSV and
-:mod:`meshmocap.apps.plots` draws.
+:mod:`meshmocap.apps.figures.evaluation` draws.
 
 Frames whose prediction holds NaN or infinite values (a tracker that lost the subject) are
 **failures**: listed in ``failed`` and left out of every statistic, never propagated as

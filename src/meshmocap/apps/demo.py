@@ -27,19 +27,19 @@ import numpy as np
 from meshmocap._atomic import atomic_open
 from meshmocap._progress import phase
 from meshmocap.analysis.evaluate import Evaluation, evaluate
-from meshmocap.apps.evaluation_files import write_evaluation
-from meshmocap.apps.export import export_track
-from meshmocap.apps.gait_files import gait_of, write_gait
+from meshmocap.apps.figures.render import render_motion
+from meshmocap.apps.files.evaluation import write_evaluation
+from meshmocap.apps.files.export import export_track
+from meshmocap.apps.files.gait import gait_of, write_gait
 from meshmocap.apps.kernels import start_compiling
-from meshmocap.apps.player import player_from_tracks
-from meshmocap.apps.render import render_motion
-from meshmocap.apps.report import (
+from meshmocap.apps.report.page import (
     Section,
     comparison_table,
     evaluation_section,
     gait_section,
     write_report,
 )
+from meshmocap.apps.report.player import player_from_tracks
 from meshmocap.body.light import tracking_body
 from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget

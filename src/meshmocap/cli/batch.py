@@ -6,8 +6,8 @@ import argparse
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from meshmocap.apps.batch import run_batch
-    from meshmocap.apps.batch_items import batch_items
+    from meshmocap.apps.batch.items import batch_items
+    from meshmocap.apps.batch.run import run_batch
 
     items = batch_items(
         args.captures, method=args.method, template=args.template, frames=args.frames or ""

@@ -87,7 +87,7 @@ def _cmd_silhouettes(args: argparse.Namespace) -> int:
 
 def _cmd_hull(args: argparse.Namespace) -> int:
     from meshmocap._validate import counted, frame_positions
-    from meshmocap.apps.export import frame_ranges
+    from meshmocap.apps.files.export import frame_ranges
     from meshmocap.errors import InputError
     from meshmocap.io.cameras import read_cameras
     from meshmocap.studio.hulls import camera_file, compute_hulls, silhouette_frames

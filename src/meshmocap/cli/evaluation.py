@@ -12,7 +12,7 @@ from meshmocap.cli._args import check_track_folders, number
 def _cmd_eval(args: argparse.Namespace) -> int:
     from meshmocap import api
     from meshmocap._progress import phase
-    from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.apps.files.evaluation import write_evaluation
     from meshmocap.io.plausibility import partial_hulls
     from meshmocap.io.results import input_frame, open_tracked_capture, read_track
 
@@ -42,8 +42,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from meshmocap._progress import phase
-    from meshmocap.apps.batch_report import build_batch_report, is_batch_folder
-    from meshmocap.apps.report import build_report
+    from meshmocap.apps.batch.report import build_batch_report, is_batch_folder
+    from meshmocap.apps.report.page import build_report
     from meshmocap.errors import InputError
 
     t0 = time.perf_counter()
@@ -90,8 +90,8 @@ def _check_report_tracks(args: argparse.Namespace) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from meshmocap.apps.bench import run_bench
-    from meshmocap.apps.bench_report import markdown_table, tradeoff_table
+    from meshmocap.apps.bench.report import markdown_table, tradeoff_table
+    from meshmocap.apps.bench.run import run_bench
     from meshmocap.errors import InputError
 
     def items(values: list[str] | None) -> list[str] | None:  # "a,b c" → [a, b, c]

@@ -10,7 +10,7 @@ from meshmocap.cli._args import add_frames, check_track_folders, number
 
 def _cmd_export(args: argparse.Namespace) -> int:
     from meshmocap._progress import phase
-    from meshmocap.apps.export import export_format, export_track, frame_ranges
+    from meshmocap.apps.files.export import export_format, export_track, frame_ranges
 
     check_track_folders("export", [args.track])
     export_format(args.out, args.format, given_as="--format")  # before reading the track

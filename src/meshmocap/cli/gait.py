@@ -8,7 +8,7 @@ import argparse
 def _cmd_gait(args: argparse.Namespace) -> int:
     from meshmocap._progress import phase
     from meshmocap.analysis.tables import format_table
-    from meshmocap.apps.gait_files import SUMMARY_HEADERS, gait_of, summary_rows, write_gait
+    from meshmocap.apps.files.gait import SUMMARY_HEADERS, gait_of, summary_rows, write_gait
 
     with phase(f"analysing the gait of {args.source}"):
         run = gait_of(args.source, fps=args.fps, truth=not args.no_truth)

@@ -13,7 +13,7 @@ def _cmd_learn(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from meshmocap.apps.latent_plot import plot_latent_space
+    from meshmocap.apps.figures.latent import plot_latent_space
     from meshmocap.body.template import load_template
     from meshmocap.errors import InputError, MeshmocapFileNotFoundError
     from meshmocap.trackers.cage.manifold import fit_pose_manifold

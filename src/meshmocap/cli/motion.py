@@ -31,7 +31,7 @@ def _cmd_retarget(args: argparse.Namespace) -> int:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    from meshmocap.apps.render import render_motion
+    from meshmocap.apps.figures.render import render_motion
     from meshmocap.body.template import load_template
     from meshmocap.io.clips import clip_on
 

@@ -14,7 +14,7 @@ def _cmd_transfer(args: argparse.Namespace) -> int:
     import warnings
     from pathlib import Path
 
-    from meshmocap.apps.export import capture_fps
+    from meshmocap.apps.files.export import capture_fps
     from meshmocap.body.template import bundled_templates, load_template
     from meshmocap.io.meshes import read_mesh
     from meshmocap.trackers.cage.transfer import read_cage_track, write_transfer

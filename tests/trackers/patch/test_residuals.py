@@ -132,8 +132,8 @@ def test_bench_ablation_table_reports_each_change_against_patch():
     """One row per ablation present, one column per capture with a ``patch`` row; each
     cell is the ablation's mean and its change against ``patch``; another tracker's
     ablations against that tracker."""
-    from meshmocap.apps.bench_report import ablation_table
-    from meshmocap.apps.bench_rows import BenchRow, not_applicable
+    from meshmocap.apps.bench.report import ablation_table
+    from meshmocap.apps.bench.rows import BenchRow, not_applicable
 
     rows = [
         BenchRow("walk", "patch", mean_mm=10.0),
@@ -212,8 +212,8 @@ def test_acceleration_gate_stops_extrapolating_a_velocity_that_just_jumped():
 def test_bench_says_where_patch_loses_to_its_baseline():
     """The report names each capture where ``patch`` has a larger mean than articulated
     ICP, with both means and worst frames; nothing where it wins."""
-    from meshmocap.apps.bench_report import baseline_losses
-    from meshmocap.apps.bench_rows import BenchRow
+    from meshmocap.apps.bench.report import baseline_losses
+    from meshmocap.apps.bench.rows import BenchRow
 
     rows = [
         BenchRow("walk", "patch", mean_mm=10.0, worst_frame_mm=20.0),

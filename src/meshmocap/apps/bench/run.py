@@ -3,10 +3,10 @@
 Every method, ablation and baseline of :data:`~meshmocap.trackers.registry.METHODS` tracks
 every capture of a named set; each (capture, method) pair is scored by
 :func:`~meshmocap.analysis.evaluate.evaluate` and written as ``results.csv``,
-``results.md`` and plots (:mod:`meshmocap.apps.bench_report`).
+``results.md`` and plots (:mod:`meshmocap.apps.bench.report`).
 
-``meshmocap bench`` (this module and ``bench_captures``, ``bench_rows``,
-``bench_report``, ``bench_plots``) is the product's comparison of the methods, shipped and
+``meshmocap bench`` (this module and the rest of :mod:`meshmocap.apps.bench`: ``captures``,
+``rows``, ``report``, ``plots``) is the product's comparison of the methods, shipped and
 run by users. The scripts in the project's ``benchmarks/`` folder are developers' tools
 (speed, long runs, real-data acceptance, old tree against new), not shipped; one that
 reproduces a paper's table calls :func:`run_bench` (``benchmarks/README.md`` lists them).
@@ -69,7 +69,7 @@ import numpy as np
 from meshmocap._atomic import write_text_atomic
 from meshmocap._validate import check_choice
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.bench_captures import (
+from meshmocap.apps.bench.captures import (
     CAPTURE_SETS,
     DEFAULT_KEEP_FRACTIONS,
     capture_set,
@@ -77,8 +77,8 @@ from meshmocap.apps.bench_captures import (
     mesh_template,
     parse_capture,
 )
-from meshmocap.apps.bench_report import write_report
-from meshmocap.apps.bench_rows import (
+from meshmocap.apps.bench.report import write_report
+from meshmocap.apps.bench.rows import (
     BenchRow,
     TradeoffPoint,
     not_applicable,
@@ -258,7 +258,7 @@ def code_digest() -> str:
     """Digest (8 hex digits) of the package's source outside ``analysis/`` and ``apps/``:
     the code that makes a track. A benchmark keys its cached tracks by it, so an edited tracker
     re-tracks instead of resuming a track made by the old code."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]  # src/meshmocap
     h = hashlib.sha1()
     for p in sorted(root.rglob("*.py")):
         rel = p.relative_to(root).as_posix()

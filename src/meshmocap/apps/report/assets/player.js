@@ -1,7 +1,7 @@
 /* meshmocap report player: the exported glTF of each track, played with three.js.
  *
  * Each div.mm-player holds a JSON script element of class mm-data
- * written by meshmocap.apps.player (per track: the GLB that `meshmocap export` writes,
+ * written by meshmocap.apps.report.player (per track: the GLB that `meshmocap export` writes,
  * base64; tracked joints; the truth and hull points quantised to int16), a <canvas> and the
  * controls. three.js comes from the vendored bundle inlined before this file (MMTHREE).
  * World frame: glTF's, metres, Y up. Mouse: drag to orbit, right-drag to pan, wheel to

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from external import walk_track
-from meshmocap.apps.player import (
+from meshmocap.apps.report.player import (
     MIN_HULL_POINTS,
     decode_array,
     player_from_tracks,

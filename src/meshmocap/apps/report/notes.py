@@ -1,7 +1,7 @@
 """What a report says next to its numbers: why frames were not scored or were flagged, why a
 value is missing, what a column means, and when a value is fixed by construction.
 
-Plain strings and rows for :mod:`meshmocap.apps.report`'s tables.
+Plain strings and rows for :mod:`meshmocap.apps.report.page`'s tables.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ Files (:func:`write_gait`):
   with the events; ``gait_flexion.png`` — hip and knee flexion over the cycle.
 
 A ``reference`` gait (the ground truth) is drawn dashed in the plots. Figures use
-matplotlib's object API on the Agg canvas, as :mod:`meshmocap.apps.plots`.
+matplotlib's object API on the Agg canvas, as :mod:`meshmocap.apps.figures.evaluation`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from meshmocap.analysis.gait import (
     compare_gaits,
     track_gait,
 )
-from meshmocap.apps.plots import new_figure, save_figure
+from meshmocap.apps.figures.evaluation import new_figure, save_figure
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import input_frame, read_track

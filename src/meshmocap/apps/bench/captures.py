@@ -1,6 +1,6 @@
 """The captures of ``meshmocap bench``: named sets, capture names ``BASE[+VARIANT...]``
 resolved against the data folder, and the captures made (or resumed) in the work folder.
-See :mod:`meshmocap.apps.bench` for the protocol."""
+See :mod:`meshmocap.apps.bench.run` for the protocol."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Self-contained HTML reports: tables, embedded plots and a 3D player of tracked meshes.
 
 A report is one ``.html`` file that works offline: PNG/JPEG images are embedded as
-``data:`` URIs and the player (:mod:`meshmocap.apps.player`, three.js playing each track's
+``data:`` URIs and the player (:mod:`meshmocap.apps.report.player`, three.js playing each track's
 exported glTF) is inlined with its data; the page refers to no URL at all. Its size is
 about the player's (0.7 MB of three.js, a few hundred kB per track, the per-frame data ≤
 ``max_megabytes``) plus the images'.
@@ -29,9 +29,11 @@ from meshmocap._atomic import write_text_atomic
 from meshmocap._version import __version__
 from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.analysis.tables import summary_table
-from meshmocap.apps.evaluation_files import write_evaluation
-from meshmocap.apps.gait_files import GAIT_HEADERS, gait_report
-from meshmocap.apps.player import (
+from meshmocap.apps.files.evaluation import write_evaluation
+from meshmocap.apps.files.gait import GAIT_HEADERS, gait_report
+from meshmocap.apps.report.cameras import camera_views
+from meshmocap.apps.report.notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
+from meshmocap.apps.report.player import (
     HULL_COLOR,
     MARKS,
     PALETTE,
@@ -42,8 +44,6 @@ from meshmocap.apps.player import (
     player_payload,
     track_templates,
 )
-from meshmocap.apps.report_cameras import camera_views
-from meshmocap.apps.report_notes import WORST_FRAME, bone_note, frame_rows, silhouette_note
 from meshmocap.body.template import EVAL_PARENTS
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture
@@ -305,7 +305,7 @@ def image_uri(image: ImageSource) -> str:
     return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
 
 
-#: The timeline's colours per mark (:data:`~meshmocap.apps.player.MARKS`): lost, changed by
+#: The timeline's colours per mark (:data:`~meshmocap.apps.report.player.MARKS`): lost, changed by
 #: the two-way pass, both (changed and still lost).
 _MARK_COLORS = {1: "#d62728", 2: "#1f77b4", 3: "#9467bd"}
 
@@ -458,7 +458,7 @@ def gait_section(
 
 def cameras_section(capture: Capture, track: Track, name: str, *, frames: int = 4) -> Section:
     """Each camera's frames with the track's skeleton and the silhouette's outline drawn
-    over them (:func:`~meshmocap.apps.report_cameras.camera_views`)."""
+    over them (:func:`~meshmocap.apps.report.cameras.camera_views`)."""
     parents = np.asarray(track.meta.get("eval_parents", EVAL_PARENTS), np.int64)
     pictures, note = camera_views(capture, track, parents, frames=frames)
     text = (
@@ -492,11 +492,11 @@ def build_report(
         (:func:`~meshmocap.analysis.evaluate.write_evaluation`); default: a temporary
         folder, removed once the plots are embedded.
     max_frames : int, optional, at most this many frames in the player (default: every
-        frame the size budget allows, :func:`~meshmocap.apps.player.player_from_tracks`)
+        frame the size budget allows, :func:`~meshmocap.apps.report.player.player_from_tracks`)
     silhouettes, surface_frames : as in :func:`~meshmocap.analysis.evaluate.evaluate`
     camera_frames : int
         Frames of the section "Cameras" (each camera's video frame or silhouette with the
-        first track's skeleton drawn over it, :mod:`meshmocap.apps.report_cameras`); 0 for
+        first track's skeleton drawn over it, :mod:`meshmocap.apps.report.cameras`); 0 for
         none. A capture without cameras has no such section.
     """
     trs = [t if isinstance(t, Track) else read_track(t) for t in tracks]

@@ -1,9 +1,9 @@
 """The 3D player of HTML reports: what it shows of tracks and their capture, encoded for
-``report_assets/player.js``, a three.js viewer (three.js is vendored as
-``report_assets/three.min.js``, MIT licence in ``report_assets/three.LICENSE.txt``).
+``assets/player.js``, a three.js viewer (three.js is vendored as
+``assets/three.min.js``, MIT licence in ``assets/three.LICENSE.txt``).
 
 Each track is shown as **what a user exports**: the template as a skinned mesh with the
-skeleton animation of :func:`meshmocap.apps.export.track_gltf` (the same GLB as
+skeleton animation of :func:`meshmocap.apps.files.export.track_gltf` (the same GLB as
 ``meshmocap export --out x.glb``), with its 15 tracked joints as a skeleton, the
 ground-truth joints when the capture has them, and the observed visual hull as points
 (surface voxels of ``hulls/NNNNN.npz``, else vertices of the frame's mesh). Tracks sit side
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshmocap.apps.export import track_fps, track_gltf, track_template
+from meshmocap.apps.files.export import track_fps, track_gltf, track_template
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, frame_name, read_hull
@@ -408,10 +408,10 @@ def player_payload(player: Player) -> dict:
 
 
 def _asset(name: str) -> str:
-    return resources.files("meshmocap.apps").joinpath(f"report_assets/{name}").read_text("utf-8")
+    return resources.files("meshmocap.apps.report").joinpath(f"assets/{name}").read_text("utf-8")
 
 
 def player_js() -> str:
     """The player's JavaScript: the vendored three.js build (with its licence notice), then
-    ``report_assets/player.js``."""
+    ``assets/player.js``."""
     return f"{_asset('three.min.js')}\n{_asset('player.js')}"

@@ -9,7 +9,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from meshmocap.apps.player import (
+from meshmocap.apps.report.page import Section, Table, report_html, write_report
+from meshmocap.apps.report.player import (
     decode_array,
     encode_array,
     player_from_tracks,
@@ -17,7 +18,6 @@ from meshmocap.apps.player import (
     player_payload,
     surface_voxels,
 )
-from meshmocap.apps.report import Section, Table, report_html, write_report
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
@@ -89,7 +89,7 @@ def _payloads(text: str) -> list[dict]:
 def test_player_data_round_trips(player, capture, tracked, shifted, tmp_path):
     import pygltflib
 
-    from meshmocap.apps.export import export_track
+    from meshmocap.apps.files.export import export_track
 
     tr, sh = tracked[1], shifted[1]
     assert player.frames.tolist() == [0, 1, 2] and player.fps == capture.fps

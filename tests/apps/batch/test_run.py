@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshmocap.apps import batch as batch_module
-from meshmocap.apps.batch import run_batch
-from meshmocap.apps.batch_items import BatchItem, batch_items
-from meshmocap.apps.batch_summary import SUMMARY_COLUMNS
+from meshmocap.apps.batch import run as batch_module
+from meshmocap.apps.batch.items import BatchItem, batch_items
+from meshmocap.apps.batch.run import run_batch
+from meshmocap.apps.batch.summary import SUMMARY_COLUMNS
 from meshmocap.body.template import load_template
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from meshmocap.apps.report_cameras import (
+from meshmocap.apps.report.cameras import (
     BONE_COLOR,
     JOINT_COLOR,
     OUTLINE_COLOR,

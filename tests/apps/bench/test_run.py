@@ -9,9 +9,9 @@ import shutil
 import numpy as np
 import pytest
 
-from meshmocap.apps.bench import run_bench
-from meshmocap.apps.bench_captures import CAPTURE_SETS, parse_capture
-from meshmocap.apps.bench_report import COLUMNS
+from meshmocap.apps.bench.captures import CAPTURE_SETS, parse_capture
+from meshmocap.apps.bench.report import COLUMNS
+from meshmocap.apps.bench.run import run_bench
 from meshmocap.cli import main
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
 
@@ -123,7 +123,7 @@ def test_rerun_reuses_captures_tracks_and_scores(bench):
 def test_changed_tracking_code_tracks_afresh(bench, tmp_path, monkeypatch):
     """Tracks are keyed by the tracking code too: after an edit to the package a re-run
     tracks again instead of resuming the old code's frames."""
-    import meshmocap.apps.bench as bench_module
+    import meshmocap.apps.bench.run as bench_module
 
     _, root = bench
     work = tmp_path / "work"

@@ -1,6 +1,6 @@
-"""Report files of ``meshmocap bench`` (:mod:`meshmocap.apps.bench`):
+"""Report files of ``meshmocap bench`` (:mod:`meshmocap.apps.bench.run`):
 ``results.csv``, ``results.md``, ``frame_errors.csv``, ``bone_lengths.csv``,
-``keep_fraction.csv`` and the plots of :mod:`meshmocap.apps.bench_plots`.
+``keep_fraction.csv`` and the plots of :mod:`meshmocap.apps.bench.plots`.
 
 CSV values are unrounded in the units named by each header (``_mm``, ``_ratio``,
 ``_s``); not-applicable rows leave their values empty and say why in ``note``.
@@ -16,13 +16,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from meshmocap._atomic import write_bytes_atomic, write_text_atomic
-from meshmocap.apps.bench_plots import (
+from meshmocap.apps.bench.plots import (
     plot_bone_spread,
     plot_frame_curves,
     plot_mean_errors,
     plot_tradeoff,
 )
-from meshmocap.apps.bench_rows import BenchRow, TradeoffPoint
+from meshmocap.apps.bench.rows import BenchRow, TradeoffPoint
 
 #: results.csv columns: (header, row attribute)
 COLUMNS = (

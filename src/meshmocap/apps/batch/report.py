@@ -7,8 +7,8 @@ import math
 import os
 from pathlib import Path
 
-from meshmocap.apps.batch_summary import CaptureSummary, read_summary
-from meshmocap.apps.report import Section, Table, write_report
+from meshmocap.apps.batch.summary import CaptureSummary, read_summary
+from meshmocap.apps.report.page import Section, Table, write_report
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 
 __all__ = ["build_batch_report", "is_batch_folder"]

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.apps.report import comparison_table, evaluation_tables, table_html
-from meshmocap.apps.report_notes import frame_ranges, frame_rows
+from meshmocap.apps.report.notes import frame_ranges, frame_rows
+from meshmocap.apps.report.page import comparison_table, evaluation_tables, table_html
 from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 
@@ -63,8 +63,8 @@ def test_skipped_and_flagged_frames_say_why(scored):
 
 
 def test_frames_the_two_way_pass_changed_are_listed_and_marked(scored, synth_capture):
-    from meshmocap.apps.player import player_from_tracks
-    from meshmocap.apps.report import report_html
+    from meshmocap.apps.report.page import report_html
+    from meshmocap.apps.report.player import player_from_tracks
 
     track, ev = scored
     two_way = {

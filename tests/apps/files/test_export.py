@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshmocap.apps.export import export_track, track_fps, track_rows
+from meshmocap.apps.files.export import export_track, track_fps, track_rows
 from meshmocap.body.markers import marker_vertices
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import EVAL_NAMES, EVAL_PARENTS, load_template
@@ -23,7 +23,7 @@ from meshmocap.io.bvh import read_bvh
 from meshmocap.io.gltf import morph_gltf, write_gltf
 from meshmocap.io.results import FrameResult, read_track, start_track, write_frame
 
-SCRIPTS = Path(__file__).parent / "scripts"
+SCRIPTS = Path(__file__).parents[1] / "scripts"
 T = 8
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from meshmocap._atomic import write_text_atomic
 from meshmocap.analysis.evaluate import Evaluation, summary
 from meshmocap.analysis.tables import write_csv
-from meshmocap.apps.plots import (
+from meshmocap.apps.figures.evaluation import (
     plot_bone_lengths,
     plot_frame_errors,
     plot_joint_errors,

@@ -1,6 +1,6 @@
 """Plots of ``meshmocap bench`` (PNG, matplotlib's Agg canvas, written atomically).
 
-Each function takes rows of :class:`~meshmocap.apps.bench_rows.BenchRow` (results
+Each function takes rows of :class:`~meshmocap.apps.bench.rows.BenchRow` (results
 that are ``ok``) and a ``.png`` path, and returns the path:
 
 * :func:`plot_mean_errors` — mean error per method per capture, grouped bars (±1 std);
@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from meshmocap.apps.bench_rows import BenchRow, TradeoffPoint
-from meshmocap.apps.plots import new_figure, save_figure
+from meshmocap.apps.bench.rows import BenchRow, TradeoffPoint
+from meshmocap.apps.figures.evaluation import new_figure, save_figure
 
 
 def _methods(rows: Sequence[BenchRow]) -> list[str]:

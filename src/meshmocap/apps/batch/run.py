@@ -35,8 +35,8 @@ from typing import Any
 from meshmocap._atomic import write_text_atomic
 from meshmocap._progress import progress
 from meshmocap._validate import frame_positions, frame_slice
-from meshmocap.apps.batch_items import BatchItem
-from meshmocap.apps.batch_summary import (
+from meshmocap.apps.batch.items import BatchItem
+from meshmocap.apps.batch.summary import (
     CaptureSummary,
     read_summary,
     summary_line,
@@ -157,7 +157,7 @@ def _track(item: BatchItem, out: str, *_hulls: int) -> dict[str, Any]:
 
 def _track_and_score(item: BatchItem, folder: Path, base: CaptureSummary) -> CaptureSummary:
     from meshmocap.analysis.evaluate import evaluate
-    from meshmocap.apps.evaluation_files import write_evaluation
+    from meshmocap.apps.files.evaluation import write_evaluation
     from meshmocap.body.light import tracking_body
     from meshmocap.estimate.performer.tracking_template import tracking_template
     from meshmocap.io.axes import open_oriented

@@ -3,7 +3,7 @@
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot, no window, no
 global state; safe in worker processes and headless machines) and written atomically.
 Each function takes a result of :mod:`meshmocap.analysis` (metrics) and a ``.png`` path and
-returns the path; gait plots are in :mod:`meshmocap.apps.gait_files`.
+returns the path; gait plots are in :mod:`meshmocap.apps.files.gait`.
 """
 
 from __future__ import annotations

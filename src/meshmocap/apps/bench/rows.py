@@ -1,6 +1,6 @@
 """Rows of ``meshmocap bench``: one result per (capture, method), and the points of the
-patch tracker's kept-fraction sweep (Fig. 8). :mod:`meshmocap.apps.bench_report` writes
-them; :mod:`meshmocap.apps.bench_plots` draws them.
+patch tracker's kept-fraction sweep (Fig. 8). :mod:`meshmocap.apps.bench.report` writes
+them; :mod:`meshmocap.apps.bench.plots` draws them.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""The bench report (meshmocap.apps.bench_report): how the first poses were found comes from
+"""The bench report (meshmocap.apps.bench.report): how the first poses were found comes from
 the rows' start records, never from their messages."""
 
 import numpy as np
 import pytest
 
-from meshmocap.apps.bench_report import write_report
-from meshmocap.apps.bench_rows import BenchRow
+from meshmocap.apps.bench.report import write_report
+from meshmocap.apps.bench.rows import BenchRow
 
 
 def _row(capture: str, start: str, init: str) -> BenchRow:
