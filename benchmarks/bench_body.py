@@ -1,6 +1,6 @@
-"""Benchmark the foundation: retarget + skin one frame, and mocap loading.
+"""Speed of the body: retarget + skin one frame of the ~14k-vertex template, and mocap loading.
 
-Targets (issue "Foundation"): retarget + skin one frame of the ~14k-vertex template
+Targets: retarget + skin one frame of the ~14k-vertex template
 ≤ 2 ms; load a 3,000-frame AMC ≤ 1 s (see bench_mocap_io.py for the loaders alone).
 
 Run: ``python benchmarks/bench_body.py`` (uses ../shared/data when present, else a

@@ -6,7 +6,7 @@ apart), and on the visual-hull vertices of a synthetic capture (each hull vertex
 by its nearest truth vertex), with the fraction of hull points each method calls outliers
 (Eq. (6): p ≤ 0.5) and, as the extension, farther than 10 cm from the previous mesh.
 
-Issue: "make the faster one the default only if it is as accurate on the benchmark".
+The faster method is the default only where it is as accurate on this benchmark.
 
 Run: ``python benchmarks/bench_bodyparts.py`` (about a minute; the capture is synthesised
 in a temporary folder).

@@ -1,4 +1,4 @@
-"""Cage tracker acceptance benchmark (issue 5): accuracy with a CMU-learned manifold, the
+"""Cage tracker acceptance benchmark: accuracy with a CMU-learned manifold, the
 ablations of the paper, and speed with a per-stage breakdown.
 
 Protocol: synthetic ``humaneva4`` captures from the studio at 60 fps

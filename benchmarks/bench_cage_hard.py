@@ -1,4 +1,4 @@
-"""Cage tracker on hard captures (issue 20): varied CMU motions, degraded silhouettes, and
+"""Cage tracker on hard captures: varied CMU motions, degraded silhouettes, and
 the clips the bundled pose library holds out.
 
 Protocol (the papers'): synthetic ``humaneva4`` captures (4 cameras, 60 fps) of the

@@ -1,4 +1,4 @@
-"""The cage tracker on every performer (issue 29 item 2): each bundled body, a body in a
+"""The cage tracker on every performer: each bundled body, a body in a
 loose skirt, and the MIT crane's clothed performer.
 
 Protocol: synthetic ``humaneva4`` captures (4 cameras, 60 fps, hulls at 1 cm) of the

@@ -1,5 +1,4 @@
-"""The time a user waits for a whole command, phase by phase, old tree and new in one run
-(issue 38).
+"""The time a user waits for a whole command, phase by phase, old tree and new in one run.
 
 Each command (``demo``: ``meshmocap demo`` on its defaults; ``track``: ``meshmocap track``
 of a synthetic walk of the 12k ``neutral`` body, its body estimated and its first pose
@@ -10,7 +9,7 @@ for each phase (:data:`PHASES`: the body estimate, the first pose, each track, t
 evaluation, the plots, the player, the report...), wall and CPU seconds of its own
 process, each phase without the phases inside it; what no phase covers is ``other``
 (importing, loading templates). The parent stamps every line the command prints: a gap
-of more than 2 s with nothing printed is a **silent phase** (issue 38 item 5), listed with
+of more than 2 s with nothing printed is a **silent phase**, listed with
 the lines before and after it and the CPU seconds it took (a gap between two lines of a
 progress bar, which logs every few seconds, or inside a phase that said what it does, is
 not silent).

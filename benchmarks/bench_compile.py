@@ -1,6 +1,6 @@
 """What the numba kernels cost a fresh install, module by module: cold (an empty cache,
 ``NUMBA_CACHE_DIR`` pointed at a new folder: every kernel compiled) and warm (the same
-folder again: every kernel loaded), old tree and new in one run (issue 38 item 3).
+folder again: every kernel loaded), old tree and new in one run.
 
 Each run is a child process that imports each kernel module of
 :data:`meshmocap.apps.kernels.KERNELS` and compiles each kernel with the argument types

@@ -8,7 +8,7 @@ Reported: frames flagged ``lost`` (count, share, longest run and the limbs named
 largest joint error of any frame (mm, against the truth), CPU seconds, the load, and the
 BLAS kernel OpenBLAS chose for this CPU (``OPENBLAS_CORETYPE`` overrides it: the flags
 change with it, which is why this count is measured here and not asserted in a test).
-Target (issue 28 item 4): at most a tenth of the frames flagged, no run longer than
+Target: at most a tenth of the frames flagged, no run longer than
 ``SEEN_AGAIN`` + 2 frames, no joint 100 mm off.
 
 Run: ``python benchmarks/bench_fast_legs.py [--work /tmp/meshmocap-fast-legs]

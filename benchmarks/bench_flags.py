@@ -1,4 +1,4 @@
-"""Calibration of the ``lost`` flag (issue 28 item 4): does a flagged limb mean a joint
+"""Calibration of the ``lost`` flag: does a flagged limb mean a joint
 really off?
 
 Protocol. Synthetic captures with truth (the first-frame captures of ``bench_init.py
@@ -16,7 +16,7 @@ silhouettes (the driver's check). Per sample: the largest joint error of each li
 and whether the check names that limb lost. Reported: for "a joint more than 100 mm off"
 and "more than 150 mm off", the recall (samples with such a limb whose limb is named) and
 the precision (named limbs that have such a joint), and the share of clean samples with a
-limb named. Acceptance (issue 28): recall ≥ 90 % for > 150 mm, ≤ 5 % of clean frames
+limb named. Acceptance: recall ≥ 90 % for > 150 mm, ≤ 5 % of clean frames
 flagged. Run: ``python benchmarks/bench_flags.py [--captures /tmp/limbs/init/captures]
 [--step 10] [--samples 4]``.
 """

@@ -1,6 +1,6 @@
-"""Benchmark the visual hull: carve + marching cubes + distance grid at 1 cm.
+"""Speed of the visual hull: carve + marching cubes + distance grid at 1 cm.
 
-Target (issue "capture studio"): carving ≤ 150 ms per frame for 4 views of a person at
+Target: carving ≤ 150 ms per frame for 4 views of a person at
 1 cm voxels (bounds ~1 × 1 × 2 m, ~2 M voxels) on a 2-core machine.
 
 Subject: the bundled ``neutral`` template (A-posed human mesh) when it loads, else a

@@ -1,4 +1,4 @@
-"""Automatic initialisation acceptance (issue 17, "Start"): a performer anywhere in the
+"""Automatic initialisation acceptance: a performer anywhere in the
 volume, facing any way, started at any frame.
 
 Protocol: CMU clips from ../shared/data (05_01 walk, 09_01 run, 01_01 jumps), retargeted on
@@ -20,7 +20,7 @@ camera's view not scored). Acceptance: first frame ≤ 30 mm in every case, clip
 2 mm of ``--init truth``.
 
 ``--first-only`` synthesises and initialises the first frame of each case only (no
-tracking), in a fraction of the time (issue 28's first-pose acceptance): clips 05_01 (walk),
+tracking), in a fraction of the time (the first pose's acceptance): clips 05_01 (walk),
 01_01 (forward jumps) and 49_18 (balance, arms outstretched) by default, performed by
 ``--subjects`` (heavy_male and small_female, alternating with the heading), the first pose
 searched with the performer's body as the template; per start the mean and worst joint

@@ -1,4 +1,4 @@
-"""Every method on every input (issue 17, "Real meshes" and "Inputs"): the command line as
+"""Every method on every input (real meshes, hulls, point clouds): the command line as
 a user runs it, in-process (``meshmocap.cli.main``), default options.
 
 **Real meshes.** ``meshmocap track ../shared/data/meshes/crane/crane_mesh_0000-0174.tar.gz

@@ -1,7 +1,7 @@
 """The keyframe search against the first pose's search, on frames inside failure runs
-(issue 42 item 2: one keyframe search ≤ 3 s on 2 cores, as accurate as the full search).
+(target: one keyframe search ≤ 3 s on 2 cores, as accurate as the full search).
 
-Protocol. Frames of bench_limbs captures where the default path lost a limb (issue 42):
+Protocol. Frames of bench_limbs captures where the default path lost a limb:
 01_01 forward jumps by heavy_male (a wrist lost over frames 1–100), 60_01 salsa by
 small_female (an arm lost) and 05_03 modern dance by heavy_male (a leg lost from frame 61),
 each turned and shifted as :mod:`bench_limbs` draws it, synthesised one frame at a time at
@@ -178,7 +178,7 @@ def main() -> None:
                 )
                 rows.append(r)
     text = (
-        f"Keyframe search (issue 42 item 2), measured {stamp}, load average "
+        f"Keyframe search against the first pose's search, measured {stamp}, load average "
         f"{load0:.1f}→{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores\n\n"
         f"{table(rows, args.searches)}"
     )

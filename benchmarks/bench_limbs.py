@@ -1,4 +1,4 @@
-"""The default path against the papers' protocol (issues 28, 42): every limb found and kept.
+"""The default path against the papers' protocol: every limb found and kept.
 
 Protocol. Motions never seen by the pose prior: the CMU clips of ../shared/data (05_01 walk,
 01_01 forward jumps, 49_18 balance with the arms out; none is in the pose library) and
@@ -106,9 +106,9 @@ PERFORMERS = ("heavy_male", "small_female")
 PASSES = ("forward", "two-way")
 SEED = 28
 #: A joint this far off (mm) makes a frame bad; a run of more than RUN_FRAMES such frames
-#: fails a trial (issue 42's acceptance).
+#: fails a trial (the acceptance).
 BAD_MM, RUN_FRAMES = 150.0, 10
-#: Minutes the whole default set may take on two quiet cores (issue 42).
+#: Minutes the whole default set may take on two quiet cores.
 BUDGET_MIN = 45.0
 
 
@@ -150,7 +150,7 @@ def joint_errors(track, cap) -> np.ndarray:
 
 
 def has_passes() -> bool:
-    """Whether this tree's tracking record has ``passes`` (the two-way pass, issue 42)."""
+    """Whether this tree's tracking record has ``passes`` (the two-way pass)."""
     return "passes" in {f.name for f in fields(TrackOptions)}
 
 
@@ -501,7 +501,8 @@ def main() -> None:
             rows += r
             costs.append(cost)
     text = (
-        f"Issues 28/42 benchmark ({'quick: ' if args.quick else ''}{len(cases)} captures × "
+        f"Default path and papers' protocol "
+        f"({'quick: ' if args.quick else ''}{len(cases)} captures × "
         f"{', '.join(args.methods)}, passes {', '.join(args.passes)}, ≤ {args.frames} frames "
         f"at 60 fps, humaneva4), measured {stamp}, load average {load0:.1f}→"
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, {args.jobs} at once, "

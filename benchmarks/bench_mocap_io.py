@@ -1,6 +1,6 @@
-"""Benchmark the mocap readers and writer on real CMU clips.
+"""Speed of the mocap readers and writer on real CMU clips.
 
-Target (issue "Foundation"): load a 3,000-frame AMC in ≤ 1 s. 01_01.amc has 2,751 frames;
+Target: load a 3,000-frame AMC in ≤ 1 s. 01_01.amc has 2,751 frames;
 the table also shows the time scaled to 3,000 frames (parsing is linear in the frames).
 
 Run: ``python benchmarks/bench_mocap_io.py`` (needs ../shared/data/mocap/cmu; prints why

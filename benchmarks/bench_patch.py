@@ -1,4 +1,4 @@
-"""Patch tracker acceptance benchmark (issue: patch tracker, in full): a thin wrapper over
+"""Patch tracker acceptance benchmark (accuracy and speed on the CMU clips): a thin wrapper over
 :func:`meshmocap.apps.bench.run.run_bench` (``meshmocap bench``) on the CMU clips.
 
 Protocol: synthetic captures from the studio at 60 fps, subject = tracking template unless

@@ -1,6 +1,6 @@
 """The patch tracker's speed and accuracy, this tree against an earlier revision, in one run.
 
-Protocol (issue 30): synthetic captures from the studio at 60 fps (``humaneva4`` hulls at
+Protocol: synthetic captures from the studio at 60 fps (``humaneva4`` hulls at
 1 cm) of the ~12k-vertex ``neutral`` template playing a procedural walk, a dance (CMU
 05_03, ``../shared/data/mocap/cmu/library``) and a jump (CMU 16_01); the first pose from
 ground truth; frames 1… tracked by ``--method`` of each source tree (``src/`` of

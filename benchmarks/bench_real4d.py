@@ -1,4 +1,4 @@
-"""Real 4D captures end to end (issue 29): hull folders and point clouds without a
+"""Real 4D captures end to end: hull folders and point clouds without a
 template, files in millimetres and Y up, and the MIT crane scored per vertex.
 
 Part 1, a synthetic capture's hulls as a studio hands them out. ``meshmocap synth`` makes a
@@ -16,7 +16,7 @@ Part 2 (``--crane``), the crane archive (../shared/data/meshes/crane, 175 frames
 ``--crane-frames`` N: the first N): ``meshmocap track crane.tar.gz --up y --method M
 --refine R`` then ``meshmocap eval``: the per-vertex error of the tracked first frame's
 vertices against the files, mean over the frames, the first and last fifths (and their
-ratio: issue 37 asks ≤ 1.3), the worst frame, and the error's parts along the true
+ratio: the target is ≤ 1.3), the worst frame, and the error's parts along the true
 surface's normal and along the surface (tangential: a vertex slid to another point of the
 body; mean over every 5th frame); each method with the output surface
 refined towards the observations (``--refine on``, the default for mesh files) and as the

@@ -1,5 +1,5 @@
-"""Loss detection acceptance (issue 17, "Recovery"; the limb-only re-seat it measured
-was removed by issue 42: the forward pass now flags and never moves the track).
+"""Loss detection acceptance: is a frame far off flagged, with its limb? (The limb-only
+re-seat it once measured was removed: the forward pass now flags and never moves the track.)
 
 Protocol: synthetic captures of CMU clips from ../shared/data on ``neutral_5k`` (the
 template is the performer), ``humaneva4`` rig, 60 fps, visual hulls at 1 cm, the first 300
@@ -22,7 +22,7 @@ more than 150 mm off and how many of them are flagged ``lost`` with that joint's
 (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`; "body" counts for every limb) named in the
 frame's message; the longest run of consecutive frames with some joint more than 100 mm
 off; for gap captures, the frames after the gap until every joint is within 40 mm again.
-Acceptance (of issue 17, when the re-seat acted on the flags): every >150 mm frame flagged
+Acceptance (from when the re-seat acted on the flags): every >150 mm frame flagged
 with its limb, no >100 mm run longer than 10 frames, back under 40 mm within 10 frames of
 the hull being whole.
 

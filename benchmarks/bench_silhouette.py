@@ -1,6 +1,6 @@
-"""Benchmark silhouette rasterisation for the four humaneva4 cameras at 640×480.
+"""Speed of silhouette rasterisation for the four humaneva4 cameras at 640×480.
 
-Target (issue "capture studio"): ≤ 50 ms per 640×480 view of a 28k-face mesh.
+Target: ≤ 50 ms per 640×480 view of a 28k-face mesh.
 
 Subjects: a 28k-face "capsule person" built here (always available: nine capsules and an
 icosphere head, each closed) and, when it loads, the bundled template ``neutral``

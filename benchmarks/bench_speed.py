@@ -1,4 +1,4 @@
-"""Speed end to end per frame, stage by stage, and against trimesh's non-rigid ICP (issues 21, 38).
+"""Speed end to end per frame, stage by stage, and against trimesh's non-rigid ICP.
 
 **Part 1, the whole frame** (``--templates``, ``--methods``): what a user waits for per
 frame, measured on the tracking driver's own path (:func:`~meshmocap.trackers.driver.
@@ -66,7 +66,7 @@ from meshmocap.io.capture import Capture
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.registry import make_tracker
 
-try:  # a tree from before the driver's options record (issue 43's old main) takes keywords
+try:  # a tree from before the driver's options record (an older main) takes keywords
     from meshmocap.trackers.options import TrackOptions
 except ImportError:
     TrackOptions = None

@@ -1,4 +1,4 @@
-"""Acceptance of subject estimation (issue 17, item 1): a performer the tool has never seen.
+"""Acceptance of subject estimation: a performer the tool has never seen.
 
 Protocol: synthetic captures of the ``heavy_male`` and ``small_female`` performers playing
 CMU clips (humaneva4 rig: 4 cameras, 640×480; 60 fps; the first ``--frames`` frames, 09_01 cut to
@@ -14,7 +14,7 @@ CMU clips (humaneva4 rig: 4 cameras, 640×480; 60 fps; the first ``--frames`` fr
 3. the patch tracker (default options) tracks the capture with the estimated template, and
    for comparison with ``neutral`` (the default body) and with the true performer. The first
    frame is initialised from ground truth (``--init truth``: the automatic initialisation
-   is another part of the issue); errors are the mean over 15 evaluation joints and frames,
+   is measured by ``bench_init.py``); errors are the mean over 15 evaluation joints and frames,
    and the worst frame's mean, mm.
 
 Caveat: heavy_male and small_female are themselves anny bodies, so they lie near the shape

@@ -1,5 +1,5 @@
 """The two-way pass against the forward pass alone, on captures of ``bench_limbs.py`` that
-fail today (issue 42).
+the forward pass fails.
 
 Each capture (a trial of ``bench_limbs``'s table by a performer, its heading and offset
 drawn there) is tracked on the default path (the body estimated from the capture, the
@@ -37,7 +37,7 @@ from bench_init import DATA
 from bench_limbs import TRIALS, excluded, joint_errors, spec_of
 from bench_recovery import longest_run
 
-#: trial:performer:method tracked by default (they fail on the forward pass, issue 42)
+#: trial:performer:method tracked by default (they fail on the forward pass)
 CASES = ("01_01:heavy_male:patch", "60_01:small_female:patch")
 
 

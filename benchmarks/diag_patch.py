@@ -1,5 +1,5 @@
 """Per-frame diagnostics of the patch tracker on a synthetic capture with ground truth
-(issue 20: why does it drift where articulated ICP does not?).
+(why does it drift where articulated ICP does not?)
 
 Tracks a capture with the patch tracker (first frame from the truth) and, after every
 frame, measures against the truth:

@@ -1,4 +1,4 @@
-"""Option sweep of the patch tracker over many captures (issue 20: an extension is turned on
+"""Option sweep of the patch tracker over many captures (an extension is turned on
 by default only where it helps across clips, never tuned on one).
 
 Protocol: synthetic captures from the studio (``neutral_5k`` performs and tracks, 60 fps
@@ -38,7 +38,7 @@ few mm of each other to frame 50, then the gated run loses a right-side joint); 
 20.2 / ICP 12.8 (means: gate / no gate / ICP); 61_01 12.4 / 13.0 / ICP 18.6. The crane
 through ring8 hulls (bench protocol, 30 fps): 31.2 mm per vertex with the gate, as without.
 
-Issue 20's clips (default options, i.e. no gate, as ``main``'s patch tracker bit for bit;
+The hard clips (default options, i.e. no gate, as ``main``'s patch tracker bit for bit;
 articulated ICP beside it): 05_01 frames 1–149 13.9/33/196 (ICP 12.5/20/51; the right hip
 ~100 mm off in frames 104–114, 60–69 % of its thigh's data weight on phantom hull points,
 the data term pulling away from the truth, the classifier right); 09_01 1–56 11.9/21/64
