@@ -201,8 +201,13 @@ def track_sequence(
                 last = before[-1] if before else indices[0]
                 resume_tracker(tracker, body.light, out, last)
                 if recover:
-                    pose, assessed = _last_pose(out, before)
-                    recovery = Recovery(body.light, *pose, assessed=assessed)
+                    pose, evidence = _last_pose(out, before)
+                    recovery = Recovery(
+                        body.light,
+                        *pose,
+                        assessed=evidence is not None,
+                        before=() if evidence is None else (evidence,),
+                    )
                 if holder is not None:
                     holder.last = _hold_start(body.light, out, before)
                 good = last
@@ -409,13 +414,15 @@ def _hold_start(template: Template, out, indices: list[int]) -> tuple[np.ndarray
         return np.tile(np.eye(3), (sk.n_joints, 1, 1)), sk.rest_positions[0].copy()
 
 
-def _last_pose(out, indices: list[int]) -> tuple[tuple[np.ndarray, np.ndarray], bool]:
-    """The articulated pose stored with the latest of ``indices`` that has one, and whether
-    the recovery assessed that frame (it stored its evidence: a resumed run measures the next
-    frame's motion from there, as the run that wrote it would have)."""
+def _last_pose(out, indices: list[int]) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray | None]:
+    """The articulated pose stored with the latest of ``indices`` that has one, and the
+    evidence the recovery stored there where it assessed that frame (else None): a resumed
+    run measures the next frame's motion from there and holds the lost rule over that
+    frame's evidence, as the run that wrote it would have."""
     for i in reversed(indices):
         st = read_state(out, i)
         if "pose_R" in st:
             pose = st["pose_R"].astype(np.float64), st["pose_root"].astype(np.float64)
-            return pose, "evidence" in st
+            ev = st.get("evidence")
+            return pose, None if ev is None else np.asarray(ev, dtype=np.float64)
     raise InputError(f"track: {out} holds no pose to resume recovery from; use --restart")

@@ -39,10 +39,43 @@ def test_a_limb_is_lost_when_a_measure_passes_its_threshold():
         LostRule((0.1, 0.2))
 
 
+def test_a_rule_held_over_two_frames_needs_the_measure_past_its_threshold_on_both():
+    """A limb is lost when a measure passes its threshold on the frame and the one before
+    (the least of the two): a one-frame spike is not, the same limb on two frames is, and
+    the reasons give the lesser value."""
+    rule = LostRule((0.4, np.inf, 0.02, np.inf, np.inf, np.inf), frames=2)
+    spike = _evidence(left_leg={"unexplained": 0.03})
+    quiet = _evidence(left_leg={"unexplained": 0.01})
+    other = _evidence(right_leg={"unexplained": 0.05})
+    assert lost_limbs(spike, rule) == ("left_leg",)  # no frame before: the frame alone
+    assert lost_limbs(spike, rule, before=[quiet]) == ()
+    assert lost_limbs(spike, rule, before=[other]) == ()  # another limb the frame before
+    later = _evidence(left_leg={"unexplained": 0.05})
+    assert lost_limbs(later, rule, before=[quiet, spike]) == ("left_leg",)
+    assert lost_reasons(later, rule, before=[spike]) == {
+        "left_leg": "3.0% of the points unexplained"
+    }
+    seq = np.stack([quiet, spike, quiet, spike, later, later, quiet])
+    assert rule.flags(seq).tolist() == [False, False, False, False, True, True, False]
+    assert LostRule(rule.thresholds).flags(seq).tolist() == [False, True, False, True] + [
+        True,
+        True,
+        False,
+    ]
+    assert rule.describe() == "outside > 0.4, unexplained > 0.02 on 2 frames in a row"
+    with pytest.raises(InputError, match="frames must be an integer ≥ 1, found 0"):
+        LostRule(rule.thresholds, frames=0)
+
+
 def test_the_rule_round_trips_and_the_shipped_one_loads(tmp_path):
-    rule = LostRule((0.3, np.inf, 0.05, 0.5, 0.04, 0.12))
+    rule = LostRule((0.3, np.inf, 0.05, 0.5, 0.04, 0.12), frames=3)
     rule.write(tmp_path / "r.json", note="test")
     assert LostRule.read(tmp_path / "r.json") == rule
+    (tmp_path / "old.json").write_text('{"thresholds": {"outside": 0.3}}')  # before frames
+    assert LostRule.read(tmp_path / "old.json").frames == 1
+    (tmp_path / "zero.json").write_text('{"thresholds": {}, "frames": 0}')
+    with pytest.raises(FormatError, match=r"zero\.json is not a rule file"):
+        LostRule.read(tmp_path / "zero.json")
     (tmp_path / "bad.json").write_text('{"limits": {}}')
     with pytest.raises(FormatError, match=r"bad\.json is not a rule file"):
         LostRule.read(tmp_path / "bad.json")
@@ -63,3 +96,25 @@ def test_fit_rule_flags_bad_frames_within_the_budget_of_good_ones():
     assert np.count_nonzero(f & ~bad) <= 0.02 * np.count_nonzero(~bad)
     assert np.count_nonzero(f & bad) >= 0.95 * np.count_nonzero(bad)
     assert np.isfinite(rule.thresholds[k])
+
+
+def test_fit_rule_held_over_frames_leaves_one_frame_spikes_of_good_frames_alone():
+    """Bad frames come in runs, good frames have one-frame spikes of the same size: fitted
+    on the evidence held over two frames, the rule flags the runs and not the spikes."""
+    rng = np.random.default_rng(1)
+    n = 3000
+    E = np.abs(rng.normal(0.0, 0.01, (n, len(LIMB_PARTS), len(EVIDENCE))))
+    k = EVIDENCE.index("unexplained")
+    bad = np.zeros(n, dtype=bool)
+    for s in range(100, n, 300):
+        bad[s : s + 20] = True
+    E[bad, 3, k] += 0.05
+    spikes = rng.choice(np.flatnonzero(~bad[1:] & ~bad[:-1]) + 1, 150, replace=False)
+    E[spikes, 4, k] += 0.05  # 5 % of the good frames, each alone
+    one = fit_rule([E], [bad], good_rate=0.02)
+    two = fit_rule([E], [bad], good_rate=0.02, frames=2)
+    assert two.frames == 2 and np.isfinite(two.thresholds[k])
+    f1, f2 = one.flags(E), two.flags(E)
+    assert np.count_nonzero(f2 & ~bad) <= 0.02 * np.count_nonzero(~bad)
+    assert np.count_nonzero(f2 & bad) >= 0.9 * np.count_nonzero(bad)  # a run's first frame
+    assert np.count_nonzero(f2 & ~bad) < np.count_nonzero(f1 & ~bad)

@@ -15,6 +15,7 @@ from meshmocap.cli import main
 from meshmocap.errors import InputError
 from meshmocap.estimate.performer import tracking_template as tt
 from meshmocap.estimate.performer.subject import estimate_subject
+from meshmocap.estimate.recovery.evidence import LostRule, shipped_rule
 from meshmocap.estimate.recovery.reinit import SEEN_AGAIN, Recovery
 from meshmocap.geometry.carving import distance_grid
 from meshmocap.io.capture import SequenceFrame, open_capture
@@ -145,6 +146,28 @@ def test_a_limb_the_observations_miss_is_lost_until_seen_again(walker):
     held = rec.coast_pose()[t.skeleton.index("LeftArm")]
     assert np.abs(held - R[t.skeleton.index("LeftArm")]).max() < 0.05  # held as last seen
     assert rec.assess(observed_frame(posed.V, index=3), posed.V).lost == ()  # seen again
+
+
+def test_a_rule_held_over_frames_reads_the_evidence_of_the_frames_before(walker):
+    """Held over two frames, the rule flags the hanging arm on its second frame; a resumed
+    run's recovery given the evidence stored with the frame before (``before``) decides the
+    next frame as the run that went on did, and without it judges the frame alone."""
+    t, R, root, posed = walker
+    names = t.eval_skeleton.names
+    arm = np.isin(t.part_labels, [names.index(n) for n in ("left_elbow", "left_wrist")])
+    down = R.copy()
+    down[t.skeleton.index("LeftArm")] = np.eye(3)
+    hanging = t.pose(down, root).V
+    rule = LostRule(shipped_rule().thresholds, frames=2)
+    rec = Recovery(t, R, root, rule=rule)
+    ok = rec.assess(observed_frame(posed.V, index=0), posed.V)
+    pose = (rec.R.copy(), rec.root.copy())
+    lost = [rec.assess(observed_frame(posed.V[~arm], index=i), hanging).lost for i in (1, 2)]
+    assert "left_arm" not in lost[0] and "left_arm" in lost[1]
+    for before, expected in (((ok.evidence,), lost[0]), ((), ("left_arm",))):
+        resumed = Recovery(t, *pose, rule=rule, assessed=True, before=before)
+        q = resumed.assess(observed_frame(posed.V[~arm], index=1), hanging)
+        assert ("left_arm" in q.lost) == ("left_arm" in expected)
 
 
 @pytest.mark.parametrize("tracker", [ArticulatedICP, PatchTracker])

@@ -16,8 +16,12 @@ computes it after every frame, the global pass after every frame it rewrites) is
 * ``speed`` — metres per frame the limb's joints moved relative to the pelvis since the
   frame before (the largest over its joints): a limb that jumped.
 
-The rule (:class:`LostRule`) is a threshold per measure: a limb is lost when any of its
-measures exceeds its threshold. The thresholds ship as data
+The rule (:class:`LostRule`) is a threshold per measure and a number of frames: a limb is
+lost when one of its measures exceeds its threshold on that many frames in a row, the frame
+and those just before it (:attr:`LostRule.frames`; the evidence the rule reads is, per limb
+and measure, the least over those frames, :meth:`LostRule.persisted`). A fit that is off for
+a single frame (a fast limb the tracker catches up with, a hull's phantom) is not a limb
+lost; a lost limb stays lost for many frames. The rule ships as data
 (``data/lost_rule.json``, :data:`RULE_FILE`), fitted by ``benchmarks/bench_lost.py``
 (:func:`fit_rule`) on tracks of the pose library's motions by every tracker, and scored
 there leaving each motion category out of the fit in turn; the file's ``note`` says on
@@ -27,6 +31,7 @@ which tracks it was fitted.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -55,14 +60,19 @@ RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "
 
 @dataclass(frozen=True)
 class LostRule:
-    """A threshold per measure of :data:`EVIDENCE` (``inf``: the measure never flags).
+    """A threshold per measure of :data:`EVIDENCE` (``inf``: the measure never flags), held
+    for a number of frames in a row.
 
     Attributes
     ----------
     thresholds : tuple of float, one per :data:`EVIDENCE` measure (units as there)
+    frames : int
+        Frames in a row (the frame assessed and those just before it) a measure must exceed
+        its threshold on for the limb to be lost (1: the frame alone).
     """
 
     thresholds: tuple[float, ...]
+    frames: int = 1
 
     def __post_init__(self) -> None:
         if len(self.thresholds) != len(EVIDENCE):
@@ -70,22 +80,46 @@ class LostRule:
                 f"lost rule: expected {len(EVIDENCE)} thresholds ({', '.join(EVIDENCE)}), "
                 f"found {len(self.thresholds)}"
             )
+        if isinstance(self.frames, bool) or not isinstance(self.frames, int) or self.frames < 1:
+            raise InputError(f"lost rule: frames must be an integer ≥ 1, found {self.frames!r}")
 
     def limb_lost(self, evidence: np.ndarray) -> np.ndarray:
-        """(..., L) bool: each limb of ``evidence`` (..., L, E) lost."""
+        """(..., L) bool: each limb of ``evidence`` (..., L, E) past a threshold, the
+        evidence taken as it is (held over frames already: :meth:`persisted`)."""
         return np.any(np.asarray(evidence) > np.asarray(self.thresholds), axis=-1)
 
+    def persisted(self, evidence: np.ndarray, before: Sequence[np.ndarray] = ()) -> np.ndarray:
+        """(L, E) float64: the evidence the rule reads on a frame, per limb and measure the
+        least of the frame's ``evidence`` (L, E) and that of the frames just before it
+        (``before``, oldest first; the last :attr:`frames` − 1 are used, fewer where fewer
+        were assessed)."""
+        out = np.asarray(evidence, dtype=np.float64)
+        for e in list(before)[-(self.frames - 1) :] if self.frames > 1 else ():
+            out = np.minimum(out, np.asarray(e, dtype=np.float64))
+        return out
+
+    def sequence(self, evidence: np.ndarray) -> np.ndarray:
+        """(T, L, E) float64: :meth:`persisted` at each frame of ``evidence`` (T, L, E),
+        consecutive frames in order (the first frames with fewer before them)."""
+        e = np.asarray(evidence, dtype=np.float64)
+        out = e.copy()
+        for s in range(1, min(self.frames, len(e))):
+            out[s:] = np.minimum(out[s:], e[:-s])
+        return out
+
     def flags(self, evidence: np.ndarray) -> np.ndarray:
-        """(T,) bool: the frames of ``evidence`` (T, L, E) with a limb lost."""
-        return self.limb_lost(evidence).any(axis=-1)
+        """(T,) bool: the frames of ``evidence`` (T, L, E), consecutive frames in order,
+        with a limb lost (:meth:`sequence`)."""
+        return self.limb_lost(self.sequence(evidence)).any(axis=-1)
 
     def describe(self) -> str:
-        """The thresholds used, one ``name > value`` each."""
-        return ", ".join(
+        """The thresholds used, one ``name > value`` each, and the frames in a row."""
+        text = ", ".join(
             f"{n} > {t:.3g}"
             for n, t in zip(EVIDENCE, self.thresholds, strict=True)
             if np.isfinite(t)
         )
+        return text + (f" on {self.frames} frames in a row" if self.frames > 1 else "")
 
     def write(self, path: str | Path, *, note: str = "") -> None:
         """Save the rule as JSON (``inf`` as null)."""
@@ -93,15 +127,20 @@ class LostRule:
             n: (float(t) if np.isfinite(t) else None)
             for n, t in zip(EVIDENCE, self.thresholds, strict=True)
         }
-        Path(path).write_text(json.dumps({"thresholds": th, "note": note}, indent=1) + "\n")
+        rule = {"thresholds": th, "frames": self.frames, "note": note}
+        Path(path).write_text(json.dumps(rule, indent=1) + "\n")
 
     @classmethod
     def read(cls, path: str | Path) -> LostRule:
-        """A rule saved by :meth:`write`."""
+        """A rule saved by :meth:`write` (one without ``frames``: the frame alone)."""
         try:
-            th = json.loads(Path(path).read_text())["thresholds"]
-            return cls(tuple(np.inf if th.get(n) is None else float(th[n]) for n in EVIDENCE))
-        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            rule = json.loads(Path(path).read_text())
+            th = rule["thresholds"]
+            return cls(
+                tuple(np.inf if th.get(n) is None else float(th[n]) for n in EVIDENCE),
+                int(rule.get("frames", 1)),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError, InputError) as e:
             raise FormatError(f"lost rule: {path} is not a rule file ({e})") from None
 
 
@@ -111,17 +150,26 @@ def shipped_rule() -> LostRule:
     return LostRule.read(RULE_FILE)
 
 
-def lost_limbs(evidence: np.ndarray, rule: LostRule | None = None) -> tuple[str, ...]:
+def lost_limbs(
+    evidence: np.ndarray, rule: LostRule | None = None, *, before: Sequence[np.ndarray] = ()
+) -> tuple[str, ...]:
     """The limbs lost on a frame, in :data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`
     order: those with a measure of ``evidence`` (L, E) (:data:`EVIDENCE`) over ``rule``'s
-    threshold (default :func:`shipped_rule`)."""
-    lost = (rule or shipped_rule()).limb_lost(evidence)
+    threshold (default :func:`shipped_rule`), on this frame and, for a rule held over
+    frames, on the frames just before it (``before``: their evidence, oldest first;
+    :meth:`LostRule.persisted`)."""
+    rule = rule or shipped_rule()
+    lost = rule.limb_lost(rule.persisted(evidence, before))
     return tuple(n for n, k in zip(LIMB_PARTS, lost, strict=True) if k)
 
 
-def lost_reasons(evidence: np.ndarray, rule: LostRule | None = None) -> dict[str, str]:
-    """Per lost limb (:func:`lost_limbs`), why, in words: each measure over its threshold."""
+def lost_reasons(
+    evidence: np.ndarray, rule: LostRule | None = None, *, before: Sequence[np.ndarray] = ()
+) -> dict[str, str]:
+    """Per lost limb (:func:`lost_limbs`), why, in words: each measure over its threshold
+    (the least value over the frames the rule holds it for)."""
     rule = rule or shipped_rule()
+    evidence = rule.persisted(evidence, before)
     words = {
         "outside": lambda v: f"{100 * v:.0f}% outside the observations",
         "buried": lambda v: f"{100 * v:.0f}% buried in the body",
@@ -144,6 +192,7 @@ def fit_rule(
     *,
     good_rate: float = 0.04,
     quantiles: np.ndarray | None = None,
+    frames: int = 1,
 ) -> LostRule:
     """Thresholds that flag as many bad frames as possible while flagging at most
     ``good_rate`` of the good frames: greedily, the measure and threshold (a quantile of
@@ -152,16 +201,20 @@ def fit_rule(
 
     Parameters
     ----------
-    evidence : list of (T, L, E) float64, one per track
+    evidence : list of (T, L, E) float64, one per track, its frames in order
     bad : list of (T,) bool, the frames with a joint off (the label)
     good_rate : float, the share of good frames the rule may flag
     quantiles : (q,) float, candidate quantiles of the good frames' values
+    frames : int, the rule's frames in a row (:attr:`LostRule.frames`): the thresholds
+        are fitted to the evidence held over that many frames (:meth:`LostRule.sequence`)
 
     Returns
     -------
     LostRule
     """
-    X = np.concatenate([e.max(axis=1) for e in evidence])  # (N, E): worst limb per frame
+    hold = LostRule((np.inf,) * len(EVIDENCE), frames)
+    # (N, E): worst limb per frame, of the evidence the rule reads
+    X = np.concatenate([hold.sequence(e).max(axis=1) for e in evidence])
     y = np.concatenate(bad).astype(bool)
     q = np.linspace(0.9, 1.0, 101) if quantiles is None else np.asarray(quantiles)
     good = X[~y]
@@ -183,5 +236,5 @@ def fit_rule(
                 if new_bad > 0 and score > gain:
                     best, gain = (k, t), score
         if best is None:
-            return LostRule(tuple(float(v) for v in th))
+            return LostRule(tuple(float(v) for v in th), frames)
         th[best[0]] = best[1]

@@ -14,6 +14,7 @@ where one is made, ``Tracker.reseat``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -71,6 +72,10 @@ class Recovery:
         ``(R, root)`` is the pose of a frame already assessed (a resumed run): the next
         frame's motion (the ``speed`` evidence) is measured from it, as in the run that
         assessed it; otherwise the first frame assessed has no motion.
+    before : sequence of (L, E) float64
+        The evidence of the frames assessed just before (a resumed run: as stored with
+        them, oldest first), which a rule held over frames reads with the next frame's
+        (:attr:`~meshmocap.estimate.recovery.evidence.LostRule.frames`).
     """
 
     def __init__(
@@ -81,6 +86,7 @@ class Recovery:
         *,
         rule: LostRule | None = None,
         assessed: bool = False,
+        before: Sequence[np.ndarray] = (),
     ):
         self.template = template
         #: the rule that flags a limb lost from the frame's evidence (default: shipped)
@@ -106,6 +112,8 @@ class Recovery:
         self.fits_well: dict[str, int] = {}
         #: the last frame's quality as :meth:`assess` returned it (``lost``: the rule's)
         self.quality: FitQuality | None = None
+        #: the evidence of the last frames assessed, oldest first (a few)
+        self.recent: list[np.ndarray] = [np.asarray(e, dtype=np.float64) for e in before][-4:]
 
     def _inputs(self, frame):
         obs = observed(frame)
@@ -169,8 +177,9 @@ class Recovery:
         for n, idx in self.limb_joints.items():
             if n not in held:
                 self.held[idx] = R[idx]
-        lost = lost_limbs(evidence, self.rule)
-        reasons = lost_reasons(evidence, self.rule)
+        lost = lost_limbs(evidence, self.rule, before=self.recent)
+        reasons = lost_reasons(evidence, self.rule, before=self.recent)
+        self.recent = [*self.recent[-3:], evidence]
         self.quality = replace(
             q,
             lost=lost,
