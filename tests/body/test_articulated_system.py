@@ -1,6 +1,7 @@
 """The compiled articulated-ICP pieces equal their numpy references: the posed model, the
 moment-assembled normal equations (against the dense ``Σ JᵀJ``), the point motion, the
-rotation error, the nearest compatible partner and the sampled vertex normals."""
+rotation error, the nearest compatible partner, the sampled vertex normals and the closest
+points' energy as moments."""
 
 import numpy as np
 import pytest
@@ -8,11 +9,14 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
     articulated_model,
+    closest_point_system,
+    model_subset,
     nearest_compatible,
     pose_points,
     residual_jacobian,
 )
 from meshmocap.body.articulated_system import (
+    closest_point_moments,
     moment_plan,
     normal_equations,
     pair_moments,
@@ -152,3 +156,30 @@ def test_vertex_normals_at_equals_every_normal_picked(setup):
     V, F = template.V, template.F
     idx = np.random.default_rng(1).choice(len(V), 700)  # with repeats
     assert np.array_equal(vertex_normals_at(V, F, idx), vertex_normals(V, F)[idx])
+
+
+def test_closest_point_moments_give_closest_point_systems_equations(setup):
+    """Both directions' pairs as per-point moments, then normal_equations: the dense
+    closest_point_system (point-to-plane plus a tenth of a subsample's point-to-point) to
+    1e-12 relative; and a model restricted to some points poses them as the whole does."""
+    _, model, plan, R, root = setup
+    rng = np.random.default_rng(3)
+    posed = posed_model(plan, R, root)
+    v, _, a = pose_points(model, R, root)
+    Y = v[rng.integers(0, len(v), 1200)] + rng.normal(scale=0.02, size=(1200, 3))
+    NY = rng.normal(size=(1200, 3))
+    NY /= np.linalg.norm(NY, axis=1, keepdims=True)
+    pairs = [
+        (rng.integers(0, len(v), 700), rng.integers(0, 1200, 700)),
+        (rng.integers(0, len(v), 1100), rng.integers(0, 1200, 1100)),
+    ]
+    H_ref, g_ref = closest_point_system(v, a, pairs, (1.0, 0.5), Y, NY)
+    S, b = closest_point_moments(posed.v, pairs, (1.0, 0.5), Y, NY)
+    H, g = normal_equations(plan, posed, S, b)
+    assert np.abs(H - H_ref).max() < 1e-12 * np.abs(H_ref).max()
+    assert np.abs(g - g_ref).max() < 1e-12 * np.abs(g_ref).max()
+    keep = np.sort(rng.choice(len(v), 40, replace=False))
+    vs, ns, as_ = pose_points(model_subset(model, keep), R, root)
+    _, n, _ = pose_points(model, R, root)
+    assert np.array_equal(vs, v[keep]) and np.array_equal(ns, n[keep])
+    assert np.array_equal(as_, a[keep])

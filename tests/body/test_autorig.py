@@ -7,7 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from meshmocap.body.autorig import MIN_VERTICES, fit_skeleton, rest_in_pose, rig_mesh
+from meshmocap.body.autorig import (
+    MIN_VERTICES,
+    fit_skeleton,
+    mesh_samples,
+    rest_in_pose,
+    rig_mesh,
+)
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template, template_problems
 from meshmocap.errors import InputError, MeshError
@@ -192,3 +198,16 @@ def test_bench_crane_hook_rigs_frame0_for_every_method(shared_data, tmp_path):
     assert icp.per_frame_mm[0] < 1.0  # frame 0 is the template itself
     assert icp.mean_mm < 30.0 and not math.isnan(icp.bone_std_max_mm)  # a real skeleton now
     assert (tmp_path / "out" / "work" / "templates" / "crane+humaneva4-2f.npz").is_file()
+
+
+def test_a_fit_on_shared_mesh_samples_is_the_fit_on_the_mesh(subject):
+    """mesh_samples made once (for fits from several starts) give the very fit that
+    fit_skeleton samples for itself; a bad mesh is refused there in one line."""
+    t, V, _, _ = subject
+    kw = dict(iterations=3, fit_scale=True, n_model_points=400, seed=1)
+    own = fit_skeleton(t, V, t.F, n_data_points=900, **kw)
+    shared = fit_skeleton(t, V, t.F, samples=mesh_samples(V, t.F, 900, seed=1), **kw)
+    assert np.array_equal(own.R, shared.R) and np.array_equal(own.root, shared.root)
+    assert own.scale == shared.scale and own.rms == shared.rms
+    with pytest.raises(MeshError, match="mesh_samples: "):
+        mesh_samples(V, t.F[:-1], 900)

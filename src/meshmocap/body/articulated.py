@@ -62,6 +62,7 @@ __all__ = [
     "closest_point_system",
     "damped_solve",
     "limit_step",
+    "model_subset",
     "nearest_compatible",
     "pose_points",
     "residual_jacobian",
@@ -164,6 +165,26 @@ def articulated_model(
         N0=vertex_normals(V, F)[sample],
         W_acc=np.asarray(W @ D),
         D=D,
+    )
+
+
+def model_subset(model: ArticulatedModel, keep: np.ndarray) -> ArticulatedModel:
+    """The model restricted to its points ``keep`` (k,) int64 (positions in
+    ``model.sample``, sorted): :func:`pose_points` gives those points the same values as
+    the whole model does (each point's sums run over its own weights alone)."""
+    W = model.W[keep]
+    W.sort_indices()
+    coo = W.tocoo()
+    return ArticulatedModel(
+        template=model.template,
+        sample=model.sample[keep],
+        W=W,
+        rows=coo.row.astype(np.int64),
+        cols=coo.col.astype(np.int64),
+        X=model.X[keep],
+        N0=model.N0[keep],
+        W_acc=model.W_acc[keep],
+        D=model.D,
     )
 
 

@@ -42,11 +42,12 @@ from meshmocap.body._articulated_kernels import (
     posed_kernel,
     rotation_error_kernel,
 )
-from meshmocap.body.articulated import ArticulatedModel
+from meshmocap.body.articulated import POINT_MIX, POINT_MIX_PAIRS, ArticulatedModel
 
 __all__ = [
     "MomentPlan",
     "PosedModel",
+    "closest_point_moments",
     "moment_plan",
     "normal_equations",
     "pair_moments",
@@ -154,6 +155,45 @@ def pair_moments(
         np.ascontiguousarray(s, dtype=np.float64),
         residual == "point_to_plane",
     )
+
+
+def closest_point_moments(
+    v: np.ndarray,
+    pairs: list[tuple[np.ndarray, np.ndarray]],
+    weights: tuple[float, ...],
+    Y: np.ndarray,
+    NY: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The per-model-point moments (:func:`pair_moments`, summed) of the energy of
+    :func:`~meshmocap.body.articulated.closest_point_system`: for each direction (weight
+    w, p pairs) w times the mean squared point-to-plane residual plus w times
+    :data:`~meshmocap.body.articulated.POINT_MIX` times the mean squared point-to-point
+    residual over the same subsample of pairs.
+
+    Parameters
+    ----------
+    v : (m, 3) float64, model points, metres
+    pairs : list of (model point indices, observed point indices) (int64), e.g.
+        :func:`~meshmocap.body.articulated.closest_pairs`
+    weights : tuple of float, the weight of each direction
+    Y, NY : (p, 3) float64, observed points (metres) and unit normals
+
+    Returns
+    -------
+    S : (m, 3, 3) float64 and b : (m, 3) float64, for :func:`normal_equations`
+    """
+    m = len(v)
+    S, b = np.zeros((m, 3, 3)), np.zeros((m, 3))
+    for (ii, kk), w in zip(pairs, weights, strict=True):
+        if not len(ii):
+            continue
+        ws = np.full(len(ii), w / len(ii))
+        S1, b1, _ = pair_moments(v, ii, Y[kk], NY[kk], ws, "point_to_plane")
+        sub = slice(None, None, max(1, len(ii) // POINT_MIX_PAIRS))
+        ws = np.full(len(ii[sub]), w * POINT_MIX / len(ii[sub]))
+        S2, b2, _ = pair_moments(v, ii[sub], Y[kk[sub]], NY[kk[sub]], ws, "point_to_point")
+        S, b = S + S1 + S2, b + b1 + b2
+    return S, b
 
 
 def normal_equations(

@@ -52,8 +52,13 @@ from meshmocap.body.articulated import (
     articulated_model,
     articulated_step,
     closest_pairs,
-    closest_point_system,
-    pose_points,
+)
+from meshmocap.body.articulated_system import (
+    PosedModel,
+    closest_point_moments,
+    moment_plan,
+    normal_equations,
+    posed_model,
     rotation_error,
 )
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
@@ -66,9 +71,11 @@ from meshmocap.geometry.rotations import so3_exp
 
 __all__ = [
     "MIN_VERTICES",
+    "MeshSamples",
     "SkeletonFit",
     "fit_sequence",
     "fit_skeleton",
+    "mesh_samples",
     "nearest_surface_points",
     "rest_in_pose",
     "rig_mesh",
@@ -114,6 +121,38 @@ def _area_centre(V: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray]:
 
 # ------------------------------------------------------------------------------ fitting
 @dataclass(frozen=True, eq=False)
+class MeshSamples:
+    """Area-uniform samples of a closed mesh that :func:`fit_skeleton` fits to, made once
+    (:func:`mesh_samples`) where several fits share a mesh (e.g. fits from several headings).
+
+    Attributes
+    ----------
+    Y : (p, 3) float64, surface points, metres
+    NY : (p, 3) float64, their unit face normals (outwards)
+    tree : KDTree of ``Y``
+    """
+
+    Y: np.ndarray
+    NY: np.ndarray
+    tree: KDTree
+
+
+def mesh_samples(V: np.ndarray, F: np.ndarray, n_points: int = 4000, *, seed: int = 0):
+    """:class:`MeshSamples` of ``n_points`` points of the closed mesh ``V`` (n, 3) float64,
+    metres, ``F`` (m, 3) int (seeded by ``seed``): what :func:`fit_skeleton` samples with
+    ``n_data_points=n_points``, the same points.
+
+    Raises
+    ------
+    MeshError
+        The mesh is not a closed 2-manifold of at least :data:`MIN_VERTICES` vertices.
+    """
+    V, F = _check_mesh("mesh_samples", V, F)
+    Y, NY = _surface(V, F, n_points, seed)
+    return MeshSamples(Y, NY, KDTree(Y))
+
+
+@dataclass(frozen=True, eq=False)
 class SkeletonFit:
     """A template's pose (and size) fitted to a mesh by :func:`fit_skeleton`.
 
@@ -150,11 +189,9 @@ class _Fitter:
     def __init__(
         self,
         template,
-        V,
-        F,
+        samples,
         *,
         n_model_points,
-        n_data_points,
         lambda_pose,
         fixed_joints,
         fit_scale,
@@ -163,8 +200,9 @@ class _Fitter:
         self.t = template
         self.sk = template.skeleton
         self.model = articulated_model(template, n_points=n_model_points, seed=seed)
-        self.Y, self.NY = _surface(V, F, n_data_points, seed)
-        self.tree = KDTree(self.Y)
+        self.plan = moment_plan(self.model)
+        self.rest = np.tile(np.eye(3), (self.sk.n_joints, 1, 1))
+        self.Y, self.NY, self.tree = samples.Y, samples.NY, samples.tree
         self.lambda_pose = lambda_pose
         J = self.sk.n_joints
         free = [j for j, name in enumerate(self.sk.names) if name not in fixed_joints]
@@ -173,12 +211,23 @@ class _Fitter:
             act.append(np.array([3 + 3 * J]))
         self.active = np.concatenate([a.ravel() for a in act])
 
-    def posed(self, R, root, s):
-        u, n, a = pose_points(self.model, R, root)
-        return root + s * (u - root), n, s * a
+    def posed(self, R, root, s) -> PosedModel:
+        """The model points posed and scaled by ``s`` about the root: every nonzero
+        weight's part ``q_e`` and every joint moved as the points are, so that the lever
+        arms of :func:`~meshmocap.body.articulated_system.normal_equations` are the
+        unscaled ones times ``s``."""
+        p = posed_model(self.plan, R, root)
+        w = self.model.W.data[:, None]
+        return PosedModel(
+            G=p.G,
+            P=root + s * (p.P - root),
+            q=w * root + s * (p.q - w * root),
+            v=root + s * (p.v - root),
+            n=p.n,
+        )
 
     def rms(self, R, root, s) -> float:
-        v, _, _ = self.posed(R, root, s)
+        v = self.posed(R, root, s).v
         d1 = np.minimum(self.tree.query(v, k=1)[0], 0.2)
         d2 = np.minimum(KDTree(v).query(self.Y, k=1)[0], 0.2)
         return float(np.sqrt(0.5 * (np.mean(d1**2) + np.mean(d2**2))))
@@ -186,18 +235,28 @@ class _Fitter:
     def step(self, R, root, s, max_distance, normal_cos):
         """One damped Gauss–Newton step; returns the new (R, root, s)."""
         J = self.sk.n_joints
-        v, nv, a = self.posed(R, root, s)
+        p = self.posed(R, root, s)
         pairs = closest_pairs(
-            self.tree, self.Y, self.NY, v, nv, max_distance=max_distance, normal_cos=normal_cos
+            self.tree, self.Y, self.NY, p.v, p.n, max_distance=max_distance, normal_cos=normal_cos
         )
         if not any(len(i) for i, _ in pairs):
             raise FitError("fit_skeleton: no compatible closest points")
-        # the log of the scale moves a point along its arm from the root
-        H, g = closest_point_system(v, a, pairs, (1.0, 1.0), self.Y, self.NY, extra=v - root)
+        # closest_point_system's energy, from per-model-point moments
+        S, b = closest_point_moments(p.v, pairs, (1.0, 1.0), self.Y, self.NY)
+        H = np.zeros((4 + 3 * J, 4 + 3 * J))
+        g = np.zeros(4 + 3 * J)
+        H[:-1, :-1], g[:-1] = normal_equations(self.plan, p, S, b)
+        # the log of the scale moves a point along its arm e from the root: its column of
+        # H is Σ Jᵀ S e, the pose's g of the moments b = S e
+        e = p.v - root
+        Se = np.einsum("mab,mb->ma", S, e)
+        H[:-1, -1] = H[-1, :-1] = normal_equations(self.plan, p, S, Se)[1]
+        H[-1, -1] = float(np.sum(e * Se))
+        g[-1] = float(np.sum(e * b))
         # weak pull of every non-root joint towards the rest pose (world-frame error)
         lam = np.full(J, self.lambda_pose)
         lam[0] = 0.0
-        add_pose_pull(H, g, rotation_error(self.sk, R, root), lam)
+        add_pose_pull(H, g, rotation_error(self.plan, p, R, self.rest), lam)
         act = self.active
         R, root, delta = articulated_step(
             self.sk,
@@ -207,6 +266,7 @@ class _Fitter:
             g[act],
             active=act,
             n_params=4 + 3 * J,
+            G=p.G,
         )
         return R, root, s * float(np.exp(np.clip(delta[-1], -0.1, 0.1)))
 
@@ -228,6 +288,7 @@ def fit_skeleton(
     n_data_points: int = 4000,
     fixed_joints: tuple[str, ...] = FIXED_JOINTS,
     seed: int = 0,
+    samples: MeshSamples | None = None,
 ) -> SkeletonFit:
     """Fit a template's skeleton pose (and optionally its size) to a closed mesh.
 
@@ -265,6 +326,10 @@ def fit_skeleton(
         Joints kept at their starting rotation (default: the articulated ICP's).
     seed : int
         Seed of both samples.
+    samples : MeshSamples, optional
+        The mesh's samples where the caller made them once for several fits
+        (:func:`mesh_samples` of ``V``, ``F``: then ``V``, ``F`` and ``n_data_points`` are
+        not read, and the mesh is not checked again).
 
     Returns
     -------
@@ -273,7 +338,10 @@ def fit_skeleton(
     func = "fit_skeleton"
     if not isinstance(template, Template):
         raise InputError(f"{func}: template must be a Template, found {type(template).__name__}")
-    V, F = _check_mesh(func, V, F)
+    if samples is None:
+        V, F = _check_mesh(func, V, F)
+        Y, NY = _surface(V, F, n_data_points, seed)
+        samples = MeshSamples(Y, NY, KDTree(Y))
     J = template.skeleton.n_joints
     R = np.tile(np.eye(3), (J, 1, 1)) if R is None else np.array(R, dtype=np.float64)
     root = template.skeleton.rest_positions[0] if root is None else root
@@ -294,10 +362,8 @@ def fit_skeleton(
         raise InputError(f"{func}: scale must be a positive number, found {scale!r}")
     fitter = _Fitter(
         template,
-        V,
-        F,
+        samples,
         n_model_points=n_model_points,
-        n_data_points=n_data_points,
         lambda_pose=lambda_pose,
         fixed_joints=tuple(fixed_joints),
         fit_scale=fit_scale,

@@ -97,3 +97,48 @@ def test_a_fit_from_the_mean_body_recovers_another_body_from_its_silhouettes(spa
     start = np.linalg.norm(mean.V - true.V, axis=1).mean()
     assert start > 0.05 and np.linalg.norm(V - true.V, axis=1).mean() < 0.01
     assert abs(np.ptp(body.V[:, 2]) - np.ptp(true.V[:, 2])) < 0.005
+
+
+def test_outlines_rendered_in_their_box_and_terms_on_their_rows_are_the_whole_images(space):
+    """The outline vertices found in the projected body's box equal those of the whole
+    image's silhouette (the reference below), and the terms from the lever arms and shape
+    Jacobians of the rows they use only equal those from every vertex's."""
+    from pykdtree.kdtree import KDTree
+    from scipy import ndimage
+
+    from meshmocap.body.articulated import model_subset
+    from meshmocap.estimate.performer.shape_fit import outlines
+
+    rng = np.random.default_rng(5)
+    z = 0.5 * rng.normal(size=16)
+    t = space.template(z)
+    R = so3_exp(0.2 * rng.normal(size=(31, 3)))
+    root = t.skeleton.rest_positions[0] + np.array([0.3, -0.2, 0.0])
+    model = articulated_model(t, n_points=t.n_vertices)
+    v, n, a = pose_points(model, R, root)
+    cams = camera_rig("humaneva4")
+    views = [silhouette_view(silhouette(v, t.F, c, assume_closed=True), c) for c in cams]
+    lines = outlines(views, v, n, t.F)
+    for cam, got in zip(cams, lines, strict=True):
+        mask = silhouette(v, t.F, cam, assume_closed=True)
+        uv, depth = cam.project(v)
+        view = (v - cam.centre) / np.linalg.norm(v - cam.centre, axis=1, keepdims=True)
+        cand = np.flatnonzero((np.abs(np.sum(view * n, axis=1)) < 0.35) & (depth > 0))
+        rows, cols = np.nonzero(mask & ~ndimage.binary_erosion(mask))
+        d, k = KDTree(uv[cand]).query(
+            np.stack([cols, rows], 1).astype(np.float64), k=1, distance_upper_bound=2.0
+        )
+        want = np.unique(cand[k[np.isfinite(d) & (k < len(cand))].astype(np.int64)])
+        assert len(got) > 100 and np.array_equal(got, want)
+    sample = articulated_model(t, n_points=500, seed=0).sample
+    rows = np.unique(np.concatenate([sample, *lines]))
+    S = shape_jacobian(space, t, R, root)
+    S_rows = shape_jacobian(space, t, R, root, rows=rows)
+    assert np.array_equal(S_rows, S[rows])
+    _, _, a_rows = pose_points(model_subset(model, rows), R, root)
+    whole = frame_terms(views, v, n, a, S, t.F, sample, 25.0).rows
+    part = frame_terms(views, v, n, a_rows, S_rows, t.F, sample, 25.0, lines=lines, rows=rows)
+    assert [r[0] for r in whole] == [r[0] for r in part.rows] and len(whole) >= 8
+    for x, y in zip(whole, part.rows, strict=True):
+        for u, w in zip(x[1:], y[1:], strict=True):
+            assert np.array_equal(u, w)

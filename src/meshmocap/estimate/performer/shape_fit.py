@@ -51,6 +51,7 @@ from meshmocap.body.articulated import (
     articulated_model,
     damped_solve,
     limit_step,
+    model_subset,
     pose_points,
     rotation_error,
 )
@@ -60,9 +61,16 @@ from meshmocap.body.template import Template
 from meshmocap.errors import FitError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import cross
-from meshmocap.geometry.silhouette import silhouette
+from meshmocap.geometry.silhouette import fill_triangles
 
-__all__ = ["ShapeFit", "SilhouetteView", "fit_shape", "shape_jacobian", "silhouette_view"]
+__all__ = [
+    "ShapeFit",
+    "SilhouetteView",
+    "fit_shape",
+    "outlines",
+    "shape_jacobian",
+    "silhouette_view",
+]
 
 #: Residuals beyond this (metres) get Huber weights.
 HUBER = 0.02
@@ -145,23 +153,30 @@ def _projection(camera: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 
 def shape_jacobian(
-    space: BodyShapeSpace, template: Template, R: np.ndarray, root: np.ndarray
+    space: BodyShapeSpace,
+    template: Template,
+    R: np.ndarray,
+    root: np.ndarray,
+    *,
+    rows: np.ndarray | None = None,
+    derivatives=None,
 ) -> np.ndarray:
     """``∂v/∂z`` (n, 3, K) float64 of every skinned vertex of ``template`` (the space's body
     at the current ``z``) posed by local rotations ``R`` (J, 3, 3) and ``root`` (3,)
-    (module docstring)."""
+    (module docstring); with ``rows`` (r,) int64, of those vertices only (r, 3, K), the
+    same values. ``derivatives``: ``space.derivatives()`` where the caller has it."""
     sk = template.skeleton
     G, _ = forward_kinematics(sk, R, root)
-    d = space.derivatives()  # leading axis K
+    d = space.derivatives() if derivatives is None else derivatives  # leading axis K
     dP = np.moveaxis(d.heads, 0, -1)  # (J, 3, K)
     dp = np.zeros_like(dP)
     for k in range(1, sk.n_joints):  # parents precede children
         q = sk.parents[k]
         dp[k] = dp[q] + G[q] @ (dP[k] - dP[q])
-    W = template.weights
-    n, K = template.n_vertices, space.n_components
+    W = template.weights if rows is None else template.weights[rows]
+    n, K = W.shape[0], space.n_components
     Gb = (W @ G.reshape(-1, 9)).reshape(n, 3, 3)
-    dX = np.moveaxis(d.V, 0, -1)  # (n, 3, K)
+    dX = np.moveaxis(d.V if rows is None else d.V[:, rows], 0, -1)  # (n, 3, K)
     out = np.einsum("nab,nbk->nak", Gb, dX)
     out -= (W @ np.einsum("jab,jbk->jak", G, dP).reshape(-1, 3 * K)).reshape(n, 3, K)
     out += (W @ dp.reshape(-1, 3 * K)).reshape(n, 3, K)
@@ -219,25 +234,61 @@ def _outline(v, n, cam, F, *, ring: float = 2.0, rim_cos: float = 0.35) -> np.nd
     """Indices of the vertices ``v`` (n, 3) on the outline of the model seen by ``cam``:
     for each boundary pixel of the model's rendered
     silhouette, the nearest vertex seen edge-on (``|n · view| < rim_cos``) projected within
-    ``ring`` pixels of it."""
-    mask = silhouette(v, F, cam, assume_closed=True)
+    ``ring`` pixels of it.
+
+    The silhouette is rendered and its boundary found in the box of the projected vertices
+    (2 pixels of margin, within the image) only: the same pixels as in the whole image
+    (pixel centres sit at integers, so the box's whole-pixel shift is exact)."""
     uv, depth = cam.project(v)
+    ok = depth > 0
+    H, W = cam.shape
+    if ok.any():
+        lo = np.floor(uv[ok].min(axis=0)).astype(np.int64) - 2
+        hi = np.ceil(uv[ok].max(axis=0)).astype(np.int64) + 3
+        c0, r0 = (max(0, int(x)) for x in lo)
+        c1, r1 = min(W, int(hi[0])), min(H, int(hi[1]))
+    else:
+        c0 = r0 = c1 = r1 = 0
+    if c1 <= c0 or r1 <= r0:
+        return np.zeros(0, dtype=np.int64)
+    mask = fill_triangles(
+        uv - np.array([c0, r0], dtype=np.float64),
+        F,
+        (r1 - r0, c1 - c0),
+        valid=ok,
+        orientation="positive",  # a closed body (silhouette(..., assume_closed=True))
+    )
     view = v - cam.centre
     view /= np.linalg.norm(view, axis=1, keepdims=True)
-    cand = np.flatnonzero((np.abs(np.sum(view * n, axis=1)) < rim_cos) & (depth > 0))
+    cand = np.flatnonzero((np.abs(np.sum(view * n, axis=1)) < rim_cos) & ok)
     rows, cols = np.nonzero(mask & ~ndimage.binary_erosion(mask))
     if len(cand) == 0 or len(rows) == 0:
         return np.zeros(0, dtype=np.int64)
     dist, k = KDTree(np.ascontiguousarray(uv[cand])).query(
-        np.stack([cols, rows], 1).astype(np.float64), k=1, distance_upper_bound=ring
+        np.stack([cols + c0, rows + r0], 1).astype(np.float64), k=1, distance_upper_bound=ring
     )
     return np.unique(cand[k[np.isfinite(dist) & (k < len(cand))].astype(np.int64)])
 
 
-def frame_terms(views, v, n, a, S, F, sample, max_match):
-    """The three silhouette terms of one frame (module docstring), as a :class:`FrameTerms`."""
+def outlines(views, v, n, F) -> list[np.ndarray]:
+    """The outline vertices of the model ``v``, ``n`` (n, 3) with faces ``F`` in each of
+    ``views`` (list of SilhouetteView): a list of (o,) int64 vertex indices per view."""
+    return [_outline(v, n, view.camera, F) for view in views]
+
+
+def frame_terms(views, v, n, a, S, F, sample, max_match, *, lines=None, rows=None):
+    """The three silhouette terms of one frame (module docstring), as a :class:`FrameTerms`.
+
+    ``a`` and ``S``: lever arms (r, J, 3) and shape Jacobians (r, 3, K) of the vertices
+    ``rows`` (sorted, holding ``sample`` and every outline vertex; default all vertices);
+    ``lines``: :func:`outlines` where the caller has them."""
     t = FrameTerms(a.shape[1] * 3 + 3, S.shape[2])
-    for view in views:
+    lines = outlines(views, v, n, F) if lines is None else lines
+
+    def at(i):  # rows of a and S of vertices i
+        return i if rows is None else np.searchsorted(rows, i)
+
+    for view, ol in zip(views, lines, strict=True):
         cam = view.camera
         # inside: sampled points outside the silhouette
         uv, D, s = _projection(cam, v[sample])
@@ -246,16 +297,16 @@ def frame_terms(views, v, n, a, S, F, sample, max_match):
         if out.any():
             g = _bilinear(view.grad, uv[out]).T  # (p, 2)
             w3 = s[out, None] * np.einsum("pc,pcx->px", g, D[out])
-            i = sample[out]
+            i = at(sample[out])
             t.add("inside", s[out] * d[out], w3, a[i], S[i], len(sample))
         # outline on the contour, both signs
-        ol = _outline(v, n, cam, F)
         if len(ol) == 0:
             continue
         uv, D, s = _projection(cam, v[ol])
         d = _bilinear(view.sdt, uv)
         g = _bilinear(view.grad, uv).T
-        t.add("outline", s * d, s[:, None] * np.einsum("pc,pcx->px", g, D), a[ol], S[ol], len(ol))
+        i = at(ol)
+        t.add("outline", s * d, s[:, None] * np.einsum("pc,pcx->px", g, D), a[i], S[i], len(ol))
         # coverage: each contour pixel explained by the nearest outline point
         tree = KDTree(np.ascontiguousarray(uv))
         dist, k = tree.query(view.contour, k=1, distance_upper_bound=max_match)
@@ -264,7 +315,7 @@ def frame_terms(views, v, n, a, S, F, sample, max_match):
             k, q, nq = k[ok].astype(np.int64), view.contour[ok], view.normal[ok]
             r = np.sum(nq * (uv[k] - q), axis=1) * s[k]
             w3 = s[k, None] * np.einsum("pc,pcx->px", nq, D[k])
-            t.add("coverage", r, w3, a[ol[k]], S[ol[k]], len(view.contour))
+            t.add("coverage", r, w3, a[i[k]], S[i[k]], len(view.contour))
     return t
 
 
@@ -333,15 +384,22 @@ def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda
     J = tmpl.skeleton.n_joints
     n_pose = 3 + 3 * J
     model = articulated_model(tmpl, n_points=tmpl.n_vertices)
+    deriv = space.derivatives()
     n_par = K + n_f * n_pose
     H = np.zeros((n_par, n_par))
     g = np.zeros(n_par)
     sq, cnt = 0.0, 0
     frames = []
     for f in range(n_f):
-        v, n, a = pose_points(model, R[f], root[f])
-        S = shape_jacobian(space, tmpl, R[f], root[f])
-        frames.append(frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match))
+        # every vertex posed (the outlines), the derivatives of those the terms use only
+        v, n, _ = pose_points(model, R[f], root[f], jacobian=False)
+        lines = outlines(views[f], v, n, tmpl.F)
+        rows = np.unique(np.concatenate([sample, *lines]))
+        _, _, a = pose_points(model_subset(model, rows), R[f], root[f])
+        S = shape_jacobian(space, tmpl, R[f], root[f], rows=rows, derivatives=deriv)
+        frames.append(
+            frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match, lines=lines, rows=rows)
+        )
     counts: dict[str, int] = {}
     for t in frames:
         for term, n_term in t.population.items():

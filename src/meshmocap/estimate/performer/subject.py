@@ -27,7 +27,7 @@ from scipy import ndimage
 
 from meshmocap._progress import phase
 from meshmocap._validate import check_choice
-from meshmocap.body.autorig import fit_skeleton, rig_mesh
+from meshmocap.body.autorig import fit_skeleton, mesh_samples, rig_mesh
 from meshmocap.body.shape_space import BodyShapeSpace, load_shape_space
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshError
@@ -163,6 +163,7 @@ def initial_body_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed:
     s0 = float(np.ptp(V[:, 2]) / np.ptp(template.V[:, 2]))
     centre = V.mean(axis=0)
     c_t = template.V.mean(axis=0)
+    coarse = mesh_samples(V, F, 1500, seed=seed)  # shared by the headings' fits
     fits = []
     for yaw in 2 * np.pi * np.arange(8) / 8:
         R = np.tile(np.eye(3), (sk.n_joints, 1, 1))
@@ -180,11 +181,12 @@ def initial_body_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed:
                 iterations=10,
                 max_distance=(0.3, 0.1),
                 n_model_points=600,
-                n_data_points=1500,
                 seed=seed,
+                samples=coarse,
             )
         )
     best = sorted(fits, key=lambda f: f.rms)[:2]
+    fine = mesh_samples(V, F, seed=seed)  # fit_skeleton's default n_data_points
     final = [
         fit_skeleton(
             template,
@@ -197,6 +199,7 @@ def initial_body_pose(template: Template, V: np.ndarray, F: np.ndarray, *, seed:
             iterations=25,
             max_distance=(0.1, 0.03),
             seed=seed,
+            samples=fine,
         )
         for f in best
     ]

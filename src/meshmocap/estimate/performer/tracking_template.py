@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open
+from meshmocap._threads import blas_threads
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template, load_template, save_template
 from meshmocap.estimate.performer.capture_cache import cached_subject
@@ -189,10 +190,14 @@ def tracking_template(
     chosen = frames_kind(capture) if kind == "auto" else kind
     # estimated once per capture and cached for it (meshmocap.estimate.performer.capture_cache);
     # hull and mesh: estimate_subject's own choice ("auto") is frames_kind's
-    if chosen == "points":
-        est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
-    else:
-        est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
+    # one BLAS (and k-d tree OpenMP) thread, as the commands and the tracking driver run
+    # (meshmocap._threads): a caller of the Python API (a benchmark, a notebook) otherwise
+    # estimates with every pool spinning on a shared machine
+    with blas_threads():
+        if chosen == "points":
+            est = cached_subject(capture, kind="points", estimate=_points_body, refresh=refresh)
+        else:
+            est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
     start = None
