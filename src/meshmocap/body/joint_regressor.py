@@ -11,6 +11,12 @@ template, in a second or two.
 
 With the template's own skinning the read-out is exact to a millimetre (see the tests); on
 a tracked surface it inherits the surface's errors.
+
+References
+----------
+- M. Loper, N. Mahmood, J. Romero, G. Pons-Moll, M. J. Black, *SMPL: a skinned
+  multi-person linear model*, ACM Transactions on Graphics 34(6) (SIGGRAPH Asia
+  2015). https://doi.org/10.1145/2816795.2818013
 """
 
 from __future__ import annotations

@@ -16,6 +16,12 @@ them on the template's skin at those landmarks' usual positions, not on bony lan
 of the performer: they are virtual, for tools that expect these names.
 
 Units: metres; the rest frame of templates (Z up, facing −Y, left towards +X).
+
+References
+----------
+- R. B. Davis, S. Õunpuu, D. Tyburski, J. R. Gage, *A gait analysis data collection
+  and reduction technique*, Human Movement Science 10(5):575–587, 1991.
+  https://doi.org/10.1016/0167-9457(91)90046-Z
 """
 
 from __future__ import annotations

@@ -5,6 +5,11 @@ A thin, checked wrapper of ``fast-simplification`` (the library trimesh's
 "simplified to 4000 vertices and 8000 faces" from a 10,000-vertex capture. Collapsed
 edges move vertices to their quadric-optimal positions, so the decimated vertices are
 not a subset of the input's. Metres in, metres out; any frame.
+
+References
+----------
+- M. Garland, P. S. Heckbert, *Surface simplification using quadric error metrics*,
+  SIGGRAPH 1997. https://doi.org/10.1145/258734.258849
 """
 
 from __future__ import annotations

@@ -23,6 +23,11 @@ tolerates one other camera that lost the subject: it is the union of the hulls o
 others without one of them).
 
 Images: ``(height, width, 3)`` uint8 RGB or float; masks ``(height, width)`` bool.
+
+References
+----------
+- T. Horprasert, D. Harwood, L. S. Davis, *A statistical approach for real-time robust
+  background subtraction and shadow detection*, ICCV Frame-Rate Workshop, 1999.
 """
 
 from __future__ import annotations

@@ -56,6 +56,16 @@ At rest ``s_j = 1`` (the numerator is ``2|u×v|² = 8 area²``); under a similar
 scale ``k``, ``s_j = k`` and ``x' = k R x + t`` exactly.
 
 Frames and units: world frame (Z up), metres; coordinates are unitless (φ) or metres (ψ).
+
+References
+----------
+- Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
+  27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
+- Y. Lipman, D. Levin, *Derivation and analysis of Green coordinates*, Computational
+  Methods and Function Theory 10(1):167–188, 2010.
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -26,6 +26,14 @@ accepted step (never below :data:`LAMBDA_MIN`), × 10 after a rejected one, givi
 :data:`LAMBDA_MAX`.
 
 :data:`DAMPING` holds every caller's λ and floor: the only damping values in meshmocap.
+
+References
+----------
+- D. W. Marquardt, *An algorithm for least-squares estimation of nonlinear
+  parameters*, Journal of the Society for Industrial and Applied Mathematics
+  11(2):431–441, 1963. https://doi.org/10.1137/0111030
+- J. Nocedal, S. J. Wright, *Numerical Optimization*, 2nd ed., Springer, 2006.
+  https://doi.org/10.1007/978-0-387-40065-5
 """
 
 from __future__ import annotations

@@ -13,6 +13,11 @@ voxel occupancy; a point-cloud capture (a scanner's PLY without faces) has neith
   undecided (an open scan), away from the cloud's centroid.
 
 Units: metres; world frame.
+
+References
+----------
+- H. Hoppe, T. DeRose, T. Duchamp, J. McDonald, W. Stuetzle, *Surface reconstruction
+  from unorganized points*, SIGGRAPH 1992. https://doi.org/10.1145/133994.134011
 """
 
 from __future__ import annotations

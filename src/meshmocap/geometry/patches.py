@@ -17,6 +17,13 @@ joint"). This module builds those pieces:
 
 ``V`` : (n, 3) float64 vertex positions, metres. ``F`` : (m, 3) int triangle indices.
 Patch labels are (n,) int64 in ``0 .. P-1`` with every patch non-empty.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Probabilistic deformable surface tracking from
+  multiple videos*, European Conference on Computer Vision (ECCV), 2010.
 """
 
 from __future__ import annotations

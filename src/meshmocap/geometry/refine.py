@@ -21,6 +21,12 @@ by conjugate gradients. The refinement starts from the tracked surface every fra
 never feeds back into the tracker's state: it cannot drift.
 
 Frames and units: any frame, metres.
+
+References
+----------
+- O. Sorkine, D. Cohen-Or, Y. Lipman, M. Alexa, C. Rössl, H.-P. Seidel, *Laplacian
+  surface editing*, Symposium on Geometry Processing (SGP), 2004.
+  https://doi.org/10.1145/1057432.1057456
 """
 
 from __future__ import annotations

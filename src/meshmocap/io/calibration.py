@@ -27,6 +27,12 @@ calibration defines it):
     and meshmocap's ``cameras.json``: see :mod:`meshmocap.io.cameras`.
 
 :func:`write_calibration` writes every format back (Qualisys: the fields above only).
+
+References
+----------
+- D. Pagnon, M. Domalain, L. Reveret, *Pose2Sim: an open-source Python package for
+  multiview markerless kinematics*, Journal of Open Source Software, 2022.
+  https://doi.org/10.21105/joss.04362
 """
 
 from __future__ import annotations

@@ -37,6 +37,17 @@ labelled thorax, with the 10 bone labels, at p > 0.9 by both methods; with the 1
 ``"svc"`` calls about 15 % of it outliers, ``"logistic"`` none. Only points near boundaries
 between parts get p ≤ 0.5. :func:`partition`'s ``max_distance`` (an extension, off by
 default) also drops points farther than a given distance from every training point.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- H.-T. Lin, C.-J. Lin, R. C. Weng, *A note on Platt's probabilistic outputs for
+  support vector machines*, Machine Learning 68(3):267–276, 2007.
+  https://doi.org/10.1007/s10994-007-5018-6
+- T.-F. Wu, C.-J. Lin, R. C. Weng, *Probability estimates for multi-class
+  classification by pairwise coupling*, Journal of Machine Learning Research
+  5:975–1005, 2004.
 """
 
 from __future__ import annotations

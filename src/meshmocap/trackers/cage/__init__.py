@@ -16,6 +16,14 @@ One method, one folder, read like its paper:
 * :mod:`~meshmocap.trackers.cage.options` and :mod:`~meshmocap.trackers.cage.tracker` —
   :class:`CageTracker`, one frame at a time (§5–6);
 * :mod:`~meshmocap.trackers.cage.transfer` — motion transfer to another body (§7).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
+  27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
 """
 
 from meshmocap.trackers.cage.options import CageOptions

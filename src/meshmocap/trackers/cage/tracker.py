@@ -71,6 +71,12 @@ rigid motion of the points (no cage derivative), the latent shape's come from on
 point's gradient with respect to the cage vertices
 (:meth:`~meshmocap.geometry.green.GreenDeformer.pointwise_vjp`) and each quad's own
 vertices; the output deforms the N vertices once. ``stage_seconds`` keeps the breakdown.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -11,6 +11,11 @@ One method, one folder, read like its paper:
 * :mod:`~meshmocap.trackers.patch.terms` — the math of the silhouette and temporal terms;
 * :mod:`~meshmocap.trackers.patch.kernels` — compiled inner loops (soft assignments);
 * :mod:`~meshmocap.trackers.patch.tracker` — :class:`PatchTracker`, one frame at a time.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
 """
 
 from meshmocap.trackers.patch.options import PatchOptions

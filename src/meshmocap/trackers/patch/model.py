@@ -5,6 +5,13 @@ bound to, and the blending that turns patch transforms into a smooth mesh.
 Notation: a patch ``k`` moves rigidly; it predicts the position of a rest vertex ``v0`` as
 ``x_k(v) = R_k (v0 − c0_k) + c_k`` with ``c0_k`` its rest centre and ``(R_k, c_k)`` its
 current rotation and centre (Cagniart et al. 2010, the paper's ref. [5]).
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Probabilistic deformable surface tracking from
+  multiple videos*, European Conference on Computer Vision (ECCV), 2010.
 """
 
 from __future__ import annotations

@@ -11,6 +11,11 @@ patch rotation/centre and joint position of
 (M-step; :mod:`meshmocap.trackers.patch.solver`), warm-started from the previous frame.
 Each term is normalised by its total weight, so the λs weigh mean squared residuals
 (metres²) whatever the number of points, patches or vertices.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
 """
 
 from __future__ import annotations
