@@ -50,6 +50,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "_progress",
         "_threads",
         "_timing",
+        "_tolerances",
         "_version",
     ),  # base
     ("geometry",),
@@ -80,6 +81,9 @@ UNTESTED: dict[str, str] = {
     "meshmocap._validate": (
         "the option-constraint table: tests/trackers/test_registry.py feeds every registered "
         "method an invalid value for every option"
+    ),
+    "meshmocap._tolerances": (
+        "named constants; what each guards is tested by the tests of the modules that use it"
     ),
     "meshmocap._version": "the version string, nothing to test",
     "meshmocap.errors": (

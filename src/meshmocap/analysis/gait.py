@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from meshmocap._tolerances import SAME_FPS
 from meshmocap.analysis.gait_signals import (
     SIDES,
     close_gaps,
@@ -545,7 +546,7 @@ def compare_gaits(test: Gait, reference: Gait, *, window: float = 0.2) -> GaitCo
     """Match the events of ``test`` to those of ``reference`` (same frame numbering and
     frame rate, e.g. a track and its capture's truth) within ``window`` seconds and compare
     their cadence and stride length."""
-    if abs(test.fps - reference.fps) > 1e-9:
+    if abs(test.fps - reference.fps) > SAME_FPS:
         raise InputError(f"compare_gaits: frame rates differ ({test.fps} and {reference.fps})")
     offsets, n_ref, spurious = [], 0, 0
     for ev in ("strikes", "foot_offs"):

@@ -10,6 +10,8 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import savgol_filter
 
+from meshmocap._tolerances import NORM_FLOOR
+
 SIDES = ("left", "right")
 
 
@@ -63,7 +65,7 @@ def smoothed(X: np.ndarray, window: int, deriv: int = 0) -> np.ndarray:
 def unit(v: np.ndarray) -> np.ndarray:
     """Return ``v`` (..., 3) scaled to unit length along the last axis (zero stays zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-12)
+    return v / np.maximum(n, NORM_FLOOR)
 
 
 def forward(J: np.ndarray, idx: dict[str, int], fps: float) -> np.ndarray:

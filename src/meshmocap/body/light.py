@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.body.autorig import nearest_surface_points, transfer_rig
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshError
@@ -80,10 +81,10 @@ def _surface_frames(
     T = F[tri]
     p = np.einsum("nk,nkc->nc", bary, V[T])
     n = np.einsum("nk,nkc->nc", bary, N[T])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), NORM_FLOOR)
     e = V[T[:, 1]] - V[T[:, 0]]
     t1 = e - np.einsum("nc,nc->n", e, n)[:, None] * n
-    t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-12)
+    t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), NORM_FLOOR)
     return p, np.stack([t1, np.cross(n, t1), n], axis=1)
 
 

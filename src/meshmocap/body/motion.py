@@ -7,6 +7,7 @@ from functools import cached_property
 
 import numpy as np
 
+from meshmocap._tolerances import ROUNDING_SLACK, SAME_FPS
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.errors import InputError
 from meshmocap.geometry.rotations import slerp_matrices
@@ -127,10 +128,10 @@ def resample(motion: Motion, fps: float) -> Motion:
     """
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"resample: fps must be a positive number, found {fps}")
-    if abs(fps - motion.fps) < 1e-9:
+    if abs(fps - motion.fps) < SAME_FPS:
         return motion
     times = motion.times
-    n = int(np.floor(motion.duration * fps + 1e-9)) + 1
+    n = int(np.floor(motion.duration * fps + ROUNDING_SLACK)) + 1
     new_times = np.arange(n) / fps
     R = slerp_matrices(motion.rotations, times, new_times)
     t = np.stack([np.interp(new_times, times, motion.root_positions[:, k]) for k in range(3)], 1)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from meshmocap._tolerances import DEPTH_FLOOR
 from meshmocap.errors import InputError
 
 
@@ -66,7 +67,7 @@ def project(
     """
     Xc = np.asarray(X, dtype=float) @ R.T + t
     depth = Xc[..., 2]
-    safe = np.where(np.abs(depth) < 1e-12, 1e-12, depth)
+    safe = np.where(np.abs(depth) < DEPTH_FLOOR, DEPTH_FLOOR, depth)
     uvw = Xc @ K.T
     return uvw[..., :2] / safe[..., None], depth
 
@@ -152,7 +153,7 @@ class Camera:
     def _project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Xc = X @ self.R.T + self.t
         depth = Xc[..., 2]
-        safe = np.where(np.abs(depth) < 1e-12, 1e-12, depth)
+        safe = np.where(np.abs(depth) < DEPTH_FLOOR, DEPTH_FLOOR, depth)
         x, y = Xc[..., 0] / safe, Xc[..., 1] / safe
         if np.any(self.dist):
             k1, k2, p1, p2, k3 = self.dist

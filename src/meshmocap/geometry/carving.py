@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from meshmocap._tolerances import ROUNDING_SLACK
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.distance_field import DistanceGrid, distance_grid_from_mesh, signed_distance
@@ -440,7 +441,7 @@ def carve(
     if bounds.shape != (2, 3) or not np.all(np.isfinite(bounds)) or np.any(bounds[0] > bounds[1]):
         raise InputError(f"bounds: expected finite [lower, upper] (2, 3) metres, found {bounds!r}")
     origin = bounds[0]
-    n = np.floor((bounds[1] - bounds[0]) / vs + 1e-9).astype(np.int64) + 1
+    n = np.floor((bounds[1] - bounds[0]) / vs + ROUNDING_SLACK).astype(np.int64) + 1
     if np.prod(n) > _MAX_VOXELS:
         raise InputError(
             f"bounds: {n[0]}×{n[1]}×{n[2]} voxels of {vs} m is too many (max {_MAX_VOXELS});"
@@ -529,7 +530,7 @@ def distance_grid(hull: VoxelHull, *, pad: float = 0.0) -> DistanceGrid:
         raise InputError("hull: the hull is empty; there is no surface to measure from")
     if not np.isfinite(pad) or pad < 0:
         raise InputError(f"pad: expected a non-negative number of metres, found {pad!r}")
-    k = 1 + int(np.ceil(pad / hull.voxel_size - 1e-9))
+    k = 1 + int(np.ceil(pad / hull.voxel_size - ROUNDING_SLACK))
     if k not in hull._fields:
         values = signed_distance(np.pad(hull.occupancy, k), hull.voxel_size)
         hull._fields[k] = DistanceGrid(values, hull.origin - k * hull.voxel_size, hull.voxel_size)

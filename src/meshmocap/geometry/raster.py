@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshmocap._tolerances import ROUNDING_SLACK
+
 _CHUNK = 4_000_000  # candidate (triangle, pixel) pairs per chunk
 
 
@@ -44,7 +46,8 @@ def rasterize(
     F = np.asarray(F, dtype=np.int64)
     tri = uv[F]  # (m, 3, 2)
     ok = (depth[F] > 0).all(axis=1)
-    lo = np.floor(tri.min(axis=1) + 1.0 - 1e-9).astype(np.int64)  # first pixel centre ≥ min
+    # the first pixel centre ≥ min
+    lo = np.floor(tri.min(axis=1) + 1.0 - ROUNDING_SLACK).astype(np.int64)
     hi = np.floor(tri.max(axis=1)).astype(np.int64)
     lo = np.maximum(lo, 0)
     hi = np.minimum(hi, [W - 1, H - 1])

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._tolerances import SAME_FPS
 from meshmocap.errors import FormatError, InputError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.io.capture import Capture, SequenceCapture, open_capture
 
@@ -150,7 +151,7 @@ def open_oriented(
                 "--up and --units apply to mesh and point-cloud files"
             )
         said = raw.meta.get("fps")
-        if fps is not None and said is not None and abs(float(said) - fps) > 1e-9:
+        if fps is not None and said is not None and abs(float(said) - fps) > SAME_FPS:
             raise InputError(
                 f"track: {source} is a capture folder of {said:g} fps (capture.json); "
                 "--fps applies to mesh and point-cloud files"

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshmocap._atomic import write_bytes_atomic, write_text_atomic
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.body.skeleton import Skeleton
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import vertex_normals
@@ -150,7 +151,7 @@ def _mesh_primitive(b: _Builder, V: np.ndarray, F: np.ndarray, *, normals: bool)
     attrs = {"POSITION": b.add(Vy, _FLOAT, target=_ARRAY, bounds=True)}
     if normals:
         N = vertex_normals(V, F) @ Z_UP_TO_Y_UP.T
-        N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-12)
+        N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), NORM_FLOOR)
         N[np.linalg.norm(N, axis=1) < 0.5] = (0.0, 1.0, 0.0)  # isolated vertices
         attrs["NORMAL"] = b.add(N, _FLOAT, target=_ARRAY)
     idx = _USHORT if len(V) < 65536 else _UINT

@@ -62,6 +62,7 @@ from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 from sklearn.svm import SVC
 
+from meshmocap._tolerances import ROUNDING_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
 
@@ -590,5 +591,5 @@ def partition(
         bone = bone[np.argsort(labels[bone], kind="stable")]  # random order within labels
         _, starts, counts = np.unique(labels[bone], return_index=True, return_counts=True)
         for s, c in zip(starts, counts, strict=True):
-            keep[bone[s : s + math.ceil(keep_fraction * c - 1e-9)]] = True
+            keep[bone[s : s + math.ceil(keep_fraction * c - ROUNDING_SLACK)]] = True
     return Partition(labels=labels, prob=p, kind=kind, keep=keep)

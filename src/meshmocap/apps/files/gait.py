@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import write_text_atomic
+from meshmocap._tolerances import SAME_FPS
 from meshmocap.analysis.gait import (
     CYCLE_SAMPLES,
     SIDES,
@@ -366,7 +367,7 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
         first = cap[0].truth if truth and cap is not None else None
         if first is not None and first.joints is not None:
             ref = capture_gait(cap)
-            if ref.found and g.found and abs(ref.fps - fps) < 1e-9:
+            if ref.found and g.found and abs(ref.fps - fps) < SAME_FPS:
                 cmp = compare_gaits(g, ref)
         what = (
             f"{path.name} ({track.meta.get('method', '?')}, {len(track.frames)} frames at "

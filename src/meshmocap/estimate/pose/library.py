@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.body.pose_library import PoseLibrary, load_pose_library
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
@@ -75,7 +76,7 @@ def body_frame(template: Template) -> np.ndarray:
     i = [sk.index(n) for n in names]
     left = P[i[0]] - P[i[1]] + P[i[2]] - P[i[3]]
     left[2] = 0.0
-    left /= max(float(np.linalg.norm(left)), 1e-12)
+    left /= max(float(np.linalg.norm(left)), NORM_FLOOR)
     up = np.array([0.0, 0.0, 1.0])
     return np.stack([left, np.cross(left, up), up], axis=1)
 

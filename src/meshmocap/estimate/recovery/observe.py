@@ -16,6 +16,7 @@ from functools import cached_property
 
 import numpy as np
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.geometry.carving import VoxelHull
 from meshmocap.geometry.distance_field import LazyDistanceGrid
 from meshmocap.geometry.mesh import vertex_normals
@@ -75,7 +76,7 @@ class ObservedFrame:
         if N is None:
             return V, point_normals(V)
         N = np.asarray(N, dtype=np.float64)
-        return V, N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-12)
+        return V, N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), NORM_FLOOR)
 
 
 def observed(frame) -> ObservedFrame:

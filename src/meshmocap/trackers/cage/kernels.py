@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
+from meshmocap._tolerances import ANTIPARALLEL, DIVISOR_FLOOR
 
 __all__ = ["quad_skinning_transforms", "silhouette_residuals"]
 
@@ -127,7 +128,7 @@ def _turn(a, b):  # pragma: no cover - compiled
     v = np.cross(a, b)
     c = np.sum(a * b)
     R = np.eye(3)
-    if c < -1 + 1e-9:
+    if c < -1 + ANTIPARALLEL:
         o = np.cross(a, np.array([1.0, 0.0, 0.0]))
         if np.sqrt(np.sum(o * o)) < 1e-6:
             o = np.cross(a, np.array([0.0, 1.0, 0.0]))
@@ -139,7 +140,7 @@ def _turn(a, b):  # pragma: no cover - compiled
     Kx = np.zeros((3, 3))
     Kx[0, 1], Kx[0, 2], Kx[1, 2] = -v[2], v[1], -v[0]
     Kx[1, 0], Kx[2, 0], Kx[2, 1] = v[2], -v[1], v[0]
-    f = 1.0 / max(1.0 + c, 1e-12)
+    f = 1.0 / max(1.0 + c, DIVISOR_FLOOR)
     return R + Kx + (Kx @ Kx) * f
 
 

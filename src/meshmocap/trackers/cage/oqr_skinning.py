@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshmocap._tolerances import ANTIPARALLEL, DIVISOR_FLOOR
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.trackers.cage.kernels import quad_skinning_transforms
@@ -48,9 +49,9 @@ def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     K = np.zeros((len(a), 3, 3))
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
     K -= K.transpose(0, 2, 1)
-    f = 1.0 / np.maximum(1.0 + c, 1e-12)
+    f = 1.0 / np.maximum(1.0 + c, DIVISOR_FLOOR)
     R = np.eye(3) + K + (K @ K) * f[:, None, None]
-    anti = c < -1 + 1e-9
+    anti = c < -1 + ANTIPARALLEL
     if anti.any():  # π about any axis orthogonal to a
         o = np.cross(a[anti], [1.0, 0.0, 0.0])
         o = np.where(

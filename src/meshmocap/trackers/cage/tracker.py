@@ -85,6 +85,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from meshmocap._tolerances import ROUNDING_SLACK
 from meshmocap.body.template import Template
 from meshmocap.errors import FormatError, MeshmocapFileNotFoundError
 from meshmocap.estimate.recovery.observe import frame_hull
@@ -504,7 +505,7 @@ class CageTracker:
         o = self.opts
         clock = StageClock(self.stage_seconds)
         hull = frame_hull(frame)  # a capture's hull, or the solid a mesh or point cloud bounds
-        k = 1 + int(np.ceil(_PAD / hull.voxel_size - 1e-9))  # as distance_grid(pad=_PAD)
+        k = 1 + int(np.ceil(_PAD / hull.voxel_size - ROUNDING_SLACK))  # as distance_grid(pad=_PAD)
         stride = max(1, round(o.field_spacing / hull.voxel_size))
         field = clock.field = HullDistanceField(
             hull.occupancy, hull.origin, hull.voxel_size, pad=k, stride=stride

@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
+from meshmocap._tolerances import DIVISOR_FLOOR
 from meshmocap.body.template import Template
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.patches import (
@@ -141,7 +142,7 @@ def build_patch_model(
     X0 = ev.rest_positions
     j, child = _nearest_bone(X0, ev.parents, classes[bone_of_patch], centres0)
     d = X0[child] - X0[j]
-    s = np.sum((centres0 - X0[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-12)
+    s = np.sum((centres0 - X0[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), DIVISOR_FLOOR)
     gamma = 1.0 - s  # Δ = γ x_j + (1 − γ) x_child is the foot of the perpendicular (Eq. 8)
     delta0 = X0[j] + s[:, None] * d
     bone_w = np.maximum(4.0 * s * (1.0 - s), MIN_BONE_WEIGHT)  # mid-bone patches weigh more
@@ -201,7 +202,7 @@ def _nearest_bone(
             continue
         a, b = X0[p], X0[ch]
         d = b - a
-        s = np.clip(((c[m] - a) @ d) / max(d @ d, 1e-12), 0.0, 1.0)
+        s = np.clip(((c[m] - a) @ d) / max(d @ d, DIVISOR_FLOOR), 0.0, 1.0)
         dist = np.linalg.norm(c[m] - (a + s[:, None] * d), axis=1)
         better = dist < best[m]
         idx = np.flatnonzero(m)[better]
@@ -224,7 +225,7 @@ def rebind_bones(model: PatchModel, R: np.ndarray, c: np.ndarray, X: np.ndarray)
     """
     j, child = model.bone_j, model.bone_child
     d = X[child] - X[j]
-    s = np.sum((c - X[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-12)
+    s = np.sum((c - X[j]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), DIVISOR_FLOOR)
     delta = X[j] + s[:, None] * d  # Eq. (8): foot of the perpendicular from the patch centre
     delta0 = np.einsum("kji,kj->ki", R, delta - c) + model.centres0  # T_k(Δ0_k) = Δ_k
     bone_w = np.maximum(4.0 * s * (1.0 - s), MIN_BONE_WEIGHT)

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.geometry.levenberg_marquardt import (
     DAMPING,
     damped_diagonal,
@@ -565,7 +566,7 @@ def length_residuals(
     """Unit directions ``u`` (m, 3) of ``x_a − x_b`` over ``pairs`` (m, 2) of ``X`` (K, 3)
     and the length errors ``r = |x_a − x_b| − L`` (m,), metres: ``∂r/∂x_a = uᵀ = −∂r/∂x_b``."""
     d = X[pairs[:, 0]] - X[pairs[:, 1]]
-    n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+    n = np.maximum(np.linalg.norm(d, axis=1), NORM_FLOOR)
     return d / n[:, None], n - lengths
 
 

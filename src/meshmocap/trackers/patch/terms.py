@@ -26,6 +26,7 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
+from meshmocap._tolerances import DIVISOR_FLOOR
 from meshmocap.geometry.camera import Camera, in_view
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.trackers.patch.model import PatchModel
@@ -188,7 +189,7 @@ class DataTerm(_Weighted):
         patch, v, w, y = k.patch, k.vertex, k.weight, k.point
         q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k): v is a vertex of its patch k
         r = it.V[v] - y
-        wd = max(float(w.sum()), 1e-12)
+        wd = max(float(w.sum()), DIVISOR_FLOOR)
         if self.residual == "point_to_plane":  # slide along the surface, with a little pull
             s_n = np.sum(k.normal * r, axis=1)
             e = add_plane_terms(sys, patch, q, k.normal, s_n, w, self.coefficient / wd)

@@ -26,6 +26,7 @@ from dataclasses import replace
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.body.articulated import MAX_STEP_ANGLE
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
@@ -544,7 +545,7 @@ class PatchTracker:
         d = delta[: 6 * P].reshape(P, 6).copy()
         # trust region: no patch turns more than MAX_STEP_ANGLE radians in one step
         angle = np.linalg.norm(d[:, :3], axis=1, keepdims=True)
-        d[:, :3] *= np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(angle, 1e-12))
+        d[:, :3] *= np.minimum(1.0, MAX_STEP_ANGLE / np.maximum(angle, NORM_FLOOR))
         self.R = so3_exp(d[:, :3]) @ self.R
         self.c = self.c + d[:, 3:]
         self.X = self.X + delta[6 * P :].reshape(-1, 3)
@@ -614,15 +615,15 @@ def _pair_lengths(X: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Smallest rotations (k, 3, 3) turning the directions of ``a`` (k, 3) into ``b``."""
-    a = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-12)
-    b = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
+    a = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), NORM_FLOOR)
+    b = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), NORM_FLOOR)
     axis = np.cross(a, b)
     s = np.linalg.norm(axis, axis=1, keepdims=True)
     angle = np.arctan2(s[:, 0], np.sum(a * b, axis=1))
-    return so3_exp(axis / np.maximum(s, 1e-12) * angle[:, None])
+    return so3_exp(axis / np.maximum(s, NORM_FLOOR) * angle[:, None])
 
 
 def _clip_rows(A: np.ndarray, limit: float) -> np.ndarray:
     """Rows of ``A`` (k, 3) scaled down to a norm of at most ``limit``."""
     n = np.linalg.norm(A, axis=1, keepdims=True)
-    return A * np.minimum(1.0, limit / np.maximum(n, 1e-12))
+    return A * np.minimum(1.0, limit / np.maximum(n, NORM_FLOOR))
