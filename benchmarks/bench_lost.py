@@ -1,4 +1,4 @@
-"""Calibration of the ``lost`` flag on tracks of motions it never saw (issue 36 item 4).
+"""Calibration of the ``lost`` flag on tracks of motions it never saw.
 
 Protocol. Tracks of ``bench_limbs`` captures (synthetic CMU motions performed by
 heavy_male and small_female, headings and offsets drawn per trial; ``--tracks``: folders
@@ -15,7 +15,7 @@ of the other categories only and scored on that category's frames; the table giv
 left-out category and over all, the share of bad frames flagged (recall), the share of
 good frames flagged, and the thresholds fitted. The rule is held over ``--frames`` frames in
 a row (default: the shipped rule's, :attr:`~meshmocap.estimate.recovery.evidence.LostRule.frames`):
-its thresholds are fitted to the evidence held so. Targets (issue 36): ≥ 90 % of bad frames
+its thresholds are fitted to the evidence held so. Targets: ≥ 90 % of bad frames
 flagged, ≤ 5 % of good frames flagged. The rule shipped
 (``meshmocap/estimate/recovery/data/lost_rule.json``) is fitted on all the frames
 (``--write``), after the left-out scores are reported.

@@ -1,4 +1,4 @@
-"""Silhouettes from video, measured (issue 45): rendered video with truth, and the real
+"""Silhouettes from video, measured: rendered video with truth, and the real
 Pose2Sim demonstration judged by multi-view consistency.
 
 Rendered: a synthetic capture (``meshmocap synth``, the walk, HumanEva-like four cameras)
