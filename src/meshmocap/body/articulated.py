@@ -40,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
@@ -215,7 +216,7 @@ def pose_points(
     v = np.stack([np.bincount(rows, wY[:, c], minlength=m) for c in range(3)], 1)
     B = (model.W @ G.reshape(-1, 9)).reshape(m, 3, 3)  # blended linear parts
     n = np.einsum("mab,mb->ma", B, model.N0)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), NORM_FLOOR)
     if not jacobian:
         return v, n, None
     S = model.W.copy()
@@ -260,7 +261,7 @@ def limit_step(delta: np.ndarray, max_angle: float = MAX_STEP_ANGLE) -> np.ndarr
     out = np.array(delta, dtype=np.float64)
     w = out[3:].reshape(-1, 3)
     ang = np.linalg.norm(w, axis=1, keepdims=True)
-    out[3:] = (w * np.minimum(1.0, max_angle / np.maximum(ang, 1e-12))).ravel()
+    out[3:] = (w * np.minimum(1.0, max_angle / np.maximum(ang, NORM_FLOOR))).ravel()
     return out
 
 

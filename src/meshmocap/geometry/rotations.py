@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-_EPS = 1e-12
+from meshmocap._tolerances import NORM_FLOOR
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -121,8 +121,8 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), _EPS)
-    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), _EPS)
+    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), NORM_FLOOR)
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), NORM_FLOOR)
     axis = np.cross(a, b)
     s = np.linalg.norm(axis, axis=-1)
     c = np.sum(a * b, axis=-1)
@@ -134,7 +134,7 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         np.linalg.norm(ortho, axis=-1, keepdims=True) < 1e-6, np.cross(a, [0.0, 1.0, 0.0]), ortho
     )
     axis = np.where(anti[..., None], ortho, axis)
-    n = np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), _EPS)
+    n = np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), NORM_FLOOR)
     return so3_exp(axis / n * angle[..., None])
 
 

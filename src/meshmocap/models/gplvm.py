@@ -70,6 +70,7 @@ from scipy.optimize import minimize
 
 from meshmocap._atomic import atomic_open
 from meshmocap._npz import read_npz
+from meshmocap._tolerances import NORM_FLOOR
 from meshmocap._validate import check_choice
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import chol_inverse, rbf, sqdist
@@ -361,7 +362,7 @@ class GPLVM:
         Vt = np.linalg.svd(Ys, full_matrices=False)[2]
         Vt = Vt[:q] * np.sign(Vt[:q][np.arange(q), np.argmax(np.abs(Vt[:q]), 1)])[:, None]
         X0 = Ys @ Vt.T
-        X0 /= max(float(X0[:, 0].std()), 1e-12)
+        X0 /= max(float(X0[:, 0].std()), NORM_FLOOR)
 
         Kbc, bc_gamma, w0 = None, float("nan"), []
         if bc == "rbf":

@@ -43,6 +43,7 @@ from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
 from meshmocap._progress import phase
+from meshmocap._tolerances import DIVISOR_FLOOR, NORM_FLOOR
 from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
@@ -120,7 +121,7 @@ def silhouette_view(
         pick = np.sort(np.random.default_rng(seed).choice(len(rows), max_contour, replace=False))
         rows, cols = rows[pick], cols[pick]
     n = np.stack([gu[rows, cols], gv[rows, cols]], axis=1)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), NORM_FLOOR)
     q = np.stack([cols, rows], 1) + 0.5 * n  # the pixel's outer edge: where sdt = 0
     return SilhouetteView(camera, sdt, np.stack([gu, gv]), q, n)
 
@@ -407,7 +408,7 @@ def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda
     for f, t in enumerate(frames):
         sl = slice(K + f * n_pose, K + (f + 1) * n_pose)
         for term, r, Jp, Jz in t.rows:
-            w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12)) / counts[term]
+            w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), DIVISOR_FLOOR)) / counts[term]
             H[sl, sl] += Jp.T @ (w[:, None] * Jp)
             B = Jp.T @ (w[:, None] * Jz)
             H[sl, :K] += B
