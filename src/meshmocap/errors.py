@@ -27,6 +27,23 @@ class MeshError(MeshmocapError, ValueError):
     """A mesh or template is malformed (NaN vertices, bad faces, non-manifold, ...)."""
 
 
+class BodyPartError(MeshError):
+    """A rig cannot be placed on one part of a template's body (the cage's quads on a
+    performer whose first frame is far from a standing pose, or in loose clothing).
+
+    Attributes
+    ----------
+    part : str
+        The part in words (``"left shoulder"``, ``"chest junction"``).
+    reason : str
+        Why, in a few words, without the part.
+    """
+
+    def __init__(self, message: str, *, part: str, reason: str):
+        super().__init__(message)
+        self.part, self.reason = part, reason
+
+
 class SkeletonError(MeshmocapError, ValueError):
     """A skeleton is malformed (bad parents, duplicate names, unknown joint)."""
 

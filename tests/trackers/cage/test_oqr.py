@@ -301,10 +301,12 @@ def test_arms_held_against_the_trunk_get_a_cage(built):
 
 def test_build_oqr_names_the_failed_check_and_validates_its_inputs():
     t = load_template("neutral_5k")
-    with pytest.raises(MeshError, match=r"enclosure.*with the upper arms boxed: enclosure"):
+    with pytest.raises(MeshError, match=r"'neutral_5k': the [a-z ]+: enclosure: ") as e:
         build_oqr(t, clearance=0.05, max_grow=0)
-    with pytest.raises(MeshError, match="cross-section holds no vertex"):
+    assert e.value.part in str(e.value) and e.value.reason.startswith("enclosure")
+    with pytest.raises(MeshError, match="cross-section holds no vertex") as e:
         build_oqr(t, slab=1e-5)
+    assert e.value.part == "left shoulder"  # the first quad placed
     for kw, what in [
         (dict(margin=0.5), r"margin must be a number in \[1, 3\], found 0.5"),
         (dict(pad=0), r"pad must be a number in \(0, 0.1\] metres, found 0"),

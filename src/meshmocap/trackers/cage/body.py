@@ -30,7 +30,7 @@ import numpy as np
 
 from meshmocap.body.autorig import rest_in_pose
 from meshmocap.body.template import Template, load_template
-from meshmocap.errors import InputError, MeshError, SkeletonError
+from meshmocap.errors import BodyPartError, InputError, MeshError, MeshmocapError, SkeletonError
 from meshmocap.trackers.cage.options import Body
 from meshmocap.trackers.cage.oqr import OQR, build_oqr
 
@@ -104,27 +104,43 @@ def cage_body(template: Template, *, body: Body = "auto") -> tuple[Template, OQR
     Raises
     ------
     MeshError
-        No cage could be built; one line naming the cause and the alternative.
+        No cage could be built: one line naming the part of the body where it failed
+        (a :class:`~meshmocap.errors.BodyPartError` where the rigging names one), why,
+        and the alternative.
     """
     if body not in ("auto", "template", "reference"):
         raise InputError(f"cage: body must be one of auto, template, reference, found {body!r}")
-    why = ""
+    why: MeshmocapError | None = None
     if body in ("auto", "template"):
         try:
             return template, build_oqr(template, relaxed=body == "template")
         except (MeshError, SkeletonError) as exc:
             if body == "template":
                 raise MeshError(
-                    f"cage: no cage encloses template {template.name!r} ({exc}); build it on "
-                    "the reference body (body='reference') or track with --method patch"
+                    f"cage: no cage encloses template {template.name!r}: {_where(exc)}; build "
+                    "it on the reference body (body='reference') or track with --method patch"
                 ) from None
-            why = str(exc)
+            why = exc
     try:  # a body: its cage builds without the relaxed rounds, or not at all (fast)
         posed = posed_reference(template)
         return posed, build_oqr(posed, relaxed=False)
     except (MeshError, SkeletonError) as exc:
-        first = f"on the template: {why}; " if why else ""
+        said = _where(exc)
+        if why is None:
+            where = f"on the reference body, {said}"
+        elif _where(why) == said:
+            where = f"{said} (on the reference body too)"
+        else:
+            where = f"{_where(why)} (on the reference body: {said})"
         raise MeshError(
-            f"cage: no cage could be built for template {template.name!r} ({first}on the "
-            f"reference body: {exc}); track with --method patch instead"
+            f"cage: no cage could be built for template {template.name!r}: {where}; "
+            "track with --method patch instead"
         ) from None
+
+
+def _where(exc: MeshmocapError) -> str:
+    """Where and why a rigging failed, in words: ``the <part>: <reason>`` for a
+    :class:`~meshmocap.errors.BodyPartError`, else its message."""
+    if isinstance(exc, BodyPartError):
+        return f"the {exc.part}: {exc.reason}"
+    return str(exc)

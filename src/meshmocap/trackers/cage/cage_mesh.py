@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap.errors import BodyPartError
 from meshmocap.geometry.mesh import mesh_problems, signed_volume
 from meshmocap.geometry.proximity import closest_points_on_triangles
 
@@ -80,6 +81,24 @@ def cap_faces(ring: np.ndarray, apex: int | None = None) -> np.ndarray:
 _L, _F, _U = np.eye(3)[0], -np.eye(3)[1], np.eye(3)[2]  # subject's left, front, up
 
 
+#: The quads of the two junctions (cage vertex // 4), named as parts of the body.
+_JUNCTION_QUADS = {
+    0: "pelvis",
+    13: "left hip",
+    17: "right hip",
+    2: "chest",
+    3: "neck",
+    5: "left shoulder",
+    9: "right shoulder",
+}
+#: What usually makes a junction quad's corners ambiguous: its bone near the direction
+#: the corners are told apart by (up for the shoulders, front or side for the hips).
+_JUNCTION_CAUSE = {
+    "chest": "an upper arm hanging straight down or raised, or the head bowed",
+    "pelvis": "a thigh raised to the front or side",
+}
+
+
 def oqr_faces(C: np.ndarray) -> np.ndarray:
     """Triangles (166, 3) of the OQR cage on the 84 quad corners plus the head apex (84).
 
@@ -100,8 +119,8 @@ def oqr_faces(C: np.ndarray) -> np.ndarray:
 
     Raises
     ------
-    ValueError
-        The corners of a junction quad cannot be told apart.
+    BodyPartError
+        The corners of a junction quad cannot be told apart (the message names its part).
 
     Notes
     -----
@@ -174,8 +193,14 @@ def oqr_faces(C: np.ndarray) -> np.ndarray:
     ]
     for name, faces in (("pelvis", pants), ("chest", girdle)):
         used = np.unique(np.asarray(faces))
-        if len(used) != 4 * len(np.unique(used // 4)):
-            raise ValueError(f"oqr_faces: the corners at the {name} junction cannot be told apart")
+        quads, n_used = np.unique(used // 4, return_counts=True)
+        if np.any(n_used != 4):
+            part = " and ".join(_JUNCTION_QUADS[int(q)] for q in quads[n_used != 4])
+            reason = (
+                f"the corners of its quad cannot be told apart at the {name} junction "
+                f"({_JUNCTION_CAUSE[name]})"
+            )
+            raise BodyPartError(f"oqr_faces: the {part}: {reason}", part=part, reason=reason)
         parts.append(np.asarray(faces, dtype=np.int64))
     return np.concatenate(parts)
 

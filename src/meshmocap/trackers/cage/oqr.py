@@ -64,7 +64,7 @@ import numpy as np
 from meshmocap.body.names import canonical_name_map
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.errors import InputError, MeshError
+from meshmocap.errors import BodyPartError, InputError
 from meshmocap.trackers.cage.cage_mesh import (
     CORNER_SIGNS,
     OQR_APEX,
@@ -73,6 +73,9 @@ from meshmocap.trackers.cage.cage_mesh import (
     cage_problems,
     oqr_faces,
     rect_cage,
+    self_intersections,
+    surface_distances,
+    winding_numbers,
 )
 from meshmocap.trackers.cage.growth import enclose, untangle
 from meshmocap.trackers.cage.oqr_placement import Placer, heading
@@ -276,10 +279,12 @@ def build_oqr(
     SkeletonError
         The skeleton lacks a joint the quads need, or its hips and shoulders give no
         horizontal left-right axis (not upright, Z up).
-    MeshError
-        A cross-section holds no vertex, or both cages fail a check; the message names
-        them (``manifold``, ``orientation``, ``outward``, ``self-intersection``,
-        ``enclosure``), for both placements.
+    BodyPartError
+        A quad cannot be placed (a cross-section holds no vertex, a junction quad's corners
+        cannot be told apart: a performer far from a standing pose), or every placement's
+        cage fails a check (``manifold``, ``orientation``, ``outward``,
+        ``self-intersection``, ``enclosure``): one line naming the body part where the
+        first placement failed, and why (its ``part`` and ``reason``).
     """
     func = "build_oqr"
     if not isinstance(template, Template):
@@ -298,7 +303,6 @@ def build_oqr(
     if isinstance(max_grow, bool) or not (isinstance(max_grow, int | np.integer) and max_grow >= 0):
         raise InputError(f"{func}: max_grow must be a non-negative integer, found {max_grow!r}")
     C = heading(template)  # canonical frame → world: the rig is built facing −Y
-    why = []
     # the second placement boxes the upper arms; the later ones relax the cage for loose
     # clothing (a long dress): wider cross-sections, three times the growth, half and then
     # a quarter of the clearance
@@ -308,15 +312,16 @@ def build_oqr(
         (True, min(margin * 1.15, 3.0), clearance / 2, 3 * max_grow),
         (True, min(margin * 1.3, 3.0), clearance / 4, 3 * max_grow),
     ][: 4 if relaxed else 2]
+    failed: list[BodyPartError] = []
     for box_limbs, margin, clearance, max_grow in rounds:
         placer = Placer(template, C, QUAD_JOINTS, float(margin), float(pad), float(slab))
         placer.box_limbs = box_limbs
-        placed = placer.place()
+        placed = placer.place()  # a part no quad can box fails every round: raised at once
         rects = [placed[name] for name in QUAD_NAMES]
         try:
             F = oqr_faces(np.stack([r.corners() for r in rects]))
-        except ValueError as exc:
-            why.append(str(exc))
+        except BodyPartError as exc:
+            failed.append(exc)
             continue
         head = rects[OQR_HEAD]
         apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
@@ -338,11 +343,44 @@ def build_oqr(
         problems = cage_problems(V, F, template.V, clearance=clearance)
         if not problems:
             return _assemble(template, rects, F, V)
-        why.append("; ".join(problems))
-    relax = f"; relaxed for loose clothing: {why[-1]}" if relaxed else ""
-    raise MeshError(
-        f"{func}: template {template.name!r}: {why[0]} (with the upper arms boxed: {why[1]}{relax})"
+        part = problem_part(V, F, template.V, problems[0])
+        failed.append(BodyPartError(problems[0], part=part, reason=problems[0]))
+    raise _refusal(func, template.name, failed)
+
+
+def _refusal(func: str, name: str, failed: list[BodyPartError]) -> BodyPartError:
+    """One error for the rounds of :func:`build_oqr` that failed: the first round's part
+    and reason, and the other rounds' parts where they differ."""
+    first = failed[0]
+    others = sorted({e.part for e in failed[1:]} - {first.part})
+    also = f"; other placements fail at the {', '.join(others)}" if others else ""
+    return BodyPartError(
+        f"{func}: template {name!r}: the {first.part}: {first.reason}{also}",
+        part=first.part,
+        reason=first.reason,
     )
+
+
+def problem_part(V: np.ndarray, F: np.ndarray, points: np.ndarray, problem: str) -> str:
+    """The body part in words where a cage (``V`` (85, 3), ``F`` (166, 3)) fails the check
+    ``problem`` (a :func:`~meshmocap.trackers.cage.cage_mesh.cage_problems` message) on the
+    template's vertices ``points`` (n, 3): the quads of the first pair of intersecting
+    faces, or of the face nearest the first point outside the cage or too close to it;
+    ``"cage"`` for a check of the whole mesh (manifold, orientation, outward)."""
+    check = problem.split(":")[0]
+    if check == "self-intersection":
+        faces = self_intersections(V, F)[:1].ravel()
+    elif check == "enclosure":
+        P = np.asarray(points, dtype=np.float64)
+        d, face = surface_distances(P, V, F)
+        out = np.abs(winding_numbers(P, V, F) - 1.0) > 1e-6
+        first = int(np.flatnonzero(out)[0]) if out.any() else int(np.argmin(d))
+        faces = face[first : first + 1]
+    else:
+        return "cage"
+    corners = F[faces].ravel()
+    quads = np.unique(np.where(corners == OQR_APEX, 4 * OQR_HEAD, corners) // 4)
+    return " and ".join(QUAD_NAMES[int(q)].replace("_", " ") for q in quads[:3])
 
 
 def _assemble(template: Template, rects: list[QuadRect], F: np.ndarray, V: np.ndarray) -> OQR:

@@ -11,7 +11,7 @@ import numpy as np
 
 from meshmocap.body.names import canonical_name_map
 from meshmocap.body.template import Template
-from meshmocap.errors import MeshError, SkeletonError
+from meshmocap.errors import BodyPartError, SkeletonError
 from meshmocap.trackers.cage.cage_mesh import QuadRect
 
 _TORSO = (
@@ -116,9 +116,9 @@ class Placer:
         """Return the (n,) bool mask of the vertices owned by the joints ``names``."""
         return np.isin(self.owner, [self.idx[n] for n in names if n in self.idx])
 
-    def fit(self, anchor, n, u_ref, section, box=None, axis=None, keep_out=None) -> QuadRect:
-        """Quad through ``anchor`` ⟂ ``n`` covering the ``section`` vertices within the
-        slab and the ``box`` vertices projected along ``axis``, scaled by the margin."""
+    def fit(self, name, anchor, n, u_ref, section, box=None, axis=None, keep_out=None) -> QuadRect:
+        """Quad ``name`` through ``anchor`` ⟂ ``n`` covering the ``section`` vertices within
+        the slab and the ``box`` vertices projected along ``axis``, scaled by the margin."""
         R = _frame(n, u_ref)
         rel = self.V - anchor
         pts = [rel[section & (np.abs(rel @ R[:, 2]) <= self.slab)]]
@@ -127,10 +127,8 @@ class Placer:
             pts.append(r - ((r @ R[:, 2]) / (axis @ R[:, 2]))[:, None] * axis)
         uv = np.concatenate(pts) @ R[:, :2]
         if not len(uv):
-            raise MeshError(
-                f"build_oqr: template {self.t.name!r}: a quad's cross-section holds no "
-                f"vertex within slab {self.slab:g} m of its plane (pad {self.pad:g} m)"
-            )
+            reason = f"its cross-section holds no vertex within {self.slab:g} m of its plane"
+            raise self.refused(name, reason)
         lo, hi = uv.min(axis=0), uv.max(axis=0)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * self.margin + self.pad
         q = QuadRect(np.asarray(anchor, float), R, mid - half, mid + half, keep_out)
@@ -150,11 +148,16 @@ class Placer:
         X = np.concatenate([V[np.abs(s) < self.pad], (1 - w) * V[E[:, 0]] + w * V[E[:, 1]]])
         X = X[X[:, 2] > max(P["LeftLeg"][2], P["RightLeg"][2])]
         if not len(X):
-            raise MeshError(
-                f"build_oqr: template {self.t.name!r}: no surface between the "
-                "legs above the knees on the mid-sagittal plane"
-            )
+            raise self.refused("crotch", "no surface between the legs above the knees")
         return X[np.argmin(X[:, 2])]
+
+    def refused(self, name: str, reason: str) -> BodyPartError:
+        """The error of a quad ``name`` (a ``QUAD_NAMES`` entry or a part's name)
+        that cannot be placed, naming the body part."""
+        part = name.replace("_", " ")
+        return BodyPartError(
+            f"build_oqr: template {self.t.name!r}: the {part}: {reason}", part=part, reason=reason
+        )
 
     def clear(self, quads: list[QuadRect], other: np.ndarray) -> QuadRect:
         """The first quad whose rectangle (grown by ``pad``, within the slab) holds no
@@ -185,35 +188,41 @@ class Placer:
             hand = part(f"{s}Hand", f"{s}FingerBase", f"{s}HandIndex1", thumb)
             pa, pe, pw = P[f"{s}Arm"], P[f"{s}ForeArm"], P[f"{s}Hand"]
             d1, d2 = _unit(pe - pa), _unit(pw - pe)
+            if not hand.any():
+                raise self.refused(f"{side}_hand", "no vertex is skinned to the hand")
             d3 = _unit(self.V[hand].mean(axis=0) - pw)
             # shoulder: the first cross-section of the upper arm clear of the torso
             L = np.linalg.norm(pe - pa)
-            cand = [self.fit(pa + f * L * d1, d1, _Z, arm) for f in steps]
+            cand = [self.fit(f"{side}_shoulder", pa + f * L * d1, d1, _Z, arm) for f in steps]
             sh = out[f"{side}_shoulder"] = self.clear(cand, torso)
-            out[f"{side}_elbow"] = self.fit(pe, d1 + d2, _Z, arm)
+            out[f"{side}_elbow"] = self.fit(f"{side}_elbow", pe, d1 + d2, _Z, arm)
             if self.box_limbs:  # both quads cover the upper arm projected along its bone
                 h = (self.V - sh.anchor) @ d1
                 upper = arm & (h >= 0) & (h <= (pe - sh.anchor) @ d1)
-                out[f"{side}_shoulder"] = self.fit(sh.anchor, d1, _Z, arm, upper, d1)
-                out[f"{side}_elbow"] = self.fit(pe, d1 + d2, _Z, arm, upper, d1)
-            out[f"{side}_wrist"] = self.fit(pw, d2 + d3, _Z, arm, hand, d3)
+                boxed = ((f"{side}_shoulder", sh.anchor, d1), (f"{side}_elbow", pe, d1 + d2))
+                for q, a, n in boxed:
+                    out[q] = self.fit(q, a, n, _Z, arm, upper, d1)
+            out[f"{side}_wrist"] = self.fit(f"{side}_wrist", pw, d2 + d3, _Z, arm, hand, d3)
             tip = pw + (((self.V[hand] - pw) @ d3).max() + self.pad) * d3
-            out[f"{side}_hand"] = self.fit(tip, d3, _Z, hand & False, hand, d3)
+            out[f"{side}_hand"] = self.fit(f"{side}_hand", tip, d3, _Z, hand & False, hand, d3)
             # leg: the first cross-section of the thigh below the crotch, not crossing
             # the mid-sagittal plane; mitred knee and ankle; a foot box to the toe tips
             leg = part(f"{s}UpLeg", f"{s}Leg", f"{s}Foot", f"{s}ToeBase")
             foot = part(f"{s}Foot", f"{s}ToeBase")
+            if not foot.any():
+                raise self.refused(f"{side}_foot", "no vertex is skinned to the foot")
             ph, pk, pf = P[f"{s}UpLeg"], P[f"{s}Leg"], P[f"{s}Foot"]
             e1, e2 = _unit(pk - ph), _unit(pf - pk)
             e3 = _principal_axis(self.V[foot], bone[f"{s}Foot"])
             m = lateral if s == "Left" else -lateral
             keep = (m, m @ P["Hips"] + self.pad)
             below = (crotch - ph) @ e1 + 2 * self.pad
-            out[f"{side}_hip"] = self.fit(ph + below * e1, e1, _X, leg, keep_out=keep)
-            out[f"{side}_knee"] = self.fit(pk, e1 + e2, _X, leg)
-            out[f"{side}_ankle"] = self.fit(pf, e2 + e3, _X, leg, foot, e3)
+            hip = ph + below * e1
+            out[f"{side}_hip"] = self.fit(f"{side}_hip", hip, e1, _X, leg, keep_out=keep)
+            out[f"{side}_knee"] = self.fit(f"{side}_knee", pk, e1 + e2, _X, leg)
+            out[f"{side}_ankle"] = self.fit(f"{side}_ankle", pf, e2 + e3, _X, leg, foot, e3)
             tip = pf + (((self.V[foot] - pf) @ e3).max() + self.pad) * e3
-            out[f"{side}_toe"] = self.fit(tip, e3, _X, foot & False, foot, e3)
+            out[f"{side}_toe"] = self.fit(f"{side}_toe", tip, e3, _X, foot & False, foot, e3)
         # torso: the chest section just below the armpits (the shoulder quads' lowest
         # corners), the pelvis at the hip joints, the abdomen halfway; parallel quads
         low = np.concatenate([out[f"{s}_shoulder"].corners() for s in ("left", "right")])
@@ -228,12 +237,14 @@ class Placer:
         chest = base + (((low - base) @ axis).min() - drop) * axis
         axis = _unit(chest - base)
         section = torso | part("LeftUpLeg", "RightUpLeg")
-        out["pelvis"] = self.fit(base, axis, _X, section)
-        out["abdomen"] = self.fit((base + chest) / 2, axis, _X, torso)
-        out["chest"] = self.fit(chest, axis, _X, torso)
+        out["pelvis"] = self.fit("pelvis", base, axis, _X, section)
+        out["abdomen"] = self.fit("abdomen", (base + chest) / 2, axis, _X, torso)
+        out["chest"] = self.fit("chest", chest, axis, _X, torso)
         # neck and head top: a box around the head along the head bone
         h = bone["Head"]
-        out["neck"] = self.fit(P["Neck"], h, _X, head, head, h)
+        if not head.any():
+            raise self.refused("head", "no vertex is skinned to the head or neck")
+        out["neck"] = self.fit("neck", P["Neck"], h, _X, head, head, h)
         top = P["Head"] + (((self.V[head] - P["Head"]) @ h).max() + self.pad) * h
-        out["head"] = self.fit(top, h, _X, head & False, head, h)
+        out["head"] = self.fit("head", top, h, _X, head & False, head, h)
         return out
