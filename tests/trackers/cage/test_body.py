@@ -93,7 +93,8 @@ def test_a_performer_far_from_standing_is_refused_in_one_line_naming_the_part(re
     # the bundled pose library's first pose (a salsa turn, arms hanging straight down) as a
     # performer's rest pose, as a clean 4D capture's first frame rigged as it stands: the
     # shoulder quads' corners cannot be told apart at the chest junction, on the template
-    # and on the reference body posed on its skeleton; said in one line, in CPU seconds
+    # and on the reference body posed on its skeleton; said in one line (0.7 s of CPU in
+    # the cage guide: no timing asserted here)
     from meshmocap.body.pose_library import load_pose_library
     from meshmocap.errors import BodyPartError
     from meshmocap.trackers.cage.oqr import build_oqr
@@ -104,9 +105,7 @@ def test_a_performer_far_from_standing_is_refused_in_one_line_naming_the_part(re
         build_oqr(salsa)
     assert e.value.part == "left shoulder and right shoulder"
     assert "chest junction" in e.value.reason and "\n" not in str(e.value)
-    t0 = time.process_time()
     with pytest.raises(MeshError, match=r"'salsa': the left shoulder.*--method patch") as e:
         cage_body(salsa)
-    assert time.process_time() - t0 < 10
     assert "reference body too" in str(e.value) and "\n" not in str(e.value)
     assert len(str(e.value)) < 300  # the batch's one-line summaries keep 300 characters
