@@ -85,6 +85,20 @@ def _manifold_cache(tmp_path_factory):
     mp.undo()
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _kernels_compiled_ahead():
+    """On a fresh clone numba compiles each kernel at its first call (about a minute of CPU
+    in all, ``benchmarks/bench_compile.py``); here a background process compiles them all
+    from the start of the session, beside the tests, as ``meshmocap track`` does
+    (:func:`~meshmocap.apps.kernels.start_compiling`; nothing to do once they are
+    cached). A test that meets a kernel first compiles it itself, as before."""
+    from meshmocap.apps.kernels import start_compiling, stop_compiling
+
+    proc = start_compiling()
+    yield
+    stop_compiling(proc)
+
+
 @pytest.fixture(scope="session")
 def walker():
     """neutral_5k walking (procedural walk, frame 10 at 30 fps) with its arms in a T-pose,

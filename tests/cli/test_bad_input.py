@@ -153,6 +153,8 @@ def _other_settings(tmp: Path, cap: Path) -> str:
                 "1",
                 "--frames",
                 "0:2",
+                "--init",
+                "truth",  # the start is not what is refused: no search for it
                 "--out",
                 str(out),
             ]
