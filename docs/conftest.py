@@ -15,8 +15,10 @@
 
 from __future__ import annotations
 
+import atexit
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -123,6 +125,22 @@ def check_output(expected: list[str], stdout: str) -> str | None:
     return None
 
 
+_ROOT: list[Path] = []
+
+
+def _session_root() -> Path:
+    """This run's folder for the pages' sessions: each page runs in ``page/`` in it, emptied
+    before the page, and the commands share one cache, ``cache/`` (``MESHMOCAP_CACHE``,
+    unless set), removed at exit. Many pages make the same capture under the same name
+    (``walk-cap``): at the same path, its cache (the first pose, the estimated body: keyed
+    by the capture's path and content) answers every page after the first, as it answers a
+    user who makes it again."""
+    if not _ROOT:
+        _ROOT.append(Path(tempfile.mkdtemp(prefix="meshmocap-docs-")))
+        atexit.register(shutil.rmtree, _ROOT[0], True)
+    return _ROOT[0]
+
+
 class ConsolePage(pytest.File):
     def collect(self):
         yield ConsoleSession.from_parent(self, name="console")
@@ -134,10 +152,17 @@ class ConsoleSession(pytest.Item):
         env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
         env.setdefault("MESHMOCAP_PROGRESS_SECONDS", "3600")
         env.pop("COLUMNS", None)
-        with tempfile.TemporaryDirectory(prefix="meshmocap-docs-") as folder:
+        root = _session_root()
+        env.setdefault("MESHMOCAP_CACHE", str(root / "cache"))
+        folder = root / "page"
+        shutil.rmtree(folder, ignore_errors=True)
+        folder.mkdir()
+        try:
             for block in sessions(self.path.read_text()):
                 for cmd, expected, lineno in block:
                     self._run(cmd, expected, lineno, folder, env)
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
 
     def _run(self, cmd, expected, lineno, folder, env):
         r = subprocess.run(
