@@ -7,11 +7,14 @@ from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
 from meshmocap.geometry.foreground import (
     clean_mask,
+    colour_model,
     consistent_masks,
     foreground_mask,
+    grow_mask,
     learn_background,
     others_reach,
     reach,
+    restore_background,
 )
 
 
@@ -116,3 +119,62 @@ def test_reach_covers_the_projected_cubes():
     uv, _ = cam.project(X)
     c, row = np.round(uv[0]).astype(int)
     assert r[row, c] and r.sum() < 0.2 * r.size
+
+
+def _stays(n=20, H=60, W=60, seed=3):
+    """A smooth background and a subject that stays: at one place in 16 of 20 frames,
+    leaning 12 pixels right in the other 4; its masks too."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[:H, :W]
+    bg = np.stack([60 + 2 * x, 80 + y, 150 - x], -1).astype(np.float64)
+    frames = np.repeat(bg[None], n, axis=0)
+    masks = np.zeros((n, H, W), bool)
+    for k in range(n):
+        c = 16 if k < 16 else 28
+        masks[k, 14:46, c : c + 18] = True
+    frames[masks] = (230, 190, 160)  # skin-like, far from the background around it
+    frames = np.clip(frames + rng.normal(0, 1.5, frames.shape), 0, 255).astype(np.uint8)
+    return frames, bg, masks
+
+
+def test_restored_background_takes_out_a_subject_who_stays():
+    frames, bg, masks = _stays()
+    B, noise = learn_background(frames)
+    covered = masks.mean(axis=0) > 0.5
+    assert np.abs(B - bg).max(axis=2)[covered].min() > 60  # the median is the subject
+    R, noise2, envelope = restore_background(frames, B, noise)
+    assert envelope[covered].all() and not envelope[:, :8].any()
+    err = np.abs(R - bg).max(axis=2)
+    leaves = covered & ~masks[16:].all(axis=0)  # the subject leaves these in 4 frames
+    assert np.median(err[leaves]) < 8  # the second colour is the background's
+    assert np.median(err[covered]) < 25  # never left: brought in from around
+    assert noise2[envelope].min() == 6.0 and np.array_equal(noise2[~envelope], noise[~envelope])
+    found = foreground_mask(frames[0], R, noise2)
+    iou = (found & masks[0]).sum() / (found | masks[0]).sum()
+    assert iou > 0.9
+    plain = foreground_mask(frames[0], B, noise)
+    assert (plain & masks[0]).sum() / (plain | masks[0]).sum() < 0.3
+    with pytest.raises(InputError, match="must agree"):
+        restore_background(frames[:, :10], B, noise)
+
+
+def test_grow_mask_recovers_the_subjects_colours_that_touch_it():
+    rng = np.random.default_rng(4)
+    H, W = 60, 60
+    image = np.full((H, W, 3), (40, 120, 200), np.float64)  # a blue room
+    image[:, 45:] = (200, 200, 60)  # and a yellow wall on the right
+    truth = np.zeros((H, W), bool)
+    truth[10:50, 20:35] = True
+    image[truth] = (220, 170, 140)
+    image[30:50, 20:35] = (30, 30, 30)  # dark shorts
+    image[5:10, 50:55] = (220, 170, 140)  # something of the subject's colour, apart
+    image = np.clip(image + rng.normal(0, 2, image.shape), 0, 255).astype(np.uint8)
+    seen = truth.copy()
+    seen[15:28, 20:35] = False  # differencing lost the trunk in this frame
+    model = colour_model(image[None].repeat(2, 0), np.stack([truth, truth]))
+    grown = grow_mask(image, seen, model)
+    assert (grown & truth).sum() / (grown | truth).sum() > 0.95
+    assert not grown[5:10, 50:55].any()  # not connected: left out
+    assert not grow_mask(image, np.zeros_like(seen), model).any()
+    with pytest.raises(InputError, match="bins must be"):
+        colour_model(image[None], truth[None], bins=10)

@@ -16,6 +16,18 @@ distortion ``CD = |I − α B|``, a pixel is background when ``CD`` is within th
 ``α`` is near 1; a **shadow** (``shadow_low ≤ α < 1`` with the same chromaticity) is
 background too; darker than any shadow or brighter than the background is foreground.
 
+A subject who **stays** (balancing on a force plate for the whole take) is the median
+itself where it stands; :func:`restore_background` takes it out: the pixels whose history
+has a second colour in a fair share of the frames make the subject's envelope, and inside it
+the background is the colour (first or second) that agrees with the background around the
+envelope, or that background brought in where the subject never leaves (not used by
+:func:`~meshmocap.studio.from_video.silhouettes_from_video`: on a subject that moves across a
+textured room it restores colours that are not the room's). What differencing
+still misses (the subject against a background of its colour, a part that hardly moves) is
+recovered by the subject's own colours: :func:`colour_model` learns them, against the
+background around the subject, from the confident masks, and :func:`grow_mask` adds the
+pixels of those colours that touch a frame's mask.
+
 :func:`clean_mask` opens and closes the mask, fills its holes and keeps its large
 connected components. :func:`consistent_masks` makes the cameras agree: a pixel of one
 camera whose ray misses the volume carved from the other cameras is dropped (the volume
@@ -33,9 +45,11 @@ References
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from skimage.morphology import convex_hull_image
 
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
@@ -93,6 +107,111 @@ def learn_background(
     return background, noise
 
 
+def restore_background(
+    frames: np.ndarray,
+    background: np.ndarray,
+    noise: np.ndarray,
+    *,
+    tolerance: float = 30.0,
+    share: float = 0.12,
+    min_area: float = 2e-3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Take a subject who stays out of a learned background.
+
+    Where the subject stands in most frames, the temporal median (:func:`learn_background`)
+    is the subject. Such a pixel's history has a **second colour** in a fair share of the
+    frames (the background while the subject leans away, or another body part); the
+    pixels that have one, holes filled, are the subject's **envelope**. Inside it the
+    background is whichever of the two colours agrees better with the background around the
+    envelope, brought in by normalised Gaussian convolution at growing scales; at a pixel
+    without a second colour whose colour is far from that estimate (a core the subject
+    never leaves), the estimate itself.
+
+    Parameters
+    ----------
+    frames : (n, height, width, 3) uint8
+        Frames of one camera (the sample :func:`learn_background` learned from).
+    background : (height, width, 3) float
+        The learned background.
+    noise : (height, width) float
+        Its per-pixel noise (that of a pixel with two colours is their distance).
+    tolerance : float
+        Grey levels: a frame's colour farther than this from the background is the
+        second colour's (a core pixel is restored when its colour is 40 grey levels from
+        the estimate).
+    share : float
+        Fewest frames (a fraction) with the second colour for a pixel of the envelope.
+    min_area : float
+        Envelope parts smaller than this fraction of the image are dropped.
+
+    Returns
+    -------
+    background : (height, width, 3) float32
+    noise : (height, width) float32, twice the noise floor inside the envelope (the
+        restored colours are estimates), as given elsewhere
+    envelope : (height, width) bool
+    """
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or frames.shape[1:] != np.shape(background):
+        raise InputError(
+            f"restore_background: frames (n, h, w, 3) and background (h, w, 3) must agree, "
+            f"found {frames.shape} and {np.shape(background)}"
+        )
+    first = np.asarray(background, np.float32)
+    n, H, W, _ = frames.shape
+    second = np.empty_like(first)
+    count = np.empty((H, W), np.int64)
+    rows = max(1, (1 << 22) // max(1, n * W * 3))
+    for r0 in range(0, H, rows):
+        block = frames[:, r0 : r0 + rows].astype(np.int16)
+        far = np.abs(block - first[None, r0 : r0 + rows]).max(axis=3) > tolerance
+        keyed = np.where(far[..., None], block, np.int16(1000))  # the others sort last
+        keyed.sort(axis=0)
+        c = far.sum(axis=0)
+        k = np.maximum(c - 1, 0) // 2
+        second[r0 : r0 + rows] = np.take_along_axis(keyed, k[None, :, :, None].repeat(3, 3), 0)[0]
+        count[r0 : r0 + rows] = c
+    mixed = count >= share * n
+    r = max(4, round(H / 100))  # bridges a core the subject never leaves
+    envelope = ndimage.binary_fill_holes(ndimage.binary_closing(np.pad(mixed, r), _disk(r)))
+    envelope = ndimage.binary_opening(envelope[r:-r, r:-r], _disk(2))
+    labels, k = ndimage.label(envelope)
+    if k:
+        area = np.bincount(labels.ravel())[1:]
+        envelope = np.isin(labels, 1 + np.flatnonzero(area >= min_area * envelope.size))
+    envelope = ndimage.binary_dilation(envelope, _disk(3))
+    noise = np.asarray(noise, np.float32)
+    if not envelope.any():
+        return first, noise, envelope
+    guess = _fill_in(first, ~envelope)
+    e1 = np.abs(first - guess).max(axis=2)
+    e2 = np.where(mixed, np.abs(second - guess).max(axis=2), np.inf)
+    out = first.copy()
+    use2 = envelope & (e2 < e1)
+    out[use2] = second[use2]
+    never = envelope & ~mixed & (e1 > 40.0)  # a core the subject never leaves
+    out[never] = guess[never]
+    return out, np.where(envelope, np.float32(2 * _MIN_NOISE), noise), envelope
+
+
+def _fill_in(image: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``image`` with its unknown pixels filled by normalised Gaussian convolution of the
+    known ones, at growing scales (2 to 64 pixels) until every pixel is reached."""
+    out = image.copy()
+    filled = known.copy()
+    w = known.astype(np.float32)
+    for sigma in (2, 4, 8, 16, 32, 64):
+        den = ndimage.gaussian_filter(w, sigma)
+        ok = ~filled & (den > 1e-3)
+        if ok.any():
+            num = [ndimage.gaussian_filter(image[..., c] * w, sigma) for c in range(3)]
+            out[ok] = np.stack(num, -1)[ok] / den[ok, None]
+            filled |= ok
+        if filled.all():
+            break
+    return out
+
+
 def foreground_mask(
     image: np.ndarray,
     background: np.ndarray,
@@ -144,6 +263,121 @@ def foreground_mask(
     gap = np.abs(1.0 - alpha) * np.sqrt((B * B).sum(axis=2))  # |I − B| along B, grey levels
     bright = (alpha < shadow_low) | ((alpha > 1.0) & (gap > limit))
     return (chroma | bright) & (diff > min_difference)
+
+
+@dataclass(frozen=True, eq=False)
+class ColourModel:
+    """A camera's colours of the subject against the background around it
+    (:func:`colour_model`).
+
+    Attributes
+    ----------
+    log_ratio : (bins³,) float64, log p(colour | subject) − log p(colour | background) per
+        quantised RGB colour (``bins`` levels a channel)
+    region : (height, width) bool, where the subject may be: the convex hull of every
+        given mask, grown by a margin
+    bins : int
+    """
+
+    log_ratio: np.ndarray
+    region: np.ndarray
+    bins: int
+
+
+def colour_model(images: np.ndarray, masks: np.ndarray, *, bins: int = 16) -> ColourModel:
+    """Learn the subject's colours from the confident pixels of a camera's masks.
+
+    The subject's histogram counts the masks' pixels (eroded by one pixel); the
+    background's, a ring around the region the subject may be in (the convex hull of the
+    union of the masks, grown by 1/40 of the image height; the ring three times as wide),
+    so that it holds what lies around the subject, not the whole room. Both histograms
+    are smoothed (σ = 0.7 bin).
+
+    Parameters
+    ----------
+    images : (n, height, width, 3) uint8, frames of one camera
+    masks : (n, height, width) bool, their foreground (the trusted part)
+    bins : int, quantisation levels per channel (a power of two, 4 to 64)
+
+    Returns
+    -------
+    ColourModel
+    """
+    images = np.asarray(images)
+    masks = np.asarray(masks, bool)
+    if images.ndim != 4 or masks.shape != images.shape[:3]:
+        raise InputError(
+            f"colour_model: images (n, h, w, 3) and masks (n, h, w) must agree, found "
+            f"{images.shape} and {masks.shape}"
+        )
+    if bins not in (4, 8, 16, 32, 64):
+        raise InputError(f"colour_model: bins must be 4, 8, 16, 32 or 64, found {bins!r}")
+    H = images.shape[1]
+    r = max(3, H // 40)
+    union = masks.any(axis=0)
+    region = (
+        ndimage.binary_dilation(convex_hull_image(union), _disk(r))
+        if union.any()
+        else np.zeros(union.shape, bool)
+    )
+    ring = ndimage.binary_dilation(region, _disk(3 * r)) & ~region
+    fg = np.zeros(bins**3)
+    bg = np.zeros(bins**3)
+    for im, m in zip(images, masks, strict=True):
+        q = _quantise(im, bins)
+        fg += np.bincount(q[ndimage.binary_erosion(m)], minlength=bins**3)
+        bg += np.bincount(q[ring], minlength=bins**3)
+    fg = ndimage.gaussian_filter(fg.reshape(bins, bins, bins), 0.7).ravel()
+    bg = ndimage.gaussian_filter(bg.reshape(bins, bins, bins), 0.7).ravel()
+    ratio = np.log(fg / max(fg.sum(), 1.0) + 1e-6) - np.log(bg / max(bg.sum(), 1.0) + 1e-6)
+    return ColourModel(ratio, region, bins)
+
+
+def grow_mask(
+    image: np.ndarray,
+    mask: np.ndarray,
+    model: ColourModel,
+    *,
+    threshold: float = 0.5,
+    blur: float = 1.5,
+) -> np.ndarray:
+    """Add to a mask the pixels of the subject's colours that touch it.
+
+    A pixel joins where, inside the model's region, the log-likelihood ratio of its colour
+    (smoothed by ``blur`` pixels) exceeds ``threshold`` and it is connected to the mask;
+    holes are filled. What differencing missed where the background has the subject's
+    colour or the subject stood still is recovered from the colours the subject showed
+    elsewhere.
+
+    Parameters
+    ----------
+    image : (height, width, 3) uint8
+    mask : (height, width) bool
+    model : ColourModel of the camera (:func:`colour_model`), same image size
+    threshold : float, natural-log ratio
+    blur : float, pixels
+
+    Returns
+    -------
+    (height, width) bool, a superset of ``mask``
+    """
+    m = np.asarray(mask, bool)
+    if m.shape != model.region.shape or np.shape(image)[:2] != m.shape:
+        raise InputError(
+            f"grow_mask: image, mask and model must be {model.region.shape}, found "
+            f"{np.shape(image)[:2]} and {m.shape}"
+        )
+    if not m.any():
+        return m
+    score = ndimage.gaussian_filter(model.log_ratio[_quantise(image, model.bins)], blur)
+    labels, _ = ndimage.label(m | (model.region & (score > threshold)))
+    touched = np.unique(labels[m])
+    return ndimage.binary_fill_holes(np.isin(labels, touched[touched > 0]))
+
+
+def _quantise(image: np.ndarray, bins: int) -> np.ndarray:
+    q = (np.asarray(image, np.uint8) // (256 // bins)).astype(np.int32)
+    return (q[..., 0] * bins + q[..., 1]) * bins + q[..., 2]
 
 
 def clean_mask(

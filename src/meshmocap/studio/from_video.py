@@ -11,9 +11,12 @@ over the footage in two passes (:mod:`meshmocap.geometry.foreground`): a tempora
 a sample of frames; the sample's masks made consistent across the cameras; then the median
 again without the pixels where the other cameras' carved volume says the subject stood.
 That second pass removes the ghost a slow subject leaves in a plain median (what one camera
-cannot tell, the others can). Each frame's masks are then made consistent across cameras
-(a pixel whose ray misses the volume carved from all the other cameras is dropped), cleaned
-(holes filled, small components dropped) and written at the calibration's image size.
+cannot tell, the others can). The subject's colours are learned from the sample's consistent masks
+(:func:`~meshmocap.geometry.foreground.colour_model`). Each frame's masks are then made
+consistent across cameras (a pixel whose ray misses the volume carved from all the other
+cameras is dropped), grown by the subject's colours where differencing lost it (without
+plates), made consistent again, cleaned (holes filled, small components dropped) and
+written at the calibration's image size.
 Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
 longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
 resampled to the full size.
@@ -45,9 +48,12 @@ from meshmocap._progress import progress
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.foreground import (
+    ColourModel,
     clean_mask,
+    colour_model,
     consistent_masks,
     foreground_mask,
+    grow_mask,
     learn_background,
     others_reach,
 )
@@ -60,6 +66,7 @@ from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_foota
 
 _CODEC_CROP = 16  # largest encoder crop taken for the same image (macroblock size)
 _SEGMENT_PX = 1000  # default segmentation resolution: the longest side, pixels
+_MODEL_VERSION = 2  # of the cached backgrounds: 2 adds the colour models
 
 
 @dataclass(frozen=True)
@@ -222,10 +229,16 @@ def silhouettes_from_video(
     for k in progress(todo, label="silhouettes", enabled=show_progress):
         images = [next(streams[n])[1] for n in names]
         masks = [
-            clean_mask(foreground_mask(im, *models[n]), keep=0.0)
+            clean_mask(foreground_mask(im, *models[n][:2]), keep=0.0)
             for im, n in zip(images, names, strict=True)
         ]
         masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
+        if plates is None:  # the subject's colours where differencing lost it
+            masks = [
+                grow_mask(im, m, models[n][2])
+                for im, m, n in zip(images, masks, names, strict=True)
+            ]
+            masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
@@ -343,24 +356,26 @@ def _plate(folder: Path, name: str, size: tuple[int, int]) -> np.ndarray:
 
 def _backgrounds(
     root, cams, small, footage, offsets, numbers, plates, model_frames, voxel_size, overwrite
-) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    models: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+) -> dict[str, tuple[np.ndarray, np.ndarray, ColourModel | None]]:
+    """Each camera's background, its noise, and (without plates) its colour model."""
+    models: dict[str, tuple[np.ndarray, np.ndarray, ColourModel | None]] = {}
     if plates is not None:
         for c, s in zip(cams, small, strict=True):
-            models[c.name] = (
-                _plate(Path(plates), c.name, (s.width, s.height)).astype(np.float32),
-                np.float32(3.0),
-            )
+            plate = _plate(Path(plates), c.name, (s.width, s.height)).astype(np.float32)
+            models[c.name] = (plate, np.float32(3.0), None)
         return models
     cache = {c.name: root / "background" / f"{c.name}.npz" for c in cams}
-    key = json.dumps([[s.width for s in small], numbers[0], numbers[-1], model_frames])
+    key = json.dumps(
+        [_MODEL_VERSION, [s.width for s in small], numbers[0], numbers[-1], model_frames]
+    )
     if not overwrite and all(p.is_file() for p in cache.values()):
         try:
             for n, p in cache.items():
                 with np.load(p) as z:
                     if str(z["key"]) != key:
                         raise KeyError
-                    models[n] = (z["background"], z["noise"])
+                    colour = ColourModel(z["log_ratio"], z["region"], int(z["bins"]))
+                    models[n] = (z["background"], z["noise"], colour)
             return models
         except (KeyError, OSError, ValueError):
             models.clear()
@@ -379,8 +394,30 @@ def _backgrounds(
         for c, r in zip(cams, others_reach(masks, small, voxel_size=voxel_size), strict=True):
             keep[c.name][j] = False if r is None else r
     for c in cams:
-        bg, noise = learn_background(stacks[c.name], masks=keep[c.name])
-        models[c.name] = (bg, noise)
+        st = stacks[c.name]
+        models[c.name] = (*learn_background(st, masks=keep[c.name]), None)
+    # the subject's colours, from masks made consistent across the cameras (20 frames)
+    some = np.unique(np.linspace(0, len(sample) - 1, min(20, len(sample))).round()).astype(int)
+    found = {c.name: np.zeros((len(some), *stacks[c.name].shape[1:3]), bool) for c in cams}
+    for i, j in enumerate(some):
+        masks = [
+            clean_mask(foreground_mask(stacks[c.name][j], *models[c.name][:2]), keep=0.0)
+            for c in cams
+        ]
+        for c, m in zip(cams, consistent_masks(masks, small, voxel_size=voxel_size), strict=True):
+            found[c.name][i] = clean_mask(m, open_px=0, close_px=0)
+    for c in cams:
+        bg, noise, _ = models[c.name]
+        colour = colour_model(stacks[c.name][some], found[c.name])
+        models[c.name] = (bg, noise, colour)
         with atomic_open(cache[c.name]) as f:
-            np.savez(f, background=bg, noise=noise, key=np.array(key))
+            np.savez(
+                f,
+                background=bg,
+                noise=noise,
+                log_ratio=colour.log_ratio,
+                region=colour.region,
+                bins=colour.bins,
+                key=np.array(key),
+            )
     return models
