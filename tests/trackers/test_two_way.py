@@ -76,10 +76,13 @@ def test_the_choice_switches_where_the_tracks_agree():
     assert choose(cost, J, switch=100.0).tolist() == [0] * T
 
 
-def _truth_search(capture):
-    """A keyframe search that finds each frame's true pose (the test's stand-in)."""
+def _truth_search(capture, seen=None):
+    """A keyframe search that finds each frame's true pose (the test's stand-in); the
+    hints of each call appended to ``seen`` where given."""
 
     def search(template, frame, **hints):
+        if seen is not None:
+            seen.append((int(frame.index), hints))
         truth = frame.truth
         return InitResult(truth.rotations, truth.root, 0.0, "truth", ())
 
@@ -120,8 +123,8 @@ def thrown(walk, tmp_path_factory):
     return out, body
 
 
-def _pass(walk, folder, body, monkeypatch):
-    monkeypatch.setattr(two_way, "keyframe_search", _truth_search(walk))
+def _pass(walk, folder, body, monkeypatch, seen=None):
+    monkeypatch.setattr(two_way, "keyframe_search", _truth_search(walk, seen))
     tracker = make_tracker("articulated_icp", max_iter=5)
     tracker.setup(body.light)
     return two_way_pass(tracker, body, walk, folder, frames=range(len(walk)), show_progress=False)
@@ -135,8 +138,11 @@ def test_a_lost_run_is_replaced_from_a_keyframe_tracked_backward(
     shutil.copytree(thrown[0], folder)
     before = read_track(folder)
     truth = np.stack([f.truth.joints for f in walk])
-    res = _pass(walk, folder, thrown[1], monkeypatch)
+    seen = []
+    res = _pass(walk, folder, thrown[1], monkeypatch, seen)
     after = read_track(folder)
+    # the keyframe after the run, no longer flagged, is searched for the run's lost arm
+    assert seen[0][0] == 7 and "left_arm" in seen[0][1]["lost"]
     err_before = 1000 * np.linalg.norm(before.joints - truth, axis=2).mean(axis=1)
     err_after = 1000 * np.linalg.norm(after.joints - truth, axis=2).mean(axis=1)
     # measured: frames 3–6 at 60–70 mm mean with the arm off, 6–9 mm after

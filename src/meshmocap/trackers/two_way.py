@@ -5,18 +5,23 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
 1. **Runs.** Runs of frames the forward pass flagged ``lost`` (in the track's frame order;
    runs closer than :data:`MERGE_GAP` frames are one run; runs shorter than
    :data:`MIN_RUN` frames are left as they are).
-2. **Keyframes.** For each run, whole-body searches (:func:`keyframe_search`) at the first
-   frame after the run, then at the middle of the longest stretch of the run that no kept
-   hypothesis explains yet, until every stretch is explained or :func:`max_keyframes`
-   are kept. A keyframe is kept only where the tracker seated at the found pose passes the
-   lost rule on that frame (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`,
-   the same rule as the forward pass's flags).
+2. **Keyframes.** For each run, whole-body searches (:func:`keyframe_search`, for the
+   limbs lost anywhere in the run, the torso where lost at the keyframe: the forward
+   track may still be off where it is no longer flagged) at the first frame after the
+   run, then at the middle of the longest stretch of the run that no kept hypothesis
+   explains yet, until every stretch is explained or :func:`max_keyframes` are kept. A
+   keyframe is kept only where the tracker seated at the found pose passes the lost rule
+   on that frame (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`, the same
+   rule as the forward pass's flags).
 3. **Hypotheses.** From each kept keyframe the same tracker (the forward pass's state at
    that frame, re-seated at the found pose, :meth:`~meshmocap.trackers.base.Tracker.reseat`)
-   tracks backward to :data:`MARGIN` frames before the run and, from a keyframe inside it,
-   forward to :data:`MARGIN` frames after it, each frame scored by its own
-   :class:`~meshmocap.estimate.recovery.reinit.Recovery`; a hypothesis stops early once it
-   has been lost itself for :data:`STOP_LOST` frames in a row.
+   tracks backward past the run's first frame and forward past its last, each frame scored
+   by its own :class:`~meshmocap.estimate.recovery.reinit.Recovery`. Past the run it goes
+   on at least :data:`MARGIN` frames and until it meets the forward track (mean joint
+   distance under :data:`MEET`), at most :data:`REACH` frames and never into the next
+   run's frames: the forward track often drifts off some frames before it is flagged, and
+   the choice switches where the two agree. A hypothesis stops early once it has been lost
+   itself for :data:`STOP_LOST` frames in a row.
 4. **Choice.** Per frame, the forward track or a hypothesis: dynamic programming over the
    frames (:func:`choose`) of the evidence's cost (:func:`evidence_cost`: limbs lost, then
    how far the fit is off the observations) plus a cost per switch that grows with the
@@ -75,9 +80,11 @@ __all__ = [
     "FOLDER",
     "FRAMES_PER_KEY",
     "MARGIN",
+    "MEET",
     "MERGE_GAP",
     "MIN_RUN",
     "PREFER_FORWARD",
+    "REACH",
     "STOP_LOST",
     "SWITCH",
     "SWITCH_PER_METRE",
@@ -94,8 +101,14 @@ __all__ = [
 MERGE_GAP = 3
 #: Runs of fewer flagged frames are left as the forward pass made them.
 MIN_RUN = 3
-#: Frames a hypothesis tracks past its run at each end (where it meets the forward track).
+#: Frames a hypothesis tracks past its run at each end at least.
 MARGIN = 4
+#: Frames a hypothesis tracks past its run at each end at most, until it meets the
+#: forward track.
+REACH = 24
+#: Metres of mean joint distance under which a hypothesis meets the forward track (past
+#: the run, it stops there: the choice can switch back).
+MEET = 0.02
 #: A hypothesis stops once it has been lost itself for this many frames in a row.
 STOP_LOST = 6
 #: Cost of a switch between two tracks (in lost limbs), plus :data:`SWITCH_PER_METRE`
@@ -312,7 +325,10 @@ def two_way_pass(
     changed: list[dict] = []
     run = _Run(tracker, body, capture, out, work, order, where, refiner, exclude_trials, rule)
     run.hold = hold
-    for a, b in runs:
+    for k, (a, b) in enumerate(runs):
+        # a run's hypotheses and choice stay on its side of the gaps to its neighbours
+        run.floor = (runs[k - 1][1] + a) // 2 + 1 if k else 0
+        run.ceiling = (b + runs[k + 1][0]) // 2 if k + 1 < len(runs) else len(order) - 1
         with phase(
             f"two-way pass: lost frames {order[a]}–{order[b]}, searching and tracking",
             enabled=show_progress,
@@ -370,6 +386,7 @@ class _Run:
         self.refiner, self.exclude, self.rule = refiner, tuple(excl), rule
         self.hold = False
         self.pos = {i: p for p, i in enumerate(order)}
+        self.floor, self.ceiling = 0, len(order) - 1
 
     def frame(self, i: int):
         return self.capture[self.where[i]]
@@ -378,13 +395,19 @@ class _Run:
         """Search keyframes for the run ``a..b`` (positions in the order), track hypotheses
         from the kept ones, choose per frame and write; returns (keyframes, changed)."""
         T = len(self.order)
-        lo, hi = max(a - MARGIN, 0), min(b + MARGIN, T - 1)
+        lo, hi = max(a - REACH, self.floor, 0), min(b + REACH, self.ceiling, T - 1)
         hyps: list[_Hyp] = []
         keys: list[dict] = []
         tried: set[int] = set()
         explained = np.zeros(b - a + 1, dtype=bool)
         candidates = [b + 1] if b + 1 < T else []
         most = max_keyframes(b - a + 1)
+        # the limbs lost anywhere in the run: searched at each of its keyframes (after the
+        # run, too, where the forward track is no longer flagged but may still be off);
+        # the torso only where it is lost at the keyframe itself (a lost torso drops the
+        # tracked heading, and the search is then the slow one all around)
+        lost = {n for q in range(a, b + 1) for n in self.lost_limbs(fwd[q])} - {"torso"}
+        run_lost = tuple(n for n in LIMB_PARTS if n in lost)
         while sum(bool(k["kept"]) for k in keys) < most and len(tried) < most + 2:
             if candidates:
                 p = candidates.pop()
@@ -393,14 +416,13 @@ class _Run:
                 if p is None:
                     break
             tried.add(p)
-            key, seated = self.keyframe(fwd, p, a)
+            key, seated = self.keyframe(fwd, p, a, run_lost)
             keys.append(key)
             if seated is None:
                 continue
-            back = self.hypothesis(seated, p, range(p - 1, lo - 1, -1), "backward")
-            hyps.append(back)
-            if p <= b:
-                hyps.append(self.hypothesis(seated, p, range(p + 1, hi + 1), "forward"))
+            past = (fwd, a - MARGIN, b + MARGIN)
+            hyps.append(self.hypothesis(seated, p, range(p - 1, lo - 1, -1), "backward", past))
+            hyps.append(self.hypothesis(seated, p, range(p + 1, hi + 1), "forward", past))
             for h in hyps:
                 for i, r in h.results.items():
                     k = self.pos[i] - a
@@ -410,11 +432,18 @@ class _Run:
                 break
         if not hyps:
             return keys, []
+        # the choice from the frame before the hypotheses' first to the frame after their
+        # last (the forward track's at both ends where there is one)
+        have = [self.pos[i] for h in hyps for i in h.results]
+        lo, hi = max(min(have) - 1, self.floor), min(max(have) + 1, self.ceiling)
         return keys, self.write_choice(fwd, hyps, lo, hi)
 
-    def keyframe(self, fwd, p: int, a: int) -> tuple[dict, FrameResult | None]:
-        """Search frame at position ``p``; the seated result where kept (else None). A
-        frame the forward pass found without observation (``missing``) is not searched."""
+    def keyframe(
+        self, fwd, p: int, a: int, run_lost: tuple[str, ...] = ()
+    ) -> tuple[dict, FrameResult | None]:
+        """Search frame at position ``p`` for the limbs ``run_lost`` and those lost there;
+        the seated result where kept (else None). A frame the forward pass found without
+        observation (``missing``) is not searched."""
         i = self.order[p]
         if "missing" in fwd[p].flags:
             return {"frame": i, "run": self.order[a], "kept": False, "label": "missing"}, None
@@ -426,7 +455,8 @@ class _Run:
             z = read_npz(cached, "two-way keyframe")
             R, root, label = z["R"], z["root"], str(z["label"])
         else:
-            lost = self.lost_limbs(fwd[p])
+            own = set(self.lost_limbs(fwd[p])) | set(run_lost)
+            lost = tuple(n for n in LIMB_PARTS if n in own)
             res = keyframe_search(
                 self.body.template, frame, near=near, lost=lost, exclude_trials=self.exclude
             )
@@ -446,13 +476,17 @@ class _Run:
             key["lost"] = list(self.lost_limbs(r))
         return key, (r if kept else None)
 
-    def hypothesis(self, seated: FrameResult, p: int, steps: range, direction: str) -> _Hyp:
-        """Track from the seated keyframe at position ``p`` over ``steps`` (positions)."""
+    def hypothesis(
+        self, seated: FrameResult, p: int, steps: range, direction: str, past=None
+    ) -> _Hyp:
+        """Track from the seated keyframe at position ``p`` over ``steps`` (positions);
+        ``past`` ``(fwd, first, last)``: stop at a frame outside positions ``first..last``
+        where the track meets the forward track ``fwd`` (:data:`MEET`)."""
         i0 = self.order[p]
         folder = self.work / f"k{i0:05d}-{direction}"
         marker = folder / "done.json"
         if marker.is_file():
-            done = json.loads(marker.read_text())["frames"]
+            done = [i for i in json.loads(marker.read_text())["frames"] if i in self.pos]
             return _Hyp(i0, direction, {i: read_track_frame(folder, i) for i in done})
         if folder.exists():  # an unfinished hypothesis: tracked again
             shutil.rmtree(folder)
@@ -484,6 +518,8 @@ class _Run:
             good = i if r.healthy else good
             lost_in_row = lost_in_row + 1 if "lost" in r.flags else 0
             if lost_in_row >= STOP_LOST:
+                break
+            if past is not None and not past[1] <= q <= past[2] and _meets(r, past[0][q]):
                 break
         write_text_atomic(marker, json.dumps({"frames": sorted(results)}) + "\n")
         return _Hyp(i0, direction, results)
@@ -571,6 +607,14 @@ class _Run:
             state["evidence"] = q.evidence
             out.append(replace(r, flags=flags, message=message, state=state))
         return out
+
+
+def _meets(r: FrameResult, f: FrameResult) -> bool:
+    """Whether the frames ``r`` and ``f`` (both fitted) agree: mean joint distance under
+    :data:`MEET`."""
+    if not (r.healthy and f.healthy):
+        return False
+    return bool(np.linalg.norm(r.joints - f.joints, axis=1).mean() < MEET)
 
 
 def _middle_of_longest(explained: np.ndarray, tried: set[int], a: int) -> int | None:
