@@ -1,9 +1,12 @@
 """The demo keeps what a user needs: hull meshes are rebuilt from their voxel occupancy, and
 finished tracks lose only the state that resumes an interrupted run."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 
-from meshmocap.apps.demo import drop_hull_meshes, drop_resume_state
+from meshmocap.apps.demo import DEMO_METHODS, drop_hull_meshes, drop_resume_state
 from meshmocap.io.capture import Capture
 from meshmocap.io.results import FrameResult, read_state, read_track, start_track, write_frame
 from meshmocap.studio.synth import SynthSpec, synthesize
@@ -73,3 +76,14 @@ def test_files_the_tracks_share_are_stored_once(tmp_path):
     assert link_duplicates([a, b, c, d]) == 0  # linked already
     write_bytes_atomic(b, b"new body")
     assert a.read_bytes() == c.read_bytes() == b"body" * 100 and b.read_bytes() == b"new body"
+
+
+def test_the_demo_guard_has_a_record_of_every_demo_tracker():
+    """``benchmarks/bench_demo_guard.py`` fails a change that makes a tracker worse on the
+    demo than its record: the record is in the repository, one entry per demo tracker."""
+    path = Path(__file__).parents[2] / "benchmarks" / "demo_guard.json"
+    record = json.loads(path.read_text())
+    assert set(record["methods"]) == set(DEMO_METHODS)
+    for figures in record["methods"].values():
+        assert 0 < figures["mean_mm"] <= figures["worst_frame_mm"]
+        assert figures["seconds_per_frame"] > 0
