@@ -32,13 +32,12 @@ from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
-    POINT_MIX,
-    POINT_MIX_PAIRS,
     articulated_model,
     articulated_step,
     nearest_compatible,
 )
 from meshmocap.body.articulated_system import (
+    closest_point_moments,
     moment_plan,
     normal_equations,
     pair_moments,
@@ -171,19 +170,9 @@ class SkeletonHold:
             k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
             if not (len(i1) or len(i2)):
                 break
-            # closest_point_system's energy as per-model-point moments (they add): each
-            # direction's mean point-to-plane residual, a tenth of a subsample's
-            # point-to-point, and the optional pull towards the tracker's surface
-            S, b = np.zeros((m, 3, 3)), np.zeros((m, 3))
-            for ii, kk in ((i1, k1), (i2, k2)):
-                if not len(ii):
-                    continue
-                w = np.full(len(ii), 1.0 / len(ii))
-                S1, b1, _ = pair_moments(v, ii, Y[kk], NY[kk], w, "point_to_plane")
-                sub = slice(None, None, max(1, len(ii) // POINT_MIX_PAIRS))
-                ws = np.full(len(ii[sub]), POINT_MIX / len(ii[sub]))
-                S2, b2, _ = pair_moments(v, ii[sub], Y[kk[sub]], NY[kk[sub]], ws, "point_to_point")
-                S, b = S + S1 + S2, b + b1 + b2
+            # closest_point_system's energy as per-model-point moments (they add), both
+            # directions weighted alike, and the optional pull towards the tracker's surface
+            S, b = closest_point_moments(v, [(i1, k1), (i2, k2)], (1.0, 1.0), Y, NY)
             if self.mu > 0:  # the tracker's surface, correspondences known
                 w = np.full(m, self.mu / m)
                 S3, b3, _ = pair_moments(v, idx, target, target, w, "point_to_point")
