@@ -32,13 +32,17 @@ from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
     ArticulatedModel,
-    add_pose_pull,
     articulated_model,
     articulated_step,
     closest_pairs,
-    closest_point_system,
     pose_points,
     residual_jacobian,
+)
+from meshmocap.body.articulated_system import (
+    closest_point_moments,
+    moment_plan,
+    normal_equations,
+    posed_model,
     rotation_error,
 )
 from meshmocap.body.template import Template
@@ -125,6 +129,7 @@ class PoseFitter:
         self.NY = np.asarray(NY, dtype=np.float64)
         self.tree = KDTree(self.Y)
         self.model = articulated_model(template, n_points=n_model_points, seed=seed)
+        self.plan = moment_plan(self.model)
         self.normal_cos = normal_cos
         self.w_dm = data_to_model_weight
         self.free = np.array(
@@ -205,9 +210,10 @@ class PoseFitter:
             system = self._system(R, root, d, R_ref, lam, free, move_root)
             if system is None:  # no pair left
                 break
+            H, g, G = system
             try:
                 R, root, _ = articulated_step(
-                    self.sk, R, root, *system, active=active, damping=damping
+                    self.sk, R, root, H, g, active=active, damping=damping, G=G
                 )
             except FitError:  # a singular system: keep the pose reached
                 break
@@ -216,28 +222,36 @@ class PoseFitter:
     def _system(self, R, root, max_distance, R_ref, lam, joints, move_root):
         """The Gauss–Newton system (H, g) of the root (if ``move_root``) and the rotations of
         ``joints``, or None without any pair. Only the model points those move, and their
-        pairs, enter (the others' residuals do not change)."""
-        v, nv, a = pose_points(self.model, R, root)
+        pairs, enter (the others' residuals do not change). Assembled from per-point
+        moments (:mod:`~meshmocap.body.articulated_system`, compiled): the same system as
+        the dense Jacobian's of :func:`~meshmocap.body.articulated.closest_point_system`,
+        to rounding."""
+        posed = posed_model(self.plan, R, root)
         moving = None if move_root else self.model.W_acc[:, joints].sum(1) > 0
         pairs = closest_pairs(
             self.tree,
             self.Y,
             self.NY,
-            v,
-            nv,
+            posed.v,
+            posed.n,
             max_distance=max_distance,
             normal_cos=self.normal_cos,
             moving=moving,
         )
         if not any(len(i) for i, _ in pairs):
             return None
-        # lever arms of the estimated joints only
-        H, g = closest_point_system(v, a[:, joints], pairs, (1.0, self.w_dm), self.Y, self.NY)
-        # pull towards the reference pose, linearised in world-frame rotation errors
-        e = rotation_error(self.sk, R, root, R_ref)[joints]
-        add_pose_pull(H, g, e, lam[joints])
-        cols = slice(0 if move_root else 3, None)
-        return H[cols, cols], g[cols]
+        S, b = closest_point_moments(posed.v, pairs, (1.0, self.w_dm), self.Y, self.NY)
+        H, g = normal_equations(self.plan, posed, S, b)
+        # the estimated parameters: the root's translation (if it moves), the rotations of
+        # ``joints``; the pull towards the reference pose, linearised in world-frame
+        # rotation errors, on the rotations' diagonal
+        rot = (3 + 3 * joints[:, None] + np.arange(3)).ravel()
+        cols = np.concatenate([np.arange(3), rot]) if move_root else rot
+        e = rotation_error(self.plan, posed, R, R_ref)[joints]
+        lam3 = np.repeat(lam[joints], 3)
+        H[rot, rot] += lam3
+        g[rot] += lam3 * e.ravel()
+        return H[np.ix_(cols, cols)], g[cols], posed.G
 
 
 def silhouette_mismatch(
