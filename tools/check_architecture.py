@@ -152,6 +152,10 @@ UNTESTED: dict[str, str] = {
         "the template a track uses: tests/estimate/performer/test_capture_cache.py and "
         "tests/estimate/performer/test_point_subject.py"
     ),
+    "meshmocap.estimate.pose._kernels": (
+        "numba loops of the pose search: tests/estimate/pose/test_pose_search.py (against "
+        "NumPy), signatures in tests/apps/test_kernels.py"
+    ),
     "meshmocap.geometry._mesh_kernels": (
         "numba loops of geometry/mesh: tests/apps/test_kernels.py and the normals of "
         "tests/geometry/test_raster.py"

@@ -63,6 +63,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "int64[::1]",
         ),
     },
+    "meshmocap.estimate.pose._kernels": {
+        "nearest_d2_kernel": ("float32[:, :, ::1], float32[:, ::1]",),
+        "nearest_kernel": ("float32[:, :, ::1], float32[:, ::1]",),
+    },
     "meshmocap.trackers.patch.kernels": {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
         "stale_rows": (
@@ -144,8 +148,13 @@ def compile_kernels(modules=None) -> dict[str, float]:
 
 
 #: The kernel modules every tracking run meets (normals; the articulated body's fits: the
-#: first pose, the checks, the ICP tracker), and those of each method's folder.
-SHARED = ("meshmocap.geometry._mesh_kernels", "meshmocap.body._articulated_kernels")
+#: first pose, the checks, the ICP tracker; the first pose's search), and those of each
+#: method's folder.
+SHARED = (
+    "meshmocap.geometry._mesh_kernels",
+    "meshmocap.body._articulated_kernels",
+    "meshmocap.estimate.pose._kernels",
+)
 METHOD_KERNELS = {
     "patch": ("meshmocap.trackers.patch.kernels",),
     "cage": ("meshmocap.trackers.cage.kernels", "meshmocap.trackers.cage.field"),

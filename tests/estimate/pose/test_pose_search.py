@@ -20,6 +20,8 @@ from meshmocap.estimate.pose.pose_search import (
 )
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
 from meshmocap.estimate.recovery.limbs import library_limb_candidates
+from meshmocap.geometry.silhouette import silhouette
+from meshmocap.studio.rigs import camera_rig
 from toys import observed_frame
 
 HELD = "13_32"  # the library trial the performer's pose comes from, kept out of the search
@@ -79,6 +81,43 @@ def test_the_batch_score_ranks_the_true_pose_first_and_matches_the_fitters(scene
         off = off + scorer.shift(X[:1] + off)[0]
         gaps.append(np.linalg.norm(off))
     assert gaps[0] < 0.7 * np.linalg.norm([0.05, -0.03, 0.02]) and gaps[2] < gaps[0]
+
+
+def test_the_compiled_nearest_points_are_numpys_and_a_shared_part_scores_once(scene):
+    """The kernels give NumPy's squared distances (summed coordinate by coordinate in
+    float32) and its first index of the nearest; a score with the still points apart is
+    the score of all the points together, to rounding."""
+    from meshmocap.estimate.pose._kernels import nearest_d2_kernel, nearest_kernel
+
+    rng = np.random.default_rng(3)
+    for dim in (2, 3):
+        x = rng.normal(size=(7, 30, dim)).astype(np.float32)
+        x[:, 5] = x[:, 2]  # equal points: the first index wins
+        Y = rng.normal(size=(11, dim)).astype(np.float32)
+        diff2 = (x[:, :, None, :] - Y[None, None]) ** 2
+        D = diff2[..., 0] + diff2[..., 1] + (diff2[..., 2] if dim == 3 else 0)
+        Yt = np.ascontiguousarray(Y.T)
+        d2, k = nearest_kernel(x, Yt)
+        assert np.array_equal(d2, D.min(axis=1)) and np.array_equal(k, D.argmin(axis=1))
+        assert np.array_equal(nearest_d2_kernel(x, Yt), D.min(axis=1))
+    t, R, root, posed, frame, scorer = scene
+    s = body_sample(t)
+    Rs = np.stack([R, turned_about_z(R, 0.4), turned_about_z(R, np.pi)])
+    Rs[1:, t.skeleton.index("LeftArm")] = np.eye(3)
+    X, _ = posed_samples(t, s, Rs, np.tile(root, (3, 1)))
+    moving = np.arange(X.shape[1]) % 3 == 0
+    Xs = np.concatenate([X[:1, ~moving].repeat(3, axis=0), X[:, moving]], axis=1)
+    shared = scorer.score_shared(X[:, moving], X[0, ~moving])
+    assert np.allclose(shared, scorer.score(Xs), rtol=1e-12, atol=0)
+    # in the images too: two cameras, the posed template's silhouettes
+    cams = camera_rig("humaneva4", width=160, height=120)[:2]
+    masks = [silhouette(posed.V, t.F, cam) for cam in cams]
+    h = frame.hull
+    sc = FrameScorer(
+        h.occupancy, h.origin, h.voxel_size, frame.points[0], cameras=cams, masks=masks
+    )
+    got = sc.score_shared(X[:, moving], X[0, ~moving], n_data=20)
+    assert np.allclose(got, sc.score(Xs, n_data=20), rtol=1e-12, atol=0)
 
 
 def test_the_library_search_finds_a_pose_of_a_trial_it_never_saw(scene):

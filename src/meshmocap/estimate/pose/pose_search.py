@@ -212,16 +212,36 @@ class FrameScorer:
             (g < 0).any(-1) | (g > self.shape - 1).any(-1), beyond, 0.0
         )
 
-    def _nearest(self, x: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _nearest(
+        self, x: np.ndarray, Y: np.ndarray, *, index: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """For candidates' points ``x`` (c, m, 3) float32 and observed points ``Y``
         (k, 3): each observed point's squared distance to its nearest model point (c, k)
-        and that point's index (c, k), by one matrix product."""
-        c, m, dim = x.shape
-        xy = (x.reshape(c * m, dim) @ Y.T).reshape(c, m, len(Y))
-        D = np.einsum("cma,cma->cm", x, x)[:, :, None] - 2 * xy
-        k = D.argmin(axis=1)
-        d2 = np.take_along_axis(D, k[:, None, :], axis=1)[:, 0] + np.einsum("ka,ka->k", Y, Y)
-        return np.maximum(d2, 0.0), k
+        float32 and, with ``index``, that point's index (c, k) int64, else None (compiled
+        loops, :mod:`meshmocap.estimate.pose._kernels`)."""
+        from meshmocap.estimate.pose._kernels import nearest_d2_kernel, nearest_kernel
+
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        Yt = np.ascontiguousarray(np.asarray(Y, dtype=np.float32).T)
+        return nearest_kernel(x, Yt) if index else (nearest_d2_kernel(x, Yt), None)
+
+    def _data_d2(self, x: np.ndarray, n_data: int | None) -> np.ndarray:
+        """(c, k) float32: each observed point's (or, with cameras, sampled silhouette
+        pixel's) squared distance to the nearest of the candidates' points ``x``
+        (c, m, 3) float32, the first ``n_data`` of each."""
+        if not self.views:
+            return self._nearest(x, self.Y[:n_data], index=False)[0]
+        return np.concatenate(
+            [
+                self._nearest(
+                    (project(x, cam.K, cam.R, cam.t)[0] * scale).astype(np.float32),
+                    pix[:n_data],
+                    index=False,
+                )[0]
+                for cam, scale, pix in self.views
+            ],
+            axis=1,
+        )
 
     def score(
         self, X: np.ndarray, *, n_model: int | None = None, n_data: int | None = None
@@ -238,21 +258,31 @@ class FrameScorer:
         for a in range(0, len(X), chunk):
             x = X[a : a + chunk].astype(np.float32)
             d1 = np.clip(self.outside(x), 0.0, OUTSIDE_CLIP)
-            if self.views:
-                d2 = np.concatenate(
-                    [
-                        self._nearest(
-                            (project(x, cam.K, cam.R, cam.t)[0] * scale).astype(np.float32),
-                            pix[:n_data],
-                        )[0]
-                        for cam, scale, pix in self.views
-                    ],
-                    axis=1,
-                )
-                d2 = np.minimum(np.sqrt(d2), SCORE_CLIP)
-            else:
-                d2 = np.minimum(np.sqrt(self._nearest(x, Y)[0]), SCORE_CLIP)
+            d2 = np.minimum(np.sqrt(self._data_d2(x, n_data)), SCORE_CLIP)
             out[a : a + chunk] = np.sqrt(0.5 * ((d1**2).mean(axis=1) + (d2**2).mean(axis=1)))
+        return out
+
+    def score_shared(
+        self, X: np.ndarray, still: np.ndarray, *, n_data: int | None = None
+    ) -> np.ndarray:
+        """(C,) float64: :meth:`score` of candidates whose points are ``still`` (s, 3),
+        the same for every candidate (e.g. the body but one limb), and their own ``X``
+        (C, m, 3); the still points' terms computed once. Equal to :meth:`score` of
+        the points joined, up to the order of the sums (rounding)."""
+        X = np.asarray(X)
+        S = np.asarray(still, dtype=np.float32)[None]
+        n = X.shape[1] + S.shape[1]
+        s1 = float((np.clip(self.outside(S[0]), 0.0, OUTSIDE_CLIP) ** 2).sum())
+        s2 = self._data_d2(S, n_data)  # (1, k)
+        out = np.empty(len(X))
+        chunk = max(1, 2_000_000 // (max(X.shape[1], 1) * s2.shape[1]))
+        for a in range(0, len(X), chunk):
+            x = X[a : a + chunk].astype(np.float32)
+            d1 = np.clip(self.outside(x), 0.0, OUTSIDE_CLIP)
+            d2 = np.minimum(np.sqrt(np.minimum(self._data_d2(x, n_data), s2)), SCORE_CLIP)
+            out[a : a + chunk] = np.sqrt(
+                0.5 * ((s1 + (d1**2).sum(axis=1)) / n + (d2**2).mean(axis=1))
+            )
         return out
 
     def shift(self, X: np.ndarray) -> np.ndarray:

@@ -25,7 +25,12 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.pose.fit import PoseFit, PoseFitter
 from meshmocap.estimate.pose.library import COARSE_POINTS, DISTINCT, LibraryPoses, body_frame
-from meshmocap.estimate.pose.pose_search import FrameScorer, body_sample, posed_samples
+from meshmocap.estimate.pose.pose_search import (
+    BodySample,
+    FrameScorer,
+    body_sample,
+    sample_positions,
+)
 from meshmocap.geometry.rotations import rotation_between
 
 __all__ = [
@@ -64,6 +69,11 @@ def limb_joint_indices(template: Template, limb: str, *, lower: bool = False) ->
     return np.array(sorted({sk.index(n) for n in names if n in sk.names} | set(below)))
 
 
+def _part(sample: BodySample, keep: np.ndarray) -> BodySample:
+    """The points of ``sample`` where ``keep`` (m,) bool."""
+    return BodySample(sample.vertex[keep], sample.joint[keep], sample.offset[keep])
+
+
 def _ancestors(sk, j: int) -> list[int]:
     out = []
     while j >= 0:
@@ -92,11 +102,16 @@ def library_limb_candidates(
     sample = body_sample(template)
     Rc = np.broadcast_to(R, poses.R.shape).copy()
     Rc[:, idx] = poses.R[:, idx]
-    X, Pj = posed_samples(template, sample, Rc, np.broadcast_to(root, (len(Rc), 3)))
-    sc = scorer.score(X, n_model=COARSE_POINTS, n_data=COARSE_POINTS)
+    G, Pj = forward_kinematics(template.skeleton, Rc, np.broadcast_to(root, (len(Rc), 3)))
+    # only the limb's sample points differ between candidates: the others are scored once
+    moving = np.isin(sample.joint, idx)
+    coarse = np.arange(len(moving)) < COARSE_POINTS  # the coarse score's prefix
+    X = sample_positions(_part(sample, moving), G, Pj)  # (N, m_limb, 3)
+    still = sample_positions(_part(sample, ~moving), G[0], Pj[0])  # (m - m_limb, 3)
+    sc = scorer.score_shared(X[:, coarse[moving]], still[coarse[~moving]], n_data=COARSE_POINTS)
     top = np.argsort(sc)[: 20 * n_best]
     sc = np.full(len(sc), np.inf)
-    sc[top] = scorer.score(X[top])
+    sc[top] = scorer.score_shared(X[top], still)
     kept: list[int] = []
     for i in np.argsort(sc):
         if all(np.linalg.norm(Pj[i, idx] - Pj[k, idx], axis=1).max() > DISTINCT for k in kept):
