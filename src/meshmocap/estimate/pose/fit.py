@@ -36,12 +36,12 @@ from meshmocap.body.articulated import (
     articulated_step,
     closest_pairs,
     pose_points,
-    residual_jacobian,
 )
 from meshmocap.body.articulated_system import (
     closest_point_moments,
     moment_plan,
     normal_equations,
+    pair_moments,
     posed_model,
     rotation_error,
 )
@@ -308,19 +308,30 @@ def pose_of_vertices(
     """
     if model is None:
         model = articulated_model(template, n_points=n_points, seed=0)
+    plan = moment_plan(model)
     sk = template.skeleton
-    target = np.asarray(V, dtype=np.float64)[model.sample]
+    target = np.ascontiguousarray(np.asarray(V, dtype=np.float64)[model.sample])
     free = [j for j, n in enumerate(sk.names) if n not in fixed_joints]
     act = np.concatenate([np.arange(3), (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()])
     R, root = np.array(R, dtype=np.float64), np.array(root, dtype=np.float64)
     i = np.arange(len(model.sample))
+    ones = np.ones(len(i))
     for _ in range(iterations):
-        v, _, a = pose_points(model, R, root)
-        r, Jr = residual_jacobian(v, a, i, target, np.zeros_like(target), "point_to_point")
-        Ja = Jr[:, act]
+        # Σ JᵀJ and Σ Jᵀr of the point-to-point residuals v_i − V_i from per-point moments
+        # (:mod:`~meshmocap.body.articulated_system`): the dense Jacobian's, to rounding
+        posed = posed_model(plan, R, root)
+        S, b, _ = pair_moments(posed.v, i, target, target, ones, "point_to_point")
+        H, g = normal_equations(plan, posed, S, b)
         try:
             R, root, delta = articulated_step(
-                sk, R, root, Ja.T @ Ja, Ja.T @ r, active=act, damping=VERTEX_DAMPING
+                sk,
+                R,
+                root,
+                H[np.ix_(act, act)],
+                g[act],
+                active=act,
+                damping=VERTEX_DAMPING,
+                G=posed.G,
             )
         except FitError:  # a singular system: keep the pose reached
             break
