@@ -249,6 +249,7 @@ def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], 
                     passes=passes,
                     template_info=choice.info,
                     init_options={"exclude_trials": excluded(trial)},
+                    start=choice.start,  # as api.track: the body fit's pose is a candidate
                 )
             tracker = make_tracker(method, template=tracking_body(template).light)  # as tracked
             with _Clock() as c:

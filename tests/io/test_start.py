@@ -26,6 +26,8 @@ def _start(**kw):
         runner_up="07_05:11@0°",
         runner_up_key=0.0469,
         lost=("left_arm",),
+        silhouette_cost=3.1415e-5,
+        rival_cost=4.2e-5,
     )
     return Start(**{**fields, **kw})
 
@@ -35,18 +37,28 @@ def test_a_start_reads_back_bit_for_bit_through_json_text():
     back = start_of_json(json.loads(json.dumps(start_json(s))))
     assert back.R.dtype == back.root.dtype == np.float64
     assert back.R.tobytes() == s.R.tobytes() and back.root.tobytes() == s.root.tobytes()
-    for name in ("frame", "source", "confident", "label", "score", "key", "runner_up", "lost"):
+    names = ("frame", "source", "confident", "label", "score", "key", "runner_up", "lost")
+    for name in (*names, "silhouette_cost", "rival_cost"):
         assert getattr(back, name) == getattr(s, name)
     assert back.margin == s.margin == pytest.approx(0.00009, abs=1e-12)
     # the other sources carry no search: no numbers, no runner-up, no margin
     truth = start_of_json(json.loads(json.dumps(start_json(_start(source="truth", **_bare())))))
     assert truth.score is None and truth.runner_up is None and truth.margin is None
+    assert truth.silhouette_cost is None and truth.rival_cost is None
     assert truth.confident
 
 
 def _bare():
     return dict(
-        confident=True, label="", score=None, key=None, runner_up=None, runner_up_key=None, lost=()
+        confident=True,
+        label="",
+        score=None,
+        key=None,
+        runner_up=None,
+        runner_up_key=None,
+        lost=(),
+        silhouette_cost=None,
+        rival_cost=None,
     )
 
 

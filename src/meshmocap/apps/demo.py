@@ -247,8 +247,10 @@ def demo_tracks(
     The tracking template is chosen once (:func:`tracking_template`: ``"auto"`` estimates the
     performer's body, cached for the capture) and kept in every track folder; each method
     runs on the default path: the light body the driver tracks (:mod:`meshmocap.body.light`),
-    default options, the automatic first pose (cached for the capture), the recovery
-    checks. ``benchmarks/bench_demo_guard.py`` guards these figures.
+    default options, the automatic first pose (the search's, cached for the capture, or
+    the pose the body was fitted in, by the silhouettes' evidence:
+    :mod:`~meshmocap.estimate.performer.first_frame`), the recovery checks.
+    ``benchmarks/bench_demo_guard.py`` guards these figures.
 
     Returns
     -------
@@ -281,7 +283,10 @@ def demo_tracks(
             choice.template,
             cap,
             folder,
-            TrackOptions(show_progress=show_progress, template_info=choice.info),
+            # the pose the body was fitted in competes with the search (as meshmocap.api.track)
+            TrackOptions(
+                show_progress=show_progress, template_info=choice.info, start=choice.start
+            ),
         )
         with phase(f"scoring the {method} track", enabled=show_progress):
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)

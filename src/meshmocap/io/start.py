@@ -34,8 +34,8 @@ __all__ = ["START_SOURCES", "Start", "StartSource", "start_json", "start_of_json
 #:   is the template's own rest mesh, a template cut from the frame): its rest pose;
 #: * ``subject-rest``: the template was rigged from this frame as it stands (a clean 4D
 #:   capture, :mod:`~meshmocap.estimate.performer.tracking_template`): its rest pose;
-#: * ``subject-fit``: the template's body was fitted to this frame's points: the pose
-#:   fitted with it.
+#: * ``subject-fit``: the template's body was fitted to this frame's points or silhouettes:
+#:   the pose fitted with it.
 StartSource = Literal["search", "truth", "rest", "subject-rest", "subject-fit"]
 START_SOURCES: tuple[str, ...] = get_args(StartSource)
 
@@ -62,6 +62,11 @@ class Start:
         the search found none, and for the other sources)
     runner_up_key : float or None, the runner-up's ranking key, metres
     lost : tuple of str, the winner's limbs the fit-quality check finds lost
+    silhouette_cost : float or None, m²: the objective left by this pose's fit to the
+        frame's silhouettes with the body held, where the start was chosen by it among
+        candidates (:mod:`~meshmocap.estimate.performer.first_frame`); None otherwise
+    rival_cost : float or None, m²: the same for the best candidate not chosen (None
+        without one)
     """
 
     frame: int
@@ -75,6 +80,8 @@ class Start:
     runner_up: str | None = None
     runner_up_key: float | None = None
     lost: tuple[str, ...] = ()
+    silhouette_cost: float | None = None
+    rival_cost: float | None = None
 
     def __post_init__(self) -> None:
         R, root = np.asarray(self.R), np.asarray(self.root)
@@ -111,6 +118,8 @@ def start_json(start: Start) -> dict:
         "runner_up": start.runner_up,
         "runner_up_key": _number(start.runner_up_key),
         "lost": list(start.lost),
+        "silhouette_cost": _number(start.silhouette_cost),
+        "rival_cost": _number(start.rival_cost),
     }
 
 
@@ -142,6 +151,8 @@ def start_of_json(record: object, where: str = "start") -> Start:
             runner_up=None if record.get("runner_up") is None else str(record["runner_up"]),
             runner_up_key=_optional_float(record.get("runner_up_key")),
             lost=tuple(str(x) for x in record.get("lost", ())),
+            silhouette_cost=_optional_float(record.get("silhouette_cost")),
+            rival_cost=_optional_float(record.get("rival_cost")),
         )
     except (KeyError, TypeError, ValueError, InputError) as exc:
         raise FormatError(f"{where}: not a start record ({type(exc).__name__}: {exc})") from None

@@ -53,6 +53,7 @@ from meshmocap.body.light import TrackingBody, tracking_body
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.performer.capture_cache import cached_first_pose
+from meshmocap.estimate.performer.first_frame import start_of_frame
 from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
@@ -295,8 +296,11 @@ def initialise_tracker(
 ) -> None:
     """Start on the first frame that has an observation, at the pose :func:`first_pose`
     finds for the full body, or at ``start``'s where that is this frame
-    (:func:`track_sequence`), the tracker on ``body.light``. The start is recorded in
-    ``track.json`` (:func:`~meshmocap.io.results.write_start`); the frame's message and
+    (:func:`track_sequence`), the tracker on ``body.light``. With ``init="auto"`` on a
+    frame with silhouettes the search's pose and a ``subject-fit`` start compete, each
+    fitted to the silhouettes
+    (:func:`~meshmocap.estimate.performer.first_frame.start_of_frame`). The start is
+    recorded in ``track.json`` (:func:`~meshmocap.io.results.write_start`); the frame's message and
     flags (``lost`` for an uncertain start) are made from it
     (:mod:`~meshmocap.estimate.pose.start`). Frames before it are written as copies of
     it, flagged ``missing``. A placement of more than a few seconds says so
@@ -312,8 +316,21 @@ def initialise_tracker(
         if reason is None:
             t0 = time.perf_counter()
             try:
-                if start is not None and init == "auto" and start.frame == index:
-                    found = start
+                if init == "auto":  # the search's or the given start's, by evidence
+                    given = start if start is not None and start.frame == index else None
+                    found = start_of_frame(
+                        body.template,
+                        frame,
+                        given,
+                        functools.partial(
+                            first_pose,
+                            body.template,
+                            frame,
+                            init,
+                            capture=capture,
+                            options=init_options,
+                        ),
+                    )
                 else:
                     found = first_pose(
                         body.template, frame, init, capture=capture, options=init_options

@@ -66,7 +66,9 @@ from meshmocap.geometry.silhouette import fill_triangles
 
 __all__ = [
     "ShapeFit",
+    "SilhouettePose",
     "SilhouetteView",
+    "fit_pose",
     "fit_shape",
     "outlines",
     "shape_jacobian",
@@ -434,3 +436,88 @@ def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda
         d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose])
         R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
     return z, rms
+
+
+@dataclass(frozen=True, eq=False)
+class SilhouettePose:
+    """A pose fitted to one frame's silhouettes with the body held (:func:`fit_pose`).
+
+    Attributes
+    ----------
+    R : (J, 3, 3) float64, local rotations; ``root`` (3,) float64, metres
+    cost : float, the fit's objective at the returned pose: the Huber-weighted mean squared
+        silhouette residual of each term (inside, outline, coverage), summed, m²
+    """
+
+    R: np.ndarray
+    root: np.ndarray
+    cost: float
+
+
+def fit_pose(
+    template: Template,
+    views: list[SilhouetteView],
+    R0: np.ndarray,
+    root0: np.ndarray,
+    *,
+    iterations: int = 10,
+    lambda_pose: float = 1e-7,
+    n_points: int = 1500,
+    max_match: float = 25.0,
+    fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+    seed: int = 0,
+) -> SilhouettePose:
+    """Fit ``template``'s pose to one frame's silhouettes, the body held as it is: the
+    terms of :func:`fit_shape` (module docstring) without the shape's unknowns.
+
+    Parameters
+    ----------
+    template : Template, the body (any rigged template)
+    views : list (cameras) of SilhouetteView, the frame's silhouettes
+    R0 : (J, 3, 3) float64, starting local rotations; ``root0`` (3,) float64, metres
+    iterations : int, Gauss–Newton iterations
+    lambda_pose, n_points, max_match, fixed_joints, seed : as :func:`fit_shape`
+
+    Returns
+    -------
+    SilhouettePose, with the objective at the returned pose (comparable between fits of
+    the same frame and body from different starts)
+    """
+    R = np.array(R0, dtype=np.float64)
+    root = np.array(root0, dtype=np.float64)
+    model = articulated_model(template, n_points=template.n_vertices)
+    sample = articulated_model(template, n_points=n_points, seed=seed).sample
+    names = template.skeleton.names
+    free = [j for j, name in enumerate(names) if name not in fixed_joints]
+    act = np.r_[0:3, (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()]
+    for _ in range(iterations):
+        H, g, _ = _pose_system(template, model, views, R, root, sample, lambda_pose, max_match)
+        delta = np.zeros(len(g))
+        try:
+            delta[act] = damped_solve(H[np.ix_(act, act)], g[act], damping=DAMPING)
+        except FitError as exc:
+            raise FitError(f"fit_pose: {exc}") from None
+        R, root = apply_increment(template.skeleton, R, root, limit_step(delta))
+    cost = _pose_system(template, model, views, R, root, sample, lambda_pose, max_match)[2]
+    return SilhouettePose(R, root, cost)
+
+
+def _pose_system(template, model, views, R, root, sample, lambda_pose, max_match):
+    """The normal equations ``H`` (n, n), ``g`` (n,) of :func:`fit_pose`'s step at
+    ``R``, ``root`` and its objective there (m²)."""
+    v, n, _ = pose_points(model, R, root, jacobian=False)
+    lines = outlines(views, v, n, template.F)
+    rows = np.unique(np.concatenate([sample, *lines]))
+    _, _, a = pose_points(model_subset(model, rows), R, root)
+    S = np.zeros((len(rows), 3, 0))  # no shape unknowns
+    t = frame_terms(views, v, n, a, S, template.F, sample, max_match, lines=lines, rows=rows)
+    n_pose = 3 + 3 * template.skeleton.n_joints
+    H, g, cost = np.zeros((n_pose, n_pose)), np.zeros(n_pose), 0.0
+    for term, r, Jp, _ in t.rows:
+        w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), DIVISOR_FLOOR)) / t.population[term]
+        H += Jp.T @ (w[:, None] * Jp)
+        g += Jp.T @ (w * r)
+        cost += float(w @ (r * r))
+    e = rotation_error(template.skeleton, R, root)[1:]
+    add_pose_pull(H, g, e, lambda_pose, start=6)
+    return H, g, cost

@@ -23,9 +23,11 @@ In order:
      fitted to the points (:func:`~meshmocap.estimate.performer.point_subject.fit_body_to_points`).
 
    A template made from a frame knows that frame's pose (the rest pose of a rigged first
-   frame, the fitted pose of the points' body): :attr:`TemplateChoice.start` holds it
-   (kept beside the template as ``subject_pose.npz``), and tracking starts there
-   instead of searching.
+   frame, the pose fitted with the body to the points or to the silhouettes):
+   :attr:`TemplateChoice.start` holds it (kept beside the template as
+   ``subject_pose.npz``). Where that frame is the first tracked, tracking starts there
+   instead of searching; on a studio capture the search runs too and the better of the
+   two by the silhouettes' evidence is kept (:mod:`~meshmocap.estimate.performer.first_frame`).
 """
 
 from __future__ import annotations
@@ -200,17 +202,15 @@ def tracking_template(
             est = cached_subject(capture, kind=kind, estimate=estimate_subject, refresh=refresh)
     path.parent.mkdir(parents=True, exist_ok=True)
     save_template(path, est.template)
-    start = None
-    if est.kind in ("mesh", "points"):  # the first fitted frame's own pose
-        R, root = est.R[0], est.root[0]
-        if est.kind == "mesh":  # rigged as it stands: rest rotations at the rest root
-            R = np.tile(np.eye(3), (est.template.skeleton.n_joints, 1, 1))
-            root = est.template.skeleton.rest_positions[0]
-        source = "subject-rest" if est.kind == "mesh" else "subject-fit"
-        start = Start(int(est.frames[0]), R, root, source)
-        _save_start(pose_path, start)
-    else:
-        pose_path.unlink(missing_ok=True)
+    # the first fitted frame's own pose (hull: a candidate the search competes with,
+    # meshmocap.estimate.performer.first_frame)
+    R, root = est.R[0], est.root[0]
+    if est.kind == "mesh":  # rigged as it stands: rest rotations at the rest root
+        R = np.tile(np.eye(3), (est.template.skeleton.n_joints, 1, 1))
+        root = est.template.skeleton.rest_positions[0]
+    source = "subject-rest" if est.kind == "mesh" else "subject-fit"
+    start = Start(int(est.frames[0]), R, root, source)
+    _save_start(pose_path, start)
     # tracked as read back from the file, as a resumed run will read it: the same template
     # to the bit, so the resumed run's settings (a cage manifold's digest) are the same
     t = load_template(path)
