@@ -204,14 +204,21 @@ def made_forward(out: Path) -> None:
 
 def evidence_of(track_dir: Path, cap, template) -> dict:
     """The ``lost`` evidence replayed over a track as the driver computes it
-    (``bench_lost.track_evidence``), cached beside the track folder."""
+    (``bench_lost.track_evidence``), cached beside the track folder, and ``also`` (T,):
+    the frames the two-way pass flagged because its tracks disagree there (``ambiguous``
+    in ``track.json``; a flag the evidence replay cannot see, added to the rule's flags
+    when scored on a left-out category)."""
     from bench_lost import track_evidence  # bench_lost imports this module's TRIALS
 
     cache = track_dir.with_name(f"{track_dir.name}.evidence.npz")
     if not cache.is_file():
         np.savez(cache, **track_evidence(track_dir, cap, template))
     z = np.load(cache)
-    return {k: z[k] for k in ("evidence", "error", "lost")}
+    meta = json.loads((track_dir / "track.json").read_text())
+    amb = {int(a["frame"]) for a in (meta.get("two_way") or {}).get("ambiguous", ())}
+    frames = sorted(int(p.stem) for p in (track_dir / "frames").glob("*.npz"))
+    also = np.array([i in amb for i in frames[1 : 1 + len(z["lost"])]], dtype=bool)
+    return {**{k: z[k] for k in ("evidence", "error", "lost")}, "also": also}
 
 
 def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], dict]:

@@ -136,10 +136,11 @@ def gather(args) -> list[dict]:
 
 
 def score(rule: LostRule, rows: list[dict]) -> dict:
-    """Bad frames flagged / bad frames, good frames flagged / good frames."""
+    """Bad frames flagged / bad frames, good frames flagged / good frames (a row's ``also``
+    (T,) bool, where given: frames flagged besides the rule's)."""
     bad = flagged = good = false = 0
     for r in rows:
-        f = rule.flags(r["evidence"])
+        f = rule.flags(r["evidence"]) | r.get("also", False)
         b = (r["error"] > BAD_MM).any(axis=1)
         bad += int(b.sum())
         flagged += int((f & b).sum())

@@ -25,6 +25,7 @@ from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 from meshmocap.trackers.two_way import (
     TwoWay,
+    ambiguous_limbs,
     choose,
     evidence_cost,
     flagged_runs,
@@ -55,6 +56,26 @@ def test_the_evidence_cost_counts_lost_limbs_first_then_the_fit():
     assert c[0] == 0.0
     assert c[1] == pytest.approx(two_way.FIT_WEIGHT * 0.5)
     assert c[2] == pytest.approx(1.0 + two_way.FIT_WEIGHT)
+
+
+def test_a_limb_is_ambiguous_where_a_track_the_evidence_passes_places_it_elsewhere():
+    limb_of = np.array([0, 0, 4, 4, 5])  # torso, torso, left leg ×2, right leg
+    J = np.zeros((5, 3))
+    others = np.zeros((3, 5, 3))
+    others[0, 3, 0] = 0.2  # an unflagged track: the left leg 200 mm off
+    others[1, 4, 0] = 0.18  # a flagged track, its right leg passing: 180 mm is not enough
+    others[2, 4, 0] = 0.5  # ... and lost there: 500 mm does not count either
+    frame_lost = np.array([False, True, True])
+    limb_lost = np.zeros((3, len(LIMB_PARTS)), dtype=bool)
+    limb_lost[2, 5] = True
+    amb, d = ambiguous_limbs(J, others, frame_lost, limb_lost, limb_of)
+    assert amb.tolist() == [False, False, False, False, True, False]
+    assert d[4].tolist() == pytest.approx([0.2, 0.0, 0.0]) and not d[5].any()
+    others[1, 4, 0] = 0.25  # the flagged track's passing right leg 250 mm off: ambiguous
+    amb, d = ambiguous_limbs(J, others, frame_lost, limb_lost, limb_of)
+    assert amb[5] and d[5].tolist() == pytest.approx([0.0, 0.25, 0.0])
+    amb, _ = ambiguous_limbs(J, others[:0], frame_lost[:0], limb_lost[:0], limb_of)
+    assert not amb.any()  # no other track: nothing to disagree with
 
 
 def test_the_choice_switches_where_the_tracks_agree():
@@ -156,6 +177,7 @@ def test_a_lost_run_is_replaced_from_a_keyframe_tracked_backward(
     assert any("LeftArm" in c["limbs"] or "left_arm" in c["limbs"] for c in res.changed)
     # the flags recomputed by the rule on the result; the record in track.json
     assert res.flagged[0] == 4 and res.flagged[1] == 0
+    assert res.ambiguous == ()  # the forward track's arm is lost there: no disagreement
     assert not any("lost" in f for f in after.flags[3:7])
     assert "two-way: from keyframe 7 (backward)" in after.messages[4]
     meta = json.loads((folder / "track.json").read_text())

@@ -25,13 +25,19 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
 4. **Choice.** Per frame, the forward track or a hypothesis: dynamic programming over the
    frames (:func:`choose`) of the evidence's cost (:func:`evidence_cost`: limbs lost, then
    how far the fit is off the observations) plus a cost per switch that grows with the
-   distance between the two poses at the switch (the choice switches where they agree).
-   Whole frames are chosen: the chosen track's vertices, joints and state as tracked.
+   distance between the two poses at the switch (the choice switches where they agree);
+   before the run the forward track costs :data:`DRIFT` more (it often drifts off before it
+   is flagged). Whole frames are chosen: the chosen track's vertices, joints and state as
+   tracked.
 5. **Result.** The chosen frames are written into the track folder (the forward pass's
    frame kept in ``two_way/forward/``), the flags of every frame of the run's span
-   recomputed by the same rule on the result, and ``track.json`` records the pass
+   recomputed by the same rule on the result, a chosen frame flagged ``lost`` too where the
+   other tracks that the evidence does not rule out disagree with it on a limb
+   (:func:`ambiguous_limbs`: a limb wrong inside the visual hull passes every measure;
+   the disagreement is what shows it), and ``track.json`` records the pass
    (``"two_way"``: the runs, each keyframe and whether it was kept, which frames changed,
-   from which keyframe and direction, and the limbs the forward pass had lost there). Where
+   from which keyframe and direction, the limbs the forward pass had lost there, and the
+   frames flagged ambiguous). Where
    no keyframe is kept, the frames stay as they were, flagged.
 
 Everything the pass makes is kept under ``TRACK/two_way/`` (keyframe searches in
@@ -76,6 +82,9 @@ from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.frame_step import read_track_frame, recovered, track_frame
 
 __all__ = [
+    "AMBIGUOUS",
+    "AMBIGUOUS_LIMB",
+    "DRIFT",
     "FIT_WEIGHT",
     "FOLDER",
     "FRAMES_PER_KEY",
@@ -89,6 +98,7 @@ __all__ = [
     "SWITCH",
     "SWITCH_PER_METRE",
     "TwoWay",
+    "ambiguous_limbs",
     "choose",
     "evidence_cost",
     "flagged_runs",
@@ -118,11 +128,21 @@ SWITCH = 0.5
 SWITCH_PER_METRE = 10.0
 #: Cost per frame of a hypothesis over the forward track (the forward track wins ties).
 PREFER_FORWARD = 0.05
+#: Cost per frame of the forward track over a hypothesis on the frames before its run (a
+#: forward track drifts off some frames before the rule flags it: where the evidence ties,
+#: the hypothesis tracked back from a keyframe that passes is kept).
+DRIFT = 0.1
 #: Weight of the fit's continuous evidence (the largest share of a limb outside, buried or
 #: unexplained, in units of its threshold, at most 1 per limb) next to the lost limbs.
 FIT_WEIGHT = 0.1
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
+#: Metres: a limb of the chosen frame is ambiguous where another track the lost rule does
+#: not flag on that frame places it this far off (largest joint distance on the limb).
+AMBIGUOUS = 0.15
+#: Metres: a limb of the chosen frame is also ambiguous where a keyframe's track whose same
+#: limb the lost rule passes (its frame flagged for another limb) places it this far off.
+AMBIGUOUS_LIMB = 0.2
 #: The folder of the pass's intermediate results, inside the track folder.
 FOLDER = TWO_WAY_FOLDER
 
@@ -140,6 +160,10 @@ class TwoWay:
     changed : tuple of dict, each stretch of frames replaced: ``frames`` (first, last),
         ``keyframe``, ``direction`` (``"backward"`` or ``"forward"``), ``limbs`` (those the
         forward pass had flagged lost there; the whole frame is replaced)
+    ambiguous : tuple of dict, each frame flagged ``lost`` because the tracks disagree
+        there (:func:`ambiguous_limbs`): ``frame``, ``limbs``, ``mm`` (the largest
+        disagreement), ``track`` (``"forward"`` or ``"keyframe K backward|forward"``, the
+        track that disagrees most)
     flagged : (int, int), frames flagged ``lost`` before and after the pass
     seconds : float, wall time of the pass
     """
@@ -147,6 +171,7 @@ class TwoWay:
     runs: tuple[tuple[int, int], ...] = ()
     keyframes: tuple[dict, ...] = ()
     changed: tuple[dict, ...] = ()
+    ambiguous: tuple[dict, ...] = ()
     flagged: tuple[int, int] = (0, 0)
     seconds: float = 0.0
 
@@ -156,6 +181,7 @@ class TwoWay:
             "runs": [list(r) for r in self.runs],
             "keyframes": list(self.keyframes),
             "changed": list(self.changed),
+            "ambiguous": list(self.ambiguous),
             "flagged": list(self.flagged),
             "seconds": round(float(self.seconds), 3),
             "complete": True,
@@ -167,8 +193,8 @@ class TwoWay:
         kept = sum(bool(k["kept"]) for k in self.keyframes)
         return (
             f"two-way pass: {len(self.runs)} lost runs, {kept} of {len(self.keyframes)} "
-            f"keyframes kept, {n} frames changed, frames flagged lost {self.flagged[0]} → "
-            f"{self.flagged[1]} ({self.seconds:.0f} s)"
+            f"keyframes kept, {n} frames changed, {len(self.ambiguous)} flagged ambiguous, "
+            f"frames flagged lost {self.flagged[0]} → {self.flagged[1]} ({self.seconds:.0f} s)"
         )
 
 
@@ -273,6 +299,48 @@ def choose(
     return path
 
 
+def ambiguous_limbs(
+    joints: np.ndarray,
+    others: np.ndarray,
+    frame_lost: np.ndarray,
+    limb_lost: np.ndarray,
+    limb_of: np.ndarray,
+    *,
+    whole: float = AMBIGUOUS,
+    limb: float = AMBIGUOUS_LIMB,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The limbs of a chosen frame that other tracks, which the evidence does not rule
+    out, place elsewhere: the frame is then ambiguous (the evidence cannot tell which track
+    is right, and the chosen one may be the wrong one: a limb wrong inside the visual hull
+    passes every measure).
+
+    Parameters
+    ----------
+    joints : (K, 3) float64, metres, the chosen frame's evaluation joints
+    others : (H, K, 3) float64, metres, the other tracks' joints on that frame
+    frame_lost : (H,) bool, whether the lost rule flags each other track's frame
+    limb_lost : (H, L) bool, whether it finds each other track's limb lost
+    limb_of : (K,) int, the limb (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`
+        order) of each joint
+    whole, limb : metres, a limb is ambiguous where an unflagged track places it more than
+        ``whole`` off, or a track whose limb passes places it more than ``limb`` off
+        (largest joint distance on the limb)
+
+    Returns
+    -------
+    ambiguous : (L,) bool, per limb
+    distance : (L, H) float64, metres, the largest joint distance per limb and track where
+        it makes the limb ambiguous (0 elsewhere)
+    """
+    L = len(LIMB_PARTS)
+    d = np.linalg.norm(np.asarray(others, np.float64) - joints, axis=-1)  # (H, K)
+    per = np.stack([d[:, limb_of == k].max(axis=1, initial=0.0) for k in range(L)])  # (L, H)
+    ok = ~np.asarray(frame_lost, dtype=bool)
+    passes = ~np.asarray(limb_lost, dtype=bool).T  # (L, H)
+    amb = ((per > whole) & ok) | ((per > limb) & passes)
+    return amb.any(axis=1), np.where(amb, per, 0.0)
+
+
 # --- the pass over a track folder ------------------------------------------------------
 
 
@@ -341,6 +409,7 @@ def two_way_pass(
         runs=tuple((order[a], order[b]) for a, b in runs),
         keyframes=tuple(keys),
         changed=tuple(changed),
+        ambiguous=tuple(run.ambiguous),
         flagged=(int(flagged.sum()), int(after)),
         seconds=time.perf_counter() - t0,
     )
@@ -353,6 +422,7 @@ def _of_json(d: dict) -> TwoWay:
         runs=tuple(tuple(r) for r in d.get("runs", ())),
         keyframes=tuple(d.get("keyframes", ())),
         changed=tuple(d.get("changed", ())),
+        ambiguous=tuple(d.get("ambiguous", ())),
         flagged=tuple(d.get("flagged", (0, 0))),
         seconds=float(d.get("seconds", 0.0)),
     )
@@ -387,6 +457,11 @@ class _Run:
         self.hold = False
         self.pos = {i: p for p, i in enumerate(order)}
         self.floor, self.ceiling = 0, len(order) - 1
+        self.ambiguous: list[dict] = []
+        names = body.template.eval_skeleton.names
+        self.limb_of = np.array(
+            [next(k for k, v in enumerate(LIMB_PARTS.values()) if n in v) for n in names]
+        )
 
     def frame(self, i: int):
         return self.capture[self.where[i]]
@@ -436,7 +511,7 @@ class _Run:
         # last (the forward track's at both ends where there is one)
         have = [self.pos[i] for h in hyps for i in h.results]
         lo, hi = max(min(have) - 1, self.floor), min(max(have) + 1, self.ceiling)
-        return keys, self.write_choice(fwd, hyps, lo, hi)
+        return keys, self.write_choice(fwd, hyps, lo, hi, first=a)
 
     def keyframe(
         self, fwd, p: int, a: int, run_lost: tuple[str, ...] = ()
@@ -524,9 +599,12 @@ class _Run:
         write_text_atomic(marker, json.dumps({"frames": sorted(results)}) + "\n")
         return _Hyp(i0, direction, results)
 
-    def write_choice(self, fwd, hyps: list[_Hyp], lo: int, hi: int) -> list[dict]:
+    def write_choice(
+        self, fwd, hyps: list[_Hyp], lo: int, hi: int, *, first: int | None = None
+    ) -> list[dict]:
         """Choose per frame over positions ``lo..hi`` (:func:`choose`), write the chosen
-        frames and the span's recomputed flags; returns the stretches changed."""
+        frames and the span's recomputed flags; returns the stretches changed. ``first``:
+        the run's first position (the forward track costs :data:`DRIFT` more before it)."""
         span = self.order[lo : hi + 1]
         T, H = len(span), 1 + len(hyps)
         K = fwd[lo].joints.shape[0]
@@ -534,6 +612,8 @@ class _Run:
         joints = np.zeros((T, H, K, 3))
         for t, i in enumerate(span):
             cost[t, 0] = self.cost(fwd[lo + t])
+            if first is not None and lo + t < first:
+                cost[t, 0] += DRIFT  # the forward track drifts off before it is flagged
             joints[t, 0] = fwd[lo + t].joints
             for h, hyp in enumerate(hyps, start=1):
                 r = hyp.results.get(i)
@@ -548,6 +628,7 @@ class _Run:
             for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True))
         ]
         chosen = self.reflagged(fwd, lo, chosen)
+        chosen = self.flag_ambiguous(fwd, hyps, lo, path, chosen)
         kept = self.out / FOLDER / "forward"
         (kept / "frames").mkdir(parents=True, exist_ok=True)
         for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True)):
@@ -564,6 +645,62 @@ class _Run:
             write_frame(self.out, replace(r, index=i))
         lost = [self.lost_limbs(r) for r in fwd[lo : hi + 1]]
         return _stretches(span, path, hyps, lost)
+
+    def flag_ambiguous(
+        self, fwd, hyps: list[_Hyp], lo: int, path: np.ndarray, chosen: list[FrameResult]
+    ) -> list[FrameResult]:
+        """The chosen frames flagged ``lost`` where the other tracks disagree on a limb
+        (:func:`ambiguous_limbs`); each such frame recorded in ``self.ambiguous``."""
+        names = list(LIMB_PARTS)
+        tracks = ["forward"] + [f"keyframe {h.keyframe} {h.direction}" for h in hyps]
+        out = []
+        for t, (r, h) in enumerate(zip(chosen, path.tolist(), strict=True)):
+            i = r.index
+            alt = [
+                (g, f)
+                for g, f in enumerate([fwd[lo + t]] + [y.results.get(i) for y in hyps])
+                if g != h and f is not None and f.healthy
+            ]
+            if not r.healthy or not alt:
+                out.append(r)
+                continue
+            ev = [f.state.get("evidence") for _, f in alt]
+            # the forward track where flagged is what the pass replaces: none of its limbs
+            # counts on its own (its other limbs carry the drift that lost it)
+            limb_lost = np.array(
+                [
+                    self.rule_of().limb_lost(e)
+                    if g > 0 and e is not None and np.shape(e) == (len(LIMB_PARTS), len(EVIDENCE))
+                    else np.full(len(LIMB_PARTS), "lost" in f.flags)
+                    for e, (g, f) in zip(ev, alt, strict=True)
+                ]
+            )
+            amb, per = ambiguous_limbs(
+                r.joints,
+                np.stack([f.joints for _, f in alt]),
+                np.array(["lost" in f.flags for _, f in alt]),
+                limb_lost,
+                self.limb_of,
+            )
+            if not amb.any():
+                out.append(r)
+                continue
+            limbs = [names[k] for k in np.flatnonzero(amb)]
+            worst = per[amb].max(axis=0)
+            g = int(np.argmax(worst))
+            mm = round(1000 * float(worst[g]))
+            src = tracks[alt[g][0]]
+            self.ambiguous.append({"frame": i, "limbs": limbs, "mm": mm, "track": src})
+            note = f"ambiguous: {', '.join(limbs)} {mm} mm off in the {src} track"
+            flags = r.flags if "lost" in r.flags else (*r.flags, "lost")
+            out.append(
+                replace(r, flags=flags, message=f"{r.message}; {note}" if r.message else note)
+            )
+        return out
+
+    def rule_of(self) -> LostRule:
+        """The lost rule (the shipped one where none was given)."""
+        return self.rule or shipped_rule()
 
     def lost_limbs(self, r: FrameResult) -> tuple[str, ...]:
         """The limbs the lost rule finds lost on a frame, from its recorded evidence."""
