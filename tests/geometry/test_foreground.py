@@ -66,15 +66,18 @@ def test_foreground_mask_finds_the_subject_and_not_its_shadow():
     assert foreground_mask(very_dark, B, noise)[shadow].mean() > 0.9
 
 
-def test_clean_mask_fills_holes_and_drops_specks():
-    m = np.zeros((60, 60), bool)
-    m[10:40, 10:30] = True
-    m[20:25, 15:20] = False  # a hole
-    m[50, 50] = True  # a speck
-    m[45:48, 40:43] = True  # a small blob (9 px)
+def test_clean_mask_fills_small_holes_keeps_gaps_and_drops_specks():
+    m = np.zeros((100, 100), bool)
+    m[10:90, 10:70] = True  # 4800 px
+    m[20:23, 15:18] = False  # a small hole (9 px, 0.19 %): a part of the background's colour
+    m[50:60, 30:40] = False  # a gap (100 px, 2 %): the room seen between arm and trunk
+    m[95, 95] = True  # a speck
+    m[92:95, 80:83] = True  # a small blob (9 px)
     out = clean_mask(m, min_area=20 / m.size)
-    assert out[22, 17] and not out[50, 50] and not out[46, 41]
-    assert out[11:39, 11:29].all() and out.sum() <= m.sum() + 25  # corners rounded
+    assert out[21, 16] and not out[95, 95] and not out[93, 81]
+    assert not out[51:59, 31:39].any()
+    assert out[11:89, 11:29].all() and abs(int(out.sum()) - int(m.sum())) <= 30  # corners
+    assert clean_mask(m, max_hole=np.inf)[51:59, 31:39].all()
 
 
 def _rig(n=4, size=(64, 48)):

@@ -340,6 +340,7 @@ def grow_mask(
     *,
     threshold: float = 0.5,
     blur: float = 1.5,
+    max_hole: float = 0.002,
 ) -> np.ndarray:
     """Add to a mask the pixels of the subject's colours that touch it.
 
@@ -356,6 +357,9 @@ def grow_mask(
     model : ColourModel of the camera (:func:`colour_model`), same image size
     threshold : float, natural-log ratio
     blur : float, pixels
+    max_hole : float
+        Holes of at most this fraction of the mask's area are filled (see
+        :func:`clean_mask`).
 
     Returns
     -------
@@ -372,7 +376,7 @@ def grow_mask(
     score = ndimage.gaussian_filter(model.log_ratio[_quantise(image, model.bins)], blur)
     labels, _ = ndimage.label(m | (model.region & (score > threshold)))
     touched = np.unique(labels[m])
-    return ndimage.binary_fill_holes(np.isin(labels, touched[touched > 0]))
+    return _fill_holes(np.isin(labels, touched[touched > 0]), max_hole)
 
 
 def _quantise(image: np.ndarray, bins: int) -> np.ndarray:
@@ -387,8 +391,9 @@ def clean_mask(
     close_px: int = 1,
     keep: float = 0.15,
     min_area: float = 5e-4,
+    max_hole: float = 0.002,
 ) -> np.ndarray:
-    """Open, close, fill holes and keep the large connected components of a mask.
+    """Open, close, fill the small holes and keep the large connected components of a mask.
 
     Parameters
     ----------
@@ -400,6 +405,10 @@ def clean_mask(
         Keep components of at least this fraction of the largest one's area...
     min_area : float
         ...and at least this fraction of the image's area.
+    max_hole : float
+        Fill the holes of at most this fraction of the mask's area (a part of the subject
+        of the background's colour); a larger hole is the background seen between an arm
+        and the trunk or between the legs, and stays (``np.inf`` fills every hole).
 
     Returns
     -------
@@ -413,13 +422,24 @@ def clean_mask(
     if close_px > 0:  # pad so that the closing does not glue the mask to the border
         p = close_px
         m = ndimage.binary_closing(np.pad(m, p), _disk(close_px))[p:-p, p:-p]
-    m = ndimage.binary_fill_holes(m)
+    m = _fill_holes(m, max_hole)
     labels, n = ndimage.label(m)
     if n == 0:
         return m
     area = np.bincount(labels.ravel())[1:]
     good = (area >= keep * area.max()) & (area >= min_area * m.size)
     return good[labels - 1] & (labels > 0)
+
+
+def _fill_holes(mask: np.ndarray, max_hole: float) -> np.ndarray:
+    """``mask`` with its holes of at most ``max_hole`` × its area filled."""
+    holes = ndimage.binary_fill_holes(mask) & ~mask
+    labels, n = ndimage.label(holes)
+    if n == 0:
+        return mask
+    area = np.bincount(labels.ravel())[1:]
+    small = np.concatenate([[False], area <= max_hole * np.count_nonzero(mask)])
+    return mask | small[labels]
 
 
 def consistent_masks(

@@ -66,7 +66,7 @@ from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_foota
 
 _CODEC_CROP = 16  # largest encoder crop taken for the same image (macroblock size)
 _SEGMENT_PX = 1000  # default segmentation resolution: the longest side, pixels
-_MODEL_VERSION = 2  # of the cached backgrounds: 2 adds the colour models
+_MODEL_VERSION = 3  # of the cached backgrounds: 2 adds the colour models, 3 keeps large holes
 
 
 @dataclass(frozen=True)
