@@ -28,8 +28,9 @@ recovered by the subject's own colours: :func:`colour_model` learns them, agains
 background around the subject, from the confident masks, and :func:`grow_mask` adds the
 pixels of those colours that touch a frame's mask.
 
-:func:`clean_mask` opens and closes the mask, fills its holes and keeps its large
-connected components. :func:`consistent_masks` makes the cameras agree: a pixel of one
+:func:`clean_mask` opens and closes the mask, fills its small holes (a large one is the
+room seen between an arm and the trunk, or between the legs) and keeps its large connected
+components. :func:`consistent_masks` makes the cameras agree: a pixel of one
 camera whose ray misses the volume carved from the other cameras is dropped (the volume
 tolerates one other camera that lost the subject: it is the union of the hulls of the
 others without one of them).
@@ -346,7 +347,7 @@ def grow_mask(
 
     A pixel joins where, inside the model's region, the log-likelihood ratio of its colour
     (smoothed by ``blur`` pixels) exceeds ``threshold`` and it is connected to the mask;
-    holes are filled. What differencing missed where the background has the subject's
+    small holes are filled. What differencing missed where the background has the subject's
     colour or the subject stood still is recovered from the colours the subject showed
     elsewhere.
 
