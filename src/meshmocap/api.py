@@ -301,7 +301,7 @@ def track(
     init: Literal["auto", "truth"] = "auto",
     resume: bool = True,
     recover: bool = True,
-    refine: Literal["auto", "on", "off"] = "auto",
+    refine: Literal["auto", "on", "arap", "off"] = "auto",
     passes: Literal["two-way", "forward"] = "two-way",
     vertices: bool = True,
     show_progress: bool | None = None,
@@ -351,11 +351,12 @@ def track(
     recover : bool
         Score frames and flag lost limbs
         (:class:`~meshmocap.estimate.recovery.reinit.Recovery`).
-    refine : {"auto", "on", "off"}
+    refine : {"auto", "on", "arap", "off"}
         Refine each frame's output surface towards its observations
-        (:class:`~meshmocap.trackers.options.TrackOptions`: ``"auto"`` for mesh and
-        point-cloud files, not a capture folder's visual hulls); ``"off"`` outputs the
-        tracked skeleton's surface as it is.
+        (:class:`~meshmocap.trackers.options.TrackOptions`: along the normals, or as
+        rigidly as possible; ``"auto"``: ``"arap"`` for mesh and point-cloud files, not
+        a capture folder's visual hulls); ``"off"`` outputs the tracked skeleton's surface
+        as it is.
     passes : {"two-way", "forward"}
         After the forward pass, the two-way pass over the frames it flagged lost
         (:mod:`meshmocap.trackers.two_way`; not for a live capture), or the forward pass

@@ -132,6 +132,8 @@ def test_rig_mesh_decimates_after_the_fit(subject, rigged):
         with pytest.raises(InputError, match="rig_mesh: decimate: decimate_mesh: n_vertices") as e:
             rig_mesh(V, t.F, decimate=bad)
         assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="rig_mesh: smooth must be an integer ≥ 0, found -1"):
+        rig_mesh(V, t.F, smooth=-1)
 
 
 @pytest.fixture(scope="module")

@@ -9,6 +9,7 @@ from meshmocap.body.skinning import (
     linear_blend_skinning,
     skinning_operator,
     skinning_transforms,
+    smooth_weights,
 )
 from meshmocap.body.template import Template, load_template, save_template, template_problems
 from meshmocap.errors import InputError, MeshError, MeshmocapFileNotFoundError
@@ -128,3 +129,25 @@ def test_invalid_templates_fail_with_one_line(tmp_path):
         load_template(tmp_path / "missing.npz")
     with pytest.raises(InputError, match=r"\.npz"):
         save_template(tmp_path / "x.obj", t)
+
+
+def test_smoothed_weights_spread_a_jump_and_stay_a_partition_of_one():
+    """Weights that jump from one joint to another across a sphere's equator, diffused
+    over its edges: the jump spreads over a band, the far caps keep their joint, every
+    row keeps at most ``max_weights`` weights summing to 1."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    V, F = np.asarray(s.vertices), np.asarray(s.faces, np.int64)
+    top = (V[:, 2] > 0).astype(float)
+    W = sp.csr_matrix(np.stack([top, 1.0 - top, np.zeros(len(V))], axis=1))
+    out = smooth_weights(W, F, iterations=20, max_weights=2)
+    X = out.toarray()
+    np.testing.assert_allclose(X.sum(axis=1), 1.0, atol=1e-12)
+    assert np.diff(out.indptr).max() <= 2 and (X[:, 2] == 0).all()
+    band = np.abs(V[:, 2]) < 0.02
+    assert (np.abs(X[band, 0] - 0.5) < 0.3).all() and (X[band, 0] > 0.05).all()
+    caps = np.abs(V[:, 2]) > 0.09
+    np.testing.assert_allclose(X[caps].max(axis=1), 1.0, atol=1e-3)
+    # no pass: the weights as they were
+    np.testing.assert_array_equal(smooth_weights(W, F, iterations=0).toarray(), W.toarray())

@@ -6,7 +6,7 @@ import trimesh
 
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.refine import SurfaceRefiner
+from meshmocap.geometry.refine import ArapRefiner, SurfaceRefiner, rotational_part
 
 
 @pytest.fixture(scope="module")
@@ -83,3 +83,125 @@ def test_bad_arguments_are_refused_in_one_line(sphere):
         SurfaceRefiner(F, len(V), reach=0.0)
     with pytest.raises(InputError, match="iterations"):
         SurfaceRefiner(F, len(V), iterations=0)
+
+
+# ------------------------------------------------------------------ as rigid as possible
+@pytest.fixture(scope="module")
+def ellipsoid():
+    """An ellipsoid (15 × 25 × 40 cm semi-axes, 642 vertices) and dense points of it with
+    outward normals: a shape on which a vertex slid along the surface can be told apart."""
+    axes = np.array([0.15, 0.25, 0.4])
+    s = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    V, F = np.asarray(s.vertices) * axes, np.asarray(s.faces, np.int64)
+    fine = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    P = np.asarray(fine.vertices) * axes
+    N = P / axes**2  # the gradient of Σ (x/a)²
+    return V, F, P, N / np.linalg.norm(N, axis=1, keepdims=True)
+
+
+def _turn(deg: float, axis: int = 2) -> np.ndarray:
+    w = np.zeros(3)
+    w[axis] = np.radians(deg)
+    from meshmocap.geometry.rotations import so3_exp
+
+    return so3_exp(w)
+
+
+def test_rotational_part_is_the_polar_rotation():
+    rng = np.random.default_rng(0)
+    from meshmocap.geometry.rotations import so3_exp
+
+    Q = so3_exp(rng.normal(size=(50, 3)))
+    S = rng.normal(size=(50, 3, 3)) * 0.2
+    A = Q @ (np.eye(3) + S @ np.swapaxes(S, 1, 2))  # a rotation times a symmetric PD matrix
+    R = rotational_part(A, np.tile(np.eye(3), (50, 1, 1)), iterations=40)
+    np.testing.assert_allclose(R, Q, atol=1e-8)
+    U, _, Vt = np.linalg.svd(A)
+    np.testing.assert_allclose(R, U @ Vt, atol=1e-8)
+
+
+def test_the_local_step_finds_a_rigid_turn_of_the_rest_shape(ellipsoid):
+    V, F, _, _ = ellipsoid
+    Q = _turn(70.0, 0) @ _turn(40.0)
+    ref = ArapRefiner(V, F)
+    # a rigid turn's rotation at once, from the rest neighbourhoods' own axes
+    R = ref.rotations(V @ Q.T + 0.3, iterations=0)
+    np.testing.assert_allclose(R, np.broadcast_to(Q, R.shape), atol=1e-12)
+    # a stretch: the polar rotation of each neighbourhood's Aᵢ, as rotational_part finds it
+    X = (V * [1.3, 1.0, 0.8]) @ Q.T
+    R = ref.rotations(X, iterations=30)
+    a, b = ref.edges_.T
+    outer = (X[a] - X[b])[:, :, None] * ref.rest_edges_[:, None, :]
+    A = np.zeros((len(V), 3, 3))
+    np.add.at(A, a, outer)
+    np.add.at(A, b, outer)
+    U, _, Vt = np.linalg.svd(A)
+    # (the update converges slowly where a neighbourhood is flat: Aᵢ has rank 2)
+    np.testing.assert_allclose(R, U @ Vt, atol=1e-4)
+
+
+def _twisted(V: np.ndarray, deg: float = 12.0) -> np.ndarray:
+    """``V`` twisted about Z: turned by ``deg`` at the top (z = 40 cm), ``−deg`` at the
+    bottom, in between in proportion to z."""
+    from meshmocap.geometry.rotations import so3_exp
+
+    w = np.zeros((len(V), 3))
+    w[:, 2] = np.radians(deg) * V[:, 2] / 0.4
+    return np.einsum("nij,nj->ni", so3_exp(w), V)
+
+
+def test_a_vertex_slid_along_the_body_goes_back_to_its_place(ellipsoid):
+    """The tracked surface is the true one twisted (±12° at the ends): its vertices are
+    14 mm off, mostly along the surface. Along the normals nothing can bring them back; as
+    rigidly as possible, the rest shape does, more with more iterations."""
+    V, F, P, N = ellipsoid
+    S = _twisted(V)
+    err = lambda X: np.linalg.norm(X - V, axis=1).mean()  # noqa: E731
+    normal = SurfaceRefiner(F, len(V)).refine(S, P, N)
+    few, many = (ArapRefiner(V, F, iterations=k).refine(S, P, N) for k in (10, 30))
+    assert err(S) > 0.013
+    assert err(normal) > 0.9 * err(S)
+    assert err(many) < err(few) < 0.8 * err(S) and err(many) < 0.5 * err(S)
+
+
+def test_the_next_frame_starts_where_the_last_left(ellipsoid):
+    """With the frame's number, a frame next to the last one refined starts from that
+    refinement (turned with the skin); any other frame starts from the skin alone."""
+    V, F, P, N = ellipsoid
+    S = _twisted(V)
+    fresh = ArapRefiner(V, F, iterations=3).refine(S, P, N)
+    ref = ArapRefiner(V, F, iterations=3)
+    first = ref.refine(S, P, N, key=4)
+    np.testing.assert_array_equal(first, fresh)
+    np.testing.assert_array_equal(ref.refine(S, P, N, key=6), fresh)  # not next to 4
+    ref.refine(S, P, N, key=4)
+    nxt = ref.refine(S, P, N, key=5)
+    assert np.linalg.norm(nxt - V, axis=1).mean() < 0.95 * np.linalg.norm(fresh - V, axis=1).mean()
+    # a turned frame carries the refinement turned with it
+    Q = _turn(30.0, 1)
+    ref = ArapRefiner(V, F, iterations=3)
+    ref.refine(S, P, N, key=4)
+    turned = ref.refine(S @ Q.T, P @ Q.T, N @ Q.T, key=5)
+    np.testing.assert_allclose(turned, nxt @ Q.T, atol=1e-6)
+
+
+def test_arap_refiner_leaves_a_surface_without_observations(ellipsoid):
+    V, F, _, _ = ellipsoid
+    S = V @ _turn(8.0).T
+    np.testing.assert_array_equal(
+        ArapRefiner(V, F).refine(S, np.zeros((0, 3)), np.zeros((0, 3))), S
+    )
+
+
+def test_arap_refiner_refuses_bad_arguments_in_one_line(ellipsoid):
+    V, F, _, _ = ellipsoid
+    for kw, msg in (
+        (dict(data_weight=0.0), "data_weight must be > 0"),
+        (dict(stiffness=-1.0), "stiffness must be ≥ 0"),
+        (dict(iterations=0), "iterations must be ≥ 1"),
+        (dict(max_angle=0.0), "max_angle"),
+    ):
+        with pytest.raises(InputError, match=msg):
+            ArapRefiner(V, F, **kw)
+    with pytest.raises(InputError, match="F must be"):
+        ArapRefiner(V[:10], F)

@@ -165,13 +165,14 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
             t,
             walk,
             out,
-            TrackOptions(
-                init="truth", show_progress=False, light=None, refine="on" if refine else "off"
-            ),
+            TrackOptions(init="truth", show_progress=False, light=None, refine=refine),
         )
 
-    refined, plain = run(tmp_path / "refined", True), run(tmp_path / "plain", False)
+    refined, plain = run(tmp_path / "refined", "on"), run(tmp_path / "plain", "off")
+    rigid = run(tmp_path / "rigid", "arap")
     assert json.loads((tmp_path / "refined" / "track.json").read_text())["refine_surface"]
+    assert rigid.meta["refine_surface"] == "arap"
+    np.testing.assert_array_equal(rigid.joints, plain.joints)
     # by default a capture folder's visual hulls (larger than the body) are not followed
     tracker = make_tracker("articulated_icp", template=t, max_iter=5)
     auto = track_sequence(
@@ -193,6 +194,7 @@ def test_the_refined_surface_leaves_the_joints_and_the_state_as_tracked(walk, tm
         P, _ = frame_points(walk[k])
         near = [KDTree(P).query(V[k])[0].mean() for V in (refined.vertices, plain.vertices)]
         assert near[0] < near[1]
+        assert KDTree(P).query(rigid.vertices[k])[0].mean() < near[1]
 
 
 @pytest.mark.slow

@@ -64,7 +64,9 @@ def test_a_frame_outside_the_capture_is_refused_saying_which_it_was(options, sai
 def test_the_record_is_checked_once_when_made_in_one_line():
     with pytest.raises(InputError, match=r"track: init must be one of \['auto', 'truth'\]"):
         TrackOptions(init="gt")
-    with pytest.raises(InputError, match=r"track: refine must be one of \['auto', 'on', 'off'\]"):
+    with pytest.raises(
+        InputError, match=r"track: refine must be one of \['auto', 'on', 'arap', 'off'\]"
+    ):
         TrackOptions(refine="yes")
     with pytest.raises(InputError, match=r"give frames \(frame numbers\) or positions"):
         TrackOptions(frames=[1], positions=[1])

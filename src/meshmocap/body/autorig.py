@@ -25,7 +25,8 @@ on it. :func:`rig_mesh` turns any closed human mesh, in roughly any upright pose
 4. **Transfer** (:func:`transfer_rig`): every mesh vertex takes the skinning weights and
    body-part label of its nearest point on the fitted reference surface (normals
    agreeing), interpolated barycentrically; at most ``max_weights`` weights are kept and
-   renormalised. The skeleton and the evaluation joints are the fitted reference's.
+   renormalised; :func:`rig_mesh` then diffuses them over the mesh's edges (``smooth``).
+   The skeleton and the evaluation joints are the fitted reference's.
 
 Everything is in metres, world frame Z up. The rigged template faces wherever the mesh
 faces: its rest frames are world-aligned and its local rotations are relative to the
@@ -40,7 +41,7 @@ rigs it decimated (cage-manifold-tracking §6.1: 4000 vertices; not the capture'
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -62,6 +63,7 @@ from meshmocap.body.articulated_system import (
     rotation_error,
 )
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
+from meshmocap.body.skinning import smooth_weights
 from meshmocap.body.template import EvalSkeleton, Template, load_template, template_problems
 from meshmocap.errors import FitError, InputError, MeshError
 from meshmocap.geometry.decimate import decimate_mesh
@@ -444,6 +446,7 @@ def rig_mesh(
     n_yaws: int = 8,
     iterations: int = 40,
     max_weights: int = 4,
+    smooth: int = 20,
     seed: int = 0,
 ) -> Template:
     """Rig a closed human mesh with a reference template's skeleton (module docstring).
@@ -468,6 +471,12 @@ def rig_mesh(
         Gauss–Newton iterations of the final fit (each heading gets a quarter).
     max_weights : int
         Skinning weights kept per vertex (1–4 typical).
+    smooth : int
+        Passes of diffusion of the transferred weights over the mesh's edges
+        (:func:`~meshmocap.body.skinning.smooth_weights`; 0: as transferred). A vertex
+        takes the weights of its nearest point on the fitted reference, so they jump
+        where neighbours found different parts (an armpit, the crotch); smoothed, the
+        rig's skin follows a real capture's frames more closely (``docs/guide/own_4d.rst``).
     seed : int
         Seed of the fit's point samples.
 
@@ -494,6 +503,8 @@ def rig_mesh(
         raise InputError(f"{func}: decimate: {exc}") from None
     if not (isinstance(n_yaws, int | np.integer) and n_yaws >= 1):
         raise InputError(f"{func}: n_yaws must be an integer ≥ 1, found {n_yaws!r}")
+    if not (isinstance(smooth, int | np.integer) and smooth >= 0):
+        raise InputError(f"{func}: smooth must be an integer ≥ 0, found {smooth!r}")
     ref = reference if isinstance(reference, Template) else load_template(reference)
     sk = ref.skeleton
     (a_mesh, c_mesh), (a_ref, c_ref) = _area_centre(V, F), _area_centre(ref.V, ref.F)
@@ -538,7 +549,11 @@ def rig_mesh(
     ]
     fit = min(final, key=lambda f: f.rms)
     fitted = rest_in_pose(ref, fit.R, fit.root, scale=fit.scale, name=f"{ref.name}_fitted")
-    return transfer_rig(fitted, *out, name=name, max_weights=max_weights)
+    t = transfer_rig(fitted, *out, name=name, max_weights=max_weights)
+    if not smooth:
+        return t
+    W = smooth_weights(t.weights, t.F, iterations=smooth, max_weights=max_weights)
+    return replace(t, weights=W)
 
 
 # ------------------------------------------------------------------------------ transfer

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from meshmocap.geometry.mesh import edges_unique
+
 
 def skinning_transforms(G: np.ndarray, P: np.ndarray, P0: np.ndarray) -> np.ndarray:
     """Return per-joint skinning transforms.
@@ -91,3 +93,31 @@ def linear_blend_skinning(V0: np.ndarray, W: sp.csr_matrix, A: np.ndarray) -> np
     B = (W @ A.transpose(1, 0, 2, 3).reshape(J, T * 12)).reshape(len(V0), T, 3, 4)
     out = np.einsum("ntab,nb->tna", B[..., :3], V0) + B[..., 3].transpose(1, 0, 2)
     return out[0] if single else out
+
+
+def smooth_weights(
+    W: sp.spmatrix, F: np.ndarray, *, iterations: int, max_weights: int = 4
+) -> sp.csr_matrix:
+    """Skinning weights ``W`` (n, J) diffused over a mesh's edges: ``iterations`` times
+    ``W ← ½ W + ½ D⁻¹ A W`` (``A`` the adjacency of triangles ``F`` (m, 3), ``D`` the
+    degrees); then the ``max_weights`` largest weights of each vertex, renormalised to
+    sum to 1. Weights copied onto a mesh vertex by vertex (a rig transferred from another
+    body) jump where neighbouring vertices took them from different parts; diffused, a
+    skinned joint bends the surface around it instead of tearing it along the jump.
+
+    Returns (n, J) float64 sparse rows with at most ``max_weights`` non-zeros, sum 1."""
+    n = W.shape[0]
+    E, _ = edges_unique(np.asarray(F, dtype=np.int64))
+    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    A = (A + A.T).tocsr()
+    P = (sp.diags(1.0 / np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)) @ A).tocsr()
+    X = np.asarray(W.todense(), dtype=np.float64)  # (n, J): J is small
+    for _ in range(int(iterations)):
+        X = 0.5 * X + 0.5 * (P @ X)
+    keep = min(int(max_weights), X.shape[1])
+    cut = np.argpartition(-X, keep - 1, axis=1)[:, :keep]
+    rows = np.arange(n)[:, None]
+    out = np.zeros_like(X)
+    out[rows, cut] = X[rows, cut]
+    out /= np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+    return sp.csr_matrix(out)

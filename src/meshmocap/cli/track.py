@@ -369,11 +369,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument(
         "--refine",
         default="auto",
-        choices=["auto", "on", "off"],
-        help="refine each frame's output surface towards its observations along its "
-        "normals (the joints are the skeleton's either way; default auto: on for mesh and "
-        "point-cloud files, off for a capture folder's visual hulls, which are larger "
-        "than the body)",
+        choices=["auto", "on", "arap", "off"],
+        help="refine each frame's output surface towards its observations: on: along its "
+        "normals; arap: as rigidly as possible, its vertices keeping their place on the "
+        "body from frame to frame (the joints are the skeleton's either way; default "
+        "auto: arap for mesh and point-cloud files, off for a capture folder's visual "
+        "hulls, which are larger than the body)",
     )
     k.add_argument(
         "--passes",

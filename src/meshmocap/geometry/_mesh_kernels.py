@@ -27,3 +27,100 @@ def normals_at_kernel(V, F, slot, k):  # pragma: no cover - compiled
             out[s, 1] += a2 * b0 - a0 * b2
             out[s, 2] += a0 * b1 - a1 * b0
     return out
+
+
+@njit(cache=True, nogil=True)
+def arap_rotations_kernel(V, E, D0, G, T, iterations):  # pragma: no cover - compiled
+    """(n, 3, 3): each vertex's rotation of its neighbourhood from rest to ``V``: the
+    rotational part of ``Aᵢ = Σ_j (vᵢ − vⱼ)(rᵢ − rⱼ)ᵀ`` over its edges ``E`` (e, 2) with
+    rest vectors ``D0`` (e, 3). It starts from the rotation a rigid turn would have:
+    ``Tᵢ`` (n, 3, 3) holds the rest neighbourhood's principal axes (its two widest first,
+    the normal last, a right-handed frame), ``Gᵢ`` (n, 3, 2) the first two divided by their
+    spread, so that ``Aᵢ Gᵢ`` are the turned axes; made orthonormal (Gram–Schmidt) they
+    give ``Rᵢ Tᵢ``. Then ``iterations`` of Müller et al. 2016's update
+    (:func:`~meshmocap.geometry.refine.rotational_part`) turn it to ``Aᵢ``'s polar
+    rotation."""
+    n = V.shape[0]
+    A = np.zeros((n, 3, 3))
+    for e in range(E.shape[0]):
+        i, j = E[e, 0], E[e, 1]
+        for r in range(3):
+            d = V[i, r] - V[j, r]
+            for c in range(3):
+                x = d * D0[e, c]
+                A[i, r, c] += x
+                A[j, r, c] += x
+    out = np.empty((n, 3, 3))
+    Q = np.empty((3, 3))
+    M = np.empty((3, 3))
+    for v in range(n):
+        x0 = x1 = x2 = y0 = y1 = y2 = 0.0
+        for c in range(3):
+            x0 += A[v, 0, c] * G[v, c, 0]
+            x1 += A[v, 1, c] * G[v, c, 0]
+            x2 += A[v, 2, c] * G[v, c, 0]
+            y0 += A[v, 0, c] * G[v, c, 1]
+            y1 += A[v, 1, c] * G[v, c, 1]
+            y2 += A[v, 2, c] * G[v, c, 1]
+        t = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + 1e-300
+        x0, x1, x2 = x0 / t, x1 / t, x2 / t
+        p = x0 * y0 + x1 * y1 + x2 * y2
+        y0, y1, y2 = y0 - p * x0, y1 - p * x1, y2 - p * x2
+        u = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2) + 1e-300
+        y0, y1, y2 = y0 / u, y1 / u, y2 / u
+        M[0, 0], M[1, 0], M[2, 0] = x0, x1, x2
+        M[0, 1], M[1, 1], M[2, 1] = y0, y1, y2
+        M[0, 2], M[1, 2], M[2, 2] = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0
+        for a in range(3):  # R = (R T) Tᵀ
+            for b in range(3):
+                out[v, a, b] = M[a, 0] * T[v, b, 0] + M[a, 1] * T[v, b, 1] + M[a, 2] * T[v, b, 2]
+        for _ in range(iterations):
+            w0 = w1 = w2 = 0.0
+            den = 0.0
+            for c in range(3):  # Σ_c r_c × a_c and Σ_c r_c · a_c
+                r0, r1, r2 = out[v, 0, c], out[v, 1, c], out[v, 2, c]
+                a0, a1, a2 = A[v, 0, c], A[v, 1, c], A[v, 2, c]
+                w0 += r1 * a2 - r2 * a1
+                w1 += r2 * a0 - r0 * a2
+                w2 += r0 * a1 - r1 * a0
+                den += r0 * a0 + r1 * a1 + r2 * a2
+            den = abs(den) + 1e-300
+            w0, w1, w2 = w0 / den, w1 / den, w2 / den
+            t = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            if t < 1e-12:
+                break
+            k0, k1, k2 = w0 / t, w1 / t, w2 / t
+            s, c1 = np.sin(t), 1.0 - np.cos(t)
+            # Rodrigues: I + s K + (1 − cos) K²
+            Q[0, 0] = 1.0 - c1 * (k1 * k1 + k2 * k2)
+            Q[1, 1] = 1.0 - c1 * (k0 * k0 + k2 * k2)
+            Q[2, 2] = 1.0 - c1 * (k0 * k0 + k1 * k1)
+            Q[0, 1] = -s * k2 + c1 * k0 * k1
+            Q[1, 0] = s * k2 + c1 * k0 * k1
+            Q[0, 2] = s * k1 + c1 * k0 * k2
+            Q[2, 0] = -s * k1 + c1 * k0 * k2
+            Q[1, 2] = -s * k0 + c1 * k1 * k2
+            Q[2, 1] = s * k0 + c1 * k1 * k2
+            for a in range(3):
+                for b in range(3):
+                    M[a, b] = (
+                        Q[a, 0] * out[v, 0, b] + Q[a, 1] * out[v, 1, b] + Q[a, 2] * out[v, 2, b]
+                    )
+            out[v] = M
+    return out
+
+
+@njit(cache=True, nogil=True)
+def arap_rhs_kernel(R, E, D0, n):  # pragma: no cover - compiled
+    """(n, 3): Σ over each vertex's edges of ``±½ (Rᵢ + Rⱼ)(rᵢ − rⱼ)`` (ARAP's global step,
+    Sorkine & Alexa 2007 Eq. 9), + at an edge's first vertex, − at its second."""
+    b = np.zeros((n, 3))
+    for e in range(E.shape[0]):
+        i, j = E[e, 0], E[e, 1]
+        for r in range(3):
+            x = 0.0
+            for c in range(3):
+                x += 0.5 * (R[i, r, c] + R[j, r, c]) * D0[e, c]
+            b[i, r] += x
+            b[j, r] -= x
+    return b

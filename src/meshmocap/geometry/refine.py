@@ -1,4 +1,5 @@
-"""A tracked surface refined towards one frame's observations, along its normals.
+"""A tracked surface refined towards one frame's observations: along its normals, or as
+rigidly as possible so that its vertices keep their place on the body.
 
 The skeleton-driven surface of a tracker (skinned patches, a cage) cannot follow what the
 skeleton does not carry: clothing, muscles, a template rigged in another pose. Each frame,
@@ -20,6 +21,26 @@ equations ``(W + αL + βI) u = W d`` are sparse, symmetric and positive definit
 by conjugate gradients. The refinement starts from the tracked surface every frame and
 never feeds back into the tracker's state: it cannot drift.
 
+A displacement along the normals cannot move a vertex that slid *along* the body (a skin
+that cannot follow the real deformation, a joint a little off): on a real 4D capture that
+tangential part is most of the per-vertex error. :class:`ArapRefiner` moves the vertices
+freely instead, as rigidly as possible with respect to the template's rest shape
+(Sorkine & Alexa 2007): it minimises over the vertices ``v`` and one rotation ``Rᵢ`` per
+vertex
+
+    E(v, R) = ½ Σᵢ Σ_{j∈N(i)} |(vᵢ − vⱼ) − Rᵢ (rᵢ − rⱼ)|²  +  λ Σᵢ |vᵢ − tᵢ|²  +  μ Σᵢ |vᵢ − sᵢ|²
+
+(Eq. 3 of the paper with uniform weights, plus data terms) where ``r`` is the rest shape,
+``s`` the tracked surface, and ``tᵢ`` the vertex projected onto the tangent plane of its
+nearest compatible observed point (a point-to-plane target: nothing pulls a vertex along
+the observed surface but the shape of its neighbourhood), or ``sᵢ`` where none is within
+reach. Alternating the rotations (the local step: the rotation of each vertex's
+neighbourhood, Eq. 6, by a few warm-started iterations of Müller et al. 2016) and the
+vertices (the global step: ``(L + (λ + μ) I) v = b(R) + λ t + μ s``, Eq. 9, whose
+matrix never changes: factorised once) lowers ``E``. The rest shape carries the
+correspondence: the result starts from the tracked surface every frame and never feeds
+back, so it cannot drift either.
+
 Frames and units: any frame, metres.
 
 References
@@ -27,6 +48,11 @@ References
 - O. Sorkine, D. Cohen-Or, Y. Lipman, M. Alexa, C. Rössl, H.-P. Seidel, *Laplacian
   surface editing*, Symposium on Geometry Processing (SGP), 2004.
   https://doi.org/10.1145/1057432.1057456
+- O. Sorkine, M. Alexa, *As-rigid-as-possible surface modeling*, Symposium on Geometry
+  Processing (SGP), 2007.
+- M. Müller, J. Bender, N. Chentanez, M. Macklin, *A robust method to extract the
+  rotational part of deformations*, Motion in Games (MIG), 2016.
+  https://doi.org/10.1145/2994258.2994269
 """
 
 from __future__ import annotations
@@ -34,12 +60,34 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
-from scipy.sparse.linalg import cg
+from scipy.sparse.linalg import cg, splu
 
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import edges_unique, vertex_normals
+from meshmocap.geometry.rotations import cross, so3_exp
 
-__all__ = ["SurfaceRefiner"]
+__all__ = ["ArapRefiner", "SurfaceRefiner", "rotational_part"]
+
+
+def _checked(owner: str, F: object, n: int, max_angle: float, iterations: int) -> np.ndarray:
+    """``F`` as (m, 3) int64 indices below ``n``; the options both refiners share checked
+    (errors name ``owner``)."""
+    F = np.asarray(F, dtype=np.int64)
+    if F.ndim != 2 or F.shape[1] != 3 or (len(F) and (F.min() < 0 or F.max() >= n)):
+        raise InputError(f"{owner}: F must be (m, 3) indices below {n}, found {F.shape}")
+    if not 0 < max_angle <= 180:
+        raise InputError(f"{owner}: max_angle must be in (0, 180], found {max_angle}")
+    if int(iterations) < 1:
+        raise InputError(f"{owner}: iterations must be ≥ 1, found {iterations}")
+    return F
+
+
+def _graph_laplacian(F: np.ndarray, n: int) -> tuple[np.ndarray, sp.csr_matrix]:
+    """The unique edges (m, 2) of triangles ``F`` and the graph Laplacian ``D − A`` (n, n)."""
+    E, _ = edges_unique(F)
+    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    A = (A + A.T).tocsr()
+    return E, (sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A).tocsr()
 
 
 class SurfaceRefiner:
@@ -79,18 +127,10 @@ class SurfaceRefiner:
         stiffness: float = 0.05,
         iterations: int = 2,
     ):
-        F = np.asarray(F, dtype=np.int64)
-        if F.ndim != 2 or F.shape[1] != 3 or (len(F) and (F.min() < 0 or F.max() >= n_vertices)):
-            raise InputError(
-                f"SurfaceRefiner: F must be (m, 3) indices below {n_vertices}, found {F.shape}"
-            )
+        F = _checked("SurfaceRefiner", F, int(n_vertices), max_angle, iterations)
         for name, v in (("reach", reach), ("smoothness", smoothness), ("stiffness", stiffness)):
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"SurfaceRefiner: {name} must be > 0, found {v!r}")
-        if not 0 < max_angle <= 180:
-            raise InputError(f"SurfaceRefiner: max_angle must be in (0, 180], found {max_angle}")
-        if int(iterations) < 1:
-            raise InputError(f"SurfaceRefiner: iterations must be ≥ 1, found {iterations}")
         self.F, self.n = F, int(n_vertices)
         self.reach, self.cos = float(reach), float(np.cos(np.radians(max_angle)))
         self.alpha, self.beta, self.iterations = (
@@ -98,10 +138,7 @@ class SurfaceRefiner:
             float(stiffness),
             int(iterations),
         )
-        E, _ = edges_unique(F)
-        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(self.n, self.n))
-        A = (A + A.T).tocsr()
-        self.laplacian_ = (sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A).tocsr()
+        self.laplacian_ = _graph_laplacian(F, self.n)[1]
 
     def normal_targets(
         self, V: np.ndarray, N: np.ndarray, P: np.ndarray, NP: np.ndarray
@@ -128,9 +165,12 @@ class SurfaceRefiner:
         s += np.bincount(i[ok], weights=d[ok], minlength=self.n)
         return w, np.divide(s, w, out=np.zeros(self.n), where=w > 0)
 
-    def refine(self, V: np.ndarray, P: np.ndarray, NP: np.ndarray) -> np.ndarray:
+    def refine(
+        self, V: np.ndarray, P: np.ndarray, NP: np.ndarray, *, key: int | None = None
+    ) -> np.ndarray:
         """The surface ``V`` (n, 3) moved along its normals towards the observed points
-        ``P`` (p, 3) with outward unit normals ``NP`` (p, 3), metres; returns (n, 3)."""
+        ``P`` (p, 3) with outward unit normals ``NP`` (p, 3), metres; returns (n, 3).
+        ``key`` (the frame's number) is unused: each frame is refined on its own."""
         V0 = np.asarray(V, dtype=np.float64)
         P, NP = np.asarray(P, dtype=np.float64), np.asarray(NP, dtype=np.float64)
         N = vertex_normals(V0, self.F)
@@ -146,3 +186,145 @@ class SurfaceRefiner:
             u, _ = cg(A, w * (u + d), x0=u, rtol=1e-6, maxiter=200)
             u = np.clip(u, -self.reach, self.reach)  # never further than reach from the skin
         return V0 + u[:, None] * N
+
+
+def rotational_part(A: np.ndarray, R: np.ndarray, *, iterations: int = 4) -> np.ndarray:
+    """The rotations nearest to matrices ``A`` (n, 3, 3), from rotations ``R`` (n, 3, 3).
+
+    Müller et al. 2016, vectorised: each iteration turns ``R`` by the axis-angle
+    ``ω = Σ_c r_c × a_c / |Σ_c r_c · a_c|`` (``r_c``, ``a_c`` the columns of ``R`` and
+    ``A``), which maximises ``tr(Rᵀ A)`` (the rotation of the polar decomposition of ``A``
+    where ``A`` is not singular) without a singular value decomposition. A few iterations
+    from a nearby ``R`` suffice; from far away, more."""
+    A = np.asarray(A, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    for _ in range(int(iterations)):
+        num = cross(np.swapaxes(R, 1, 2), np.swapaxes(A, 1, 2)).sum(axis=1)  # Σ_c r_c × a_c
+        den = np.abs(np.einsum("nij,nij->n", R, A)) + 1e-9
+        R = so3_exp(num / den[:, None]) @ R
+    return R
+
+
+class ArapRefiner:
+    """The as-rigid-as-possible refinement of a tracked surface towards observed points
+    (module docstring): its vertices keep their place on the body.
+
+    Parameters
+    ----------
+    rest : (n, 3) float64
+        The surface's rest shape (the template's vertices), metres.
+    F : (m, 3) int
+        Its triangles (fixed over the track).
+    data_weight : float
+        ``λ``: weight of each vertex's target against its neighbourhood's rigidity.
+    stiffness : float
+        ``μ``: pull of every vertex towards the tracked surface.
+    iterations : int
+        Local and global steps (≥ 1); the targets are found again before each.
+    reach : float
+        Metres: a vertex and an observed point further apart are not matched.
+    max_angle : float
+        Degrees: a vertex and an observed point whose normals differ more are not matched.
+
+    Attributes
+    ----------
+    edges_ : (e, 2) int64, the surface's edges; ``factor_`` the factorised global step.
+    """
+
+    def __init__(
+        self,
+        rest: np.ndarray,
+        F: np.ndarray,
+        *,
+        data_weight: float = 1.0,
+        stiffness: float = 0.001,
+        iterations: int = 10,
+        reach: float = 0.05,
+        max_angle: float = 60.0,
+    ):
+        rest = np.asarray(rest, dtype=np.float64)
+        if rest.ndim != 2 or rest.shape[1] != 3 or not np.isfinite(rest).all():
+            raise InputError(f"ArapRefiner: rest must be finite (n, 3), found {rest.shape}")
+        n = len(rest)
+        F = _checked("ArapRefiner", F, n, max_angle, iterations)
+        for name, v in (("data_weight", data_weight), ("reach", reach)):
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"ArapRefiner: {name} must be > 0, found {v!r}")
+        if not (np.isfinite(stiffness) and stiffness >= 0):
+            raise InputError(f"ArapRefiner: stiffness must be ≥ 0, found {stiffness!r}")
+        self.F, self.n = F, n
+        self.lam, self.mu, self.iterations = float(data_weight), float(stiffness), int(iterations)
+        self.reach, self.cos = float(reach), float(np.cos(np.radians(max_angle)))
+        self.edges_, L = _graph_laplacian(F, n)
+        a, b = self.edges_.T
+        self.rest_edges_ = np.ascontiguousarray(rest[a] - rest[b])  # (e, 3) rᵢ − rⱼ
+        # each rest neighbourhood's principal axes (widest first; the last, its normal,
+        # turned to make a right-handed frame) and the first two over their spread: the
+        # local step's start (arap_rotations_kernel)
+        outer = (self.rest_edges_[:, :, None] * self.rest_edges_[:, None, :]).reshape(-1, 9)
+        C = np.zeros((n, 9))
+        np.add.at(C, a, outer)
+        np.add.at(C, b, outer)
+        lam, U = np.linalg.eigh(C.reshape(n, 3, 3))  # ascending
+        U = U[:, :, ::-1].copy()
+        U[:, :, 2] = np.cross(U[:, :, 0], U[:, :, 1])
+        self.axes_ = np.ascontiguousarray(U)
+        self.spread_ = np.ascontiguousarray(
+            U[:, :, :2] / np.maximum(lam[:, ::-1][:, None, :2], 1e-300)
+        )
+        self.factor_ = splu((L + (self.lam + self.mu) * sp.identity(n)).tocsc())
+        #: (key, (n, 3) rest-frame refinement) of the last keyed call, or None
+        self.last_: tuple[int, np.ndarray] | None = None
+
+    def rotations(self, V: np.ndarray, *, iterations: int = 4) -> np.ndarray:
+        """The local step: each vertex's rotation (n, 3, 3) of its neighbourhood from rest
+        to ``V`` (n, 3) (Eq. 6): the rotation maximising ``tr(Rᵀ Aᵢ)``,
+        ``Aᵢ = Σ_j (vᵢ − vⱼ)(rᵢ − rⱼ)ᵀ``, from the one a rigid turn would have, by
+        ``iterations`` of :func:`rotational_part` (compiled)."""
+        from meshmocap.geometry._mesh_kernels import arap_rotations_kernel
+
+        V = np.ascontiguousarray(V, dtype=np.float64)
+        return arap_rotations_kernel(
+            V, self.edges_, self.rest_edges_, self.spread_, self.axes_, int(iterations)
+        )
+
+    def refine(
+        self, V: np.ndarray, P: np.ndarray, NP: np.ndarray, *, key: int | None = None
+    ) -> np.ndarray:
+        """The surface ``V`` (n, 3) refined towards the observed points ``P`` (p, 3) with
+        outward unit normals ``NP`` (p, 3), metres; returns (n, 3).
+
+        ``key``: the frame's number. Where the last call's key was the frame next to it
+        (``key ± 1``), the vertices start where that frame's refinement left them with
+        respect to the skin: its refinement ``Xᵢ − Vᵢ``, turned with each vertex's
+        neighbourhood from the last frame's skin to this one's (the frame-to-frame anchor
+        of what the skin cannot carry). None: from the skin alone."""
+        from meshmocap.geometry._mesh_kernels import arap_rhs_kernel
+
+        V = np.asarray(V, dtype=np.float64)
+        P, NP = np.asarray(P, dtype=np.float64), np.asarray(NP, dtype=np.float64)
+        # the skin's own turn of each vertex's neighbourhood from rest
+        Rs = self.rotations(V)
+        last = self.last_
+        follows = key is not None and last is not None and abs(int(key) - last[0]) == 1
+        S = V + (Rs @ last[1][:, :, None])[..., 0] if follows else V
+        self.last_ = None
+        if not len(P):
+            return S.copy()
+        tree = KDTree(P)
+        X, R = S.copy(), Rs
+        for _ in range(self.iterations):
+            # targets: the vertex projected onto its observed point's tangent plane
+            N = vertex_normals(X, self.F)
+            dist, j = tree.query(X, k=1)
+            j = j.astype(np.int64)
+            ok = (dist < self.reach) & (np.einsum("ij,ij->i", N, NP[j]) > self.cos)
+            off = np.einsum("ij,ij->i", P[j] - X, NP[j])
+            T = np.where(ok[:, None], X + off[:, None] * NP[j], S)
+            # Eq. 9: Σ_j ½ (Rᵢ + Rⱼ)(rᵢ − rⱼ)
+            rhs = arap_rhs_kernel(R, self.edges_, self.rest_edges_, self.n)
+            X = self.factor_.solve(rhs + self.lam * T + self.mu * S)
+            R = self.rotations(X)
+        if key is not None:  # the refinement in the skin's rest frame, for the next frame
+            self.last_ = (int(key), np.einsum("nji,nj->ni", Rs, X - V))
+        return X

@@ -59,7 +59,7 @@ from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.reinit import Recovery
-from meshmocap.geometry.refine import SurfaceRefiner
+from meshmocap.geometry.refine import ArapRefiner, SurfaceRefiner
 from meshmocap.io.capture import Capture
 from meshmocap.io.live import LiveCapture
 from meshmocap.io.results import (
@@ -83,8 +83,11 @@ from meshmocap.trackers.frame_step import (
     track_frame,
 )
 from meshmocap.trackers.live_search import LiveSearch
-from meshmocap.trackers.options import Init, TrackOptions
+from meshmocap.trackers.options import Init, Refine, TrackOptions
 from meshmocap.trackers.two_way import two_way_pass
+
+#: ``track.json``'s ``refine_surface`` for each refinement (None: none ran).
+REFINE_SURFACE = {type(None): False, SurfaceRefiner: True, ArapRefiner: "arap"}
 
 
 def track_sequence(
@@ -153,9 +156,8 @@ def track_sequence(
     meta["tracked_vertices"] = body.light.n_vertices
     meta.update(_built_on(tracker, body.light))
     four_d = not getattr(capture, "cameras", None)  # mesh or point files: the surface itself
-    on = opts.refine == "on" or (opts.refine == "auto" and four_d)
-    meta["refine_surface"] = on
-    refiner = SurfaceRefiner(body.light.F, body.light.n_vertices) if on else None
+    refiner = _refiner(opts.refine, four_d, body.light)
+    meta["refine_surface"] = REFINE_SURFACE[type(refiner)]
     # a 4D capture's surface is the performer's: the skeleton is held against it each frame
     holder = SkeletonHold(body.light) if four_d and hasattr(tracker, "hold") else None
     meta["hold_skeleton"] = holder is not None
@@ -251,6 +253,19 @@ def track_sequence(
                 show_progress=opts.show_progress,
             )
     return read_track(out, vertices=opts.vertices)
+
+
+def _refiner(refine: Refine, four_d: bool, light: Template):
+    """The output surface's refinement (:class:`~meshmocap.trackers.options.TrackOptions`'
+    ``refine``) of the tracked body ``light``, or None; ``four_d``: the capture is mesh or
+    point files."""
+    if refine == "auto":
+        refine = "arap" if four_d else "off"
+    if refine == "on":
+        return SurfaceRefiner(light.F, light.n_vertices)
+    if refine == "arap":
+        return ArapRefiner(light.V, light.F)
+    return None
 
 
 def _built_on(tracker: Tracker, template: Template) -> dict:

@@ -23,7 +23,7 @@ from meshmocap.errors import FitError, FormatError, MeshError, MeshmocapFileNotF
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.reinit import Recovery
-from meshmocap.geometry.refine import SurfaceRefiner
+from meshmocap.geometry.refine import ArapRefiner, SurfaceRefiner
 from meshmocap.io.results import FrameResult, frame_flags, read_frame_arrays, read_state
 from meshmocap.trackers.base import Tracker
 
@@ -48,7 +48,7 @@ def track_frame(
     recovery: Recovery | None = None,
     retry: Callable[[], bool] | None = None,
     timer: StageTimer | None = None,
-    refiner: SurfaceRefiner | None = None,
+    refiner: SurfaceRefiner | ArapRefiner | None = None,
     holder: SkeletonHold | None = None,
 ) -> FrameResult | None:
     """Track one frame: the per-frame step of the driver and of live mode
@@ -68,7 +68,7 @@ def track_frame(
     timer : StageTimer, optional
         Starts a frame's record and books read, observe, step (and the tracker's own
         stages) and checks to it (:mod:`meshmocap._timing`); the caller books the write.
-    refiner : SurfaceRefiner, optional
+    refiner : SurfaceRefiner or ArapRefiner, optional
         Refines the result's vertices towards the frame's observed points (booked to
         ``refine``); the tracker's state is left as the fit made it.
     holder : SkeletonHold, optional
@@ -104,7 +104,7 @@ def track_frame(
                 if timer is not None:
                     timer.lap("checks")
             if refiner is not None:
-                r = replace(r, vertices=refiner.refine(r.vertices, *frame.points))
+                r = replace(r, vertices=refiner.refine(r.vertices, *frame.points, key=index))
             if timer is not None:
                 timer.lap("refine")
             if timer is not None:  # what this frame read and derived, the next reads first

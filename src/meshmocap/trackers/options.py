@@ -32,7 +32,7 @@ __all__ = ["Init", "Passes", "Refine", "TrackOptions"]
 #: How the first frame's pose is found: from the capture alone, or from its ground truth.
 Init = Literal["auto", "truth"]
 #: When the output surface is refined towards the observations (:class:`TrackOptions`).
-Refine = Literal["auto", "on", "off"]
+Refine = Literal["auto", "on", "arap", "off"]
 #: The passes over a capture on disk (:class:`TrackOptions`): the forward pass, then the
 #: two-way pass over its lost runs (:mod:`meshmocap.trackers.two_way`); or the forward alone.
 Passes = Literal["two-way", "forward"]
@@ -73,15 +73,20 @@ class TrackOptions:
     recover : bool
         Score every frame and flag a frame with a limb lost ``lost``
         (:class:`~meshmocap.estimate.recovery.reinit.Recovery`).
-    refine : {"auto", "on", "off"}
-        Refine each frame's output surface towards that frame's observations along its
-        normals (:class:`~meshmocap.geometry.refine.SurfaceRefiner`: what the skeleton's
-        skin cannot follow, clothing), from the tracked surface every frame: the joints and
-        the tracker's state stay the skeleton's, so nothing accumulates. ``"auto"``: on for
-        mesh or point-cloud files (a 4D capture: their surface is the performer's), off for
-        a capture folder carved from its cameras (a visual hull is larger than the body,
-        and the surface would swell into it). ``track.json`` records it
-        (``refine_surface``).
+    refine : {"auto", "on", "arap", "off"}
+        Refine each frame's output surface towards that frame's observations (what the
+        skeleton's skin cannot follow: clothing, a rig that does not bend as the body
+        does): ``"on"`` along its normals
+        (:class:`~meshmocap.geometry.refine.SurfaceRefiner`), ``"arap"`` as rigidly as
+        possible with respect to the template's rest shape, each frame starting where the
+        last one's refinement left the vertices with respect to the skin
+        (:class:`~meshmocap.geometry.refine.ArapRefiner`: vertices keep their place on
+        the body instead of sliding along it). Either way the joints and the tracker's
+        state stay the skeleton's. ``"auto"``: ``"arap"`` for mesh or point-cloud files (a
+        4D capture: their surface is the performer's), off for a capture folder carved
+        from its cameras (a visual hull is larger than the body, and the surface would
+        swell into it). ``track.json`` records it (``refine_surface``: false, true for
+        ``"on"``, ``"arap"``).
     light : int or None
         Track a light copy of the template with about this many vertices
         (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
