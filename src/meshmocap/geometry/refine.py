@@ -26,7 +26,7 @@ that cannot follow the real deformation, a joint a little off): on a real 4D cap
 tangential part is most of the per-vertex error. :class:`ArapRefiner` moves the vertices
 freely instead, as rigidly as possible with respect to the template's rest shape
 (Sorkine & Alexa 2007): it minimises over the vertices ``v`` and one rotation ``Rᵢ`` per
-vertex
+vertex::
 
     E(v, R) = ½ Σᵢ Σ_{j∈N(i)} |(vᵢ − vⱼ) − Rᵢ (rᵢ − rⱼ)|²  +  λ Σᵢ |vᵢ − tᵢ|²  +  μ Σᵢ |vᵢ − sᵢ|²
 
@@ -35,11 +35,12 @@ vertex
 nearest compatible observed point (a point-to-plane target: nothing pulls a vertex along
 the observed surface but the shape of its neighbourhood), or ``sᵢ`` where none is within
 reach. Alternating the rotations (the local step: the rotation of each vertex's
-neighbourhood, Eq. 6, by a few warm-started iterations of Müller et al. 2016) and the
-vertices (the global step: ``(L + (λ + μ) I) v = b(R) + λ t + μ s``, Eq. 9, whose
-matrix never changes: factorised once) lowers ``E``. The rest shape carries the
-correspondence: the result starts from the tracked surface every frame and never feeds
-back, so it cannot drift either.
+neighbourhood, Eq. 6, from a rigid turn's rotation by a few iterations of Müller et al.
+2016) and the vertices (the global step: ``(L + (λ + μ) I) v = b(R) + λ t + μ s``,
+Eq. 9, whose matrix never changes: factorised once) lowers ``E``. The rest shape carries
+the correspondence. Each frame starts from the tracked surface, plus the refinement of
+the frame before it (where that was the last one refined) turned with the skin, and the
+result never feeds back into the tracker.
 
 Frames and units: any frame, metres.
 
