@@ -2,23 +2,23 @@
 counted in one line at the end of the run: :func:`pytest_terminal_summary`), a posed body
 made in code, and the synthetic captures the tests track.
 
-The captures are one family, made once per session and shared by every file
-(:func:`synth_capture`): :func:`walk` (the neutral_5k walk at 60 fps, 1 cm hulls),
-:func:`small_walk` (at 30 fps, 2 cm hulls: the cheapest capture a command can track),
+The captures are one family, made once per session (per worker under pytest-xdist, ``-n``)
+and shared by every file (:func:`synth_capture`): :func:`walk` (the neutral_5k walk at
+60 fps, 1 cm hulls), :func:`small_walk` (at 30 fps, 2 cm hulls: the cheapest capture a
+command can track),
 :func:`walk_full` (the 12k-vertex ``neutral`` template's walk), :func:`jump` (jumping jacks)
 and :func:`mesh_folder` (a walk's true surfaces as PLY files, a clean 4D capture). They are
 read-only: a test that changes a capture copies it first.
 
 The automatic first-pose search is the slow step of every track that does not start from
 the truth (seconds per capture). Its answer depends only on the observations, the template
-and the options, so within a session a search on the same inputs is answered once
-(:func:`_first_pose_searched_once`), as the capture cache answers a user's second track
-of a capture. The search itself is tested in ``tests/estimate/pose/``.
+and the options, so within a test run (all its xdist workers) a search on the same inputs
+is answered once (:func:`_first_pose_searched_once`), as the capture cache answers a
+user's second track of a capture. The search itself is tested in ``tests/estimate/pose/``.
 """
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import hashlib
 import json
@@ -85,18 +85,31 @@ def _manifold_cache(tmp_path_factory):
     mp.undo()
 
 
-@pytest.fixture(autouse=True, scope="session")
-def _kernels_compiled_ahead():
+_COMPILING = pytest.StashKey[object]()
+
+
+def pytest_sessionstart(session) -> None:
     """On a fresh clone numba compiles each kernel at its first call (about a minute of CPU
     in all, ``benchmarks/bench_compile.py``); here a background process compiles them all
-    from the start of the session, beside the tests, as ``meshmocap track`` does
+    from the start of the run, beside the tests, as ``meshmocap track`` does
     (:func:`~meshmocap.apps.kernels.start_compiling`; nothing to do once they are
-    cached). A test that meets a kernel first compiles it itself, as before."""
-    from meshmocap.apps.kernels import start_compiling, stop_compiling
+    cached). A test that meets a kernel first compiles it itself, as before. Under
+    pytest-xdist (``-n``) only the controlling process starts it: one compilation for the
+    run, not one per worker."""
+    if hasattr(session.config, "workerinput"):
+        return
+    from meshmocap.apps.kernels import start_compiling
 
-    proc = start_compiling()
-    yield
-    stop_compiling(proc)
+    session.config.stash[_COMPILING] = start_compiling()
+
+
+def pytest_sessionfinish(session) -> None:
+    """End the background compilation if it still runs (:func:`pytest_sessionstart`)."""
+    proc = session.config.stash.get(_COMPILING, None)
+    if proc is not None:
+        from meshmocap.apps.kernels import stop_compiling
+
+        stop_compiling(proc)
 
 
 @pytest.fixture(scope="session")
@@ -155,30 +168,49 @@ def _fingerprint(h, value) -> bool:
     return True
 
 
+def _run_folder(tmp_path_factory) -> Path:
+    """A folder shared by every process of this test run: the session's base temporary
+    folder, or under pytest-xdist (``-n``) the one its workers' folders are made in."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
 @pytest.fixture(autouse=True, scope="session")
-def _first_pose_searched_once():
-    """Within the session, :func:`~meshmocap.estimate.pose.first_pose.initial_pose` on the
+def _first_pose_searched_once(tmp_path_factory):
+    """Within the test run, :func:`~meshmocap.estimate.pose.first_pose.initial_pose` on the
     same template, observations and options runs once; later calls get a copy of its
-    answer (the module docstring says why). A call with an argument that is not a plain
-    value (a pose library object, a callable) is always made."""
+    answer (the module docstring says why). The answers are kept in a folder of the run
+    (:func:`_run_folder`), so that pytest-xdist's workers share them too (their captures are
+    made alike, bit for bit): a worker that needs an answer another is computing waits for
+    it (a lock per call). A call with an argument that is not a plain value (a pose library
+    object, a callable) is always made."""
+    import fcntl
+    import pickle
+
     from meshmocap.estimate.pose import first_pose
 
     search = first_pose.initial_pose
-    answers: dict[str, object] = {}
+    folder = _run_folder(tmp_path_factory) / "first_poses"
+    folder.mkdir(exist_ok=True)
 
     def initial_pose(*args, **kwargs):
         h = hashlib.sha256()
         if not (_fingerprint(h, args) and _fingerprint(h, sorted(kwargs.items()))):
             return search(*args, **kwargs)
-        key = h.hexdigest()
-        if key not in answers:
-            answers[key] = search(*args, **kwargs)
-        return copy.deepcopy(answers[key])
+        answer = folder / f"{h.hexdigest()}.pkl"
+        with open(answer.with_suffix(".lock"), "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            if not answer.is_file():
+                data = pickle.dumps(search(*args, **kwargs))
+                part = answer.with_suffix(f".{os.getpid()}.part")
+                part.write_bytes(data)
+                part.replace(answer)
+            return pickle.loads(answer.read_bytes())
 
     initial_pose.__wrapped__ = search
     mp = pytest.MonkeyPatch()
     mp.setattr(first_pose, "initial_pose", initial_pose)
-    yield answers
+    yield folder
     mp.undo()
 
 
