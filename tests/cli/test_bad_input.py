@@ -181,12 +181,9 @@ def _amc_without_asf(tmp: Path) -> str:
 
 def _track_with(tmp: Path, cap: Path, how: str) -> str:
     out = tmp / "t"
-    assert (
-        main(
-            ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1", "--out", str(out)]
-        )
-        == 0
-    )
+    argv = ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1"]
+    # the start is not what is refused: no search for it
+    assert main([*argv, "--init", "truth", "--out", str(out)]) == 0
     if how == "corrupt_frame":
         (out / "frames" / "00001.npz").write_bytes(b"PK\x03\x04garbage")
     elif how == "nan_frame":
@@ -770,7 +767,7 @@ def _one_error_line(capsys, message: str, tmp: Path) -> None:
 def trk(cap, tmp_path_factory) -> Path:
     """A 2-frame track of ``cap`` (articulated ICP, one iteration)."""
     out = tmp_path_factory.mktemp("badcli_track") / "t"
-    argv = ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1"]
+    argv = ["track", str(cap), "--method", "articulated_icp", "--max-iter", "1", "--init", "truth"]
     assert main([*argv, "--frames", "0:2", "--template", "neutral_5k", "--out", str(out)]) == 0
     return out
 
