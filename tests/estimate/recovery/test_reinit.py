@@ -281,9 +281,8 @@ def test_fast_legs_the_observations_follow_are_not_flagged_lost(tmp_path):
     released once it fits the observations where it is now, ``SEEN_AGAIN`` + 1
     frames in a row (without the release a leg stayed lost 18 frames in a row). How many
     frames a patch track of this walk flags depends on each frame's rounding (the BLAS
-    kernel the CPU selects: 8 of 55 frames with OpenBLAS's Haswell kernels, 9 with its
-    Sandybridge ones): a benchmark's number (``benchmarks/bench_fast_legs.py``), not a
-    test's."""
+    kernel the CPU selects): a benchmark's number (``benchmarks/bench_fast_legs.py``,
+    ``docs/measurements.rst``), not a test's."""
     cap = tmp_path / "walk"
     args = ["--motion", "walk", "--template", "neutral_5k", "--frames", "0:110:2"]
     assert main(["synth", str(cap), *args]) == 0
