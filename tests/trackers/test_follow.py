@@ -111,6 +111,9 @@ def test_ctrl_c_stops_with_every_finished_frame_kept(walk, tmp_path, capsys, mon
         if not returned.is_set():
             signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
+    # Ctrl-C raises KeyboardInterrupt, as in a command's own process (pytest-xdist's
+    # workers ignore SIGINT)
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)
     stopper = threading.Thread(target=interrupt, daemon=True)
     stopper.start()
     th = _studio(walk.path, live, range(3))
@@ -120,6 +123,7 @@ def test_ctrl_c_stops_with_every_finished_frame_kept(walk, tmp_path, capsys, mon
     finally:
         returned.set()
         reported.set()  # release the waiter if frame 2 never came
+        signal.signal(signal.SIGINT, handler)
     th.join()
     stopper.join()
     assert "Ctrl-C: tracked 3 frames" in capsys.readouterr().out
