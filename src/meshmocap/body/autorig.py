@@ -446,7 +446,7 @@ def rig_mesh(
     n_yaws: int = 8,
     iterations: int = 40,
     max_weights: int = 4,
-    smooth: int = 20,
+    smooth: int = 0,
     seed: int = 0,
 ) -> Template:
     """Rig a closed human mesh with a reference template's skeleton (module docstring).
@@ -477,6 +477,10 @@ def rig_mesh(
         takes the weights of its nearest point on the fitted reference, so they jump
         where neighbours found different parts (an armpit, the crotch); smoothed, the
         rig's skin follows a real capture's frames more closely (``docs/guide/own_4d.rst``).
+        Off by default: the cage places its quads by each vertex's largest weight, and
+        on the crane's first frame the diffused weights leave vertices within its
+        enclosure margin at the chest (:func:`~meshmocap.trackers.cage.oqr.build_oqr`
+        refuses it).
     seed : int
         Seed of the fit's point samples.
 

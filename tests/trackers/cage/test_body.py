@@ -1,7 +1,5 @@
 """The body the cage is built on (trackers/cage/body.py)."""
 
-import time
-
 import numpy as np
 import pytest
 
@@ -53,9 +51,7 @@ def test_cage_body_keeps_a_body_and_replaces_a_dress(ref):
     body, oqr = cage_body(ref)  # a bundled body: its own cage
     assert body is ref
     dress = _dress(ref)
-    t0 = time.process_time()  # CPU seconds: the machine may be shared
     body, oqr = cage_body(dress)
-    assert time.process_time() - t0 < 30
     assert body is not dress and body.name == "dress_body"
     np.testing.assert_allclose(
         body.skeleton.rest_positions, dress.skeleton.rest_positions, rtol=0, atol=1e-9
