@@ -221,7 +221,11 @@ class HullDistanceField:
 
     def __init__(self, occupancy, origin, spacing, *, pad: int = 1, stride: int = 1) -> None:
         t0 = time.perf_counter()
-        occ = np.ascontiguousarray(occupancy, dtype=bool)
+        # a read-only view whatever the caller passed (a hull read from disk is read-only, one
+        # carved in memory is not): the compiled kernels meet one signature, the one
+        # apps.kernels compiles ahead
+        occ = np.ascontiguousarray(occupancy, dtype=bool).view()
+        occ.flags.writeable = False
         origin = np.array(origin, dtype=np.float64).reshape(-1)
         h = float(spacing)
         good = (
