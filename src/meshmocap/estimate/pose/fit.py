@@ -32,6 +32,7 @@ from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
     ArticulatedModel,
+    add_pose_pull,
     articulated_model,
     articulated_step,
     closest_pairs,
@@ -242,15 +243,14 @@ class PoseFitter:
             return None
         S, b = closest_point_moments(posed.v, pairs, (1.0, self.w_dm), self.Y, self.NY)
         H, g = normal_equations(self.plan, posed, S, b)
-        # the estimated parameters: the root's translation (if it moves), the rotations of
-        # ``joints``; the pull towards the reference pose, linearised in world-frame
-        # rotation errors, on the rotations' diagonal
+        # the pull towards the reference pose, linearised in world-frame rotation errors, on
+        # the estimated rotations only; then the estimated parameters: the root's
+        # translation (if it moves), the rotations of ``joints``
+        pull = np.zeros_like(lam)
+        pull[joints] = lam[joints]
+        add_pose_pull(H, g, rotation_error(self.plan, posed, R, R_ref), pull)
         rot = (3 + 3 * joints[:, None] + np.arange(3)).ravel()
         cols = np.concatenate([np.arange(3), rot]) if move_root else rot
-        e = rotation_error(self.plan, posed, R, R_ref)[joints]
-        lam3 = np.repeat(lam[joints], 3)
-        H[rot, rot] += lam3
-        g[rot] += lam3 * e.ravel()
         return H[np.ix_(cols, cols)], g[cols], posed.G
 
 
