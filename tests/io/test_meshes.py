@@ -24,6 +24,7 @@ from meshmocap.io.meshes import (
     Frame,
     MeshSequence,
     natural_key,
+    plain_obj_arrays,
     read_mesh,
     read_points,
     write_mesh,
@@ -54,6 +55,45 @@ def test_write_then_read_keeps_vertex_and_face_order(tmp_path, suffix, atol):
     assert np.abs(V2 - V).max() <= atol
     assert np.array_equal(F2, F)
     assert [p.name for p in tmp_path.iterdir()] == [f"m{suffix}"]  # no temporary left over
+
+
+def _obj(V, F, vertex="v {:.6f} {:.6f} {:.6f}", face="f {} {} {}") -> bytes:
+    lines = [vertex.format(*v) for v in V] + [face.format(*(f + 1)) for f in F]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def test_plain_obj_is_read_by_numpy_as_trimesh_reads_it(tmp_path):
+    """A plain OBJ (v lines, then f lines) is parsed without trimesh, to the same arrays;
+    any other OBJ is left to trimesh (plain_obj_arrays returns None) and reads the same."""
+    V, F = _sphere()
+    data = _obj(V, F)
+    fast = plain_obj_arrays(data)
+    assert fast is not None
+    (tmp_path / "a.obj").write_bytes(data)
+    scene = trimesh.load(tmp_path / "a.obj", process=False, maintain_order=True)
+    assert np.array_equal(fast[0], scene.vertices) and np.array_equal(fast[1], scene.faces)
+    assert np.array_equal(read_mesh(tmp_path / "a.obj")[1], F)
+    assert plain_obj_arrays(data.replace(b"\n", b"\r\n")) is not None  # Windows lines
+    not_plain = {
+        "comment": b"# made by hand\n" + data,
+        "normals": data + b"vn 0 0 1\n",
+        "slashes": _obj(V, F, face="f {0}//{0} {1}//{1} {2}//{2}"),
+        "negative": _obj(V, F - len(V) - 1),
+        "blank line": data.replace(b"\nf", b"\n\nf", 1),
+        "a quad": data + b"f 1 2 3 4\n",
+        "four numbers": _obj(V, F, vertex="v {:.6f} {:.6f} {:.6f} 1.0"),
+        "no faces": _obj(V, F[:0]),
+        "words": data.replace(b"v ", b"v x", 1),
+    }
+    for why, text in not_plain.items():
+        assert plain_obj_arrays(text) is None, why
+    (tmp_path / "c.obj").write_bytes(not_plain["comment"])
+    V2, F2 = read_mesh(tmp_path / "c.obj")  # through trimesh
+    assert np.array_equal(V2, fast[0]) and np.array_equal(F2, F)
+    bad = _obj(np.where(np.arange(len(V))[:, None] == 3, np.nan, V), F)
+    (tmp_path / "n.obj").write_bytes(bad)
+    with pytest.raises(MeshError, match=r"n\.obj: 1 vertex is NaN.*vertex 4 of the file, line 4"):
+        read_mesh(tmp_path / "n.obj")
 
 
 def test_stl_triangle_soup_is_merged_into_the_same_surface(tmp_path):
@@ -299,6 +339,31 @@ def test_gzip_reader_random_access_with_checkpoints(tmp_path):
             assert r.read(5000) == data[start : start + 5000]
         r.seek(len(data) - 10)
         assert r.read() == data[-10:] and r.read(10) == b""
+
+
+def test_gzip_reads_in_order_resume_where_the_last_stopped(tmp_path, monkeypatch):
+    """Each read opens a new reader (as TarArchive.read does); reads in order continue from
+    the index's cursor (each byte decompressed once), out of order from the snapshots."""
+    data = RNG.integers(0, 20, size=2_000_000, dtype=np.uint8).tobytes()
+    path = tmp_path / "x.gz"
+    path.write_bytes(gzip.compress(data))
+    index = GzipIndex(spacing=10 << 20)  # no snapshot but the start
+    steps = []
+    step = GzipReader._step
+    monkeypatch.setattr(GzipReader, "_step", lambda self: steps.append(1) or step(self))
+
+    def read(at: int, n: int) -> bytes:
+        with open(path, "rb") as f:
+            r = GzipReader(f, index)
+            r.seek(at)
+            return r.read(n)
+
+    for at in range(0, len(data), 100_000):  # in order
+        assert read(at, 100_000) == data[at : at + 100_000]
+    in_order = len(steps)
+    assert in_order <= len(path.read_bytes()) // GzipReader._CHUNK + 2  # one pass
+    for at in RNG.integers(0, len(data), size=5):  # out of order, from the start
+        assert read(int(at), 1000) == data[at : at + 1000]
 
 
 def test_corrupt_archive(tmp_path):

@@ -178,8 +178,10 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
     if ext not in MESH_EXTENSIONS:
         raise InputError(f"{label}: mesh files must end in {list(MESH_EXTENSIONS)}, found {ext!r}")
     fast = binary_ply_arrays(data) if ext == ".ply" else None  # ~30x faster than trimesh
+    if ext == ".obj":  # a plain OBJ (a 4D capture's frame): ~10x faster than trimesh
+        fast = plain_obj_arrays(data)
     if fast is not None and len(fast[0]) and len(fast[1]):
-        _finite(fast[0], label, "vertices")
+        _finite(fast[0], label, "vertices", data if ext == ".obj" else None)
         return _to_world(fast[0], up), fast[1]
     scene = _load_scene(data, ext, label)
     meshes = [g for g in scene.geometry.values() if isinstance(g, trimesh.Trimesh)]
@@ -215,6 +217,48 @@ def _parse_mesh(data: bytes, ext: str, label: str, up: str) -> tuple[np.ndarray,
             msg += " dropped or split at texture seams): indices differ from the file's"
             warnings.warn(f"{label}: {msg}", MeshmocapWarning, stacklevel=3)
     return _to_world(V, up), F
+
+
+def plain_obj_arrays(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """The vertices ``V`` (n, 3) float64 and triangles ``F`` (m, 3) int64 (0-based) of a
+    plain OBJ file, in file order, or None where the file is not plain (anything else is
+    read by trimesh).
+
+    Plain: every line ``v x y z`` (all the vertices first) then ``f i j k`` (1-based
+    indices of those vertices, no texture or normal indices), nothing else (no comment, no
+    blank line but a last one): what 4D capture exporters write. The lines' tokens are
+    counted on the bytes at once, and each block is parsed by one ``numpy.fromstring``."""
+    b = np.frombuffer(data, dtype=np.uint8)
+    if len(b) < 8 or b[0] != ord("v"):
+        return None
+    nl = b == 10
+    ws = nl | (b == 32) | (b == 9) | (b == 13)
+    first = np.concatenate(([True], ws[:-1])) & ~ws  # each token's first byte
+    line = np.cumsum(nl) - nl  # each byte's line
+    n_lines = int(line[-1]) + 1
+    if not (np.bincount(line[first], minlength=n_lines) == 4).all():
+        return None  # a line of other than 4 tokens, a blank line
+    starts = np.concatenate(([0], np.flatnonzero(nl[:-1]) + 1))  # each line's first byte
+    head = b[starts]
+    n = int(np.count_nonzero(head == ord("v")))
+    if n == n_lines or not (head[:n] == ord("v")).all() or not (head[n:] == ord("f")).all():
+        return None
+    if not ws[starts + 1].all():  # "vn", "vt", "fo..." lines
+        return None
+    cut = int(starts[n])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy warns where a block has unmatched data
+        try:
+            V = np.fromstring(data[:cut].replace(b"v", b" "), dtype=np.float64, sep=" ")
+            F = np.fromstring(data[cut:].replace(b"f", b" "), dtype=np.int64, sep=" ")
+        except (ValueError, DeprecationWarning):  # "1/2/3" faces, words: trimesh's
+            return None
+    if len(V) != 3 * n or len(F) != 3 * (n_lines - n):
+        return None
+    F = F.reshape(-1, 3) - 1
+    if F.min() < 0 or F.max() >= n:  # relative (negative) indices, or out of range
+        return None
+    return V.reshape(-1, 3), F
 
 
 #: An OBJ face line of fewer than 3 vertices (what a file cut off in its faces ends with).
