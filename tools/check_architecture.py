@@ -168,9 +168,6 @@ UNTESTED: dict[str, str] = {
     "meshmocap.geometry.mesh": (
         "mesh helpers: tests/body/test_template.py and tests/estimate/pose/test_first_pose.py"
     ),
-    "meshmocap.geometry.normals": (
-        "normals of point clouds: tests/io/test_faults.py (clouds without normals tracked)"
-    ),
     "meshmocap.geometry.proximity": "nearest points on meshes: tests/analysis/test_metrics.py",
     "meshmocap.io._labelled": "checks shared by the C3D and TRC writers: tests/io/test_exports.py",
     "meshmocap.io._text": (
