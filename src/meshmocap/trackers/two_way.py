@@ -544,7 +544,7 @@ class _Run:
         recovery = Recovery(self.body.light, R, root, rule=self.rule)
         r = replace(recovered(recovery, frame, r), index=i)
         if self.refiner is not None:
-            r = replace(r, vertices=self.refiner.refine(r.vertices, *observed(frame).points))
+            r = replace(r, vertices=self.refiner.refine(r.vertices, *observed(frame).points, key=i))
         kept = "lost" not in r.flags
         key = {"frame": i, "run": self.order[a], "kept": kept, "label": label}
         if not kept:
