@@ -20,6 +20,8 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from typing import TypeVar
 
+from meshmocap._tolerances import ZERO_EXTENT
+
 T = TypeVar("T")
 
 #: Seconds between two log lines when stderr is not a terminal
@@ -50,7 +52,7 @@ class _Rate:
     def rate(self) -> float | None:
         if len(self.stamps) < 2:
             return None
-        return (len(self.stamps) - 1) / max(self.stamps[-1] - self.stamps[0], 1e-9)
+        return (len(self.stamps) - 1) / max(self.stamps[-1] - self.stamps[0], ZERO_EXTENT)
 
 
 def progress(

@@ -10,11 +10,22 @@ their own module.
 
 __all__ = [
     "ANTIPARALLEL",
+    "BARYCENTRIC_SLACK",
+    "DEGENERATE_AXIS",
     "DEPTH_FLOOR",
     "DIVISOR_FLOOR",
+    "NEAR_DEPTH",
     "NORM_FLOOR",
+    "RELATIVE_DEGENERATE",
+    "ROTATION_SLACK",
     "ROUNDING_SLACK",
     "SAME_FPS",
+    "SAME_POSITION",
+    "SMALL_ANGLE",
+    "SMALL_SINE",
+    "UNDERFLOW_FLOOR",
+    "WINDING_SLACK",
+    "ZERO_EXTENT",
 ]
 
 #: Smallest norm a vector is divided by (metres, radians or unitless) when it is made a unit
@@ -40,3 +51,46 @@ ROUNDING_SLACK = 1e-9
 #: Cosine within this of −1: two unit vectors are antiparallel, and the rotation taking one
 #: to the other has no unique axis.
 ANTIPARALLEL = 1e-9
+
+#: Smallest positive value a length, weight or eigenvalue is clamped to (or added to) before
+#: it divides, where only an exact zero needs a guard: any positive float gives a finite
+#: quotient, so the result is unchanged wherever the value is not zero.
+UNDERFLOW_FLOOR = 1e-300
+
+#: An extent below this is zero (a length in metres, a duration in seconds, a plotted axis's
+#: range): a bone with no direction, a box or a range of one value; also the floor such an
+#: extent is clamped to before it divides.
+ZERO_EXTENT = 1e-9
+
+#: Fraction of a shape's size (raised to the measure's dimension: diameter² for an area,
+#: diameter³ for a volume) below which an area or a volume counts as zero: a flat triangle, two
+#: cage parts that touch.
+RELATIVE_DEGENERATE = 1e-12
+
+#: Depth (metres along a camera's optical axis) a point must exceed to count as in front of
+#: the camera; where a projection's derivative divides by the depth, the floor it is clamped
+#: to.
+NEAR_DEPTH = 1e-6
+
+#: Norm of a cross product of unit vectors below which they are parallel and it gives no axis:
+#: another perpendicular is chosen.
+DEGENERATE_AXIS = 1e-6
+
+#: Angle (radians) below which a rotation's formulas switch to their Taylor expansions.
+SMALL_ANGLE = 1e-6
+
+#: Sine of the angle between two rotations below which spherical interpolation is linear.
+SMALL_SINE = 1e-8
+
+#: Largest ``|R Rᵀ − I|`` of a matrix still taken as a rotation (a file's rounding).
+ROTATION_SLACK = 1e-6
+
+#: A winding number within this of 1 counts as inside a closed surface.
+WINDING_SLACK = 1e-6
+
+#: Two positions (metres) closer than this in every coordinate are the same point.
+SAME_POSITION = 1e-6
+
+#: Barycentric coordinates down to minus this count as inside a triangle: a pixel centre on an
+#: edge two triangles share is drawn by one of them, not missed by both.
+BARYCENTRIC_SLACK = 1e-9

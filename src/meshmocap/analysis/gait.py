@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshmocap._tolerances import SAME_FPS
+from meshmocap._tolerances import SAME_FPS, ZERO_EXTENT
 from meshmocap.analysis.gait_signals import (
     SIDES,
     close_gaps,
@@ -424,7 +424,7 @@ def _steps(strikes, stances, pelvis, bad, fps, max_step) -> np.ndarray:
         d = np.array(
             [np.interp(p1, t, pelvis[:, c]) - np.interp(p0, t, pelvis[:, c]) for c in (0, 1)]
         )
-        d /= max(np.linalg.norm(d), 1e-9)
+        d /= max(np.linalg.norm(d), ZERO_EXTENT)
         length = float((stances[k1][2][r1] - stances[k0][2][r0]) @ d)
         rows.append((k1, (p1 - p0) / fps, length, p1))
     return np.array(rows, dtype=float).reshape(-1, 4)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
+from meshmocap._tolerances import NORM_FLOOR
 
 
 @njit(cache=True, nogil=True)
@@ -216,7 +217,7 @@ def posed_kernel(R, root, parents, offsets, rest, indptr, cols, w, Xe, N0):  # p
                     B[a, c] += we * G[k, a, c]
         for a in range(3):
             n[i, a] = _row_dot(B, a, N0[i, 0], N0[i, 1], N0[i, 2])
-        norm = max(np.sqrt((n[i, 0] * n[i, 0] + n[i, 1] * n[i, 1]) + n[i, 2] * n[i, 2]), 1e-12)
+        norm = max(np.sqrt((n[i, 0] * n[i, 0] + n[i, 1] * n[i, 1]) + n[i, 2] * n[i, 2]), NORM_FLOOR)
         for a in range(3):
             n[i, a] /= norm
     return G, P, q, v, n
@@ -296,7 +297,7 @@ def rotation_error_kernel(R, R_ref, G, parents):  # pragma: no cover - compiled
             w, x, y, z = -w, -x, -y, -z
         norm = np.sqrt(x * x + y * y + z * z)
         angle = 2.0 * np.arctan2(norm, w)
-        scale = angle / norm if norm > 1e-12 else 2.0 / w  # Taylor: θ/sin(θ/2) → 2
+        scale = angle / norm if norm > NORM_FLOOR else 2.0 / w  # Taylor: θ/sin(θ/2) → 2
         e0, e1, e2 = scale * x, scale * y, scale * z
         p = parents[j]
         if p < 0:

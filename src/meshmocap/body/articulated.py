@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 
-from meshmocap._tolerances import NORM_FLOOR
+from meshmocap._tolerances import DIVISOR_FLOOR, NORM_FLOOR
 from meshmocap.body.skeleton import Skeleton, forward_kinematics
 from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
@@ -146,7 +146,7 @@ def articulated_model(
     vertices when the template has fewer) and precompute their weights."""
     V, F = template.V, template.F
     tri = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    area = np.bincount(F.ravel(), np.repeat(tri / 6.0, 3), minlength=len(V)) + 1e-12
+    area = np.bincount(F.ravel(), np.repeat(tri / 6.0, 3), minlength=len(V)) + DIVISOR_FLOOR
     if n_points >= len(V):
         sample = np.arange(len(V))
     else:

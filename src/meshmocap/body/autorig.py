@@ -47,6 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import UNDERFLOW_FLOOR
 from meshmocap.body.articulated import (
     FIXED_JOINTS,
     add_pose_pull,
@@ -70,6 +71,9 @@ from meshmocap.geometry.decimate import decimate_mesh
 from meshmocap.geometry.mesh import face_normals, mesh_problems, signed_volume, vertex_normals
 from meshmocap.geometry.proximity import closest_points_on_triangles, sample_surface
 from meshmocap.geometry.rotations import so3_exp
+
+#: Gram determinant (m⁴: a triangle's squared doubled area) below which a triangle is flat.
+_FLAT_TRIANGLE = 1e-20
 
 __all__ = [
     "MIN_VERTICES",
@@ -606,14 +610,14 @@ def _barycentric(Q: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> 
     d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
     d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
     den = d00 * d11 - d01 * d01
-    ok = np.abs(den) > 1e-20
+    ok = np.abs(den) > _FLAT_TRIANGLE
     safe = np.where(ok, den, 1.0)
     b = (d11 * d20 - d01 * d21) / safe
     c = (d00 * d21 - d01 * d20) / safe
     W = np.clip(np.stack([1 - b - c, b, c], axis=1), 0.0, None)
     corner = np.argmin(np.stack([((Q - X) ** 2).sum(1) for X in (A, B, C)], 1), axis=1)
     W[~ok] = np.eye(3)[corner[~ok]]
-    return W / np.maximum(W.sum(axis=1, keepdims=True), 1e-300)
+    return W / np.maximum(W.sum(axis=1, keepdims=True), UNDERFLOW_FLOOR)
 
 
 def nearest_surface_points(
@@ -699,7 +703,7 @@ def transfer_rig(
     Wk = np.zeros_like(W)
     rows = np.arange(n)[:, None]
     Wk[rows, cut] = W[rows, cut]
-    Wk /= np.maximum(Wk.sum(axis=1, keepdims=True), 1e-300)
+    Wk /= np.maximum(Wk.sum(axis=1, keepdims=True), UNDERFLOW_FLOOR)
     ev = source.eval_skeleton
     onehot = np.eye(len(ev.names))[source.part_labels]  # (n_source, K)
     labels = np.argmax(B @ onehot, axis=1).astype(np.int64)

@@ -41,6 +41,12 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.geometry.levenberg_marquardt import DAMPING, AdaptiveDamping
 
+#: Smallest cost the fit's relative decrease is measured against (a perfect fit's cost is 0).
+_COST_FLOOR = 1e-30
+#: Largest parameter update (radians, metres) that still counts as a step: below it the fit
+#: has converged.
+_STEP_DONE = 1e-7
+
 __all__ = [
     "PoseFit",
     "eval_joint_model",
@@ -171,7 +177,7 @@ def _fit_frame(
                 break
             continue
         mu.accepted()
-        done = cost - new <= tol * max(cost, 1e-30) or np.abs(delta).max() < 1e-7
+        done = cost - new <= tol * max(cost, _COST_FLOOR) or np.abs(delta).max() < _STEP_DONE
         R, root, cost, H, g = R_new, root_new, new, H_new, g_new
         if done:
             break

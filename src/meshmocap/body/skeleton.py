@@ -15,6 +15,7 @@ from functools import cached_property
 
 import numpy as np
 
+from meshmocap._tolerances import ZERO_EXTENT
 from meshmocap.errors import SkeletonError
 
 
@@ -133,10 +134,10 @@ class Skeleton:
         for j in range(self.n_joints - 1, -1, -1):  # children before parents
             kids = list(self.children[j])
             d = P[kids].mean(axis=0) - P[j] if kids else self.end_offsets[j]
-            if kids and np.linalg.norm(d) < 1e-9:
+            if kids and np.linalg.norm(d) < ZERO_EXTENT:
                 d = D[kids].mean(axis=0)
             n = np.linalg.norm(d)
-            D[j] = d / n if n > 1e-9 else 0.0
+            D[j] = d / n if n > ZERO_EXTENT else 0.0
         D.setflags(write=False)
         return D
 

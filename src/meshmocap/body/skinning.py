@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from meshmocap._tolerances import UNDERFLOW_FLOOR
 from meshmocap.geometry.mesh import edges_unique
 
 
@@ -119,5 +120,5 @@ def smooth_weights(
     rows = np.arange(n)[:, None]
     out = np.zeros_like(X)
     out[rows, cut] = X[rows, cut]
-    out /= np.maximum(out.sum(axis=1, keepdims=True), 1e-300)
+    out /= np.maximum(out.sum(axis=1, keepdims=True), UNDERFLOW_FLOOR)
     return sp.csr_matrix(out)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
+from meshmocap._tolerances import NORM_FLOOR, UNDERFLOW_FLOOR
 
 
 @njit(cache=True, nogil=True)
@@ -62,11 +63,11 @@ def arap_rotations_kernel(V, E, D0, G, T, iterations):  # pragma: no cover - com
             y0 += A[v, 0, c] * G[v, c, 1]
             y1 += A[v, 1, c] * G[v, c, 1]
             y2 += A[v, 2, c] * G[v, c, 1]
-        t = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + 1e-300
+        t = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + UNDERFLOW_FLOOR
         x0, x1, x2 = x0 / t, x1 / t, x2 / t
         p = x0 * y0 + x1 * y1 + x2 * y2
         y0, y1, y2 = y0 - p * x0, y1 - p * x1, y2 - p * x2
-        u = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2) + 1e-300
+        u = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2) + UNDERFLOW_FLOOR
         y0, y1, y2 = y0 / u, y1 / u, y2 / u
         M[0, 0], M[1, 0], M[2, 0] = x0, x1, x2
         M[0, 1], M[1, 1], M[2, 1] = y0, y1, y2
@@ -84,10 +85,10 @@ def arap_rotations_kernel(V, E, D0, G, T, iterations):  # pragma: no cover - com
                 w1 += r2 * a0 - r0 * a2
                 w2 += r0 * a1 - r1 * a0
                 den += r0 * a0 + r1 * a1 + r2 * a2
-            den = abs(den) + 1e-300
+            den = abs(den) + UNDERFLOW_FLOOR
             w0, w1, w2 = w0 / den, w1 / den, w2 / den
             t = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            if t < 1e-12:
+            if t < NORM_FLOOR:
                 break
             k0, k1, k2 = w0 / t, w1 / t, w2 / t
             s, c1 = np.sin(t), 1.0 - np.cos(t)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshmocap._tolerances import DEPTH_FLOOR
+from meshmocap._tolerances import DEPTH_FLOOR, ROTATION_SLACK, ZERO_EXTENT
 from meshmocap.errors import InputError
 
 
@@ -42,7 +42,7 @@ def look_at(
     z = np.asarray(target, dtype=float) - eye
     z /= np.linalg.norm(z)
     x = np.cross(z, np.asarray(up, dtype=float))
-    if np.linalg.norm(x) < 1e-9:  # looking along `up`: pick any perpendicular
+    if np.linalg.norm(x) < ZERO_EXTENT:  # looking along `up`: pick any perpendicular
         x = np.cross(z, [0.0, 1.0, 0.0])
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
@@ -112,7 +112,7 @@ class Camera:
         if (
             R.shape != (3, 3)
             or not np.all(np.isfinite(R))
-            or np.abs(R @ R.T - np.eye(3)).max() > 1e-6
+            or np.abs(R @ R.T - np.eye(3)).max() > ROTATION_SLACK
             or np.linalg.det(R) < 0
         ):
             problems.append("R must be a (3, 3) rotation matrix (orthonormal, det +1)")

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshmocap._tolerances import ROUNDING_SLACK
+from meshmocap._tolerances import ROUNDING_SLACK, ZERO_EXTENT
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.distance_field import DistanceGrid, distance_grid_from_mesh, signed_distance
@@ -116,7 +116,7 @@ class _View:
                 uv = self.camera.project(corners)[0]
                 u, v = uv[..., 0], uv[..., 1]
             else:  # only blocks wholly in front of the camera use u, v
-                np.divide(uvw[:2], np.maximum(depth, 1e-9, out=depth), out=uvw[:2])
+                np.divide(uvw[:2], np.maximum(depth, ZERO_EXTENT, out=depth), out=uvw[:2])
                 u, v = uvw[0], uvw[1]
             s, W, H = self.slack, self.W, self.H
             # Pixel index ranges that the box can reach (nearest pixel centre).
@@ -256,7 +256,7 @@ def _bounds(views, floor, margin, max_depth, resolution) -> np.ndarray:
     no_hull = "the silhouettes' viewing cones do not meet (no point projects into all masks)"
     if np.any(lo > hi):
         raise InputError(f"masks: {no_hull}")
-    edge = max(float((hi - lo).max()) / 16, 1e-9)
+    edge = max(float((hi - lo).max()) / 16, ZERO_EXTENT)
     nb = np.maximum(np.ceil((hi - lo) / edge), 1).astype(np.int64)
     blocks = np.indices(nb).reshape(3, -1).T
     found_lo, found_hi = np.full(3, np.inf), np.full(3, -np.inf)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import NEAR_DEPTH
 from meshmocap.geometry.camera import Camera
 
 
@@ -67,7 +68,7 @@ def uncovered(
     gap : (k,) float64, metres at that point's depth from the pixel to it
     """
     xy, depth = camera.project(X)
-    front = np.flatnonzero(depth > 1e-6)
+    front = np.flatnonzero(depth > NEAR_DEPTH)
     if len(front) == 0 or len(uv) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     d, j = KDTree(xy[front]).query(uv, k=1)

@@ -52,9 +52,14 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import convex_hull_image
 
+from meshmocap._tolerances import NEAR_DEPTH
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.carving import carve
+
+#: Probability added to each colour bin before the log-ratio (a colour never seen in either
+#: region gives a ratio of 0, not a division by zero).
+_COLOUR_FLOOR = 1e-6
 
 _MAD = 1.4826  # MAD → standard deviation of a normal distribution
 _MIN_NOISE = 3.0  # grey levels: the noise floor of 8-bit compressed footage
@@ -330,7 +335,9 @@ def colour_model(images: np.ndarray, masks: np.ndarray, *, bins: int = 16) -> Co
         bg += np.bincount(q[ring], minlength=bins**3)
     fg = ndimage.gaussian_filter(fg.reshape(bins, bins, bins), 0.7).ravel()
     bg = ndimage.gaussian_filter(bg.reshape(bins, bins, bins), 0.7).ravel()
-    ratio = np.log(fg / max(fg.sum(), 1.0) + 1e-6) - np.log(bg / max(bg.sum(), 1.0) + 1e-6)
+    ratio = np.log(fg / max(fg.sum(), 1.0) + _COLOUR_FLOOR) - np.log(
+        bg / max(bg.sum(), 1.0) + _COLOUR_FLOOR
+    )
     return ColourModel(ratio, region, bins)
 
 
@@ -535,7 +542,7 @@ def reach(X: np.ndarray, camera: Camera, size: float) -> np.ndarray:
     """
     uv, depth = camera.project(X)
     H, W = camera.shape
-    ok = depth > 1e-6
+    ok = depth > NEAR_DEPTH
     uv, depth = uv[ok], depth[ok]
     out = np.zeros((H, W), bool)
     if not len(uv):

@@ -75,6 +75,7 @@ from typing import Literal
 import numpy as np
 from scipy import sparse
 
+from meshmocap._tolerances import RELATIVE_DEGENERATE
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError, MeshError
 from meshmocap.geometry.mesh import mesh_problems, signed_volume
@@ -106,7 +107,7 @@ def _check_cage(func: str, cage_V, cage_F) -> tuple[np.ndarray, np.ndarray]:
     if np.any(np.bincount(F.ravel(), minlength=len(V)) == 0):
         raise MeshError(f"{func}: cage_V has vertices used by no face")
     area2 = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    flat = area2 <= 1e-12 * np.ptp(V, axis=0).max() ** 2
+    flat = area2 <= RELATIVE_DEGENERATE * np.ptp(V, axis=0).max() ** 2
     if flat.any():
         raise MeshError(f"{func}: {int(flat.sum())} cage faces have (near) zero area")
     if signed_volume(V, F) <= 0:

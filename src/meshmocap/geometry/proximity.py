@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import UNDERFLOW_FLOOR
 from meshmocap.errors import InputError
 
 
@@ -46,7 +47,9 @@ def closest_points_on_triangles(
         p, cand = P[bad], []
         for U, W in ((A[bad], B[bad]), (B[bad], C[bad]), (C[bad], A[bad])):
             d, rel = W - U, p - U
-            t = np.einsum("ij,ij->i", rel, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
+            t = np.einsum("ij,ij->i", rel, d) / np.maximum(
+                np.einsum("ij,ij->i", d, d), UNDERFLOW_FLOOR
+            )
             cand.append(U + d * np.clip(t, 0.0, 1.0)[:, None])
         cand = np.stack(cand)
         best = np.argmin(((cand - p) ** 2).sum(-1), axis=0)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshmocap._tolerances import ROUNDING_SLACK
+from meshmocap._tolerances import BARYCENTRIC_SLACK, DIVISOR_FLOOR, ROUNDING_SLACK
 
 _CHUNK = 4_000_000  # candidate (triangle, pixel) pairs per chunk
 
@@ -78,8 +78,8 @@ def _raster_chunk(ids, count, size, lo, tri, tdepth, W, face, zbuf) -> None:
         l1 = (px * v1[:, 1] - v1[:, 0] * py) / den
         l2 = (v0[:, 0] * py - px * v0[:, 1]) / den
     l0 = 1.0 - l1 - l2
-    eps = -1e-9
-    inside = (l0 >= eps) & (l1 >= eps) & (l2 >= eps) & (np.abs(den) > 1e-12)
+    eps = -BARYCENTRIC_SLACK
+    inside = (l0 >= eps) & (l1 >= eps) & (l2 >= eps) & (np.abs(den) > DIVISOR_FLOOR)
     if not inside.any():
         return
     z = l0 * tdepth[f, 0] + l1 * tdepth[f, 1] + l2 * tdepth[f, 2]

@@ -63,9 +63,13 @@ import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 from scipy.sparse.linalg import cg, splu
 
+from meshmocap._tolerances import UNDERFLOW_FLOOR
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import edges_unique, vertex_normals
 from meshmocap.geometry.rotations import cross, so3_exp
+
+#: Added to ``|tr(Rᵀ A)|`` before the rotation step divides by it (a zero covariance).
+_TRACE_FLOOR = 1e-9
 
 __all__ = ["ArapRefiner", "SurfaceRefiner", "rotational_part"]
 
@@ -201,7 +205,7 @@ def rotational_part(A: np.ndarray, R: np.ndarray, *, iterations: int = 4) -> np.
     R = np.asarray(R, dtype=np.float64)
     for _ in range(int(iterations)):
         num = cross(np.swapaxes(R, 1, 2), np.swapaxes(A, 1, 2)).sum(axis=1)  # Σ_c r_c × a_c
-        den = np.abs(np.einsum("nij,nij->n", R, A)) + 1e-9
+        den = np.abs(np.einsum("nij,nij->n", R, A)) + _TRACE_FLOOR
         R = so3_exp(num / den[:, None]) @ R
     return R
 
@@ -271,7 +275,7 @@ class ArapRefiner:
         U[:, :, 2] = np.cross(U[:, :, 0], U[:, :, 1])
         self.axes_ = np.ascontiguousarray(U)
         self.spread_ = np.ascontiguousarray(
-            U[:, :, :2] / np.maximum(lam[:, ::-1][:, None, :2], 1e-300)
+            U[:, :, :2] / np.maximum(lam[:, ::-1][:, None, :2], UNDERFLOW_FLOOR)
         )
         self.factor_ = splu((L + (self.lam + self.mu) * sp.identity(n)).tocsc())
         #: (key, (n, 3) rest-frame refinement) of the last keyed call, or None

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from meshmocap._tolerances import NORM_FLOOR
+from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, NORM_FLOOR, SMALL_ANGLE, SMALL_SINE
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -39,7 +39,7 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
     w = np.asarray(w, dtype=float)
     theta2 = np.sum(w * w, axis=-1)
     theta = np.sqrt(theta2)
-    small = theta < 1e-6
+    small = theta < SMALL_ANGLE
     safe = np.where(small, 1.0, theta)
     a = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
@@ -128,10 +128,12 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     c = np.sum(a * b, axis=-1)
     angle = np.arctan2(s, c)
     # antiparallel: any axis orthogonal to a
-    anti = (s < 1e-9) & (c < 0)
+    anti = (s < ANTIPARALLEL) & (c < 0)
     ortho = np.cross(a, np.array([1.0, 0.0, 0.0]))
     ortho = np.where(
-        np.linalg.norm(ortho, axis=-1, keepdims=True) < 1e-6, np.cross(a, [0.0, 1.0, 0.0]), ortho
+        np.linalg.norm(ortho, axis=-1, keepdims=True) < DEGENERATE_AXIS,
+        np.cross(a, [0.0, 1.0, 0.0]),
+        ortho,
     )
     axis = np.where(anti[..., None], ortho, axis)
     n = np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), NORM_FLOOR)
@@ -181,7 +183,7 @@ def slerp_matrices(R: np.ndarray, times: np.ndarray, new_times: np.ndarray) -> n
     omega = np.arccos(dot)
     u = u.reshape(-1, *([1] * (q.ndim - 2)))
     sin_omega = np.sin(omega)
-    near = sin_omega < 1e-8
+    near = sin_omega < SMALL_SINE
     safe = np.where(near, 1.0, sin_omega)
     w0 = np.where(near, 1.0 - u, np.sin((1.0 - u) * omega) / safe)
     w1 = np.where(near, u, np.sin(u * omega) / safe)

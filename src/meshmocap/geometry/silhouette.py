@@ -24,6 +24,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from meshmocap._tolerances import DIVISOR_FLOOR
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
 
@@ -228,7 +229,9 @@ def _prepare(uv, F, H: int, W: int, valid, orientation, rows=None):
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
     # Skipped: degenerate triangles and those whose projection overflowed (a vertex a
     # hair's breadth in front of the camera plane); the rest have finite coordinates.
-    ok = np.isfinite(area) & (area > 1e-12 if orientation == "positive" else np.abs(area) > 1e-12)
+    ok = np.isfinite(area) & (
+        area > DIVISOR_FLOOR if orientation == "positive" else np.abs(area) > DIVISOR_FLOOR
+    )
     if valid is not None:
         valid = np.asarray(valid, dtype=bool)
         ok &= valid[F[:, 0]] & valid[F[:, 1]] & valid[F[:, 2]]

@@ -34,6 +34,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from meshmocap._atomic import write_text_atomic
+from meshmocap._tolerances import ROUNDING_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.body.motion import Y_UP_TO_Z_UP, Motion
 from meshmocap.body.skeleton import Skeleton
@@ -335,7 +336,7 @@ def read_bvh(
         for c, (kind, axis) in enumerate(jt.channels):
             if kind == "p":
                 v = values[:, jt.first_channel + c]
-                if np.ptp(v) > 1e-9 * max(1.0, float(np.abs(v).max())):
+                if np.ptp(v) > ROUNDING_SLACK * max(1.0, float(np.abs(v).max())):
                     raise FormatError(
                         f"{where(path, jt.channel_line)}: joint {jt.name!r} has animated position "
                         "channels; only the root may translate (unsupported)"

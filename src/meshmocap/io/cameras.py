@@ -77,6 +77,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from meshmocap._atomic import write_text_atomic
+from meshmocap._tolerances import ROTATION_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
@@ -431,7 +432,7 @@ def checked_camera(where, name, K, R, t, dist, width, height) -> Camera:
     dev = np.abs(R @ R.T - np.eye(3)).max()
     if dev > 1e-3 or np.linalg.det(R) <= 0:
         raise FormatError(f"{where}: R is not a rotation (|R Rᵀ − I| = {dev:.2g}, det ≤ 0?)")
-    if dev > 1e-6:  # rounded in the file (Camera accepts up to 1e-6): the nearest rotation
+    if dev > ROTATION_SLACK:  # rounded in the file (Camera accepts that much): the nearest rotation
         U, _, Vt = np.linalg.svd(R)
         R = U @ Vt
     try:

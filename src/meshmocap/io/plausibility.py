@@ -20,6 +20,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from meshmocap._tolerances import ZERO_EXTENT
+
 __all__ = [
     "MAX_BODY_FILL",
     "MAX_EXTENT",
@@ -107,7 +109,7 @@ def body_problem(V: np.ndarray, F: np.ndarray | None, *, up: int = 2) -> str | N
         return f"it is {height:.2f} m tall (a person: {lo:g}–{hi:g} m)"
     if F is None or not len(F):
         return None
-    fill = _volume(V, np.asarray(F)) / float(np.prod(np.maximum(ext, 1e-9)))
+    fill = _volume(V, np.asarray(F)) / float(np.prod(np.maximum(ext, ZERO_EXTENT)))
     if fill > MAX_BODY_FILL:
         return (
             f"it fills {fill:.0%} of its bounding box, a solid blob (a body with its limbs: "

@@ -62,7 +62,7 @@ from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 from sklearn.svm import SVC
 
-from meshmocap._tolerances import ROUNDING_SLACK
+from meshmocap._tolerances import DIVISOR_FLOOR, ROUNDING_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
 
@@ -134,7 +134,11 @@ def platt_sigmoid(f: np.ndarray, positive: np.ndarray) -> tuple[float, float]:
         g1, g2 = float(f @ d1), float(d1.sum())
         if abs(g1) < 1e-5 and abs(g2) < 1e-5:
             break
-        h11, h22, h21 = float(f * f @ d2) + 1e-12, float(d2.sum()) + 1e-12, float(f @ d2)
+        h11, h22, h21 = (
+            float(f * f @ d2) + DIVISOR_FLOOR,
+            float(d2.sum()) + DIVISOR_FLOOR,
+            float(f @ d2),
+        )
         det = h11 * h22 - h21 * h21
         dA, dB = -(h22 * g1 - h21 * g2) / det, -(-h21 * g1 + h11 * g2) / det
         gd, step = g1 * dA + g2 * dB, 1.0

@@ -75,6 +75,12 @@ from meshmocap._validate import check_choice
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.models._kernels import chol_inverse, rbf, sqdist
 
+#: Eigenvalues of the back-constraint kernel clipped at this fraction of the largest (a
+#: singular kernel: duplicated rows).
+_EIGENVALUE_CLIP = 1e-10
+#: Ridge of the back-constraint's first least-squares weights (a near-singular kernel).
+_BACK_RIDGE = 1e-6
+
 BackConstraint = Literal["rbf", "mlp"]
 _BC_CHOICES = (*get_args(BackConstraint), None)
 FORMAT_VERSION = 1
@@ -107,7 +113,7 @@ class LatentProblem:
             # squares, which cuts L-BFGS-B iterations by 3-5x (eigenvalues clipped at 1e-10
             # of the largest where K_bc is singular, e.g. duplicated rows).
             s, U = np.linalg.eigh(Kbc)
-            s = np.maximum(s, 1e-10 * s[-1])
+            s = np.maximum(s, _EIGENVALUE_CLIP * s[-1])
             self.T = (U * s**-0.5) @ U.T  # A = T B
             self.Tinv = (U * s**0.5) @ U.T
 
@@ -373,9 +379,9 @@ class GPLVM:
                 float(self.bc_gamma) if self.bc_gamma is not None else 1.0 / float(np.median(pair))
             )
             Kbc = rbf(d2y, 1.0, bc_gamma)
-            # A0: least squares K_bc A0 ≈ X0 (ridge 1e-6 keeps it bounded when K_bc is
+            # A0: least squares K_bc A0 ≈ X0 (the ridge keeps it bounded when K_bc is
             # near singular)
-            w0 = [np.linalg.solve(Kbc + 1e-6 * np.eye(N), X0)]
+            w0 = [np.linalg.solve(Kbc + _BACK_RIDGE * np.eye(N), X0)]
         elif bc == "mlp":
             H = int(self.n_hidden)
             rng = np.random.default_rng(self.random_state)

@@ -18,6 +18,7 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
 from meshmocap._atomic import atomic_open
+from meshmocap._tolerances import UNDERFLOW_FLOOR, ZERO_EXTENT
 from meshmocap.errors import InputError
 from meshmocap.models.gplvm import GPLVM
 
@@ -96,10 +97,10 @@ def plot_latent_space(
     ax = fig.add_subplot()
     if q == 1:
         lo, hi = X[:, 0].min(), X[:, 0].max()
-        pad = margin * (hi - lo) + 1e-9
+        pad = margin * (hi - lo) + ZERO_EXTENT
         t = np.linspace(lo - pad, hi + pad, resolution * 4)
         _, var = model.predict(t[:, None], return_var=True)  # Eq. (9)
-        ax.semilogy(t, np.maximum(var, 1e-300), color="0.2")
+        ax.semilogy(t, np.maximum(var, UNDERFLOW_FLOOR), color="0.2")
         ax.plot(X[:, 0], np.full(N, var.min()), "x", color="tab:blue", label="training poses")
         ax.set_xlabel("latent x")
         ax.set_ylabel("predictive variance")
@@ -107,13 +108,13 @@ def plot_latent_space(
         centre, axes = _plane(X)
         P = (X - centre) @ axes.T  # training points in plane coordinates (N, 2)
         lo, hi = P.min(0), P.max(0)
-        pad = margin * (hi - lo).max() + 1e-9
+        pad = margin * (hi - lo).max() + ZERO_EXTENT
         u = np.linspace(lo[0] - pad, hi[0] + pad, resolution)
         v = np.linspace(lo[1] - pad, hi[1] + pad, resolution)
         U, V = np.meshgrid(u, v)
         grid = centre + np.column_stack([U.ravel(), V.ravel()]) @ axes
         _, var = model.predict(grid, return_var=True)  # Eq. (9)
-        var = np.maximum(var, var[var > 0].min() if np.any(var > 0) else 1e-300)
+        var = np.maximum(var, var[var > 0].min() if np.any(var > 0) else UNDERFLOW_FLOOR)
         img = ax.imshow(
             var.reshape(U.shape),
             origin="lower",

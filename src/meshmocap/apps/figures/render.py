@@ -16,6 +16,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from meshmocap._atomic import atomic_open
 from meshmocap._progress import progress
+from meshmocap._tolerances import ROUNDING_SLACK
 from meshmocap.body.motion import Motion
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
@@ -144,7 +145,7 @@ def _draw_floor(draw: ImageDraw.ImageDraw, V: np.ndarray, view: View) -> None:
     lo, hi = V[:, :2].min(axis=0) - 1.0, V[:, :2].max(axis=0) + 1.0
     lo, hi = np.floor(lo * 2) / 2, np.ceil(hi * 2) / 2
     for axis in (0, 1):
-        for c in np.arange(lo[axis], hi[axis] + 1e-9, 0.5):
+        for c in np.arange(lo[axis], hi[axis] + ROUNDING_SLACK, 0.5):
             a = np.array([c, lo[1 - axis], 0.0]) if axis == 0 else np.array([lo[0], c, 0.0])
             b = np.array([c, hi[1 - axis], 0.0]) if axis == 0 else np.array([hi[0], c, 0.0])
             ts = np.linspace(0, 1, 20)[:, None]

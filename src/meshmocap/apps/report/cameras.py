@@ -19,6 +19,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from scipy import ndimage
 
+from meshmocap._tolerances import NEAR_DEPTH
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera
 from meshmocap.io.capture import Capture, frame_name
@@ -80,7 +81,7 @@ def overlay(
     uv, depth = camera.project(J)
     sx, sy = w / camera.width, h / camera.height
     uv = np.stack([(uv[:, 0] + 0.5) * sx - 0.5, (uv[:, 1] + 0.5) * sy - 0.5], axis=1)
-    seen = (depth > 1e-6) & np.all(np.isfinite(uv), axis=1) & np.all(np.abs(uv) < 1e5, axis=1)
+    seen = (depth > NEAR_DEPTH) & np.all(np.isfinite(uv), axis=1) & np.all(np.abs(uv) < 1e5, axis=1)
     pic = Image.fromarray(out)
     draw = ImageDraw.Draw(pic)
     width = max(1, round(max(h, w) / 180))

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshmocap._tolerances import ZERO_EXTENT
 from meshmocap.apps.files.export import track_fps, track_gltf, track_template
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError, MeshmocapFileNotFoundError
@@ -355,7 +356,7 @@ def player_payload(player: Player) -> dict:
     P = P[np.isfinite(P).all(axis=1)]
     lo, hi = P.min(axis=0), P.max(axis=0)
     origin = (lo + hi) / 2
-    step = max(float((hi - lo).max()) / 2 / 32000, 1e-9)
+    step = max(float((hi - lo).max()) / 2 / 32000, ZERO_EXTENT)
     shown = [t for t in player.tracks if len(t.joints)]
     root = shown[0].joints[:, 0, [0, 2]].astype(np.float64)  # the pelvis on the floor plane
     travel = root[-1] - root[0]

@@ -43,7 +43,7 @@ from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
 from meshmocap._progress import phase
-from meshmocap._tolerances import DIVISOR_FLOOR, NORM_FLOOR
+from meshmocap._tolerances import DIVISOR_FLOOR, NEAR_DEPTH, NORM_FLOOR
 from meshmocap.body.articulated import (
     DAMPING,
     FIXED_JOINTS,
@@ -148,7 +148,7 @@ def _projection(camera: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     metres per pixel at each point's depth (p,)."""
     uv, _ = camera.project(X)
     Xc = X @ camera.R.T + camera.t
-    z = np.maximum(Xc[:, 2], 1e-6)
+    z = np.maximum(Xc[:, 2], NEAR_DEPTH)
     K, R = camera.K, camera.R
     du = (K[0, 0] / z)[:, None] * (R[0] - (Xc[:, 0] / z)[:, None] * R[2])
     dv = (K[1, 1] / z)[:, None] * (R[1] - (Xc[:, 1] / z)[:, None] * R[2])

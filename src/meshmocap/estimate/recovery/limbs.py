@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshmocap._tolerances import DEGENERATE_AXIS
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
@@ -256,7 +257,7 @@ def limb_candidates(
             Rs[j] = Gp.T @ rotation_between(P0[c] - P0[j], d)
             if bent:  # the lower bone at 90° to the upper, towards ``bend``
                 b = bend - (bend @ d) * d
-                if np.linalg.norm(b) < 1e-6:
+                if np.linalg.norm(b) < DEGENERATE_AXIS:
                     continue
                 Gj = Rs[j] if sk.parents[j] < 0 else Gp @ Rs[j]
                 Rs[m] = Gj.T @ rotation_between(P0[tip] - P0[m], b)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS
 from meshmocap.body.autorig import rest_in_pose
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import BodyPartError, InputError, MeshError, MeshmocapError, SkeletonError
@@ -41,9 +42,9 @@ def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Smallest rotation (3, 3) turning direction ``a`` onto ``b`` (Rodrigues)."""
     a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
     v, c = np.cross(a, b), float(a @ b)
-    if c < -1 + 1e-9:  # antiparallel: π about an axis orthogonal to a
+    if c < -1 + ANTIPARALLEL:  # antiparallel: π about an axis orthogonal to a
         o = np.cross(a, [1.0, 0.0, 0.0])
-        o = o if np.linalg.norm(o) > 1e-6 else np.cross(a, [0.0, 1.0, 0.0])
+        o = o if np.linalg.norm(o) > DEGENERATE_AXIS else np.cross(a, [0.0, 1.0, 0.0])
         o /= np.linalg.norm(o)
         return 2 * np.outer(o, o) - np.eye(3)
     K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])

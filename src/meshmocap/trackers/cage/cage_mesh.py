@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._tolerances import RELATIVE_DEGENERATE, UNDERFLOW_FLOOR, WINDING_SLACK
 from meshmocap.errors import BodyPartError
 from meshmocap.geometry.mesh import mesh_problems, signed_volume
 from meshmocap.geometry.proximity import closest_points_on_triangles
@@ -315,7 +316,7 @@ def surface_distances(P: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.n
     F = np.asarray(F, dtype=np.int64)
     T = V[F]
     N = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
+    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), UNDERFLOW_FLOOR)
     centre = T.mean(axis=1)
     radius = np.linalg.norm(T - centre[:, None], axis=2).max(axis=1)
     sq = (P * P).sum(1)[:, None]
@@ -386,7 +387,7 @@ def self_intersections(
         i, j = i[keep[i] | keep[j]], j[keep[i] | keep[j]]
     Fi, Fj = F[i], F[j]
     shared = (Fi[:, :, None] == Fj[:, None, :]).sum(axis=(1, 2))
-    eps = 1e-12 * float(np.ptp(V, axis=0).max()) ** 3
+    eps = RELATIVE_DEGENERATE * float(np.ptp(V, axis=0).max()) ** 3
     hits = np.zeros(len(i), dtype=bool)
     sel = np.flatnonzero(shared == 0)
     for A, B in ((Fi[sel], Fj[sel]), (Fj[sel], Fi[sel])):
@@ -405,7 +406,7 @@ def self_intersections(
         hits[sel] |= _segments_cross_triangles(p, q, tb[:, 0], tb[:, 1], tb[:, 2], eps)
     sel = np.flatnonzero(shared == 2)
     N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
+    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), UNDERFLOW_FLOOR)
     hits[sel] |= np.einsum("ij,ij->i", N[i[sel]], N[j[sel]]) < fold_cos
     return np.stack([i[hits], j[hits]], axis=1)
 
@@ -442,7 +443,7 @@ def cage_problems(
     if points is not None:
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         w = winding_numbers(P, V, F)
-        out = np.abs(w - 1.0) > 1e-6
+        out = np.abs(w - 1.0) > WINDING_SLACK
         if out.any():
             problems.append(
                 f"enclosure: {int(out.sum())} of {len(P)} points are outside the cage "

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshmocap._tolerances import UNDERFLOW_FLOOR, WINDING_SLACK
 from meshmocap.geometry.proximity import closest_points_on_triangles
 from meshmocap.trackers.cage.cage_mesh import (
     CORNER_SIGNS,
@@ -81,7 +82,7 @@ def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, 
     band = np.ones(len(points), dtype=bool)
     for it in range(max_iter + 1):
         V = rect_cage(rects, apex_height)
-        outside = np.abs(winding_numbers(points, V, F) - 1.0) > 1e-6
+        outside = np.abs(winding_numbers(points, V, F) - 1.0) > WINDING_SLACK
         check = np.flatnonzero(band | outside)
         d, f = surface_distances(points[check], V, F)
         if it == 0 and not slide:  # a slide also moves faces inwards: watch every point
@@ -95,7 +96,7 @@ def _grow_pass(rects, F, points, apex_height, clearance, step, max_iter, slide, 
         T = V[F[f]]
         Q = closest_points_on_triangles(X, T[:, 0], T[:, 1], T[:, 2])
         g = np.where(out[:, None], X - Q, np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]))
-        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), UNDERFLOW_FLOOR)
         need = 1.25 * clearance + np.where(out, d, -d)
         moves: dict[tuple[int, int, int], float] = {}
         corner = F[f] % 4
@@ -192,7 +193,7 @@ def _make_way(rects, F, P, V0, q, new, delta, apex_height, clearance) -> bool:
 
 def _bad(P: np.ndarray, V: np.ndarray, F: np.ndarray, clearance: float) -> np.ndarray:
     """(n,) bool: points outside the cage or closer than ``clearance`` to it."""
-    out = np.abs(winding_numbers(P, V, F) - 1.0) > 1e-6
+    out = np.abs(winding_numbers(P, V, F) - 1.0) > WINDING_SLACK
     return out | (surface_distances(P, V, F)[0] < clearance)
 
 

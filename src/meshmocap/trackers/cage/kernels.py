@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
-from meshmocap._tolerances import ANTIPARALLEL, DIVISOR_FLOOR
+from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, DIVISOR_FLOOR, NEAR_DEPTH
 
 __all__ = ["quad_skinning_transforms", "silhouette_residuals"]
 
@@ -59,7 +59,7 @@ def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover -
             X0 = Rc[0, 0] * P[i, 0] + Rc[0, 1] * P[i, 1] + Rc[0, 2] * P[i, 2] + tc[0]
             X1 = Rc[1, 0] * P[i, 0] + Rc[1, 1] * P[i, 1] + Rc[1, 2] * P[i, 2] + tc[1]
             X2 = Rc[2, 0] * P[i, 0] + Rc[2, 1] * P[i, 1] + Rc[2, 2] * P[i, 2] + tc[2]
-            z = max(X2, 1e-6)
+            z = max(X2, NEAR_DEPTH)
             u[i] = f * X0 / z + cx
             v[i] = fy * X1 / z + cy
             zs[i], xs[i], ys[i] = z, X0 / z, X1 / z
@@ -130,7 +130,7 @@ def _turn(a, b):  # pragma: no cover - compiled
     R = np.eye(3)
     if c < -1 + ANTIPARALLEL:
         o = np.cross(a, np.array([1.0, 0.0, 0.0]))
-        if np.sqrt(np.sum(o * o)) < 1e-6:
+        if np.sqrt(np.sum(o * o)) < DEGENERATE_AXIS:
             o = np.cross(a, np.array([0.0, 1.0, 0.0]))
         o = o / np.sqrt(np.sum(o * o))
         for i in range(3):

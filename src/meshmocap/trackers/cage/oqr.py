@@ -61,6 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._tolerances import WINDING_SLACK
 from meshmocap.body.names import canonical_name_map
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
@@ -373,7 +374,7 @@ def problem_part(V: np.ndarray, F: np.ndarray, points: np.ndarray, problem: str)
     elif check == "enclosure":
         P = np.asarray(points, dtype=np.float64)
         d, face = surface_distances(P, V, F)
-        out = np.abs(winding_numbers(P, V, F) - 1.0) > 1e-6
+        out = np.abs(winding_numbers(P, V, F) - 1.0) > WINDING_SLACK
         first = int(np.flatnonzero(out)[0]) if out.any() else int(np.argmin(d))
         faces = face[first : first + 1]
     else:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshmocap._tolerances import ANTIPARALLEL, DIVISOR_FLOOR
+from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, DIVISOR_FLOOR
 from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.trackers.cage.kernels import quad_skinning_transforms
@@ -55,7 +55,9 @@ def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if anti.any():  # π about any axis orthogonal to a
         o = np.cross(a[anti], [1.0, 0.0, 0.0])
         o = np.where(
-            np.linalg.norm(o, axis=1, keepdims=True) < 1e-6, np.cross(a[anti], [0.0, 1.0, 0.0]), o
+            np.linalg.norm(o, axis=1, keepdims=True) < DEGENERATE_AXIS,
+            np.cross(a[anti], [0.0, 1.0, 0.0]),
+            o,
         )
         o /= np.linalg.norm(o, axis=1, keepdims=True)
         R[anti] = 2 * o[:, :, None] * o[:, None, :] - np.eye(3)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import NEAR_DEPTH, RELATIVE_DEGENERATE
 from meshmocap.errors import InputError
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.cage.kernels import silhouette_residuals
@@ -76,7 +77,7 @@ def surface_sample(V: np.ndarray, F: np.ndarray, n: int, *, seed: int) -> np.nda
         raise InputError(f"surface_sample: n must be ≥ 1, found {n}")
     A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     area = np.bincount(F.ravel(), np.repeat(A, 3), minlength=len(V)) / 3.0
-    p = area + 1e-12 * area.max()  # isolated vertices: possible, last
+    p = area + RELATIVE_DEGENERATE * area.max()  # isolated vertices: possible, last
     pick = np.random.default_rng(seed).choice(len(V), min(n, len(V)), replace=False, p=p / p.sum())
     return np.sort(pick).astype(np.int64)
 
@@ -371,7 +372,7 @@ class SilhouetteCoverage:
         # every view at once: one k-d tree over the projections (C n points, the view as a
         # third coordinate _VIEW_GAP apart, so a sample only finds its own view's points)
         X = np.matmul(P, self._R.transpose(0, 2, 1)) + self._t[:, None]  # (C, n, 3) cameras
-        z = np.maximum(X[:, :, 2], 1e-6)
+        z = np.maximum(X[:, :, 2], NEAR_DEPTH)
         K = self._K
         f = K[:, 0, 0]
         pts = np.empty((C, n, 3))

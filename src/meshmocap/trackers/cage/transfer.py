@@ -36,6 +36,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from meshmocap._atomic import write_text_atomic
+from meshmocap._tolerances import SAME_POSITION
 from meshmocap._validate import check_choice
 from meshmocap.body.template import Template
 from meshmocap.errors import (
@@ -160,7 +161,7 @@ def read_cage_track(
                     f"{path}: frame {i} cage has shape {cage.shape}, expected "
                     f"{oqr.rest_vertices.shape}"
                 )
-            if rebuilt is not None and np.abs(rebuilt - cage).max() > 1e-6:
+            if rebuilt is not None and np.abs(rebuilt - cage).max() > SAME_POSITION:
                 raise InputError(
                     f"{path}: frame {i} cage does not follow the quad rigging of "
                     f"template {name!r} (tracked with another rigging?)"

@@ -31,6 +31,9 @@ from meshmocap.geometry.patches import (
     surface_patches,
 )
 
+#: Smallest squared patch radius (m²): a patch of one vertex still has a finite Gaussian.
+_RADIUS2_FLOOR = 1e-8
+
 
 @dataclass(frozen=True, eq=False)
 class PatchModel:
@@ -104,7 +107,7 @@ def build_patch_model(
     radius2 = (
         np.bincount(labels, np.sum((V0 - centres0[labels]) ** 2, axis=1), minlength=P) / counts
     )
-    radius2 = np.maximum(radius2, 1e-8)
+    radius2 = np.maximum(radius2, _RADIUS2_FLOOR)
 
     def alpha(v: np.ndarray, k: np.ndarray) -> np.ndarray:
         return np.exp(-np.sum((V0[v] - centres0[k]) ** 2, axis=1) / (2 * radius2[k]))

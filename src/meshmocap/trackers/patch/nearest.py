@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import ZERO_EXTENT
 from meshmocap.trackers.patch.kernels import nearest_among, stale_rows
 
 
@@ -107,7 +108,7 @@ def _patch_moves(
     sqrt(3 − tr(R R0ᵀ))`` for the angle θ between them; plus a nanometre for rounding."""
     tr = np.einsum("pij,pij->p", R, R0)
     turn = np.sqrt(np.maximum(3.0 - tr, 0.0))
-    return np.linalg.norm(c - c0, axis=1) + radius * turn + 1e-9
+    return np.linalg.norm(c - c0, axis=1) + radius * turn + ZERO_EXTENT
 
 
 class NearestPoints:
