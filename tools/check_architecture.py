@@ -82,9 +82,6 @@ UNTESTED: dict[str, str] = {
         "the option-constraint table: tests/trackers/test_registry.py feeds every registered "
         "method an invalid value for every option"
     ),
-    "meshmocap._tolerances": (
-        "named constants; what each guards is tested by the tests of the modules that use it"
-    ),
     "meshmocap._version": "the version string, nothing to test",
     "meshmocap.errors": (
         "the error classes; each is raised and matched by the tests of the module that raises it"

@@ -84,6 +84,8 @@ from meshmocap.geometry.rotations import cross, skew
 Exterior = Literal["extend", "raw", "raise"]
 _EXTERIOR = ("extend", "raw", "raise")
 _PAIRS_PER_CHUNK = 1 << 15  # (point, face) pairs per chunk: 256 kB per temporary (L2)
+#: Smallest ``s − ℓ`` an edge's log integral takes (0 on the cage's edge line: a finite log).
+_GAP_FLOOR = 1e-290
 _ON_CAGE = 1e-7  # points closer than this × cage diameter to a face count as on the cage
 
 
@@ -184,7 +186,7 @@ def _chunk(P: np.ndarray, fc: _Faces) -> tuple[np.ndarray, ...]:
         # L = log((s + ℓ)/(s − ℓ)); beside the edge s − ℓ cancels, so there use
         # s − ℓ = 2|a×b|²/((r_a r_b − a·b)(s + ℓ)) with |a×b|² = ℓ²(h² + d²)
         stable = fc.two_l2[k] * (h2 + d[k] * d[k]) / (np.where(obtuse, rab, 1.0) * sp)
-        gap = np.maximum(np.where(obtuse, stable, s - fc.length[k]), 1e-290)  # 0 on the cage
+        gap = np.maximum(np.where(obtuse, stable, s - fc.length[k]), _GAP_FLOOR)  # 0 on the cage
         L[k] = np.log(sp / gap)
     # 4π ψ = Σ_e d_e L_e − h Ω  (single-layer potential of the face, GC08's ψ_j)
     psi = (d[0] * L[0] + d[1] * L[1] + d[2] * L[2] - h * omega) / (4.0 * np.pi)

@@ -74,6 +74,8 @@ ON_BONE, NEAR_JOINT, OUTLIER = 0, 1, 2
 
 _CV_FOLDS = 5  # folds of the out-of-fold decision values the Platt sigmoids are fitted on
 _CHUNK = 2048  # points per batch of the pairwise coupling
+#: Shortest line-search step of Platt's Newton fit (libsvm's value).
+_PLATT_MIN_STEP = 1e-10
 _MAX_Z = 16.118  # |A f + B| cap: libsvm clips pairwise probabilities to [1e-7, 1 − 1e-7]
 _MIN_PER_CLASS = 5  # the stratified subsample keeps at least this many of each label
 _LOGISTIC_MAX_ITER = 2000
@@ -142,7 +144,7 @@ def platt_sigmoid(f: np.ndarray, positive: np.ndarray) -> tuple[float, float]:
         det = h11 * h22 - h21 * h21
         dA, dB = -(h22 * g1 - h21 * g2) / det, -(-h21 * g1 + h11 * g2) / det
         gd, step = g1 * dA + g2 * dB, 1.0
-        while step >= 1e-10:
+        while step >= _PLATT_MIN_STEP:
             new = objective(A + step * dA, B + step * dB)
             if new < value + 1e-4 * step * gd:
                 A, B, value = A + step * dA, B + step * dB, new

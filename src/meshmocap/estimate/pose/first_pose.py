@@ -394,7 +394,7 @@ def refined_search(
                 f = refine_limbs(coarse, f, limbs=limbs, directions=limb_directions, key=rank)
             f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
             # then settle on the near surface, barely held (a long pull undoes small moves)
-            f = _refit(fine, f, max(iterations // 2, 1), (0.04, 0.01), 1e-6)
+            f = _refit(fine, f, max(iterations // 2, 1), (0.04, 0.01), lam=1e-6)
         refined.append(f)
     rk = [rank(f) for f in refined]
     order = np.argsort(rk)
