@@ -105,3 +105,29 @@ def test_a_performer_far_from_standing_is_refused_in_one_line_naming_the_part(re
         cage_body(salsa)
     assert "reference body too" in str(e.value) and "\n" not in str(e.value)
     assert len(str(e.value)) < 300  # the batch's one-line summaries keep 300 characters
+
+
+@pytest.mark.slow
+def test_a_jump_pose_whose_quads_stay_tangled_is_refused_without_growing(ref):
+    # the bundled pose library's pose 20 (a jump, arms folded against the chest) as a
+    # performer's rest pose: the quads are placed but their faces still intersect after
+    # untangling, on the template and on the reference body; refused at once naming the
+    # parts (the growth used to run for minutes before the same verdict; 6 s of CPU in the
+    # cage guide, no timing asserted here)
+    from meshmocap.body.pose_library import load_pose_library
+    from meshmocap.trackers.cage import oqr
+
+    R = load_pose_library().on(ref, 21)[20]
+    jump = rest_in_pose(ref, R, ref.skeleton.rest_positions[0], name="jump")
+    grown = []
+    real = oqr.enclose
+    try:
+        oqr.enclose = lambda *a, **k: grown.append(1) or real(*a, **k)
+        with pytest.raises(MeshError, match=r"'jump': the chest and left shoulder.*") as e:
+            cage_body(jump)
+    finally:
+        oqr.enclose = real
+    assert not grown  # no round reached the growth
+    said = str(e.value)
+    assert "self-intersection" in said and "reference body" in said and "--method patch" in said
+    assert "\n" not in said and len(said) < 300

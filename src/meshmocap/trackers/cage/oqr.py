@@ -238,8 +238,10 @@ def build_oqr(
     (:func:`heading`); the cage topology from
     :func:`meshmocap.trackers.cage.cage_mesh.oqr_faces`; quads
     whose cage faces intersect shrink (:func:`~meshmocap.trackers.cage.growth.untangle`: e.g.
-    a trunk quad fitted with its margin into an arm that hangs against the trunk); then
-    quads grow (:func:`~meshmocap.trackers.cage.growth.enclose`: sides in their planes, then
+    a trunk quad fitted with its margin into an arm that hangs against the trunk; where
+    faces still intersect after it, that placement fails at once: the growth adds no
+    intersection, and on a jump pose took minutes to the same verdict); then quads grow
+    (:func:`~meshmocap.trackers.cage.growth.enclose`: sides in their planes, then
     where that is not enough whole quads slide along their normals; steps of ``grow_step`` to
     ``4 grow_step``, never into a new self-intersection) until every template vertex is
     inside the cage and at least ``clearance`` from it; the rig is turned back to the
@@ -326,7 +328,16 @@ def build_oqr(
             continue
         head = rects[OQR_HEAD]
         apex = 0.25 * float(np.mean(head.hi - head.lo)) / 2  # a low roof over the crown
-        untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
+        used = untangle(rects, F, apex_height=apex, step=grow_step, max_iter=int(max_grow))
+        if used == int(max_grow):  # faces may still intersect: the growth (which adds no
+            # intersection) would take minutes to the same verdict (a jump pose): said now
+            V = rect_cage(rects, apex)
+            left = self_intersections(V, F)
+            if len(left):
+                problem = f"self-intersection: {len(left)} pairs of faces intersect"
+                part = problem_part(V, F, template.V @ C, problem)
+                failed.append(BodyPartError(problem, part=part, reason=problem))
+                continue
         enclose(
             rects,
             F,
