@@ -49,6 +49,15 @@ over one second. Angles are measured in it (degrees), from vectors projected on 
 
 Curves per cycle are resampled to 0, 1, …, 100 % of the cycle (101 samples, linear
 interpolation). Walking in place (a treadmill) is out of scope: the feet must travel.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- A. Savitzky, M. J. E. Golay, *Smoothing and differentiation of data by
+  simplified least squares procedures*, Analytical Chemistry 36(8):1627–1639, 1964.
+  https://doi.org/10.1021/ac60214a047
 """
 
 from __future__ import annotations

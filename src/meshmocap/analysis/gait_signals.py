@@ -2,6 +2,12 @@
 timing, the subject's forward direction and flexion angles in the sagittal plane.
 
 Pure array functions; the protocol they implement is stated in :mod:`meshmocap.analysis.gait`.
+
+References
+----------
+- A. Savitzky, M. J. E. Golay, *Smoothing and differentiation of data by
+  simplified least squares procedures*, Analytical Chemistry 36(8):1627–1639, 1964.
+  https://doi.org/10.1021/ac60214a047
 """
 
 from __future__ import annotations

@@ -29,6 +29,17 @@ a "subtree-accumulated" blend: with ``D[k, j] = 1`` when j is an ancestor-or-sel
 weights). The shortcut ``(W D)_ij (v_i − p_j)`` is exact only for vertices whose weights all
 lie inside or all outside subtree(j); the exact form costs the same (three sparse
 products per iteration) and is what the finite-difference test checks.
+
+References
+----------
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
+- N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
+  deformations for hand animation and object grasping*, Graphics Interface, 1988.
 """
 
 from __future__ import annotations

@@ -36,6 +36,15 @@ known pose). Code that assumes the canonical rest pose (an A-pose facing −Y, l
 does not hold for such a template: retargeting and the procedural motions set world bone
 directions (they would play in the canonical heading). ``decimate=`` fits the full mesh and
 rigs it decimated (cage-manifold-tracking §6.1: 4000 vertices; not the capture's vertices).
+
+References
+----------
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
 """
 
 from __future__ import annotations

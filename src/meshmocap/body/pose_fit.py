@@ -20,6 +20,17 @@ What it is for: exports (BVH, glTF) whose skeleton animation, played on the temp
 gives back the tracked surface (see :func:`pose_from_surface`'s errors).
 
 Units: metres and radians, world frame Z up.
+
+References
+----------
+- N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
+  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+- D. W. Marquardt, *An algorithm for least-squares estimation of nonlinear
+  parameters*, Journal of the Society for Industrial and Applied Mathematics
+  11(2):431–441, 1963. https://doi.org/10.1137/0111030
+- W. Kabsch, *A solution for the best rotation to relate two sets of vectors*,
+  Acta Crystallographica A32(5):922–923, 1976.
+  https://doi.org/10.1107/S0567739476001873
 """
 
 from __future__ import annotations

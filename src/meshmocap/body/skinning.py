@@ -4,6 +4,11 @@ A skinning transform per joint maps rest positions to posed positions:
 ``A_j = [G_j | P_j − G_j P0_j]`` (3 × 4), where ``G_j``/``P_j`` are the joint's global
 rotation and world position and ``P0_j`` its rest position. A vertex moves by the
 weight-blended transform ``Σ_j w_ij A_j``.
+
+References
+----------
+- N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
+  deformations for hand animation and object grasping*, Graphics Interface, 1988.
 """
 
 from __future__ import annotations

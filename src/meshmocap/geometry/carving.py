@@ -22,6 +22,16 @@ live in :mod:`meshmocap.geometry.distance_field` and are re-exported here.
 
 Frames: world, metres, Z up. Voxel ``(i, j, k)`` has its centre at
 ``origin + (i, j, k) * voxel_size``.
+
+References
+----------
+- A. Laurentini, *The visual hull concept for silhouette-based image
+  understanding*, IEEE Transactions on Pattern Analysis and Machine Intelligence
+  16(2):150–162, 1994. https://doi.org/10.1109/34.273735
+- R. Szeliski, *Rapid octree construction from image sequences*, CVGIP: Image
+  Understanding 58(1):23–32, 1993.
+- F. C. Crow, *Summed-area tables for texture mapping*, SIGGRAPH 1984 (Computer
+  Graphics 18(3):207–212).
 """
 
 from __future__ import annotations

@@ -13,6 +13,14 @@ computed grid point by grid point where lookups need it (a k-d tree to the inner
 voxels): what a tracker that queries a few hundred template points per frame should use.
 
 Frames: world, metres, Z up. Grid point ``(i, j, k)`` is at ``origin + (i, j, k) * spacing``.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- J. Pineda, *A parallel algorithm for polygon rasterization*, SIGGRAPH 1988 (Computer
+  Graphics 22(4):17–20).
 """
 
 from __future__ import annotations

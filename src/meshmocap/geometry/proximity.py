@@ -2,6 +2,10 @@
 sampling and point-to-surface distance queries, as pure array functions.
 
 ``V`` : (n, 3) float64, metres; ``F`` : (m, 3) int triangles.
+
+References
+----------
+- C. Ericson, *Real-Time Collision Detection*, Morgan Kaufmann, 2005.
 """
 
 from __future__ import annotations

@@ -4,6 +4,15 @@ All functions are vectorised over leading dimensions. Rotation matrices act on c
 vectors (``x' = R @ x``); ``R`` has shape ``(..., 3, 3)``. Axis-angle vectors ``w`` have
 shape ``(..., 3)``, radians, direction = axis, norm = angle. Quaternions are ``(..., 4)``
 in scalar-last order ``(x, y, z, w)`` like scipy.
+
+References
+----------
+- O. Rodrigues, *Des lois géométriques qui régissent les déplacements d'un système
+  solide dans l'espace, et de la variation des coordonnées provenant de ces
+  déplacements considérés indépendamment des causes qui peuvent les produire*,
+  Journal de Mathématiques Pures et Appliquées 5:380–440, 1840.
+- K. Shoemake, *Animating rotation with quaternion curves*, SIGGRAPH 1985.
+  https://doi.org/10.1145/325165.325242
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ space: rest vertices, bone heads and tails, one evaluation joint; see
 with **standardised** coefficients ``z`` (each of unit variance over the training bodies),
 so that ``‖z‖²`` is the Gaussian prior's negative log-likelihood (up to a constant and a
 factor 2) and the derivative ``∂x/∂z = (std_ · components_)ᵀ`` is constant.
+
+References
+----------
+- I. T. Jolliffe, *Principal Component Analysis*, 2nd ed., Springer, 2002.
 """
 
 from __future__ import annotations

@@ -38,6 +38,17 @@ prediction overshoots at the motion's jerks (the option is kept for faster motio
 
 The articulated model (model points, lever arms, increments, correspondences) lives in
 :mod:`meshmocap.body.articulated`, which automatic rigging shares.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
 """
 
 from __future__ import annotations

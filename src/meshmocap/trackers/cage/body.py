@@ -22,6 +22,14 @@ template's own skinning from the quads: the two skeletons coincide), so a dress 
 sleeve rides along with the cage.
 
 Frames and units: world frame (Z up), metres.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
+  27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
 """
 
 from __future__ import annotations

@@ -14,6 +14,15 @@ Conventions: ``V`` (nv, 3) float64 cage vertices, metres, world frame (Z up); ``
 int64 triangles, counter-clockwise seen from outside. A *ring* is the 4 corner indices
 ``4 q … 4 q + 3`` of quad ``q``, counter-clockwise about the quad normal ``n`` (corners
 ``(+u, +v), (−u, +v), (−u, −v), (+u, −v)`` in the quad frame ``[u | v | n]``).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- A. van Oosterom, J. Strackee, *The solid angle of a plane triangle*, IEEE
+  Transactions on Biomedical Engineering 30(2):125–126, 1983.
+  https://doi.org/10.1109/TBME.1983.325207
 """
 
 from __future__ import annotations

@@ -8,6 +8,12 @@ and, beyond the paper, the coverage terms and the local adjustment's anchor and 
 Each problem of the tracker takes the terms of the list that take part in it
 (:func:`stage_terms`), adds them to one system (:func:`assemble`), and its energy is the
 sum over the same terms of coefficient × value (:func:`total_energy`).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

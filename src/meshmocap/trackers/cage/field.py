@@ -13,6 +13,12 @@ the cost. The nearest distance is unique, so the values are bit-identical
 (``tests/trackers/cage/test_field.py``).
 
 Frames and units: world frame, metres; grid indices ``(x, y, z)`` as the occupancy's.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -6,6 +6,12 @@ template vertex lies
 inside the cage, a clearance deep, never into a new self-intersection. Used by
 :func:`meshmocap.trackers.cage.oqr.build_oqr`; conventions of
 :mod:`meshmocap.trackers.cage.cage_mesh`.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

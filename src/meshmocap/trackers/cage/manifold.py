@@ -22,6 +22,18 @@ manifold_groups          (N,) str        group of each training pose (``walk``, 
 manifold_sources         (S,) str        the sources read
 manifold_stats           (2,) float      poses available, fit seconds
 =======================  ==============  ==================================================
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- N. D. Lawrence, *Probabilistic non-linear principal component analysis with
+  Gaussian process latent variable models*, Journal of Machine Learning Research
+  6:1783–1816, 2005.
+- N. D. Lawrence, J. Quiñonero-Candela, *Local distance preservation in the GP-LVM
+  through back constraints*, International Conference on Machine Learning (ICML),
+  2006. https://doi.org/10.1145/1143844.1143909
 """
 
 from __future__ import annotations

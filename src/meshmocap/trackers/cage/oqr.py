@@ -53,6 +53,12 @@ head; the pelvis–hips "pants" take 14 triangles and the chest–shoulders–ne
 Frames and units: world frame (Z up, any heading), metres. A
 *configuration* is ``centres`` (…, 21, 3) and ``rotations`` (…, 21, 3, 3) (columns
 ``u, v, n`` in world coordinates).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

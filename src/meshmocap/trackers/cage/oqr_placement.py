@@ -3,6 +3,12 @@
 :func:`heading` turns any upright template (Z up) to the canonical heading (facing −Y,
 left +X); :class:`Placer` fits each quad as a cross-section of the body there, as
 described in :mod:`meshmocap.trackers.cage.oqr` (which builds the cage from them). Metres.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -24,6 +24,17 @@ skinning puts it in the same pose, so a tracker fitting that surface to a hull t
 joints for the surface (:mod:`meshmocap.trackers.cage.tracker`).
 
 Frames and units: world frame (Z up), metres.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- W. Kabsch, *A solution for the best rotation to relate two sets of vectors*,
+  Acta Crystallographica A32(5):922–923, 1976.
+  https://doi.org/10.1107/S0567739476001873
+- N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
+  deformations for hand animation and object grasping*, Graphics Interface, 1988.
 """
 
 from __future__ import annotations

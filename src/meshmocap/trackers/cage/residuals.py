@@ -29,6 +29,12 @@ second, opposite term; each choice was measured on synthetic ``humaneva4`` captu
   cost.
 
 Frames and units: world frame (Z up), metres.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -22,6 +22,16 @@ configurations; ``directions`` (k, n, 3): their derivatives along configuration 
 residuals with point gradients ``g`` (n, 3) along each quad's centre and rotation in the
 pelvis frame (the local adjustment, Eq. (12)); ``vertices``: every template vertex.
 Metres, world frame (Z up).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
+  27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
+- N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
+  deformations for hand animation and object grasping*, Graphics Interface, 1988.
 """
 
 from __future__ import annotations

@@ -25,6 +25,15 @@ Two kinds of rows:
 What the terms read: :class:`FrameData` (fixed over a frame) and :class:`Iterate` (one
 problem's linearisation point). Frames and units: world frame (Z up), metres; energies in
 m².
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- D. W. Marquardt, *An algorithm for least-squares estimation of nonlinear
+  parameters*, Journal of the Society for Industrial and Applied Mathematics
+  11(2):431–441, 1963. https://doi.org/10.1137/0111030
 """
 
 from __future__ import annotations

@@ -44,6 +44,12 @@ Every source gives a :class:`PoseSet`: configurations plus, per pose, its trial 
 it comes from, e.g. ``"35_01"``) and group (e.g. ``"walk"``; used to colour the latent
 plot). Only the pelvis-relative configuration is kept, so root translation, heading and
 floor height of a clip do not matter (clips are retargeted with ``floor="none"``).
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
 """
 
 from __future__ import annotations

@@ -21,6 +21,14 @@ smooth only close to the cage: a body of another size should first be placed in 
 than a tolerance are reported (warning, error or nothing).
 
 Units: metres, world frame Z up (subject facing −Y at rest), like every mesh here.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
+  27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
 """
 
 from __future__ import annotations

@@ -8,6 +8,18 @@ The energy is a list of term objects (:func:`energy_terms`, from a tracker's
 list. A step adds every term of the list to one Gauss–Newton system (:func:`assemble`) and
 solves it; the frame's total energy is the sum over the same list of each term's
 coefficient × value (:func:`total_energy`).
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Free-form mesh tracking: a patch-based
+  approach*, IEEE Conference on Computer Vision and Pattern Recognition (CVPR), 2010.
+- C. Cagniart, E. Boyer, S. Ilic, *Probabilistic deformable surface tracking from
+  multiple videos*, European Conference on Computer Vision (ECCV), 2010.
+- M. Straka, S. Hauswiesner, M. Rüther, H. Bischof, *Simultaneous shape and pose
+  adaption of articulated models using linear optimization*, European Conference on
+  Computer Vision (ECCV), 2012.
 """
 
 from __future__ import annotations

@@ -15,6 +15,13 @@
 * :func:`block_cholesky`, :func:`block_cholesky_solve`: the normal equations' sparse
   Cholesky factor in 3×3 blocks on a structure computed once
   (:class:`~meshmocap.trackers.patch.solver.BlockFactor`), and its solve.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Probabilistic deformable surface tracking from
+  multiple videos*, European Conference on Computer Vision (ECCV), 2010.
 """
 
 from __future__ import annotations

@@ -15,6 +15,16 @@ once), so its cost grows with the number of neighbouring pairs, not with vertice
 with ``Q_ab = Σ w q_a q_bᵀ = R_a M_ab R_bᵀ`` and ``s_a = Σ w q_a = R_a m_a``,
 ``Σ w A(q_a)ᵀ A(q_b) = [[tr(Q_ab) I − Q_ba, [s_a]×], [−[s_b]×, W I]]`` (from
 ``[a]×[b]× = b aᵀ − (a·b) I``).
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Free-form mesh tracking: a patch-based
+  approach*, IEEE Conference on Computer Vision and Pattern Recognition (CVPR), 2010.
+- M. Straka, S. Hauswiesner, M. Rüther, H. Bischof, *Simultaneous shape and pose
+  adaption of articulated models using linear optimization*, European Conference on
+  Computer Vision (ECCV), 2012.
 """
 
 from __future__ import annotations

@@ -16,6 +16,18 @@ over a frame) and :class:`Iterate` (one iteration's linearisation point, with th
 Each term is normalised by its own total weight (a mean squared residual, metres²), so the
 weights compare mean squared residuals whatever the number of points, patches or vertices
 (the paper's sums, Eq. 2, 7 and 11, depend on them).
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- C. Cagniart, E. Boyer, S. Ilic, *Free-form mesh tracking: a patch-based
+  approach*, IEEE Conference on Computer Vision and Pattern Recognition (CVPR), 2010.
+- C. Cagniart, E. Boyer, S. Ilic, *Probabilistic deformable surface tracking from
+  multiple videos*, European Conference on Computer Vision (ECCV), 2010.
+- M. Straka, S. Hauswiesner, M. Rüther, H. Bischof, *Simultaneous shape and pose
+  adaption of articulated models using linear optimization*, European Conference on
+  Computer Vision (ECCV), 2012.
 """
 
 from __future__ import annotations
