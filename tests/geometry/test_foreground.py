@@ -177,6 +177,7 @@ def test_grow_mask_recovers_the_subjects_colours_that_touch_it():
     model = colour_model(image[None].repeat(2, 0), np.stack([truth, truth]))
     grown = grow_mask(image, seen, model)
     assert (grown & truth).sum() / (grown | truth).sum() > 0.95
+    assert not (grown & ~truth).any()  # no rim of the room's pixels beside the subject
     assert not grown[5:10, 50:55].any()  # not connected: left out
     assert not grow_mask(image, np.zeros_like(seen), model).any()
     with pytest.raises(InputError, match="bins must be"):

@@ -347,7 +347,7 @@ def grow_mask(
     model: ColourModel,
     *,
     threshold: float = 0.5,
-    blur: float = 1.5,
+    blur: float = 0.0,
     max_hole: float = 0.002,
 ) -> np.ndarray:
     """Add to a mask the pixels of the subject's colours that touch it.
@@ -381,7 +381,9 @@ def grow_mask(
         )
     if not m.any():
         return m
-    score = ndimage.gaussian_filter(model.log_ratio[_quantise(image, model.bins)], blur)
+    score = model.log_ratio[_quantise(image, model.bins)]
+    if blur > 0:
+        score = ndimage.gaussian_filter(score, blur)
     labels, _ = ndimage.label(m | (model.region & (score > threshold)))
     touched = np.unique(labels[m])
     return _fill_holes(np.isin(labels, touched[touched > 0]), max_hole)
