@@ -36,7 +36,8 @@ more than 150 mm off and the longest such run, the ``lost`` flags' recall on bad
 joint more than 150 mm off) and rate on good ones — as tracked (the shipped rule, fitted on
 every category) and on the categories left out of the rule's fit (``bench_lost.py``'s
 leave-one-category-out fit and scores on the evidence replayed over these tracks; rule
-fitted on the other categories' forward default-path tracks) — and the two-way pass's
+fitted on the other categories' default-path tracks of both passes, with the two-way
+pass's disagreement as its second part) — and the two-way pass's
 seconds against the forward pass's. Trials where patch is less accurate than articulated
 ICP are listed.
 
@@ -204,21 +205,27 @@ def made_forward(out: Path) -> None:
 
 def evidence_of(track_dir: Path, cap, template) -> dict:
     """The ``lost`` evidence replayed over a track as the driver computes it
-    (``bench_lost.track_evidence``), cached beside the track folder, and ``also`` (T,):
-    the frames the two-way pass flagged because its tracks disagree there (``ambiguous``
-    in ``track.json``; a flag the evidence replay cannot see, added to the rule's flags
-    when scored on a left-out category)."""
-    from bench_lost import track_evidence  # bench_lost imports this module's TRIALS
+    (``bench_lost.track_evidence``), cached beside the track folder, the tracks'
+    disagreement the two-way pass recorded (``bench_lost.track_disagreement``: the rule's
+    second part, fitted and scored with the evidence) and, for a two-way track made before
+    that record, ``also`` (T,): the frames it flagged because its tracks disagree there
+    (``ambiguous`` in ``track.json``, added to the rule's flags when scored)."""
+    from bench_lost import track_disagreement, track_evidence  # it imports TRIALS from here
 
     cache = track_dir.with_name(f"{track_dir.name}.evidence.npz")
     if not cache.is_file():
         np.savez(cache, **track_evidence(track_dir, cap, template))
     z = np.load(cache)
     meta = json.loads((track_dir / "track.json").read_text())
-    amb = {int(a["frame"]) for a in (meta.get("two_way") or {}).get("ambiguous", ())}
+    two = meta.get("two_way") or {}
+    amb = {int(a["frame"]) for a in two.get("ambiguous", ())} if "disagreement" not in two else {}
     frames = sorted(int(p.stem) for p in (track_dir / "frames").glob("*.npz"))
     also = np.array([i in amb for i in frames[1 : 1 + len(z["lost"])]], dtype=bool)
-    return {**{k: z[k] for k in ("evidence", "error", "lost")}, "also": also}
+    return {
+        **{k: z[k] for k in ("evidence", "error", "lost")},
+        "also": also,
+        "disagreement": track_disagreement(track_dir, len(z["lost"])),
+    }
 
 
 def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], dict]:
@@ -332,7 +339,8 @@ def _pct(a: int, b: int) -> str:
 
 def left_out_flags(rows: list[dict], method: str, passes: str) -> dict:
     """The flags' counts on each category's ``method``/``passes`` tracks by the rule fitted
-    without that category (``bench_lost``: on the other categories' forward tracks)."""
+    without that category (``bench_lost``: on the other categories' tracks of both passes,
+    the disagreement's thresholds on the two-way tracks')."""
     from bench_lost import GOOD_RATE, rule_of, score
 
     def ev(r: dict) -> dict:
@@ -341,7 +349,7 @@ def left_out_flags(rows: list[dict], method: str, passes: str) -> dict:
     have = [r for r in rows if r["path"] == "default" and "evidence" in r]
     total = dict.fromkeys(("bad", "bad_flagged", "good", "good_flagged"), 0)
     for c in sorted({r["category"] for r in have}):
-        train = [ev(r) for r in have if r["category"] != c and r["passes"] == "forward"]
+        train = [ev(r) for r in have if r["category"] != c]
         test = [
             ev(r)
             for r in have

@@ -9,6 +9,11 @@ computes it (:class:`~meshmocap.estimate.recovery.reinit.Recovery` over the trac
 order, on the tracked body), and each limb's worst joint error (15 evaluation joints, mm)
 is taken against the truth. A frame is **bad** when a joint is more than 150 mm off.
 
+A track of the two-way pass (``<method>-two-way``) also has, per frame it chose, the other
+tracks' disagreement (``track.json``'s ``two_way.disagreement``,
+:data:`~meshmocap.estimate.recovery.evidence.DISAGREEMENT`): the rule's disagreement
+thresholds are fitted with its evidence thresholds, on the same frames.
+
 Leave one category out: for each motion category (``bench_limbs.TRIALS``), the rule's
 thresholds are fitted (:func:`~meshmocap.estimate.recovery.evidence.fit_rule`) on the frames
 of the other categories only and scored on that category's frames; the table gives, per
@@ -18,7 +23,9 @@ a row (default: the shipped rule's, :attr:`~meshmocap.estimate.recovery.evidence
 its thresholds are fitted to the evidence held so. Targets: ≥ 90 % of bad frames
 flagged, ≤ 5 % of good frames flagged. The rule shipped
 (``meshmocap/estimate/recovery/data/lost_rule.json``) is fitted on all the frames
-(``--write``), after the left-out scores are reported.
+(``--write``), after the left-out scores are reported; ``--keep-evidence``: only its
+disagreement thresholds are fitted, the shipped evidence thresholds kept (the forward
+pass's flags, and so the two-way pass's runs, stay as they are).
 
 Run: ``python benchmarks/bench_lost.py --tracks /work/limbs-data/base-work/tracks
 /tmp/limbs2/tracks --captures /work/limbs-data/captures [--subjects DIR] [--write]``.
@@ -38,7 +45,13 @@ from bench_limbs import TRIALS
 from meshmocap._threads import blas_threads
 from meshmocap.body.light import tracking_body
 from meshmocap.body.template import load_template
-from meshmocap.estimate.recovery.evidence import RULE_FILE, LostRule, fit_rule, shipped_rule
+from meshmocap.estimate.recovery.evidence import (
+    DISAGREEMENT,
+    RULE_FILE,
+    LostRule,
+    fit_rule,
+    shipped_rule,
+)
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -91,6 +104,20 @@ def track_evidence(track_dir: Path, cap: Capture, template) -> dict:
     return dict(evidence=np.array(ev), error=np.array(err), lost=np.array(lost))
 
 
+def track_disagreement(track_dir: Path, n: int) -> np.ndarray:
+    """(n, D) metres: the disagreement the two-way pass recorded for the track's frames from
+    the second (``track.json``'s ``two_way.disagreement``; zeros on a frame without one, on
+    every frame of a forward track)."""
+    meta = json.loads((Path(track_dir) / "track.json").read_text())
+    rec = {int(d["frame"]): d for d in (meta.get("two_way") or {}).get("disagreement", ())}
+    frames = sorted(int(p.stem) for p in (Path(track_dir) / "frames").glob("*.npz"))
+    out = np.zeros((n, len(DISAGREEMENT)))
+    for t, i in enumerate(frames[1 : 1 + n]):
+        if i in rec:
+            out[t] = [rec[i].get(m, 0) / 1000 for m in DISAGREEMENT]
+    return out
+
+
 def _start(rec, r):
     R, root = r.state.get("R"), r.state.get("root")
     if R is None or root is None or np.shape(R) != rec.R.shape:
@@ -110,16 +137,19 @@ def gather(args) -> list[dict]:
                 continue
             name, method_path = tdir.parent.name, tdir.name
             trial = name.split("-")[0]
-            if name not in caps or trial not in TRIALS:
+            method, path = method_path.split("-", 1)
+            if name not in caps or trial not in TRIALS or path not in args.paths:
                 continue
             cache = work / f"evidence-{name}-{method_path}-{Path(root).parent.name}.npz"
+            beside = tdir.with_name(f"{tdir.name}.evidence.npz")  # bench_limbs's replay
+            if beside.is_file():
+                cache = beside
             if not cache.is_file():
                 tpl = track_template(tdir, name, [Path(s) for s in args.subjects])
                 d = track_evidence(tdir, Capture(caps[name]), tpl)
                 np.savez(cache, **d)
                 print(f"  evidence of {name} {method_path}: {len(d['lost'])} frames", flush=True)
             z = np.load(cache)
-            method, path = method_path.rsplit("-", 1)
             rows.append(
                 dict(
                     name=name,
@@ -130,17 +160,21 @@ def gather(args) -> list[dict]:
                     evidence=z["evidence"],
                     error=z["error"],
                     lost=z["lost"],
+                    disagreement=track_disagreement(tdir, len(z["lost"])),
                 )
             )
     return rows
 
 
 def score(rule: LostRule, rows: list[dict]) -> dict:
-    """Bad frames flagged / bad frames, good frames flagged / good frames (a row's ``also``
-    (T,) bool, where given: frames flagged besides the rule's)."""
+    """Bad frames flagged / bad frames, good frames flagged / good frames: flagged by the
+    rule's evidence or, where a row has ``disagreement`` (T, D), by its disagreement (a
+    row's ``also`` (T,) bool, where given: frames flagged besides the rule's)."""
     bad = flagged = good = false = 0
     for r in rows:
         f = rule.flags(r["evidence"]) | r.get("also", False)
+        if r.get("disagreement") is not None:
+            f = f | rule.disagrees(r["disagreement"])
         b = (r["error"] > BAD_MM).any(axis=1)
         bad += int(b.sum())
         flagged += int((f & b).sum())
@@ -173,12 +207,23 @@ def as_tracked(rows: list[dict]) -> dict:
     )
 
 
-def rule_of(rows: list[dict], good_rate: float, frames: int = FRAMES) -> LostRule:
+def rule_of(
+    rows: list[dict], good_rate: float, frames: int = FRAMES, keep: LostRule | None = None
+) -> LostRule:
+    """The rule fitted on ``rows`` (their evidence and disagreement; ``keep``: only the
+    disagreement's thresholds, :func:`~meshmocap.estimate.recovery.evidence.fit_rule`)."""
     return fit_rule(
         [r["evidence"] for r in rows],
         [(r["error"] > BAD_MM).any(axis=1) for r in rows],
         good_rate=good_rate,
         frames=frames,
+        disagreement=[
+            r["disagreement"]
+            if r.get("disagreement") is not None
+            else np.zeros((len(r["evidence"]), len(DISAGREEMENT)))
+            for r in rows
+        ],
+        keep=keep,
     )
 
 
@@ -189,12 +234,23 @@ def main() -> None:
     ap.add_argument("--subjects", nargs="*", default=[])
     ap.add_argument("--work", default="/tmp/meshmocap-lost")
     ap.add_argument(
+        "--paths",
+        nargs="+",
+        default=["default", "two-way"],
+        help="the tracks used (<method>-<path>): default path forward, two-way, protocol",
+    )
+    ap.add_argument(
         "--good-rate", type=float, default=GOOD_RATE, help="budget of good frames flagged"
     )
     ap.add_argument(
         "--frames", type=int, default=FRAMES, help="frames in a row the rule holds a measure"
     )
     ap.add_argument("--write", action="store_true", help="ship the rule fitted on all frames")
+    ap.add_argument(
+        "--keep-evidence",
+        action="store_true",
+        help="fit and ship only the disagreement's thresholds, the shipped evidence's kept",
+    )
     args = ap.parse_args()
     args.subjects = args.subjects or [str(Path(t).parent / "subjects") for t in args.tracks]
     rows = gather(args)
@@ -220,7 +276,9 @@ def main() -> None:
     by_method = {}
     for r in rows:
         by_method.setdefault(r["method"], []).append(r)
-    full = rule_of(rows, args.good_rate, args.frames)
+    full = rule_of(
+        rows, args.good_rate, args.frames, shipped_rule() if args.keep_evidence else None
+    )
     print(f"\nfitted on all frames: {full.describe()}; in-sample per tracker:")
     for m, rs in sorted(by_method.items()):
         s = score(full, rs)
@@ -232,9 +290,12 @@ def main() -> None:
         note = (
             f"fitted by benchmarks/bench_lost.py (budget {args.good_rate} of good frames, "
             f"{args.frames} frames in a row) on "
-            f"{len(rows)} tracks ({', '.join(sorted(by_method))}), {n_frames} frames, "
-            f"categories {', '.join(cats)}"
+            f"{len(rows)} tracks ({', '.join(sorted(by_method))}; {', '.join(args.paths)}), "
+            f"{n_frames} frames, categories {', '.join(cats)}"
         )
+        if args.keep_evidence:
+            old = json.loads(RULE_FILE.read_text()).get("note", "")
+            note = f"disagreement thresholds {note}; evidence thresholds kept: {old}"
         full.write(RULE_FILE, note=note)
         print(f"wrote {RULE_FILE}")
 

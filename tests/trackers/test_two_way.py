@@ -14,7 +14,7 @@ from meshmocap.body.light import tracking_body
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
 from meshmocap.estimate.pose.first_pose import InitResult
-from meshmocap.estimate.recovery.evidence import EVIDENCE, shipped_rule
+from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, shipped_rule
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
 from meshmocap.io.results import read_track, write_frame
@@ -60,22 +60,38 @@ def test_the_evidence_cost_counts_lost_limbs_first_then_the_fit():
 
 def test_a_limb_is_ambiguous_where_a_track_the_evidence_passes_places_it_elsewhere():
     limb_of = np.array([0, 0, 4, 4, 5])  # torso, torso, left leg ×2, right leg
+    rule = LostRule((np.inf,) * len(EVIDENCE), disagree=(0.15, 0.2))
     J = np.zeros((5, 3))
-    others = np.zeros((3, 5, 3))
-    others[0, 3, 0] = 0.2  # an unflagged track: the left leg 200 mm off
-    others[1, 4, 0] = 0.18  # a flagged track, its right leg passing: 180 mm is not enough
-    others[2, 4, 0] = 0.5  # ... and lost there: 500 mm does not count either
-    frame_lost = np.array([False, True, True])
-    limb_lost = np.zeros((3, len(LIMB_PARTS)), dtype=bool)
+    others = np.zeros((4, 5, 3))
+    others[0, 3, 0] = 0.16  # the forward track, not flagged: the left leg 160 mm off
+    others[1, 4, 0] = 0.18  # a keyframe's track, its right leg passing: 180 mm is not enough
+    others[2, 4, 0] = 0.5  # ... and lost there: 500 mm does not count
+    others[3, 2, 0] = 0.9  # the forward track flagged: none of its limbs counts
+    frame_lost = np.array([False, True, True, True])
+    forward = np.array([True, False, False, True])
+    limb_lost = np.zeros((4, len(LIMB_PARTS)), dtype=bool)
     limb_lost[2, 5] = True
-    amb, d = ambiguous_limbs(J, others, frame_lost, limb_lost, limb_of)
+    amb, d, m = ambiguous_limbs(
+        J, others, frame_lost, limb_lost, limb_of, forward=forward, rule=rule
+    )
     assert amb.tolist() == [False, False, False, False, True, False]
-    assert d[4].tolist() == pytest.approx([0.2, 0.0, 0.0]) and not d[5].any()
-    others[1, 4, 0] = 0.25  # the flagged track's passing right leg 250 mm off: ambiguous
-    amb, d = ambiguous_limbs(J, others, frame_lost, limb_lost, limb_of)
-    assert amb[5] and d[5].tolist() == pytest.approx([0.0, 0.25, 0.0])
-    amb, _ = ambiguous_limbs(J, others[:0], frame_lost[:0], limb_lost[:0], limb_of)
-    assert not amb.any()  # no other track: nothing to disagree with
+    assert d[4].tolist() == pytest.approx([0.16, 0.0, 0.0, 0.0]) and not d[5].any()
+    # the measures: per limb the farthest counted forward and keyframe track
+    assert m[4].tolist() == pytest.approx([0.16, 0.0]) and m[5].tolist() == pytest.approx([0, 0.18])
+    others[1, 4, 0] = 0.25  # the keyframe track's passing right leg 250 mm off: ambiguous
+    amb, d, _ = ambiguous_limbs(
+        J, others, frame_lost, limb_lost, limb_of, forward=forward, rule=rule
+    )
+    assert amb[5] and d[5].tolist() == pytest.approx([0.0, 0.25, 0.0, 0.0])
+    far = LostRule(rule.thresholds, disagree=(0.2, np.inf))  # keyframe tracks never count
+    amb, _, m = ambiguous_limbs(
+        J, others, frame_lost, limb_lost, limb_of, forward=forward, rule=far
+    )
+    assert not amb.any() and m[5, 1] == pytest.approx(0.25)
+    amb, _, m = ambiguous_limbs(
+        J, others[:0], frame_lost[:0], limb_lost[:0], limb_of, forward=forward[:0], rule=rule
+    )
+    assert not amb.any() and not m.any()  # no other track: nothing to disagree with
 
 
 def test_the_choice_switches_where_the_tracks_agree():

@@ -32,12 +32,14 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
 5. **Result.** The chosen frames are written into the track folder (the forward pass's
    frame kept in ``two_way/forward/``), the flags of every frame of the run's span
    recomputed by the same rule on the result, a chosen frame flagged ``lost`` too where the
-   other tracks that the evidence does not rule out disagree with it on a limb
-   (:func:`ambiguous_limbs`: a limb wrong inside the visual hull passes every measure;
-   the disagreement is what shows it), and ``track.json`` records the pass
+   other tracks that the evidence does not rule out disagree with it on a limb by more than
+   the rule's disagreement thresholds
+   (:func:`ambiguous_limbs`, :attr:`~meshmocap.estimate.recovery.evidence.LostRule.disagree`:
+   a limb wrong inside the visual hull passes every measure; the disagreement is what shows
+   it), and ``track.json`` records the pass
    (``"two_way"``: the runs, each keyframe and whether it was kept, which frames changed,
-   from which keyframe and direction, the limbs the forward pass had lost there, and the
-   frames flagged ambiguous). Where
+   from which keyframe and direction, the limbs the forward pass had lost there, the
+   frames flagged ambiguous, and each chosen frame's disagreement). Where
    no keyframe is kept, the frames stay as they were, flagged.
 
 Everything the pass makes is kept under ``TRACK/two_way/`` (keyframe searches in
@@ -65,7 +67,13 @@ from meshmocap.body.light import TrackingBody
 from meshmocap.estimate.pose.first_pose import InitResult
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.keyframe import keyframe_pose
-from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs, shipped_rule
+from meshmocap.estimate.recovery.evidence import (
+    DISAGREEMENT,
+    EVIDENCE,
+    LostRule,
+    lost_limbs,
+    shipped_rule,
+)
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -82,8 +90,6 @@ from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.frame_step import read_track_frame, recovered, track_frame
 
 __all__ = [
-    "AMBIGUOUS",
-    "AMBIGUOUS_LIMB",
     "DRIFT",
     "FIT_WEIGHT",
     "FOLDER",
@@ -137,12 +143,6 @@ DRIFT = 0.1
 FIT_WEIGHT = 0.1
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
-#: Metres: a limb of the chosen frame is ambiguous where another track the lost rule does
-#: not flag on that frame places it this far off (largest joint distance on the limb).
-AMBIGUOUS = 0.15
-#: Metres: a limb of the chosen frame is also ambiguous where a keyframe's track whose same
-#: limb the lost rule passes (its frame flagged for another limb) places it this far off.
-AMBIGUOUS_LIMB = 0.2
 #: The folder of the pass's intermediate results, inside the track folder.
 FOLDER = TWO_WAY_FOLDER
 
@@ -164,6 +164,11 @@ class TwoWay:
         there (:func:`ambiguous_limbs`): ``frame``, ``limbs``, ``mm`` (the largest
         disagreement), ``track`` (``"forward"`` or ``"keyframe K backward|forward"``, the
         track that disagrees most)
+    disagreement : tuple of dict, each chosen frame that has other tracks: ``frame`` and,
+        in mm, its disagreement measures
+        (:data:`~meshmocap.estimate.recovery.evidence.DISAGREEMENT`: ``forward``,
+        ``keyframe``), what :attr:`~meshmocap.estimate.recovery.evidence.LostRule.disagree`
+        is fitted to
     flagged : (int, int), frames flagged ``lost`` before and after the pass
     seconds : float, wall time of the pass
     """
@@ -172,6 +177,7 @@ class TwoWay:
     keyframes: tuple[dict, ...] = ()
     changed: tuple[dict, ...] = ()
     ambiguous: tuple[dict, ...] = ()
+    disagreement: tuple[dict, ...] = ()
     flagged: tuple[int, int] = (0, 0)
     seconds: float = 0.0
 
@@ -182,6 +188,7 @@ class TwoWay:
             "keyframes": list(self.keyframes),
             "changed": list(self.changed),
             "ambiguous": list(self.ambiguous),
+            "disagreement": list(self.disagreement),
             "flagged": list(self.flagged),
             "seconds": round(float(self.seconds), 3),
             "complete": True,
@@ -306,9 +313,9 @@ def ambiguous_limbs(
     limb_lost: np.ndarray,
     limb_of: np.ndarray,
     *,
-    whole: float = AMBIGUOUS,
-    limb: float = AMBIGUOUS_LIMB,
-) -> tuple[np.ndarray, np.ndarray]:
+    forward: np.ndarray,
+    rule: LostRule | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The limbs of a chosen frame that other tracks, which the evidence does not rule
     out, place elsewhere: the frame is then ambiguous (the evidence cannot tell which track
     is right, and the chosen one may be the wrong one: a limb wrong inside the visual hull
@@ -322,23 +329,41 @@ def ambiguous_limbs(
     limb_lost : (H, L) bool, whether it finds each other track's limb lost
     limb_of : (K,) int, the limb (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS`
         order) of each joint
-    whole, limb : metres, a limb is ambiguous where an unflagged track places it more than
-        ``whole`` off, or a track whose limb passes places it more than ``limb`` off
-        (largest joint distance on the limb)
+    forward : (H,) bool, which of the other tracks is the forward track: it counts where
+        its frame is not flagged (a flagged forward frame is what the pass replaces, its
+        other limbs carry the drift that lost it); a keyframe's track counts on the limbs
+        the rule passes
+    rule : LostRule, optional
+        Its disagreement thresholds
+        (:attr:`~meshmocap.estimate.recovery.evidence.LostRule.disagree`, per measure of
+        :data:`~meshmocap.estimate.recovery.evidence.DISAGREEMENT`; default the shipped
+        rule's)
 
     Returns
     -------
-    ambiguous : (L,) bool, per limb
+    ambiguous : (L,) bool, per limb: a track that counts places it farther off than its
+        measure's threshold (largest joint distance on the limb)
     distance : (L, H) float64, metres, the largest joint distance per limb and track where
         it makes the limb ambiguous (0 elsewhere)
+    measures : (L, D) float64, metres, per limb the disagreement measures: the largest
+        distance to a forward track and to a keyframe's track that count
     """
+    rule = rule or shipped_rule()
     L = len(LIMB_PARTS)
     d = np.linalg.norm(np.asarray(others, np.float64) - joints, axis=-1)  # (H, K)
     per = np.stack([d[:, limb_of == k].max(axis=1, initial=0.0) for k in range(L)])  # (L, H)
-    ok = ~np.asarray(frame_lost, dtype=bool)
-    passes = ~np.asarray(limb_lost, dtype=bool).T  # (L, H)
-    amb = ((per > whole) & ok) | ((per > limb) & passes)
-    return amb.any(axis=1), np.where(amb, per, 0.0)
+    fw = np.asarray(forward, dtype=bool)
+    counts = np.where(fw, ~np.asarray(frame_lost, dtype=bool), ~np.asarray(limb_lost, bool).T)
+    per_c = np.where(counts, per, 0.0)
+    measures = np.stack(
+        [
+            np.where(fw, per_c, 0.0).max(axis=1, initial=0.0),
+            np.where(fw, 0.0, per_c).max(axis=1, initial=0.0),
+        ],
+        axis=1,
+    )
+    amb = per_c > np.where(fw, rule.disagree[0], rule.disagree[1])  # (L, H)
+    return amb.any(axis=1), np.where(amb, per, 0.0), measures
 
 
 # --- the pass over a track folder ------------------------------------------------------
@@ -410,6 +435,7 @@ def two_way_pass(
         keyframes=tuple(keys),
         changed=tuple(changed),
         ambiguous=tuple(run.ambiguous),
+        disagreement=tuple(run.disagreement),
         flagged=(int(flagged.sum()), int(after)),
         seconds=time.perf_counter() - t0,
     )
@@ -423,6 +449,7 @@ def _of_json(d: dict) -> TwoWay:
         keyframes=tuple(d.get("keyframes", ())),
         changed=tuple(d.get("changed", ())),
         ambiguous=tuple(d.get("ambiguous", ())),
+        disagreement=tuple(d.get("disagreement", ())),
         flagged=tuple(d.get("flagged", (0, 0))),
         seconds=float(d.get("seconds", 0.0)),
     )
@@ -458,6 +485,7 @@ class _Run:
         self.pos = {i: p for p, i in enumerate(order)}
         self.floor, self.ceiling = 0, len(order) - 1
         self.ambiguous: list[dict] = []
+        self.disagreement: list[dict] = []
         names = body.template.eval_skeleton.names
         self.limb_of = np.array(
             [next(k for k, v in enumerate(LIMB_PARTS.values()) if n in v) for n in names]
@@ -650,7 +678,8 @@ class _Run:
         self, fwd, hyps: list[_Hyp], lo: int, path: np.ndarray, chosen: list[FrameResult]
     ) -> list[FrameResult]:
         """The chosen frames flagged ``lost`` where the other tracks disagree on a limb
-        (:func:`ambiguous_limbs`); each such frame recorded in ``self.ambiguous``."""
+        (:func:`ambiguous_limbs`); each such frame recorded in ``self.ambiguous``, each
+        frame's disagreement in ``self.disagreement``."""
         names = list(LIMB_PARTS)
         tracks = ["forward"] + [f"keyframe {h.keyframe} {h.direction}" for h in hyps]
         out = []
@@ -675,13 +704,17 @@ class _Run:
                     for e, (g, f) in zip(ev, alt, strict=True)
                 ]
             )
-            amb, per = ambiguous_limbs(
+            amb, per, measures = ambiguous_limbs(
                 r.joints,
                 np.stack([f.joints for _, f in alt]),
                 np.array(["lost" in f.flags for _, f in alt]),
                 limb_lost,
                 self.limb_of,
+                forward=np.array([g == 0 for g, _ in alt]),
+                rule=self.rule_of(),
             )
+            far = np.round(1000 * measures.max(axis=0)).astype(int).tolist()
+            self.disagreement.append({"frame": i, **dict(zip(DISAGREEMENT, far, strict=True))})
             if not amb.any():
                 out.append(r)
                 continue

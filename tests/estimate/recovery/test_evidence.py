@@ -6,6 +6,7 @@ import pytest
 
 from meshmocap.errors import FormatError, InputError
 from meshmocap.estimate.recovery.evidence import (
+    DISAGREEMENT,
     EVIDENCE,
     LostRule,
     fit_rule,
@@ -73,6 +74,14 @@ def test_the_rule_round_trips_and_the_shipped_one_loads(tmp_path):
     assert LostRule.read(tmp_path / "r.json") == rule
     (tmp_path / "old.json").write_text('{"thresholds": {"outside": 0.3}}')  # before frames
     assert LostRule.read(tmp_path / "old.json").frames == 1
+    assert LostRule.read(tmp_path / "old.json").disagree == (np.inf,) * len(DISAGREEMENT)
+    far = LostRule(rule.thresholds, 2, disagree=(0.2, np.inf))
+    far.write(tmp_path / "far.json")
+    assert LostRule.read(tmp_path / "far.json") == far
+    assert far.describe().endswith("on 2 frames in a row; disagreement: forward > 0.2 m")
+    assert far.disagrees(np.array([[0.1, 5.0], [0.25, 0.0]])).tolist() == [False, True]
+    with pytest.raises(InputError, match="expected 2 disagreement thresholds"):
+        LostRule(rule.thresholds, disagree=(0.2,))
     (tmp_path / "zero.json").write_text('{"thresholds": {}, "frames": 0}')
     with pytest.raises(FormatError, match=r"zero\.json is not a rule file"):
         LostRule.read(tmp_path / "zero.json")
@@ -96,6 +105,27 @@ def test_fit_rule_flags_bad_frames_within_the_budget_of_good_ones():
     assert np.count_nonzero(f & ~bad) <= 0.02 * np.count_nonzero(~bad)
     assert np.count_nonzero(f & bad) >= 0.95 * np.count_nonzero(bad)
     assert np.isfinite(rule.thresholds[k])
+
+
+def test_fit_rule_fits_the_disagreement_where_the_evidence_cannot_see_a_bad_frame():
+    """Bad frames whose evidence is clean but where another track places a limb 300 mm off
+    (a limb wrong inside the hull): the disagreement's threshold is fitted to them, between
+    the good frames' disagreement and theirs; kept evidence thresholds stay as given."""
+    rng = np.random.default_rng(2)
+    n = 2000
+    E = np.abs(rng.normal(0.0, 0.01, (n, len(LIMB_PARTS), len(EVIDENCE))))
+    bad = rng.random(n) < 0.05
+    D = np.zeros((n, len(DISAGREEMENT)))
+    D[:, 1] = rng.uniform(0.0, 0.12, n)  # good frames: the tracks within 120 mm
+    D[bad, 1] = rng.uniform(0.25, 0.4, bad.sum())
+    rule = fit_rule([E], [bad], good_rate=0.02, disagreement=[D])
+    assert rule.disagree[0] == np.inf and 0.12 <= rule.disagree[1] < 0.25
+    assert rule.disagrees(D).tolist() == bad.tolist()
+    kept = LostRule((np.inf, np.inf, 0.5, np.inf, np.inf, np.inf), frames=2)
+    again = fit_rule([E], [bad], good_rate=0.02, disagreement=[D], keep=kept)
+    assert again.thresholds == kept.thresholds and again.frames == 2
+    assert again.disagree == rule.disagree
+    assert fit_rule([E], [bad], good_rate=0.02).disagree == (np.inf, np.inf)
 
 
 def test_fit_rule_held_over_frames_leaves_one_frame_spikes_of_good_frames_alone():

@@ -43,6 +43,8 @@ from meshmocap.errors import FormatError, InputError
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 
 __all__ = [
+    "DISAGREEMENT",
+    "DISAGREEMENT_GRID",
     "EVIDENCE",
     "RULE_FILE",
     "LostRule",
@@ -54,6 +56,13 @@ __all__ = [
 
 #: The measures of a limb's evidence, in the order of the last axis of an evidence array.
 EVIDENCE = ("outside", "buried", "unexplained", "unseen", "residual", "speed")
+#: The tracks' disagreement on a frame the two-way pass chose (metres, the largest over its
+#: limbs of the largest joint distance on the limb), in the order of the last axis of a
+#: disagreement array: ``forward`` — to the forward track, where the rule does not flag that
+#: track's frame; ``keyframe`` — to a keyframe's track, on the limbs the rule passes there.
+DISAGREEMENT = ("forward", "keyframe")
+#: Metres: the candidate thresholds of the disagreement measures (:func:`fit_rule`).
+DISAGREEMENT_GRID = tuple(np.round(np.arange(0.1, 0.8001, 0.025), 3))
 #: The shipped rule's file (in the package).
 RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "lost_rule.json"))
 
@@ -61,7 +70,7 @@ RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "
 @dataclass(frozen=True)
 class LostRule:
     """A threshold per measure of :data:`EVIDENCE` (``inf``: the measure never flags), held
-    for a number of frames in a row.
+    for a number of frames in a row, and one per measure of :data:`DISAGREEMENT`.
 
     Attributes
     ----------
@@ -69,10 +78,14 @@ class LostRule:
     frames : int
         Frames in a row (the frame assessed and those just before it) a measure must exceed
         its threshold on for the limb to be lost (1: the frame alone).
+    disagree : tuple of float, metres, one per :data:`DISAGREEMENT` measure: a frame the
+        two-way pass chose is flagged where another track places a limb farther off
+        (:meth:`disagrees`; ``inf``: never)
     """
 
     thresholds: tuple[float, ...]
     frames: int = 1
+    disagree: tuple[float, ...] = (np.inf,) * len(DISAGREEMENT)
 
     def __post_init__(self) -> None:
         if len(self.thresholds) != len(EVIDENCE):
@@ -82,6 +95,11 @@ class LostRule:
             )
         if isinstance(self.frames, bool) or not isinstance(self.frames, int) or self.frames < 1:
             raise InputError(f"lost rule: frames must be an integer ≥ 1, found {self.frames!r}")
+        if len(self.disagree) != len(DISAGREEMENT):
+            raise InputError(
+                f"lost rule: expected {len(DISAGREEMENT)} disagreement thresholds "
+                f"({', '.join(DISAGREEMENT)}), found {len(self.disagree)}"
+            )
 
     def limb_lost(self, evidence: np.ndarray) -> np.ndarray:
         """(..., L) bool: each limb of ``evidence`` (..., L, E) past a threshold, the
@@ -112,14 +130,26 @@ class LostRule:
         with a limb lost (:meth:`sequence`)."""
         return self.limb_lost(self.sequence(evidence)).any(axis=-1)
 
+    def disagrees(self, disagreement: np.ndarray) -> np.ndarray:
+        """(...) bool: where ``disagreement`` (..., D) metres (:data:`DISAGREEMENT`) passes a
+        threshold of :attr:`LostRule.disagree`."""
+        return np.any(np.asarray(disagreement) > np.asarray(self.disagree), axis=-1)
+
     def describe(self) -> str:
-        """The thresholds used, one ``name > value`` each, and the frames in a row."""
+        """The thresholds used, one ``name > value`` each, the frames in a row, and the
+        disagreement's (metres)."""
         text = ", ".join(
             f"{n} > {t:.3g}"
             for n, t in zip(EVIDENCE, self.thresholds, strict=True)
             if np.isfinite(t)
         )
-        return text + (f" on {self.frames} frames in a row" if self.frames > 1 else "")
+        text += f" on {self.frames} frames in a row" if self.frames > 1 else ""
+        far = [
+            f"{n} > {t:.3g} m"
+            for n, t in zip(DISAGREEMENT, self.disagree, strict=True)
+            if np.isfinite(t)
+        ]
+        return text + (f"; disagreement: {', '.join(far)}" if far else "")
 
     def write(self, path: str | Path, *, note: str = "") -> None:
         """Save the rule as JSON (``inf`` as null)."""
@@ -127,18 +157,24 @@ class LostRule:
             n: (float(t) if np.isfinite(t) else None)
             for n, t in zip(EVIDENCE, self.thresholds, strict=True)
         }
-        rule = {"thresholds": th, "frames": self.frames, "note": note}
+        far = {
+            n: (float(t) if np.isfinite(t) else None)
+            for n, t in zip(DISAGREEMENT, self.disagree, strict=True)
+        }
+        rule = {"thresholds": th, "frames": self.frames, "disagreement": far, "note": note}
         Path(path).write_text(json.dumps(rule, indent=1) + "\n")
 
     @classmethod
     def read(cls, path: str | Path) -> LostRule:
-        """A rule saved by :meth:`write` (one without ``frames``: the frame alone)."""
+        """A rule saved by :meth:`write` (one without ``frames``: the frame alone; without
+        ``disagreement``: none flags)."""
         try:
             rule = json.loads(Path(path).read_text())
-            th = rule["thresholds"]
+            th, far = rule["thresholds"], rule.get("disagreement") or {}
             return cls(
                 tuple(np.inf if th.get(n) is None else float(th[n]) for n in EVIDENCE),
                 int(rule.get("frames", 1)),
+                tuple(np.inf if far.get(n) is None else float(far[n]) for n in DISAGREEMENT),
             )
         except (KeyError, TypeError, ValueError, AttributeError, InputError) as e:
             raise FormatError(f"lost rule: {path} is not a rule file ({e})") from None
@@ -193,11 +229,14 @@ def fit_rule(
     good_rate: float = 0.04,
     quantiles: np.ndarray | None = None,
     frames: int = 1,
+    disagreement: list[np.ndarray] | None = None,
+    keep: LostRule | None = None,
 ) -> LostRule:
     """Thresholds that flag as many bad frames as possible while flagging at most
     ``good_rate`` of the good frames: greedily, the measure and threshold (a quantile of
-    that measure's frame maximum over the good frames) that flags the most bad frames not
-    yet flagged per good frame newly flagged, within the budget, until none adds any.
+    that measure's frame maximum over the good frames; for a disagreement measure, one of
+    :data:`DISAGREEMENT_GRID`) that flags the most bad frames not yet flagged per good frame
+    newly flagged, within the budget, until none adds any.
 
     Parameters
     ----------
@@ -207,34 +246,60 @@ def fit_rule(
     quantiles : (q,) float, candidate quantiles of the good frames' values
     frames : int, the rule's frames in a row (:attr:`LostRule.frames`): the thresholds
         are fitted to the evidence held over that many frames (:meth:`LostRule.sequence`)
+    disagreement : list of (T, D) float64, metres, optional
+        Each track's disagreement per frame (:data:`DISAGREEMENT`; zeros on a forward
+        track): its thresholds are fitted too (else they stay ``inf``).
+    keep : LostRule, optional
+        Keep this rule's evidence thresholds and frames, fit only the disagreement's (the
+        good frames it flags count against the budget).
 
     Returns
     -------
     LostRule
     """
+    if keep is not None:
+        frames = keep.frames
     hold = LostRule((np.inf,) * len(EVIDENCE), frames)
-    # (N, E): worst limb per frame, of the evidence the rule reads
-    X = np.concatenate([hold.sequence(e).max(axis=1) for e in evidence])
+    D = len(DISAGREEMENT)
+    if disagreement is None:
+        disagreement = [np.zeros((len(e), D)) for e in evidence]
+    # (N, E + D): worst limb per frame, of the evidence the rule reads, and the disagreement
+    X = np.concatenate(
+        [
+            np.hstack([hold.sequence(e).max(axis=1), np.asarray(d, np.float64).reshape(-1, D)])
+            for e, d in zip(evidence, disagreement, strict=True)
+        ]
+    )
     y = np.concatenate(bad).astype(bool)
     q = np.linspace(0.9, 1.0, 101) if quantiles is None else np.asarray(quantiles)
     good = X[~y]
+    E = len(EVIDENCE)
+    candidates = [
+        np.unique(np.quantile(good[:, k], q)) if len(good) and keep is None else np.empty(0)
+        for k in range(E)
+    ] + [np.asarray(DISAGREEMENT_GRID)] * D
     th = np.full(X.shape[1], np.inf)
+    if keep is not None:
+        th[:E] = keep.thresholds
     budget = good_rate * max(len(good), 1)
     while True:
         flagged = (th < X).any(axis=1)
+        bad0, good0 = np.count_nonzero(flagged & y), np.count_nonzero(flagged & ~y)
         best, gain = None, 0.0
         for k in range(X.shape[1]):
-            for t in np.unique(np.quantile(good[:, k], q)):
+            for t in candidates[k]:
                 if t >= th[k]:
                     continue
                 f = flagged | (X[:, k] > t)
-                if np.count_nonzero(f & ~y) > budget:
+                new_good = np.count_nonzero(f & ~y) - good0
+                if good0 + new_good > budget:
                     continue
-                new_bad = np.count_nonzero(f & y) - np.count_nonzero(flagged & y)
-                new_good = np.count_nonzero(f & ~y) - np.count_nonzero(flagged & ~y)
+                new_bad = np.count_nonzero(f & y) - bad0
                 score = new_bad / (new_good + 1.0)
                 if new_bad > 0 and score > gain:
                     best, gain = (k, t), score
         if best is None:
-            return LostRule(tuple(float(v) for v in th), frames)
+            return LostRule(
+                tuple(float(v) for v in th[:E]), frames, tuple(float(v) for v in th[E:])
+            )
         th[best[0]] = best[1]
