@@ -13,6 +13,11 @@ tracked vertex against the same vertex of the file). Joints and vertices are
 scored only on frames where the true surface lies inside every camera's image: a subject
 leaving the studio (a CMU walk or run crosses 4–5 m) leaves a truncated hull, and those
 frames are listed as out of view rather than blamed on the tracker.
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
 """
 
 from __future__ import annotations

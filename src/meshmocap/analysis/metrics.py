@@ -15,6 +15,15 @@ The metrics follow the patch-tracking paper (``papers/patch-skeleton-tracking.tx
 mean 3D joint error (14 joints without the pelvis: ``exclude=("pelvis",)``), the pixel
 overlap error of Table II, bone-length mean and spread (Fig. 6), and per-vertex error on
 the fixed connectivity of the crane sequence (Table I's data).
+
+References
+----------
+- C.-H. Huang, E. Boyer, S. Ilic, *Robust human body shape and pose tracking*,
+  International Conference on 3D Vision (3DV), 2013.
+- L. Sigal, A. O. Balan, M. J. Black, *HumanEva: synchronized video and motion
+  capture dataset and baseline algorithm for evaluation of articulated human motion*,
+  International Journal of Computer Vision 87(1–2):4–27, 2010.
+  https://doi.org/10.1007/s11263-009-0273-6
 """
 
 from __future__ import annotations

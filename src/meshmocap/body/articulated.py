@@ -39,7 +39,7 @@ References
   images*, Image and Vision Computing 10(3):145–155, 1992.
   https://doi.org/10.1016/0262-8856(92)90066-C
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
-  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+  deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
 """
 
 from __future__ import annotations

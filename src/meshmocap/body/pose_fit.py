@@ -24,7 +24,7 @@ Units: metres and radians, world frame Z up.
 References
 ----------
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
-  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+  deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
 - D. W. Marquardt, *An algorithm for least-squares estimation of nonlinear
   parameters*, Journal of the Society for Industrial and Applied Mathematics
   11(2):431–441, 1963. https://doi.org/10.1137/0111030

@@ -8,7 +8,7 @@ weight-blended transform ``Σ_j w_ij A_j``.
 References
 ----------
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
-  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+  deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
 """
 
 from __future__ import annotations

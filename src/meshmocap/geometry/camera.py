@@ -3,6 +3,11 @@
 A camera maps a world point ``X`` (metres, Z up) to pixels by ``x = K (R X + t)``: camera
 axes x right, y down, z forward (depth); pixel coordinates ``(u, v) = (column, row)`` with
 the centre of the top-left pixel at (0, 0).
+
+References
+----------
+- D. C. Brown, *Decentering distortion of lenses*, Photogrammetric Engineering
+  32(3):444–462, 1966.
 """
 
 from __future__ import annotations

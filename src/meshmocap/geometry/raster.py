@@ -4,6 +4,11 @@ Each triangle's bounding box is expanded into candidate pixels in one flat array
 centres are tested against the triangle by barycentric coordinates, and the nearest
 triangle wins each pixel (a stable sort on (pixel, depth)). Work is proportional to the
 summed bounding-box areas; big meshes are processed in chunks to bound memory.
+
+References
+----------
+- E. Catmull, *A subdivision algorithm for computer display of curved surfaces*,
+  PhD thesis, University of Utah, 1974.
 """
 
 from __future__ import annotations

@@ -22,6 +22,11 @@ bone's degrees of freedom (dof). The model, as read here:
   0.056444 m); angles in degrees or radians (``:units angle``, overridden by an AMC
   ``:DEGREES``/``:RADIANS`` line). Files are Y up; readers return metres, Z up:
   (x, y, z) → (x, −z, y) (:data:`~meshmocap.body.motion.Y_UP_TO_Z_UP`).
+
+References
+----------
+- M. Meredith, S. Maddock, *Motion capture file formats explained*, Department of
+  Computer Science, University of Sheffield, 2001.
 """
 
 from __future__ import annotations

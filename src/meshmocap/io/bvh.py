@@ -19,6 +19,11 @@ Conventions of the format, as read and written here:
   (:data:`~meshmocap.body.motion.Y_UP_TO_Z_UP`); :func:`write_bvh` converts back.
 * ``Frame Time`` values that are within 1e-4 (relative) of the inverse of a whole frame rate
   (``.0083333`` → 120 fps) give that whole frame rate.
+
+References
+----------
+- M. Meredith, S. Maddock, *Motion capture file formats explained*, Department of
+  Computer Science, University of Sheffield, 2001.
 """
 
 from __future__ import annotations

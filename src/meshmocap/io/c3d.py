@@ -9,6 +9,13 @@ Conventions of the files written here:
   in the capture (C3D counts from 1, so frame 0 is written as 1).
 * Each point's residual is 0 for a valid sample and −1 for an invalid one (the C3D
   convention for a gap); readers such as ezc3d then give NaN for that sample.
+
+References
+----------
+- Motion Lab Systems, *The C3D file format user guide*, https://www.c3d.org.
+- B. Michaud, M. Begon, *ezc3d: an easy C3D file I/O cross-platform solution for
+  C++, Python and MATLAB*, Journal of Open Source Software 6(58):2911, 2021.
+  https://doi.org/10.21105/joss.02911
 """
 
 from __future__ import annotations

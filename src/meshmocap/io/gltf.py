@@ -24,6 +24,11 @@ Conventions of the files written here (those of the glTF 2.0 specification):
   A frame costs 12 bytes per vertex.
 * Triangles are indexed with uint16 below 65,536 vertices, uint32 otherwise; positions and
   normals are float32.
+
+References
+----------
+- The Khronos Group, *glTF 2.0 specification*,
+  https://registry.khronos.org/glTF/specs/2.0/glTF-2.0.html
 """
 
 from __future__ import annotations

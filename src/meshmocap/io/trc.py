@@ -14,6 +14,16 @@ Conventions of the files written here (OpenSim's):
   first frame, counted from 1.
 * A gap (a marker without a value on a frame: ``valid`` False) is written as three empty
   cells, as OpenSim and Pose2Sim read missing markers; :func:`read_trc` gives NaN there.
+
+References
+----------
+- S. L. Delp, F. C. Anderson, A. S. Arnold, P. Loan, A. Habib, C. T. John,
+  E. Guendelman, D. G. Thelen, *OpenSim: open-source software to create and analyze
+  dynamic simulations of movement*, IEEE Transactions on Biomedical Engineering
+  54(11):1940–1950, 2007. https://doi.org/10.1109/TBME.2007.901024
+- D. Pagnon, M. Domalain, L. Reveret, *Pose2Sim: an open-source Python package for
+  multiview markerless kinematics*, Journal of Open Source Software, 2022.
+  https://doi.org/10.21105/joss.04362
 """
 
 from __future__ import annotations

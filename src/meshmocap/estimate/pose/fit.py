@@ -19,6 +19,15 @@ over the iterations; one Levenberg–Marquardt-damped step
 :meth:`PoseFitter.score` is the symmetric closest-point distance a global search ranks candidate
 poses by, and :class:`PoseFitter` keeps the observed points, their k-d tree and the model
 points across the many fits of a search.
+
+References
+----------
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
 """
 
 from __future__ import annotations

@@ -23,6 +23,15 @@ another leaving it. The tracking driver then moves the tracker onto the held pos
 template, keeping its velocity; articulated ICP's own pose is such a fit already).
 
 Units: metres and radians, world frame Z up.
+
+References
+----------
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
 """
 
 from __future__ import annotations

@@ -16,6 +16,12 @@ enough to score tens of thousands of candidates in a few seconds:
 
 Both clipped as :data:`~meshmocap.estimate.pose.fit.SCORE_CLIP` and
 :data:`~meshmocap.estimate.pose.fit.OUTSIDE_CLIP`. Metres, world frame Z up.
+
+References
+----------
+- T. F. Gonzalez, *Clustering to minimize the maximum intercluster distance*,
+  Theoretical Computer Science 38:293–306, 1985.
+  https://doi.org/10.1016/0304-3975(85)90224-5
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ References
   Acta Crystallographica A32(5):922–923, 1976.
   https://doi.org/10.1107/S0567739476001873
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
-  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+  deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ References
 - Y. Lipman, D. Levin, D. Cohen-Or, *Green coordinates*, ACM Transactions on Graphics
   27(3) (SIGGRAPH 2008). https://doi.org/10.1145/1360612.1360677
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
-  deformations for hand animation and object grasping*, Graphics Interface, 1988.
+  deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
 """
 
 from __future__ import annotations
