@@ -62,6 +62,10 @@ in metres). OpenCV's XML FileStorage is not supported.
 
 PyYAML reads the YAML (after dropping the ``%YAML:1.0`` directive PyYAML rejects, and with
 a constructor for ``!!opencv-matrix``); writing needs no library.
+
+References
+----------
+- G. Bradski, *The OpenCV library*, Dr. Dobb's Journal of Software Tools, 2000.
 """
 
 from __future__ import annotations

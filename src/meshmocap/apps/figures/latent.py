@@ -4,6 +4,15 @@ The predictive variance (Eq. (9)) is drawn as a grey level over the latent space
 low variance, i.e. poses the model is confident about; black: high variance), on a log
 scale; the latent points of the training poses are blue crosses. Drawn with matplotlib's
 object API on the Agg canvas (headless, no global state) and written atomically.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- N. D. Lawrence, *Probabilistic non-linear principal component analysis with
+  Gaussian process latent variable models*, Journal of Machine Learning Research
+  6:1783–1816, 2005.
 """
 
 from __future__ import annotations
