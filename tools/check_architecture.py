@@ -189,6 +189,10 @@ UNTESTED: dict[str, str] = {
     "meshmocap.models._kernels": (
         "numba loops of models/gplvm: tests/models/test_gplvm.py (gradients by finite differences)"
     ),
+    "meshmocap.models._softmax": (
+        "numba passes of models/bodyparts' logistic fit: tests/models/test_bodyparts.py "
+        "(derivatives by finite differences, the fit against scikit-learn's)"
+    ),
     "meshmocap.studio.hulls": (
         "hulls of silhouettes: tests/studio/test_synth.py and tests/io/test_faults.py"
     ),

@@ -30,7 +30,7 @@ def test_every_listed_kernel_exists_and_its_types_parse():
             for sig in signatures:
                 assert len(_types(sig)) >= 2
     patch, cage = "meshmocap.trackers.patch.kernels", "meshmocap.trackers.cage.field"
-    assert kernels_of("patch_svc") == (*SHARED, patch)
+    assert kernels_of("patch_svc") == (*SHARED, "meshmocap.models._softmax", patch)
     assert kernels_of("articulated_icp") == SHARED
     assert kernels_of("cage_quads")[-1] == cage and patch not in kernels_of("cage")
     assert set(KERNELS) == {*kernels_of("patch"), *kernels_of("cage")}

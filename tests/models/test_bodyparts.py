@@ -13,6 +13,7 @@ import pytest
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
+from meshmocap.models._softmax import SoftmaxRegression, softmax_derivatives, softmax_loss
 from meshmocap.models.bodyparts import (
     METHODS,
     NEAR_JOINT,
@@ -331,9 +332,8 @@ def test_logistic_world_logits_reproduce_the_probabilities(walk, fitted):
 
 
 def test_warm_start_reaches_the_same_fit_in_fewer_iterations(walk, fitted):
-    # Frame 1 fitted from frame 0's logits vs from zeros (15 parts). Measured: 113 → 12
-    # L-BFGS iterations; both stop at scikit-learn's tolerance (1e-4), so they differ
-    # within it: labels of 99.8 % of the vertices agree, mean |Δp| 3e-4 (max 0.045).
+    # Frame 1 fitted from frame 0's logits vs from zeros (15 parts): fewer Newton steps to
+    # the same minimum (both stop at a gradient of 1e-6).
     t, V, _ = walk
     lab = _labels(t, "parts15")
     first = fitted("logistic", "parts15")
@@ -360,3 +360,47 @@ def test_warm_start_errors(method, coef, intercept, match):
     with pytest.raises(InputError, match=match) as info:
         BodyPartClassifier(method).fit(_X, _Y, coef_init=coef, intercept_init=intercept)
     assert "\n" not in str(info.value)
+
+
+# -- the logistic fit (Newton's method) ---------------------------------------------------------
+def _softmax_problem(seed=0, n=400, K=4):
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(K, 3))
+    y = rng.integers(0, K, n)
+    Z = centres[y] + 0.8 * rng.normal(size=(n, 3))  # overlapping classes: a finite optimum
+    return Z, y.astype(np.int64), K
+
+
+def test_softmax_derivatives_match_finite_differences():
+    Z, y, K = _softmax_problem()
+    n = len(Z)
+    Zt = np.hstack([Z, np.ones((n, 1))])
+    ZZ = (Zt[:, :, None] * Zt[:, None, :]).reshape(n, -1)
+    Wb = np.random.default_rng(1).normal(size=(K, 4))
+    l2 = 0.3
+    f, g, H = softmax_derivatives(Wb, Z, y, l2, Zt, ZZ)
+    assert f == pytest.approx(softmax_loss(Wb, Z, y, l2), rel=1e-13)
+    h = 1e-6
+    for t in range(Wb.size):
+        e = np.zeros(Wb.size)
+        e[t] = h
+        e = e.reshape(Wb.shape)
+        fp, gp, _ = softmax_derivatives(Wb + e, Z, y, l2, Zt, ZZ)
+        fm, gm, _ = softmax_derivatives(Wb - e, Z, y, l2, Zt, ZZ)
+        assert (fp - fm) / (2 * h) == pytest.approx(g.ravel()[t], abs=1e-8)
+        fd = (gp - gm).ravel() / (2 * h)
+        np.testing.assert_allclose(fd, H.reshape(Wb.size, -1)[:, t], atol=1e-8)
+
+
+def test_softmax_fit_reaches_scikit_learns_optimum():
+    # scikit-learn's L-BFGS run to a tight tolerance: the same minimum (to ~1e-6 in p)
+    from sklearn.linear_model import LogisticRegression
+
+    Z, y, K = _softmax_problem(2)
+    ours = SoftmaxRegression.fit(Z, y, K, 10.0)
+    ref = LogisticRegression(C=10.0, tol=1e-12, max_iter=100_000).fit(Z, y)
+    np.testing.assert_allclose(ours.predict_proba(Z), ref.predict_proba(Z), atol=1e-6)
+    # from a start near the optimum (the tracker's last frame): a few steps, same minimum
+    warm = SoftmaxRegression.fit(Z, y, K, 10.0, (1.05 * ours.coef_, ours.intercept_ + 0.1))
+    assert warm.n_iter_[0] <= 4 < ours.n_iter_[0]
+    np.testing.assert_allclose(warm.predict_proba(Z), ours.predict_proba(Z), atol=1e-6)

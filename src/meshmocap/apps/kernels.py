@@ -67,6 +67,9 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "nearest_d2_kernel": ("float32[:, :, ::1], float32[:, ::1]",),
         "nearest_kernel": ("float32[:, :, ::1], float32[:, ::1]",),
     },
+    "meshmocap.models._softmax": {
+        "softmax_probabilities": ("float64[:, ::1], float64[:, ::1], int64[::1]",),
+    },
     "meshmocap.trackers.patch.kernels": {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
         "stale_rows": (
@@ -156,7 +159,7 @@ SHARED = (
     "meshmocap.estimate.pose._kernels",
 )
 METHOD_KERNELS = {
-    "patch": ("meshmocap.trackers.patch.kernels",),
+    "patch": ("meshmocap.models._softmax", "meshmocap.trackers.patch.kernels"),
     "cage": ("meshmocap.trackers.cage.kernels", "meshmocap.trackers.cage.field"),
 }
 

@@ -22,7 +22,11 @@ Methods (:class:`BodyPartClassifier`), measured by ``benchmarks/bench_bodyparts.
     one-vs-rest vote counts instead: half of its misclassified points got p > 0.9 (kept
     as on-bone by Eq. (6)) against 1–3 % here.
 ``"logistic"``
-    Multinomial logistic regression (L-BFGS). As accurate in labels (within 0.7 points on
+    Multinomial logistic regression: scikit-learn's ``LogisticRegression`` loss (L2, ``C``),
+    minimised by Newton's method to a gradient of 1e-6 (3–5 steps from the last frame's
+    fit; scikit-learn's L-BFGS stops at 1e-4 after ~30 evaluations, each about as costly
+    as a Newton step); two classes by scikit-learn's L-BFGS. As accurate in labels
+    (within 0.7 points on
     the walk benchmark) and 20–35× faster to predict, but its probabilities sort points
     less well for Eq. (6): 5–8 % of its errors have p > 0.9 (svc: 0.5–3 %), and it calls
     2–4 % of the visual hull's phantom points outliers (svc: 19–33 %). It also loses
@@ -65,6 +69,7 @@ from sklearn.svm import SVC
 from meshmocap._tolerances import DIVISOR_FLOOR, ROUNDING_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
+from meshmocap.models._softmax import SoftmaxRegression
 
 Method = Literal["svc", "logistic"]
 METHODS: tuple[str, ...] = get_args(Method)
@@ -78,7 +83,7 @@ _CHUNK = 2048  # points per batch of the pairwise coupling
 _PLATT_MIN_STEP = 1e-10
 _MAX_Z = 16.118  # |A f + B| cap: libsvm clips pairwise probabilities to [1e-7, 1 − 1e-7]
 _MIN_PER_CLASS = 5  # the stratified subsample keeps at least this many of each label
-_LOGISTIC_MAX_ITER = 2000
+_LOGISTIC_MAX_ITER = 2000  # two classes: scikit-learn's L-BFGS (more: _softmax's Newton)
 
 
 def _check_points(func: str, name: str, X: object) -> np.ndarray:
@@ -300,7 +305,7 @@ class BodyPartClassifier:
     ----------
     classes_ : (K,) int64
         Sorted distinct training labels; columns of :meth:`predict_proba`.
-    model_ : LogisticRegression or _PairwiseSVC
+    model_ : SoftmaxRegression, LogisticRegression (two classes) or _PairwiseSVC
         The fitted model, on standardised coordinates (``"svc"``: the libsvm ``SVC`` is
         ``model_.svc_``, the pairwise Platt sigmoids ``model_.platt_``).
     mean_ : (3,) float64
@@ -375,11 +380,11 @@ class BodyPartClassifier:
             Body-part label of each point (any integers, at least two distinct; with
             ``"svc"`` each label needs at least two points).
         coef_init, intercept_init : array_like, optional
-            ``"logistic"`` only: the starting point of L-BFGS, as world-frame logits
+            ``"logistic"`` only: the starting point of the fit, as world-frame logits
             ``coef_init @ x + intercept_init`` (the ``coef_`` and ``intercept_`` of
             an earlier fit with the same labels). The optimum does not depend on it; from
-            the previous frame's fit a tracker's next fit takes ~12 L-BFGS iterations
-            instead of ~63 (``neutral_5k`` walking at 60 fps).
+            the previous frame's fit a tracker's next fit takes 3–5 Newton steps instead
+            of ~13 (the 12k walk at 60 fps).
 
         Returns
         -------
@@ -421,6 +426,12 @@ class BodyPartClassifier:
         start = _initial_logits(self.method, classes, coef_init, intercept_init)
         if self.method == "svc":
             model = _PairwiseSVC(C).fit(Z, yt, rng)
+        elif len(classes) > 2:
+            if start is not None:  # world logits W x + b = (W s) z + (b + W μ), z = (x − μ)/s
+                start = (start[0] * scale, start[1] + start[0] @ mean)
+            model = SoftmaxRegression.fit(Z, np.searchsorted(classes, yt), len(classes), C, start)
+            self.coef_ = model.coef_ / scale  # the same logits on world coordinates
+            self.intercept_ = model.intercept_ - self.coef_ @ mean
         else:
             warm = start is not None
             model = LogisticRegression(C=C, max_iter=_LOGISTIC_MAX_ITER, warm_start=warm)

@@ -1,0 +1,147 @@
+"""The fit of :class:`~meshmocap.models.bodyparts.BodyPartClassifier`'s ``"logistic"``
+method for more than two classes: the multinomial logistic (softmax) loss with an L2
+penalty on the weights, minimised by Newton's method (:class:`SoftmaxRegression`); the
+passes over the points (the loss, the probabilities its gradient and Hessian are sums
+of) compiled.
+
+The loss is scikit-learn's ``LogisticRegression(solver="lbfgs")``'s for more than two
+classes (the mean cross-entropy plus ``l2 / 2 · |W|²`` with ``l2 = 1 / (C n)``, the
+intercepts free). The parameters are ``[W | b]`` (K, d + 1) float64, C-ordered.
+Internal helpers of :mod:`meshmocap.models.bodyparts`: they trust their inputs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from meshmocap._numba import njit
+
+_NEWTON_MAX_ITER = 100  # Newton steps at most ...
+_NEWTON_TOL = 1e-6  # ... until no gradient entry exceeds this (probabilities to ~1e-6)
+_NEWTON_MIN_STEP = 1e-10  # ... shortest step fraction tried in its line search
+_ARMIJO = 1e-4  # sufficient decrease of the line search
+
+
+@njit(cache=True, nogil=True)
+def softmax_probabilities(Wb, Z, y):
+    """The softmax probabilities (n, K) float64 of every point of ``Z`` (n, d) under
+    logits ``W[k] · z + b[k]`` (``Wb`` (K, d + 1) float64), and the summed cross-entropy
+    of labels ``y`` (n,) int64 (float; :func:`softmax_loss` without its mean and penalty)."""
+    n, d = Z.shape
+    K = Wb.shape[0]
+    P = np.empty((n, K))
+    loss = 0.0
+    for i in range(n):
+        top = -np.inf
+        for k in range(K):
+            r = Wb[k, d]
+            for j in range(d):
+                r += Wb[k, j] * Z[i, j]
+            P[i, k] = r
+            top = max(top, r)
+        raw_y = P[i, y[i]]
+        s = 0.0
+        for k in range(K):
+            P[i, k] = math.exp(P[i, k] - top)
+            s += P[i, k]
+        loss += math.log(s) + top - raw_y
+        for k in range(K):
+            P[i, k] /= s
+    return P, loss
+
+
+def softmax_loss(Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float) -> float:
+    """Mean softmax cross-entropy of labels ``y`` (n,) int64 in ``0…K−1`` at points ``Z``
+    (n, d) float64 under logits ``W[k] · z + b[k]`` (``Wb`` (K, d + 1) float64), plus
+    ``l2 / 2 · |W|²``."""
+    return softmax_probabilities(Wb, Z, y)[1] / len(Z) + 0.5 * l2 * float(np.sum(Wb[:, :-1] ** 2))
+
+
+def softmax_derivatives(
+    Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float, Zt: np.ndarray, ZZ: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """The softmax loss of :class:`SoftmaxRegression` (mean cross-entropy of class indices ``y``
+    (n,) int64 at points ``Z`` (n, d) under ``[W | b]`` ``Wb`` (K, d + 1), plus ``l2 / 2 ·
+    |W|²``), its gradient (K, d + 1) and Hessian (K, d + 1, K, d + 1); ``Zt`` (n, d + 1)
+    is ``[Z, 1]`` and ``ZZ`` (n, (d + 1)²) each row's ``z̃ z̃ᵀ``, flattened."""
+    n, K = len(Z), len(Wb)
+    pen = np.zeros_like(Wb)  # l2 on the weights, not on the intercepts
+    pen[:, :-1] = l2
+    P, f = softmax_probabilities(Wb, Z, y)
+    f = f / n + 0.5 * float(np.sum(pen * Wb * Wb))
+    R = P.copy()
+    R[np.arange(n), y] -= 1.0
+    g = R.T @ Zt / n + pen * Wb  # Σ (p − e_y) ⊗ z̃ / n
+    # Σ (diag p − p pᵀ) ⊗ z̃ z̃ᵀ / n, as two products over the points
+    m = Wb.shape[1]
+    B = ((P[:, :, None] * P[:, None, :]).reshape(n, -1).T @ ZZ).reshape(K, K, m, m)
+    H = -B.transpose(0, 2, 1, 3) / n
+    H[np.arange(K), :, np.arange(K), :] += (P.T @ ZZ).reshape(K, m, m) / n
+    H += np.diag(pen.ravel()).reshape(K, m, K, m)
+    return f, g, H
+
+
+class SoftmaxRegression:
+    """Multinomial logistic regression fitted by Newton's method (module docstring);
+    ``coef_`` (K, d), ``intercept_`` (K,), ``n_iter_`` (1,) after :meth:`fit`."""
+
+    def __init__(self, coef: np.ndarray, intercept: np.ndarray, n_iter: int) -> None:
+        self.coef_, self.intercept_ = coef, intercept
+        self.n_iter_ = np.array([n_iter], dtype=np.int32)  # as scikit-learn's
+
+    @classmethod
+    def fit(
+        cls,
+        Z: np.ndarray,
+        y: np.ndarray,
+        K: int,
+        C: float,
+        start: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> SoftmaxRegression:
+        """The minimum of :func:`softmax_loss` (mean cross-entropy + ``|W|² / (2 C n)``)
+        for points ``Z`` (n, d) float64 and class indices ``y`` (n,) in ``0…K−1``, from
+        ``start`` (W (K, d), b (K,); default zeros): Newton steps with a backtracking
+        line search until no gradient entry exceeds ``_NEWTON_TOL``."""
+        d = Z.shape[1]
+        n, m = len(Z), K * (d + 1)
+        Z = np.ascontiguousarray(Z, dtype=np.float64)
+        y = np.ascontiguousarray(y, dtype=np.int64)
+        Zt = np.hstack([Z, np.ones((n, 1))])  # z̃ = [z, 1]
+        ZZ = (Zt[:, :, None] * Zt[:, None, :]).reshape(n, -1)  # z̃ z̃ᵀ per point
+        l2 = 1.0 / (C * n)
+        # the loss is flat along b + t·1 (softmax is shift-invariant); the gradient has no
+        # part along it, so this term in the Hessian only makes the step unique
+        gauge = np.zeros((K, d + 1))
+        gauge[:, d] = 1.0
+        gauge = np.outer(gauge.ravel(), gauge.ravel())
+        Wb = np.zeros((K, d + 1))
+        if start is not None:
+            Wb[:, :d], Wb[:, d] = start
+        n_iter = 0
+        while n_iter < _NEWTON_MAX_ITER:
+            n_iter += 1
+            f, g, H = softmax_derivatives(Wb, Z, y, l2, Zt, ZZ)
+            if np.abs(g).max() <= _NEWTON_TOL:
+                break
+            H = H.reshape(m, m) + gauge
+            step = -np.linalg.solve(H, g.ravel()).reshape(K, d + 1)
+            slope, t = float(np.vdot(g, step)), 1.0
+            while t > _NEWTON_MIN_STEP:  # backtracking (Armijo) from the full step
+                trial = Wb + t * step
+                if softmax_loss(trial, Z, y, l2) <= f + _ARMIJO * t * slope:
+                    break
+                t *= 0.5
+            else:
+                break  # no decrease left to rounding: at the minimum
+            Wb = trial
+        return cls(Wb[:, :d].copy(), Wb[:, d].copy(), n_iter)
+
+    def predict_proba(self, Z: np.ndarray) -> np.ndarray:
+        """Class probabilities (m, K) float64 of points ``Z`` (m, d)."""
+        z = Z @ self.coef_.T + self.intercept_
+        z -= z.max(axis=1, keepdims=True)
+        np.exp(z, out=z)
+        z /= z.sum(axis=1, keepdims=True)
+        return z
