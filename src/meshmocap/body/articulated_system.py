@@ -26,6 +26,15 @@ that touch only the nonzero skinning weights:
    whatever the number of pairs: 0.3–0.6 ms instead of 10–30.
 
 The result equals the dense ``Σ JᵀJ`` to rounding (``tests/trackers/test_articulated_icp.py``).
+
+References
+----------
+- P. J. Besl, N. D. McKay, *A method for registration of 3-D shapes*, IEEE
+  Transactions on Pattern Analysis and Machine Intelligence 14(2):239–256, 1992.
+  https://doi.org/10.1109/34.121791
+- Y. Chen, G. Medioni, *Object modelling by registration of multiple range
+  images*, Image and Vision Computing 10(3):145–155, 1992.
+  https://doi.org/10.1016/0262-8856(92)90066-C
 """
 
 from __future__ import annotations

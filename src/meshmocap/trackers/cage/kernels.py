@@ -12,6 +12,15 @@
 Both are the array code they replace written as loops, to rounding
 (``tests/trackers/cage/test_kernels.py``): the tracker calls them tens of times a frame on a
 few hundred points, where numpy's per-call overhead was most of the cost.
+
+References
+----------
+- E. Duveau, S. Courtemanche, L. Reveret, E. Boyer, *Cage-based motion recovery
+  using manifold learning*, International Conference on 3D Imaging, Modeling,
+  Processing, Visualization and Transmission (3DIMPVT), 2012.
+- W. Kabsch, *A solution for the best rotation to relate two sets of vectors*,
+  Acta Crystallographica A32(5):922–923, 1976.
+  https://doi.org/10.1107/S0567739476001873
 """
 
 from __future__ import annotations
