@@ -27,9 +27,11 @@ flagged, ≤ 5 % of good frames flagged. The rule shipped
 disagreement thresholds are fitted, the shipped evidence thresholds kept (the forward
 pass's flags, and so the two-way pass's runs, stay as they are).
 
-Run: ``python benchmarks/bench_lost.py --tracks /work/limbs-data/base-work/tracks
-/tmp/limbs2/tracks --captures /work/limbs-data/captures [--subjects DIR] [--write]``.
-Per-track evidence is cached next to ``--work`` (``evidence-<capture>-<track>.npz``).
+Run: ``python benchmarks/bench_lost.py --tracks WORK/tracks --captures WORK/captures
+[--subjects DIR] [--paths default two-way] [--good-rate 0.04] [--write [--keep-evidence]]``
+(``WORK``: a ``bench_limbs.py --work`` folder). Per-track evidence is read from
+``bench_limbs``'s replay beside each track where there is one, else computed and cached in
+``--work`` (``evidence-<capture>-<track>.npz``).
 """
 
 from __future__ import annotations
