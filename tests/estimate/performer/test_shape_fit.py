@@ -142,3 +142,54 @@ def test_outlines_rendered_in_their_box_and_terms_on_their_rows_are_the_whole_im
     for x, y in zip(whole, part.rows, strict=True):
         for u, w in zip(x[1:], y[1:], strict=True):
             assert np.array_equal(u, w)
+
+
+@pytest.mark.slow
+def test_a_frame_whose_pose_is_stuck_stops_informing_the_shape(space):
+    """Two frames of one body (z₀ = −0.3, z₁ = 0.2), each started from the rest pose: the
+    first is in it, the second has both arms raised, which the fit cannot reach (the arms
+    are held at their starting rotations, as a pose settled in a wrong minimum is).
+    Halfway, that frame's objective is many times the first's: it stops informing the
+    shape, and the body comes out closer to the truth than when every frame informs it."""
+    from meshmocap.body.articulated import FIXED_JOINTS
+
+    true = space.template(np.r_[-0.3, 0.2, np.zeros(14)])
+    names = space.joint_names
+    R_up = np.tile(np.eye(3), (31, 1, 1))
+    R_up[names.index("LeftArm")] = so3_exp(np.array([0.0, 1.5, 0.0]))
+    R_up[names.index("RightArm")] = so3_exp(np.array([0.0, -1.5, 0.0]))
+    rest_root = true.skeleton.rest_positions[0]
+    cams = camera_rig("humaneva4")
+    frames = []
+    for R in (np.tile(np.eye(3), (31, 1, 1)), R_up):
+        V = true.pose(R, rest_root).V
+        frames.append(
+            [silhouette_view(silhouette(V, true.F, c, assume_closed=True), c) for c in cams]
+        )
+    mean = space.template(np.zeros(16))
+    R0 = np.tile(np.eye(3), (2, 31, 1, 1))
+    root0 = np.tile(mean.skeleton.rest_positions[:1], (2, 1))
+    held = (*FIXED_JOINTS, "LeftShoulder", "LeftArm", "RightShoulder", "RightArm")
+    err = {}
+    for ratio in (2.0, None):
+        fit = fit_shape(
+            space,
+            frames,
+            R0,
+            root0,
+            iterations=6,
+            n_points=500,
+            fixed_joints=held,
+            screen_ratio=ratio,
+        )
+        err[ratio] = np.linalg.norm(space.template(fit.z).V - true.V, axis=1).mean()
+        assert fit.shape_frames.tolist() == [True, ratio is None]
+        assert fit.frame_cost[1] > 2 * fit.frame_cost[0]
+    assert err[2.0] < 0.5 * err[None]
+
+
+def test_fit_shape_rejects_a_screen_ratio_not_above_one(space):
+    from meshmocap.errors import InputError
+
+    with pytest.raises(InputError, match="screen_ratio must be > 1"):
+        fit_shape(space, [[]], np.eye(3)[None, None], np.zeros((1, 3)), screen_ratio=0.5)

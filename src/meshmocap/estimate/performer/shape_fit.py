@@ -23,6 +23,14 @@ and the shared shape together (the damping and step limit of
 :func:`~meshmocap.body.articulated.articulated_step`); the outlines and the matches are
 recomputed every iteration.
 
+A frame whose pose settled in a wrong minimum (an arm fitted where the other one is, a
+leg crossed) still explains its silhouettes partly, by stretching the shared body: a long
+forearm, wide shoulders. Halfway through the iterations each frame's objective (its own
+terms' Huber-weighted means, as :func:`fit_pose` reports) is compared with the best
+frame's; a frame more than ``screen_ratio`` times the best stops informing the shape (its
+pose is still fitted, the body held for it). ``docs/measurements.rst`` has the numbers
+(section "The performer's body").
+
 Derivatives (exact for the model; the projection's derivative ignores lens distortion):
 a skinned point ``v_i = Σ_k w_ik (G_k (X_i − P_k) + p_k)`` moves with the shape through its
 rest position ``X_i(z)`` and the rest joints ``P_k(z)`` (both linear in ``z``), and the
@@ -59,7 +67,7 @@ from meshmocap.body.articulated import (
 from meshmocap.body.shape_space import BodyShapeSpace
 from meshmocap.body.skeleton import forward_kinematics
 from meshmocap.body.template import Template
-from meshmocap.errors import FitError
+from meshmocap.errors import FitError, InputError
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import cross
 from meshmocap.geometry.silhouette import fill_triangles
@@ -82,6 +90,9 @@ HUBER = 0.02
 MAX_STEP_Z = 0.5
 #: Gauss–Newton iterations of :func:`fit_shape` per progress line.
 PROGRESS_EVERY = 10
+#: A frame whose silhouette objective exceeds this many times the best frame's, halfway
+#: through :func:`fit_shape`, stops informing the shape (module docstring).
+SCREEN_RATIO = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +207,9 @@ class ShapeFit:
     R : (f, J, 3, 3) float64, local rotations per frame; ``root`` (f, 3) float64, metres
     rms : float, RMS of the last iteration's silhouette residuals, metres
     n_iter : int
+    shape_frames : (f,) bool, the frames that inform the shape (module docstring)
+    frame_cost : (f,) float64, each frame's silhouette objective at the screening (m²;
+        the last iteration's without screening)
     """
 
     z: np.ndarray
@@ -203,6 +217,8 @@ class ShapeFit:
     root: np.ndarray
     rms: float
     n_iter: int
+    shape_frames: np.ndarray
+    frame_cost: np.ndarray
 
 
 class FrameTerms:
@@ -335,6 +351,7 @@ def fit_shape(
     n_points: int = 1500,
     max_match: float = 25.0,
     fixed_joints: tuple[str, ...] = FIXED_JOINTS,
+    screen_ratio: float | None = SCREEN_RATIO,
     seed: int = 0,
 ) -> ShapeFit:
     """Fit one body shape and a pose per frame to the frames' silhouettes (module docstring).
@@ -351,12 +368,17 @@ def fit_shape(
     n_points : int, model points of the inside term (area-weighted sample, fixed)
     max_match : float, pixels: a contour pixel farther from every outline point is left out
     fixed_joints : joints kept at their starting rotation
+    screen_ratio : float > 1 or None, halfway through, a frame whose objective exceeds this
+        many times the best frame's stops informing the shape (module docstring); None
+        keeps every frame
     seed : int, seed of the point sample
 
     Returns
     -------
     ShapeFit
     """
+    if screen_ratio is not None and not (np.isfinite(screen_ratio) and screen_ratio > 1):
+        raise InputError(f"fit_shape: screen_ratio must be > 1 or None, found {screen_ratio!r}")
     n_f, K = len(views), space.n_components
     R = np.array(R0, dtype=np.float64)
     root = np.array(root0, dtype=np.float64)
@@ -366,22 +388,43 @@ def fit_shape(
     free = [j for j, name in enumerate(space.joint_names) if name not in fixed_joints]
     act_pose = np.r_[0:3, (3 + 3 * np.array(free)[:, None] + np.arange(3)).ravel()]
     rms = np.inf
+    use = np.ones(n_f, dtype=bool)
+    cost = np.full(n_f, np.nan)
+    screen = iterations // 2 if screen_ratio is not None and n_f > 1 else -1
     for first in range(0, iterations, PROGRESS_EVERY):
         last = min(first + PROGRESS_EVERY, iterations)
         with phase(
             f"fitting the shape to the silhouettes ({n_f} frames, iterations {first + 1}–"
             f"{last} of {iterations})"
         ):
-            for _ in range(first, last):
-                z, rms = _shape_step(
-                    space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match
+            for it in range(first, last):
+                z, rms, c = _shape_step(
+                    space,
+                    views,
+                    R,
+                    root,
+                    z,
+                    sample,
+                    act_pose,
+                    lambda_shape,
+                    lambda_pose,
+                    max_match,
+                    use,
                 )
-    return ShapeFit(z, R, root, rms, int(iterations))
+                if it == screen:
+                    use = c <= screen_ratio * c.min()
+                if screen < 0 or it <= screen:
+                    cost = c
+    return ShapeFit(z, R, root, rms, int(iterations), use, cost)
 
 
-def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match):
-    """One damped Gauss–Newton step of :func:`fit_shape`: returns the new ``z`` and the
-    residuals' RMS before the step; ``R`` and ``root`` are updated in place."""
+def _shape_step(
+    space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match, use
+):
+    """One damped Gauss–Newton step of :func:`fit_shape`: returns the new ``z``, the
+    residuals' RMS before the step and each frame's objective (f,) before it (m²); ``R``
+    and ``root`` are updated in place. Frames where ``use`` (f,) bool is False do not
+    inform the shape."""
     n_f, K = len(views), space.n_components
     tmpl = space.template(z)
     J = tmpl.skeleton.n_joints
@@ -407,18 +450,23 @@ def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda
     for t in frames:
         for term, n_term in t.population.items():
             counts[term] = counts.get(term, 0) + n_term
+    cost = np.zeros(n_f)
     for f, t in enumerate(frames):
         sl = slice(K + f * n_pose, K + (f + 1) * n_pose)
         for term, r, Jp, Jz in t.rows:
-            w = np.minimum(1.0, HUBER / np.maximum(np.abs(r), DIVISOR_FLOOR)) / counts[term]
+            huber = np.minimum(1.0, HUBER / np.maximum(np.abs(r), DIVISOR_FLOOR))
+            cost[f] += float(huber @ (r * r)) / t.population[term]  # as fit_pose's
+            w = huber / counts[term]
             H[sl, sl] += Jp.T @ (w[:, None] * Jp)
+            g[sl] += Jp.T @ (w * r)
+            sq, cnt = sq + float(r @ r), cnt + len(r)
+            if not use[f]:  # its pose only, the body held for it
+                continue
             B = Jp.T @ (w[:, None] * Jz)
             H[sl, :K] += B
             H[:K, sl] += B.T
             H[:K, :K] += Jz.T @ (w[:, None] * Jz)
-            g[sl] += Jp.T @ (w * r)
             g[:K] += Jz.T @ (w * r)
-            sq, cnt = sq + float(r @ r), cnt + len(r)
         # weak pull of every non-root joint towards the rest pose (world-frame error)
         e = rotation_error(tmpl.skeleton, R[f], root[f])[1:]
         add_pose_pull(H, g, e, lambda_pose, start=sl.start + 6)
@@ -435,7 +483,7 @@ def _shape_step(space, views, R, root, z, sample, act_pose, lambda_shape, lambda
     for f in range(n_f):
         d = limit_step(delta[K + f * n_pose : K + (f + 1) * n_pose])
         R[f], root[f] = apply_increment(tmpl.skeleton, R[f], root[f], d)
-    return z, rms
+    return z, rms, cost
 
 
 @dataclass(frozen=True, eq=False)

@@ -63,7 +63,9 @@ class SubjectEstimate:
         (mesh kind: the identity at the rest root, the template's own pose)
     rms : float, the fit's residual (hull: silhouette residuals, metres; mesh: 0)
     seconds : float
-    notes : dict, diagnostics (hull: the first guesses' size and RMS distance to the hulls)
+    notes : dict, diagnostics (hull: the first guesses' size and RMS distance to the hulls,
+        each frame's silhouette objective and the frames that informed the shape,
+        :func:`~meshmocap.estimate.performer.shape_fit.fit_shape`)
     """
 
     template: Template
@@ -308,7 +310,12 @@ def estimate_subject(
         seed=seed,
     )
     t = space.template(fit.z, name=name)
-    notes = {"initial_scale": scale, "initial_rms": [float(f.rms) for f in inits]}
+    notes = {
+        "initial_scale": scale,
+        "initial_rms": [float(f.rms) for f in inits],
+        "frame_cost": [float(c) for c in fit.frame_cost],
+        "shape_frames": [fr.index for fr, u in zip(frames, fit.shape_frames, strict=True) if u],
+    }
     return SubjectEstimate(
         t,
         "hull",
