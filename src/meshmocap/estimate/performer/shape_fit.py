@@ -29,7 +29,7 @@ forearm, wide shoulders. Halfway through the iterations each frame's objective (
 terms' Huber-weighted means, as :func:`fit_pose` reports) is compared with the best
 frame's; a frame more than ``screen_ratio`` times the best stops informing the shape (its
 pose is still fitted, the body held for it). ``docs/measurements.rst`` has the numbers
-(section "The performer's body").
+(section "The performer's body, its frames screened").
 
 Derivatives (exact for the model; the projection's derivative ignores lens distortion):
 a skinned point ``v_i = Σ_k w_ik (G_k (X_i − P_k) + p_k)`` moves with the shape through its
