@@ -243,7 +243,7 @@ class ArapRefiner:
         *,
         data_weight: float = 1.0,
         stiffness: float = 0.001,
-        iterations: int = 10,
+        iterations: int = 20,
         reach: float = 0.05,
         max_angle: float = 60.0,
     ):
