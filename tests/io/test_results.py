@@ -166,3 +166,10 @@ def test_the_two_way_record_and_passes_survive_a_resume_and_not_a_restart(tmp_pa
     assert read_two_way(tmp_path) is None and not (tmp_path / TWO_WAY_FOLDER).exists()
     with pytest.raises(FormatError, match="two-way change"):
         two_way_changes({"two_way": {"changed": [{"frames": "x"}]}})
+    # a limb grafted from another track joins its frames' notes
+    graft = {"frames": [5, 7], "limb": "left_arm", "track": "forward"}
+    notes = two_way_changes({"two_way": {**record, "grafted": [graft]}})
+    assert set(notes) == {3, 4, 5, 6, 7}
+    assert notes[5] == "keyframe 6, backward; left_arm from the forward track"
+    with pytest.raises(FormatError, match="two-way graft"):
+        two_way_changes({"two_way": {"grafted": [{"frames": [1, 2]}]}})

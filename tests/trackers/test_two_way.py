@@ -27,8 +27,10 @@ from meshmocap.trackers.two_way import (
     TwoWay,
     ambiguous_limbs,
     choose,
+    choose_limbs,
     evidence_cost,
     flagged_runs,
+    limb_costs,
     max_keyframes,
     two_way_pass,
 )
@@ -111,6 +113,30 @@ def test_the_choice_switches_where_the_tracks_agree():
     assert path[0] == 0 and path[-1] == 0
     # a switch dearer than the lost frames: stay
     assert choose(cost, J, switch=100.0).tolist() == [0] * T
+
+
+def test_each_limb_is_chosen_on_its_own_evidence():
+    # two tracks, 8 frames, one joint per limb; the whole frame follows track 1, whose left
+    # arm is lost on frames 2–5 where track 0's is not (and both tracks' arms agree at
+    # frames 1 and 6); everything else ties
+    T, L = 8, len(LIMB_PARTS)
+    left = list(LIMB_PARTS).index("left_arm")
+    cost = np.zeros((T, 2, L))
+    cost[2:6, 1, left] = 1.0
+    J = np.zeros((T, 2, L, 3))
+    J[:, 1, left, 0] = 0.3
+    J[[1, 6], 1, left] = 0.0
+    path = np.ones(T, dtype=np.int64)
+    out = choose_limbs(cost, J, path, np.arange(L), start=1, end=1)
+    assert set(out) == {"left_arm", "right_arm", "left_leg", "right_leg"}
+    assert out["left_arm"].tolist() == [1, 0, 0, 0, 0, 0, 1, 1]
+    assert all(out[n].tolist() == [1] * T for n in ("right_arm", "left_leg", "right_leg"))
+    # a graft dearer than the lost frames: the frame's track throughout
+    dear = choose_limbs(cost, J, path, np.arange(L), graft=2.0, start=1, end=1)
+    assert dear["left_arm"].tolist() == [1] * T
+    # the per-limb costs sum to the whole frame's
+    ev = np.random.default_rng(0).uniform(0, 0.05, (3, L, len(EVIDENCE)))
+    assert np.allclose(limb_costs(ev).sum(axis=-1), evidence_cost(ev))
 
 
 def _truth_search(capture, seen=None):

@@ -449,8 +449,9 @@ def read_two_way(path: str | os.PathLike) -> dict | None:
 
 def two_way_changes(meta: dict) -> dict[int, str]:
     """The frames the two-way pass replaced, from a track's ``track.json`` contents
-    ``meta``: frame number → where from (``"keyframe K, backward: left_arm"``); empty
-    when no pass changed any."""
+    ``meta``: frame number → where from (``"keyframe K, backward: left_arm"``, and each
+    limb grafted from another track: ``"right_arm from the keyframe K forward track"``);
+    empty when no pass changed any."""
     record = meta.get(TWO_WAY_KEY)
     out: dict[int, str] = {}
     if not isinstance(record, dict):
@@ -465,6 +466,14 @@ def two_way_changes(meta: dict) -> dict[int, str]:
         except (KeyError, TypeError, ValueError) as exc:
             raise FormatError(f"track.json: a bad two-way change {c!r} ({exc})") from None
         out.update({i: why for i in range(first, last + 1)})
+    for g in record.get("grafted", ()):  # a limb taken from another track
+        try:
+            first, last = (int(v) for v in g["frames"])
+            why = f"{g['limb']} from the {g['track']} track"
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FormatError(f"track.json: a bad two-way graft {g!r} ({exc})") from None
+        for i in range(first, last + 1):
+            out[i] = f"{out[i]}; {why}" if i in out else why
     return out
 
 

@@ -27,8 +27,14 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
    how far the fit is off the observations) plus a cost per switch that grows with the
    distance between the two poses at the switch (the choice switches where they agree);
    before the run the forward track costs :data:`DRIFT` more (it often drifts off before it
-   is flagged). Whole frames are chosen: the chosen track's vertices, joints and state as
-   tracked.
+   is flagged). Then each limb (arms, legs) is chosen the same way on its own evidence
+   (:func:`limb_costs`, the switch priced by the limb's joints), a track other than the
+   frame's costing :data:`GRAFT` more a frame: two tracks that each lost a different limb
+   give one frame with neither lost. Where a limb's choice differs from the frame's, the
+   limb is grafted onto the frame's trunk
+   (:func:`~meshmocap.estimate.recovery.limbs.graft_limbs`: its world rotations from its
+   track, hung at the frame's shoulder or hip); elsewhere the chosen track's vertices,
+   joints and state as tracked.
 5. **Result.** The chosen frames are written into the track folder (the forward pass's
    frame kept in ``two_way/forward/``), the flags of every frame of the run's span
    recomputed by the same rule on the result, a chosen frame flagged ``lost`` too where the
@@ -38,8 +44,9 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
    a limb wrong inside the visual hull passes every measure; the disagreement is what shows
    it), and ``track.json`` records the pass
    (``"two_way"``: the runs, each keyframe and whether it was kept, which frames changed,
-   from which keyframe and direction, the limbs the forward pass had lost there, the
-   frames flagged ambiguous, and each chosen frame's disagreement). Where
+   from which keyframe and direction, the limbs the forward pass had lost there, each limb
+   grafted from another track, the frames flagged ambiguous, and each chosen frame's
+   disagreement). Where
    no keyframe is kept, the frames stay as they were, flagged.
 
 Everything the pass makes is kept under ``TRACK/two_way/`` (keyframe searches in
@@ -74,6 +81,7 @@ from meshmocap.estimate.recovery.evidence import (
     lost_limbs,
     shipped_rule,
 )
+from meshmocap.estimate.recovery.limbs import LIMBS, graft_limbs
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 from meshmocap.estimate.recovery.reinit import Recovery
@@ -94,6 +102,7 @@ __all__ = [
     "FIT_WEIGHT",
     "FOLDER",
     "FRAMES_PER_KEY",
+    "GRAFT",
     "MARGIN",
     "MEET",
     "MERGE_GAP",
@@ -106,9 +115,11 @@ __all__ = [
     "TwoWay",
     "ambiguous_limbs",
     "choose",
+    "choose_limbs",
     "evidence_cost",
     "flagged_runs",
     "keyframe_search",
+    "limb_costs",
     "max_keyframes",
     "two_way_pass",
 ]
@@ -141,6 +152,9 @@ DRIFT = 0.1
 #: Weight of the fit's continuous evidence (the largest share of a limb outside, buried or
 #: unexplained, in units of its threshold, at most 1 per limb) next to the lost limbs.
 FIT_WEIGHT = 0.1
+#: Cost per frame and limb of taking the limb from a track other than the frame's (ties stay
+#: with the frame's track).
+GRAFT = 0.05
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
 #: The folder of the pass's intermediate results, inside the track folder.
@@ -160,6 +174,9 @@ class TwoWay:
     changed : tuple of dict, each stretch of frames replaced: ``frames`` (first, last),
         ``keyframe``, ``direction`` (``"backward"`` or ``"forward"``), ``limbs`` (those the
         forward pass had flagged lost there; the whole frame is replaced)
+    grafted : tuple of dict, each stretch of frames where a limb was taken from another
+        track than the frame's: ``frames`` (first, last), ``limb``, ``track``
+        (``"forward"`` or ``"keyframe K backward|forward"``)
     ambiguous : tuple of dict, each frame flagged ``lost`` because the tracks disagree
         there (:func:`ambiguous_limbs`): ``frame``, ``limbs``, ``mm`` (the largest
         disagreement), ``track`` (``"forward"`` or ``"keyframe K backward|forward"``, the
@@ -176,6 +193,7 @@ class TwoWay:
     runs: tuple[tuple[int, int], ...] = ()
     keyframes: tuple[dict, ...] = ()
     changed: tuple[dict, ...] = ()
+    grafted: tuple[dict, ...] = ()
     ambiguous: tuple[dict, ...] = ()
     disagreement: tuple[dict, ...] = ()
     flagged: tuple[int, int] = (0, 0)
@@ -187,6 +205,7 @@ class TwoWay:
             "runs": [list(r) for r in self.runs],
             "keyframes": list(self.keyframes),
             "changed": list(self.changed),
+            "grafted": list(self.grafted),
             "ambiguous": list(self.ambiguous),
             "disagreement": list(self.disagreement),
             "flagged": list(self.flagged),
@@ -200,7 +219,8 @@ class TwoWay:
         kept = sum(bool(k["kept"]) for k in self.keyframes)
         return (
             f"two-way pass: {len(self.runs)} lost runs, {kept} of {len(self.keyframes)} "
-            f"keyframes kept, {n} frames changed, {len(self.ambiguous)} flagged ambiguous, "
+            f"keyframes kept, {n} frames changed, {len(self.grafted)} limb stretches grafted, "
+            f"{len(self.ambiguous)} flagged ambiguous, "
             f"frames flagged lost {self.flagged[0]} → {self.flagged[1]} ({self.seconds:.0f} s)"
         )
 
@@ -244,20 +264,26 @@ def max_keyframes(length: int) -> int:
     return 1 + max(1, -(-int(length) // FRAMES_PER_KEY))
 
 
+def limb_costs(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
+    """(..., L) float64: per limb the terms of :func:`evidence_cost` (1 where ``rule`` finds
+    the limb lost, plus :data:`FIT_WEIGHT` times its largest fit measure in units of its
+    threshold, at most 1) of ``evidence`` (..., L, E)."""
+    rule = rule or shipped_rule()
+    th = np.asarray(rule.thresholds, dtype=np.float64)
+    e = np.asarray(evidence, dtype=np.float64)
+    fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
+    finite = np.isfinite(th[fit])
+    ratio = np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0)
+    return rule.limb_lost(e) + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0)
+
+
 def evidence_cost(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
     """(...) float64: the cost of frames of ``evidence`` (..., L, E)
     (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`): the number of limbs
     ``rule`` finds lost, plus :data:`FIT_WEIGHT` times the sum over limbs of the largest
     fit measure (outside, buried, unexplained) in units of its threshold (at most 1 each):
-    fewer lost limbs first, then the closer fit."""
-    rule = rule or shipped_rule()
-    th = np.asarray(rule.thresholds, dtype=np.float64)
-    e = np.asarray(evidence, dtype=np.float64)
-    lost = rule.limb_lost(e).sum(axis=-1)
-    fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
-    finite = np.isfinite(th[fit])
-    ratio = np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0)
-    return lost + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0).sum(axis=-1)
+    fewer lost limbs first, then the closer fit (:func:`limb_costs` summed over limbs)."""
+    return limb_costs(evidence, rule).sum(axis=-1)
 
 
 def choose(
@@ -304,6 +330,49 @@ def choose(
         path[t] = h
         h = back[t, h]
     return path
+
+
+def choose_limbs(
+    cost: np.ndarray,
+    joints: np.ndarray,
+    path: np.ndarray,
+    limb_of: np.ndarray,
+    *,
+    graft: float = GRAFT,
+    start: int | None = None,
+    end: int | None = None,
+) -> dict[str, np.ndarray]:
+    """Per limb (arms and legs, :data:`~meshmocap.estimate.recovery.limbs.LIMBS`) the
+    track chosen per frame: :func:`choose` on that limb's costs and joints, a track other
+    than the frame's (``path``) costing ``graft`` more a frame.
+
+    Parameters
+    ----------
+    cost : (T, H, L) float64, each track's cost per frame and limb
+        (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS` order; ``inf`` where the
+        track has no frame)
+    joints : (T, H, K, 3) float64, metres, each track's joints
+    path : (T,) int, the track chosen for each whole frame
+    limb_of : (K,) int, each joint's limb
+    start, end : int, optional, the track each limb's path must begin (end) on
+
+    Returns
+    -------
+    dict, limb name → (T,) int64, its track per frame
+    """
+    c = np.asarray(cost, dtype=np.float64)
+    names = list(LIMB_PARTS)
+    c = c + graft * (np.arange(c.shape[1])[None, :] != np.asarray(path)[:, None])[..., None]
+    limb_of = np.asarray(limb_of)
+    return {
+        n: choose(
+            c[..., names.index(n)],
+            np.asarray(joints)[:, :, limb_of == names.index(n)],
+            start=start,
+            end=end,
+        )
+        for n in LIMBS
+    }
 
 
 def ambiguous_limbs(
@@ -434,6 +503,7 @@ def two_way_pass(
         runs=tuple((order[a], order[b]) for a, b in runs),
         keyframes=tuple(keys),
         changed=tuple(changed),
+        grafted=tuple(run.grafted),
         ambiguous=tuple(run.ambiguous),
         disagreement=tuple(run.disagreement),
         flagged=(int(flagged.sum()), int(after)),
@@ -448,6 +518,7 @@ def _of_json(d: dict) -> TwoWay:
         runs=tuple(tuple(r) for r in d.get("runs", ())),
         keyframes=tuple(d.get("keyframes", ())),
         changed=tuple(d.get("changed", ())),
+        grafted=tuple(d.get("grafted", ())),
         ambiguous=tuple(d.get("ambiguous", ())),
         disagreement=tuple(d.get("disagreement", ())),
         flagged=tuple(d.get("flagged", (0, 0))),
@@ -486,6 +557,8 @@ class _Run:
         self.floor, self.ceiling = 0, len(order) - 1
         self.ambiguous: list[dict] = []
         self.disagreement: list[dict] = []
+        self.grafted: list[dict] = []
+        self.checker: Recovery | None = None
         names = body.template.eval_skeleton.names
         self.limb_of = np.array(
             [next(k for k, v in enumerate(LIMB_PARTS.values()) if n in v) for n in names]
@@ -651,10 +724,11 @@ class _Run:
         start = 0 if lo > 0 else None
         end = 0 if hi < len(self.order) - 1 else None
         path = choose(cost, joints, start=start, end=end)
-        chosen = [
-            fwd[lo + t] if h == 0 else hyps[h - 1].results[i]
-            for t, (i, h) in enumerate(zip(span, path.tolist(), strict=True))
-        ]
+        tracks = [[fwd[lo + t]] + [y.results.get(i) for y in hyps] for t, i in enumerate(span)]
+        chosen = [tracks[t][h] for t, h in enumerate(path.tolist())]
+        before = 0 if first is None else max(first - lo, 0)  # frames before the run
+        limbs = self.limb_choice(tracks, joints, path, before, start=start, end=end)
+        chosen, grafts = self.grafted_frames(tracks, path, limbs, chosen, hyps)
         chosen = self.reflagged(fwd, lo, chosen)
         chosen = self.flag_ambiguous(fwd, hyps, lo, path, chosen)
         kept = self.out / FOLDER / "forward"
@@ -665,14 +739,116 @@ class _Run:
                 hyp = hyps[h - 1]
                 note = f"two-way: from keyframe {hyp.keyframe} ({hyp.direction})"
                 r = replace(r, message=f"{r.message}; {note}" if r.message else note)
+            if t in grafts:
+                r = replace(r, message=f"{r.message}; {grafts[t]}" if r.message else grafts[t])
             old = fwd[lo + t]
-            if h == 0 and r.flags == old.flags and r.message == old.message:
+            if h == 0 and t not in grafts and r.flags == old.flags and r.message == old.message:
                 continue
             if not frame_path(kept, i).is_file():
                 write_frame(kept, old)
             write_frame(self.out, replace(r, index=i))
         lost = [self.lost_limbs(r) for r in fwd[lo : hi + 1]]
         return _stretches(span, path, hyps, lost)
+
+    def limb_choice(
+        self, tracks, joints, path, before: int, *, start, end
+    ) -> dict[str, np.ndarray]:
+        """Per limb (:data:`~meshmocap.estimate.recovery.limbs.LIMBS`) the track chosen per
+        frame (:func:`choose` on the limb's own costs, :func:`limb_costs`, and joints; a
+        track other than the frame's ``path`` costs :data:`GRAFT` more, the forward track
+        :data:`DRIFT` more on the ``before`` frames before the run, as for whole frames)."""
+        T, H = len(tracks), len(tracks[0])
+        cost = np.full((T, H, len(LIMB_PARTS)), np.inf)
+        for t, row in enumerate(tracks):
+            for h, r in enumerate(row):
+                if r is not None:
+                    cost[t, h] = self.limb_cost(r)
+        cost[:before, 0] += DRIFT
+        return choose_limbs(cost, joints, path, self.limb_of, start=start, end=end)
+
+    def grafted_frames(
+        self, tracks, path, limbs, chosen, hyps
+    ) -> tuple[list[FrameResult], dict[int, str]]:
+        """The chosen frames with each limb whose choice differs from the frame's grafted
+        from its track (:func:`~meshmocap.estimate.recovery.limbs.graft_limbs`), the
+        grafts recorded in ``self.grafted``, and a note per grafted frame (by position in
+        the span). A graft is kept only where the grafted frame fits the observations at
+        least as well as the frame's own (:meth:`fit_cost`: a limb hung at another trunk
+        may stand off the observations); else each limb alone is tried, the best kept. A
+        frame whose tracks carry no pose keeps its own limbs."""
+        label = ["forward"] + [f"keyframe {y.keyframe} {y.direction}" for y in hyps]
+        out: list[FrameResult] = []
+        notes: dict[int, str] = {}
+        for t, (r, h) in enumerate(zip(chosen, path.tolist(), strict=True)):
+            want = {n: int(c[t]) for n, c in limbs.items() if int(c[t]) != h}
+            if not want or not all(
+                f.healthy and "pose_R" in f.state
+                for f in [r] + [tracks[t][g] for g in want.values()]
+            ):
+                out.append(r)
+                continue
+            frame = self.frame(r.index)
+            own = self.fit_cost(frame, r.vertices)
+            best = None
+            tries = [want] + ([{n: g} for n, g in want.items()] if len(want) > 1 else [])
+            for other in tries:
+                graft = self.graft(r, h, tracks[t], other)
+                c = self.fit_cost(frame, graft[1])
+                if c <= own and (best is None or c < best[0]):
+                    best = (c, other, graft)
+                if best is not None and other is want:
+                    break  # every limb grafted fits as well: kept
+            if best is None:
+                out.append(r)
+                continue
+            _, other, (R, V, E) = best
+            for n, g in other.items():
+                last = next((x for x in reversed(self.grafted) if x["limb"] == n), None)
+                if (
+                    last
+                    and last["track"] == label[g]
+                    and last["frames"][1] == self.order[self.pos[r.index] - 1]
+                ):
+                    last["frames"][1] = r.index
+                else:
+                    self.grafted.append(
+                        {"frames": [r.index, r.index], "limb": n, "track": label[g]}
+                    )
+            state = {**r.state, "pose_R": R, "pose_root": r.state["pose_root"]}
+            out.append(replace(r, vertices=V, joints=E, state=state))
+            notes[t] = "grafted: " + ", ".join(
+                f"{n} from the {label[g]} track" for n, g in other.items()
+            )
+        return out, notes
+
+    def graft(self, r: FrameResult, h: int, row: list, other: dict[str, int]):
+        """``(R, V, E)`` of frame ``r`` (track ``h``) with the limbs ``other`` (limb →
+        track) taken from ``row`` (each track's frame)
+        (:func:`~meshmocap.estimate.recovery.limbs.graft_limbs`)."""
+        used = [h, *dict.fromkeys(other.values())]
+        rs = [row[g] for g in used]
+        return graft_limbs(
+            self.body.light,
+            np.stack([f.state["pose_R"] for f in rs]),
+            np.stack([f.state["pose_root"] for f in rs]),
+            np.stack([f.vertices for f in rs]),
+            np.stack([f.joints for f in rs]),
+            {n: used.index(g) for n, g in other.items()},
+        )
+
+    def fit_cost(self, frame, V: np.ndarray) -> float:
+        """How badly the vertices ``V`` fit ``frame``'s observations: :func:`limb_costs`
+        summed over limbs, of the fit measures alone (outside, buried, unexplained; the
+        measures of motion and of what was missed need the frames before)."""
+        if self.checker is None:
+            light = self.body.light
+            eye = np.tile(np.eye(3), (light.skeleton.n_joints, 1, 1))
+            self.checker = Recovery(light, eye, np.zeros(3))
+        q = self.checker.check(frame, V)
+        ev = np.zeros((len(LIMB_PARTS), len(EVIDENCE)))
+        for m in ("outside", "buried", "unexplained"):
+            ev[:, EVIDENCE.index(m)] = [getattr(q, m)[n] for n in LIMB_PARTS]
+        return float(limb_costs(ev, self.rule).sum())
 
     def flag_ambiguous(
         self, fwd, hyps: list[_Hyp], lo: int, path: np.ndarray, chosen: list[FrameResult]
@@ -741,6 +917,14 @@ class _Run:
         if "lost" not in r.flags or ev is None:
             return ()
         return lost_limbs(ev, self.rule)
+
+    def limb_cost(self, r: FrameResult) -> np.ndarray:
+        """(L,) the evidence's cost of each limb of a frame (:func:`limb_costs`); a frame
+        without recorded evidence: its lost flag on every limb."""
+        ev = r.state.get("evidence")
+        if ev is None or np.shape(ev) != (len(LIMB_PARTS), len(EVIDENCE)):
+            return np.full(len(LIMB_PARTS), float("lost" in r.flags))
+        return limb_costs(ev, self.rule)
 
     def cost(self, r: FrameResult) -> float:
         """The evidence's cost of a frame (:func:`evidence_cost`); a frame without recorded

@@ -11,6 +11,9 @@ Two sources of hypotheses for the limb:
   occupancy to score library hypotheses against), straight and bent;
   :func:`refine_limbs` keeps the best.
 
+:func:`graft_limbs` puts limbs of other tracked frames onto a frame (the two-way pass's
+choice per limb, :mod:`~meshmocap.trackers.two_way`).
+
 The re-seating of a track (:mod:`~meshmocap.estimate.recovery.reinit`) and the first
 pose's search (:mod:`~meshmocap.estimate.pose.first_pose`, step 3: each candidate refined
 limb by limb) both use it. Metres and radians, world frame Z up.
@@ -37,6 +40,7 @@ from meshmocap.geometry.rotations import rotation_between
 __all__ = [
     "LIMBS",
     "LIMB_ROOTS",
+    "graft_limbs",
     "library_limb_candidates",
     "limb_candidates",
     "limb_joint_indices",
@@ -274,3 +278,60 @@ def limb_candidates(
                 )
             )
     return sorted(out, key=lambda f: f.score)
+
+
+def graft_limbs(
+    template: Template,
+    R: np.ndarray,
+    root: np.ndarray,
+    V: np.ndarray,
+    E: np.ndarray,
+    source: dict[str, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One frame made of several tracks' frames: track 0's trunk, each limb of ``source``
+    from the track given there, turned as that track turns it in the world and hung at
+    track 0's shoulder or hip (the limb's top joints' local rotations re-fitted to its
+    world rotations). Each track's surface and joints keep their own offsets from their
+    skinned pose (a tracker's non-rigid detail), blended by the skinning weights.
+
+    Parameters
+    ----------
+    template : Template, the tracked body (``J`` rig joints, ``n`` vertices, ``K``
+        evaluation joints)
+    R : (H, J, 3, 3) float64, each track's local rotations; ``root`` (H, 3) float64, metres
+    V : (H, n, 3) float64, metres, each track's vertices; ``E`` (H, K, 3), its joints
+    source : dict, limb (:data:`LIMBS`) → the track (0..H−1) it is taken from
+
+    Returns
+    -------
+    R : (J, 3, 3) float64, the grafted frame's local rotations (root: track 0's)
+    V : (n, 3) float64, metres, its vertices
+    E : (K, 3) float64, metres, its evaluation joints
+    """
+    sk = template.skeleton
+    R = np.asarray(R, dtype=np.float64)
+    root = np.asarray(root, dtype=np.float64)
+    G, _ = forward_kinematics(sk, R, root)  # (H, J, 3, 3) global rotations
+    out = R[0].copy()
+    weight = np.zeros((len(R), template.n_vertices))  # each track's share of a vertex
+    eweight = np.zeros((len(R), len(template.eval_skeleton.names)))
+    W = template.weights.tocsc()
+    for limb, h in source.items():
+        idx = limb_joint_indices(template, limb)
+        out[idx] = R[h, idx]
+        top = [j for j in idx if int(sk.parents[j]) not in idx]
+        for j in top:  # the world rotation of track h under track 0's parent
+            p = int(sk.parents[j])
+            out[j] = G[h, j] if p < 0 else G[0, p].T @ G[h, j]
+        weight[h] += np.asarray(W[:, idx].sum(axis=1)).ravel()
+        eweight[h] += template.eval_skeleton.weights[:, idx].sum(axis=1)
+    weight[0] += 1.0 - weight.sum(axis=0)
+    eweight[0] += 1.0 - eweight.sum(axis=0)
+    used = np.flatnonzero((weight > 0).any(axis=1) | (eweight > 0).any(axis=1))
+    skinned = template.pose(R[used], root[used])  # each used track's own skinned pose
+    posed = template.pose(out, root[0])
+    dV = np.asarray(V, dtype=np.float64)[used] - skinned.V
+    dE = np.asarray(E, dtype=np.float64)[used] - skinned.eval_joints
+    Vo = posed.V + np.einsum("hn,hnc->nc", weight[used], dV)
+    Eo = posed.eval_joints + np.einsum("hk,hkc->kc", eweight[used], dE)
+    return out, Vo, Eo
