@@ -15,13 +15,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from meshmocap._numba import njit
 
 _NEWTON_MAX_ITER = 100  # Newton steps at most ...
-_NEWTON_TOL = 1e-6  # ... until no gradient entry exceeds this (probabilities to ~1e-6)
+_NEWTON_TOL = 1e-7  # ... until no gradient entry exceeds this (probabilities to a few 1e-6)
 _NEWTON_MIN_STEP = 1e-10  # ... shortest step fraction tried in its line search
 _ARMIJO = 1e-4  # sufficient decrease of the line search
+_HESSIAN_REUSE = 0.1  # a Hessian is kept while each step cuts the gradient ×10
 
 
 @njit(cache=True, nogil=True)
@@ -59,28 +61,36 @@ def softmax_loss(Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float) -> flo
     return softmax_probabilities(Wb, Z, y)[1] / len(Z) + 0.5 * l2 * float(np.sum(Wb[:, :-1] ** 2))
 
 
-def softmax_derivatives(
-    Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float, Zt: np.ndarray, ZZ: np.ndarray
+def softmax_gradient(
+    Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float, Zt: np.ndarray
 ) -> tuple[float, np.ndarray, np.ndarray]:
-    """The softmax loss of :class:`SoftmaxRegression` (mean cross-entropy of class indices ``y``
-    (n,) int64 at points ``Z`` (n, d) under ``[W | b]`` ``Wb`` (K, d + 1), plus ``l2 / 2 ·
-    |W|²``), its gradient (K, d + 1) and Hessian (K, d + 1, K, d + 1); ``Zt`` (n, d + 1)
-    is ``[Z, 1]`` and ``ZZ`` (n, (d + 1)²) each row's ``z̃ z̃ᵀ``, flattened."""
-    n, K = len(Z), len(Wb)
-    pen = np.zeros_like(Wb)  # l2 on the weights, not on the intercepts
-    pen[:, :-1] = l2
+    """:func:`softmax_loss` at ``Wb`` (K, d + 1), its gradient ``Σ_i (p_i − e_(y_i)) ⊗ z̃_i
+    / n + l2 [W | 0]`` (K, d + 1), and the probabilities ``p_i`` (n, K) it is made of;
+    ``Zt`` (n, d + 1) is ``[Z, 1]``."""
+    n = len(Z)
     P, f = softmax_probabilities(Wb, Z, y)
-    f = f / n + 0.5 * float(np.sum(pen * Wb * Wb))
+    f = f / n + 0.5 * l2 * float(np.sum(Wb[:, :-1] ** 2))
     R = P.copy()
     R[np.arange(n), y] -= 1.0
-    g = R.T @ Zt / n + pen * Wb  # Σ (p − e_y) ⊗ z̃ / n
-    # Σ (diag p − p pᵀ) ⊗ z̃ z̃ᵀ / n, as two products over the points
-    m = Wb.shape[1]
+    g = R.T @ Zt / n
+    g[:, :-1] += l2 * Wb[:, :-1]
+    return f, g, P
+
+
+def softmax_hessian(P: np.ndarray, ZZ: np.ndarray, l2: float) -> np.ndarray:
+    """The Hessian (K, m, K, m) of :func:`softmax_loss` where the probabilities are ``P``
+    (n, K): ``Σ_i (diag p_i − p_i p_iᵀ) ⊗ z̃_i z̃_iᵀ / n + l2`` on the weights' diagonal;
+    ``ZZ`` (n, m²) holds each ``z̃_i z̃_iᵀ`` (``z̃ = [z, 1]``, m = d + 1), flattened."""
+    n, K = P.shape
+    m = math.isqrt(ZZ.shape[1])
+    # two products over the points
     B = ((P[:, :, None] * P[:, None, :]).reshape(n, -1).T @ ZZ).reshape(K, K, m, m)
     H = -B.transpose(0, 2, 1, 3) / n
     H[np.arange(K), :, np.arange(K), :] += (P.T @ ZZ).reshape(K, m, m) / n
+    pen = np.zeros((K, m))
+    pen[:, :-1] = l2
     H += np.diag(pen.ravel()).reshape(K, m, K, m)
-    return f, g, H
+    return H
 
 
 class SoftmaxRegression:
@@ -103,7 +113,8 @@ class SoftmaxRegression:
         """The minimum of :func:`softmax_loss` (mean cross-entropy + ``|W|² / (2 C n)``)
         for points ``Z`` (n, d) float64 and class indices ``y`` (n,) in ``0…K−1``, from
         ``start`` (W (K, d), b (K,); default zeros): Newton steps with a backtracking
-        line search until no gradient entry exceeds ``_NEWTON_TOL``."""
+        line search until no gradient entry exceeds ``_NEWTON_TOL``, the Hessian
+        recomputed only where the last step did not cut the gradient tenfold."""
         d = Z.shape[1]
         n, m = len(Z), K * (d + 1)
         Z = np.ascontiguousarray(Z, dtype=np.float64)
@@ -119,23 +130,32 @@ class SoftmaxRegression:
         Wb = np.zeros((K, d + 1))
         if start is not None:
             Wb[:, :d], Wb[:, d] = start
+        f, g, P = softmax_gradient(Wb, Z, y, l2, Zt)
+        factor, last = None, np.inf
         n_iter = 0
         while n_iter < _NEWTON_MAX_ITER:
             n_iter += 1
-            f, g, H = softmax_derivatives(Wb, Z, y, l2, Zt, ZZ)
-            if np.abs(g).max() <= _NEWTON_TOL:
+            top = float(np.abs(g).max())
+            if top <= _NEWTON_TOL:
                 break
-            H = H.reshape(m, m) + gauge
-            step = -np.linalg.solve(H, g.ravel()).reshape(K, d + 1)
+            fresh = factor is None or top > _HESSIAN_REUSE * last
+            if fresh:  # a new Hessian where the last one no longer gains ×10 a step
+                factor = cho_factor(softmax_hessian(P, ZZ, l2).reshape(m, m) + gauge)
+            last = top
+            step = -cho_solve(factor, g.ravel()).reshape(K, d + 1)
             slope, t = float(np.vdot(g, step)), 1.0
             while t > _NEWTON_MIN_STEP:  # backtracking (Armijo) from the full step
                 trial = Wb + t * step
-                if softmax_loss(trial, Z, y, l2) <= f + _ARMIJO * t * slope:
+                f_t, g_t, P_t = softmax_gradient(trial, Z, y, l2, Zt)
+                if f_t <= f + _ARMIJO * t * slope:
                     break
                 t *= 0.5
             else:
-                break  # no decrease left to rounding: at the minimum
-            Wb = trial
+                if fresh:
+                    break  # no decrease left to rounding: at the minimum
+                factor = None  # an old Hessian's step: try a new one
+                continue
+            Wb, f, g, P = trial, f_t, g_t, P_t
         return cls(Wb[:, :d].copy(), Wb[:, d].copy(), n_iter)
 
     def predict_proba(self, Z: np.ndarray) -> np.ndarray:

@@ -23,9 +23,9 @@ Methods (:class:`BodyPartClassifier`), measured by ``benchmarks/bench_bodyparts.
     as on-bone by Eq. (6)) against 1–3 % here.
 ``"logistic"``
     Multinomial logistic regression: scikit-learn's ``LogisticRegression`` loss (L2, ``C``),
-    minimised by Newton's method to a gradient of 1e-6 (3–5 steps from the last frame's
-    fit; scikit-learn's L-BFGS stops at 1e-4 after ~30 evaluations, each about as costly
-    as a Newton step); two classes by scikit-learn's L-BFGS. As accurate in labels
+    minimised by Newton's method to a gradient of 1e-7 (from the last frame's fit: one or
+    two Hessians and ~5 passes over the points; scikit-learn's L-BFGS stops at 1e-4 after
+    ~30 passes); two classes by scikit-learn's L-BFGS. As accurate in labels
     (within 0.7 points on
     the walk benchmark) and 20–35× faster to predict, but its probabilities sort points
     less well for Eq. (6): 5–8 % of its errors have p > 0.9 (svc: 0.5–3 %), and it calls
@@ -61,7 +61,7 @@ from dataclasses import dataclass
 from typing import Literal, get_args
 
 import numpy as np
-from scipy.spatial import cKDTree
+from pykdtree.kdtree import KDTree
 from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 from sklearn.svm import SVC
@@ -314,7 +314,7 @@ class BodyPartClassifier:
         Per-axis standard deviation of the training points, metres (1 where zero).
     n_train_ : int
         Number of training vertices the model saw (after subsampling).
-    tree_ : scipy.spatial.cKDTree
+    tree_ : pykdtree.kdtree.KDTree
         All the training points given to :meth:`fit` (for ``partition(max_distance=)``).
     coef_, intercept_ : (k, 3), (k,) float64
         ``"logistic"`` only: the fitted logits on world coordinates, ``coef_ @ x +
@@ -383,8 +383,8 @@ class BodyPartClassifier:
             ``"logistic"`` only: the starting point of the fit, as world-frame logits
             ``coef_init @ x + intercept_init`` (the ``coef_`` and ``intercept_`` of
             an earlier fit with the same labels). The optimum does not depend on it; from
-            the previous frame's fit a tracker's next fit takes 3–5 Newton steps instead
-            of ~13 (the 12k walk at 60 fps).
+            the previous frame's fit a tracker's next fit takes ~5 Newton steps (one or
+            two Hessians) instead of ~13 (the 12k walk at 60 fps).
 
         Returns
         -------
@@ -447,7 +447,7 @@ class BodyPartClassifier:
         self.mean_ = mean
         self.scale_ = scale
         self.n_train_ = len(idx)
-        self.tree_ = cKDTree(X)
+        self.tree_ = KDTree(np.ascontiguousarray(X, dtype=np.float64))
         return self
 
     # -- prediction -------------------------------------------------------------------------
@@ -595,7 +595,7 @@ def partition(
     kind[p > on_bone] = ON_BONE
     kind[p <= outlier] = OUTLIER
     if max_distance is not None and len(Y):
-        d, _ = classifier.tree_.query(Y, distance_upper_bound=float(max_distance))
+        d, _ = classifier.tree_.query(Y, k=1, distance_upper_bound=float(max_distance))
         kind[d > max_distance] = OUTLIER  # misses come back as inf
 
     keep = kind == NEAR_JOINT
