@@ -18,7 +18,7 @@ carved from its true silhouettes and from the silhouettes segmented from its vid
 the true first pose; the mean joint error of each against the truth, and their ratio.
 
 Usage: ``python benchmarks/bench_video.py [--frames N] [--work DIR] [--skip-real]
-[--tracks patch,articulated_icp]``.
+[--real-frames START:STOP:STEP] [--tracks patch,articulated_icp]``.
 """
 
 from __future__ import annotations
@@ -170,10 +170,12 @@ def tracks(work: Path, labels: list[str], methods: list[str]) -> None:
             )
 
 
-def real(work: Path, data: Path) -> None:
+def real(work: Path, data: Path, frames: slice | None = None) -> None:
     dest = work / "pose2sim"
     t0 = time.perf_counter()
-    run = silhouettes_from_video(data, data / "Calib.qca.txt", dest, show_progress=False)
+    run = silhouettes_from_video(
+        data, data / "Calib.qca.txt", dest, frames=frames, show_progress=False
+    )
     for note in run.notes:
         print("  note:", note)
     t1 = time.perf_counter()
@@ -195,6 +197,11 @@ def main() -> None:
     p.add_argument("--skip-real", action="store_true", help="only the rendered capture")
     p.add_argument("--skip-rendered", action="store_true", help="only the real demo")
     p.add_argument(
+        "--real-frames",
+        default="",
+        help="the demo's frames as start:stop:step (default: all 100)",
+    )
+    p.add_argument(
         "--tracks",
         default="",
         help="trackers to run on the rendered capture, comma-separated (patch,articulated_icp): "
@@ -211,7 +218,8 @@ def main() -> None:
         Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "video" / "pose2sim_demo"
     )
     if not a.skip_real and data.is_dir():
-        real(work, data)
+        sel = slice(*(int(x) if x else None for x in a.real_frames.split(":")))
+        real(work, data, sel if a.real_frames else None)
 
 
 if __name__ == "__main__":
