@@ -13,6 +13,7 @@ from meshmocap.geometry.foreground import (
     grow_mask,
     learn_background,
     others_reach,
+    others_silhouettes,
     reach,
     restore_background,
 )
@@ -115,6 +116,23 @@ def test_consistency_drops_what_the_other_cameras_do_not_see():
         consistent_masks(masks[:3], cams)
 
 
+def test_others_silhouettes_show_the_part_one_camera_lost():
+    cams = _rig()
+    truth = [_sphere_mask(c, [0.0, 0.0, 1.0], 0.3) for c in cams]
+    masks = [m.copy() for m in truth]
+    masks[0][: masks[0].shape[0] // 2] = False  # camera 0 lost the sphere's upper half
+    views = others_silhouettes(masks, cams, voxel_size=0.02)
+    lost = truth[0] & ~masks[0]
+    assert views[0][lost].mean() > 0.97  # every other camera still sees it there
+    assert views[0][truth[0]].mean() > 0.97
+    assert views[0].sum() < 1.5 * truth[0].sum()  # a hull of three, a little larger
+    few = others_silhouettes([truth[0], truth[1], *[np.zeros_like(t) for t in truth[2:]]], cams)
+    assert few[0] is None and few[1] is None  # one other camera only: a cone
+    assert few[2] is not None
+    with pytest.raises(InputError, match="3 masks for 4 cameras"):
+        others_silhouettes(masks[:3], cams)
+
+
 def test_reach_covers_the_projected_cubes():
     (cam,) = _rig(1)
     X = np.array([[0.0, 0.0, 1.0]])
@@ -180,5 +198,11 @@ def test_grow_mask_recovers_the_subjects_colours_that_touch_it():
     assert not (grown & ~truth).any()  # no rim of the room's pixels beside the subject
     assert not grown[5:10, 50:55].any()  # not connected: left out
     assert not grow_mask(image, np.zeros_like(seen), model).any()
+    within = np.zeros((H, W), bool)
+    within[10:22] = True  # the others' view holds only the upper part of what was lost
+    part = grow_mask(image, seen, model, within=within)
+    assert part[15:22, 20:35].all() and not part[22:28, 20:35].any()
+    with pytest.raises(InputError, match="within must be"):
+        grow_mask(image, seen, model, within=within[:5])
     with pytest.raises(InputError, match="bins must be"):
         colour_model(image[None], truth[None], bins=10)

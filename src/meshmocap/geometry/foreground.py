@@ -55,7 +55,8 @@ from skimage.morphology import convex_hull_image
 from meshmocap._tolerances import NEAR_DEPTH
 from meshmocap.errors import InputError
 from meshmocap.geometry.camera import Camera
-from meshmocap.geometry.carving import carve
+from meshmocap.geometry.carving import carve, hull_mesh
+from meshmocap.geometry.silhouette import silhouette
 
 #: Probability added to each colour bin before the log-ratio (a colour never seen in either
 #: region gives a ratio of 0, not a division by zero).
@@ -349,6 +350,7 @@ def grow_mask(
     threshold: float = 0.5,
     blur: float = 0.0,
     max_hole: float = 0.002,
+    within: np.ndarray | None = None,
 ) -> np.ndarray:
     """Add to a mask the pixels of the subject's colours that touch it.
 
@@ -356,7 +358,9 @@ def grow_mask(
     (smoothed by ``blur`` pixels) exceeds ``threshold`` and it is connected to the mask;
     small holes are filled. What differencing missed where the background has the subject's
     colour or the subject stood still is recovered from the colours the subject showed
-    elsewhere.
+    elsewhere. Given ``within`` (the hull of the other cameras seen from this one,
+    :func:`others_silhouettes`), a part the other cameras all see is recovered with a
+    weaker colour evidence.
 
     Parameters
     ----------
@@ -368,6 +372,8 @@ def grow_mask(
     max_hole : float
         Holes of at most this fraction of the mask's area are filled (see
         :func:`clean_mask`).
+    within : (height, width) bool, optional
+        Only pixels here join (default: the model's region; both are then required).
 
     Returns
     -------
@@ -379,12 +385,15 @@ def grow_mask(
             f"grow_mask: image, mask and model must be {model.region.shape}, found "
             f"{np.shape(image)[:2]} and {m.shape}"
         )
+    if within is not None and np.shape(within) != m.shape:
+        raise InputError(f"grow_mask: within must be {m.shape}, found {np.shape(within)}")
     if not m.any():
         return m
     score = model.log_ratio[_quantise(image, model.bins)]
     if blur > 0:
         score = ndimage.gaussian_filter(score, blur)
-    labels, _ = ndimage.label(m | (model.region & (score > threshold)))
+    region = model.region if within is None else model.region & np.asarray(within, bool)
+    labels, _ = ndimage.label(m | (region & (score > threshold)))
     touched = np.unique(labels[m])
     return _fill_holes(np.isin(labels, touched[touched > 0]), max_hole)
 
@@ -481,6 +490,46 @@ def consistent_masks(
     """
     reaches = others_reach(masks, cameras, voxel_size=voxel_size, misses=misses)
     return [m if r is None else m & r for m, r in zip(masks, reaches, strict=True)]
+
+
+def others_silhouettes(
+    masks: list[np.ndarray], cameras: list[Camera], *, voxel_size: float = 0.01
+) -> list[np.ndarray | None]:
+    """Each camera's view of the visual hull carved from all the other cameras' masks.
+
+    Where a camera's mask lacks a part that this view holds, every other camera saw it
+    there: the camera lost it (the subject against a background of its colour), and
+    :func:`grow_mask` ``within`` this view recovers it; left out, the hull carved from all
+    the cameras loses it too, and disagrees with every camera that saw it.
+
+    Parameters
+    ----------
+    masks : list of (height, width) bool, one per camera
+    cameras : list of Camera
+    voxel_size : float, voxel edge of the carving, metres
+
+    Returns
+    -------
+    list of (height, width) bool or None
+        The silhouette of the others' hull (its surface mesh) in each camera; None where
+        fewer than two other cameras have a non-empty mask or they carve nothing.
+    """
+    if len(masks) != len(cameras):
+        raise InputError(f"others_silhouettes: {len(masks)} masks for {len(cameras)} cameras")
+    out: list[np.ndarray | None] = []
+    for i, cam in enumerate(cameras):
+        others = [k for k in range(len(cameras)) if k != i and masks[k].any()]
+        hull = (
+            carve([masks[k] for k in others], [cameras[k] for k in others], voxel_size=voxel_size)
+            if len(others) >= 2
+            else None
+        )
+        if hull is None or not hull.occupancy.any():
+            out.append(None)
+            continue
+        V, F = hull_mesh(hull)
+        out.append(silhouette(V, F, cam, assume_closed=True))
+    return out
 
 
 def others_reach(

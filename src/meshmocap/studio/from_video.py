@@ -15,8 +15,12 @@ cannot tell, the others can). The subject's colours are learned from the sample'
 (:func:`~meshmocap.geometry.foreground.colour_model`). Each frame's masks are then made
 consistent across cameras (a pixel whose ray misses the volume carved from all the other
 cameras is dropped), grown by the subject's colours where differencing lost it (without
-plates), made consistent again, cleaned (holes filled, small components dropped) and
-written at the calibration's image size.
+plates), made consistent again, grown where the hull of all the other cameras (1 cm)
+says a part is and the colour leans to the subject (a part this camera lost:
+:func:`~meshmocap.geometry.foreground.others_silhouettes`), cleaned (holes filled, small
+components dropped), made consistent once more at half the voxel (the first passes keep
+a margin of a voxel's image around the others' volume) and written at the calibration's
+image size.
 Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
 longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
 resampled to the full size.
@@ -56,6 +60,7 @@ from meshmocap.geometry.foreground import (
     grow_mask,
     learn_background,
     others_reach,
+    others_silhouettes,
 )
 from meshmocap.geometry.silhouette import silhouette
 from meshmocap.io.calibration import read_calibration
@@ -66,6 +71,7 @@ from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_foota
 
 _CODEC_CROP = 16  # largest encoder crop taken for the same image (macroblock size)
 _SEGMENT_PX = 1000  # default segmentation resolution: the longest side, pixels
+_RECOVER_VOXEL = 0.01  # metres: the others' hull that recovers a part one camera lost
 _MODEL_VERSION = 3  # of the cached backgrounds: 2 adds the colour models, 3 keeps large holes
 
 
@@ -239,6 +245,14 @@ def silhouettes_from_video(
                 for im, m, n in zip(images, masks, names, strict=True)
             ]
             masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
+            # a part every other camera sees: lost by this one (its colour evidence weaker)
+            views = others_silhouettes(masks, small, voxel_size=_RECOVER_VOXEL)
+            masks = [
+                m if v is None else grow_mask(im, m, models[n][2], threshold=0.0, within=v)
+                for im, m, n, v in zip(images, masks, names, views, strict=True)
+            ]
+        # carved again, finer: the first pass keeps a margin of a 3 cm voxel's image
+        masks = consistent_masks(masks, small, voxel_size=max(voxel_size / 2, 0.01), misses=misses)
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
