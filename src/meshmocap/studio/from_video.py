@@ -19,8 +19,8 @@ plates), made consistent again, grown where the hull of all the other cameras (1
 says a part is and the colour leans to the subject (a part this camera lost:
 :func:`~meshmocap.geometry.foreground.others_silhouettes`), cleaned (holes filled, small
 components dropped), made consistent once more at half the voxel (the first passes keep
-a margin of a voxel's image around the others' volume) and written at the calibration's
-image size.
+a margin of a voxel's image around the others' volume; without plates only: with them the
+masks are tight already) and written at the calibration's image size.
 Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
 longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
 resampled to the full size.
@@ -251,8 +251,9 @@ def silhouettes_from_video(
                 m if v is None else grow_mask(im, m, models[n][2], threshold=0.0, within=v)
                 for im, m, n, v in zip(images, masks, names, views, strict=True)
             ]
-        # carved again, finer: the first pass keeps a margin of a 3 cm voxel's image
-        masks = consistent_masks(masks, small, voxel_size=max(voxel_size / 2, 0.01), misses=misses)
+            # carved again, finer: the first passes keep a margin of a voxel's image
+            fine = max(voxel_size / 2, 0.01)
+            masks = consistent_masks(masks, small, voxel_size=fine, misses=misses)
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
