@@ -14,7 +14,10 @@ stages, ``checks`` (the lost-limb assessment and any re-seat) and ``write`` (the
 result file). The new tree's driver records them itself (``timer=``); a tree whose driver
 cannot is timed by wrapping the functions its driver calls (``observed``, the tracker's
 ``step``, ``recovered``, ``write_frame``: the same stages, ``--wrap`` forces it on both
-trees to check they agree). Medians over frames 2… (frame 1 learns what a frame reads,
+trees to check they agree). On a loaded machine ``--cpu-clock`` makes every stage clock
+read the child's CPU time (``time.perf_counter`` replaced by ``time.process_time`` in the
+child), so the tracker's own stages are CPU too instead of their share of the step's.
+Medians over frames 2… (frame 1 learns what a frame reads,
 :class:`~meshmocap._timing.StageTimer`), then the median run; wall ms and CPU ms of the
 child (CPU says what a frame costs when the machine is shared; the trackers clock their
 own stages in wall time only, shown in CPU as ``≈`` their share of the step's CPU); the
@@ -43,7 +46,7 @@ template's vertices against the truth's), and the ratios.
 
 Wall times on a shared machine are noisy: the load average is printed with every table.
 Run: ``python benchmarks/bench_speed.py [--frames 30] [--repeats 3] [--templates ...]
-[--methods ...] [--old SRC] [--new SRC] [--trees old new] [--wrap] [--no-crane]
+[--methods ...] [--old SRC] [--new SRC] [--trees old new] [--wrap] [--cpu-clock] [--no-crane]
 [--nricp-every 1] [--light] [--work /tmp/meshmocap-speed]``.
 """
 
@@ -161,6 +164,9 @@ def child_stages(args) -> dict:
     import meshmocap.trackers.driver as driver
     from meshmocap.body.light import tracking_body
 
+    if args.cpu_clock:  # every stage clock of the library (time.perf_counter) reads CPU
+        time.perf_counter = time.process_time
+
     template = load_template(args.templates[0])
     capture = Capture(args.capture)
     tracker = make_tracker(args.methods[0], template=tracking_body(template).light)
@@ -234,12 +240,17 @@ def stages_table(args, work: Path) -> None:
                         *("--templates", name, "--methods", method, "--frames", str(args.frames)),
                         *("--capture", str(capture.path), "--work", str(work / tree)),
                         *(["--wrap"] if args.wrap else []),
+                        *(["--cpu-clock"] if args.cpu_clock else []),
                     ]
                     env = tree_env(getattr(args, tree), work, tree)
                     res = run_child(__file__, child, env, work / f"stages-{tree}.json")
                     res["wall_ms"], res["cpu_ms"] = _medians(res["frames"]), _medians(res["cpu"])
                     runs[tree].append(res)
-            print(f"\n**{method}** (ms per frame, median of frames 2…{args.frames - 1}; {_load()})")
+            clock = "; --cpu-clock: the wall columns are CPU too" if args.cpu_clock else ""
+            print(
+                f"\n**{method}** (ms per frame, median of frames 2…{args.frames - 1}; "
+                f"{_load()}{clock})"
+            )
             print(_stage_markdown(runs))
     print(f"(after: {_load()})")
 
@@ -396,6 +407,11 @@ def main() -> None:
     ap.add_argument("--nricp-every", type=int, default=1, help="nricp on every k-th frame")
     ap.add_argument("--work", default="/tmp/meshmocap-speed")
     ap.add_argument("--wrap", action="store_true", help="time by wrapping on every tree")
+    ap.add_argument(
+        "--cpu-clock",
+        action="store_true",
+        help="every stage clock reads CPU time (a loaded machine: the tracker's stages too)",
+    )
     ap.add_argument("--child", help=argparse.SUPPRESS)  # a run in this process: JSON here
     ap.add_argument("--capture", help=argparse.SUPPRESS)
     add_tree_args(ap)
