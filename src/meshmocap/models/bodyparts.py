@@ -23,11 +23,10 @@ Methods (:class:`BodyPartClassifier`), measured by ``benchmarks/bench_bodyparts.
     as on-bone by Eq. (6)) against 1–3 % here.
 ``"logistic"``
     Multinomial logistic regression: scikit-learn's ``LogisticRegression`` loss (L2, ``C``),
-    minimised by Newton's method to a gradient of 1e-7 (from the last frame's fit: one or
-    two Hessians and ~5 passes over the points; scikit-learn's L-BFGS stops at 1e-4 after
-    ~30 passes); two classes by scikit-learn's L-BFGS. As accurate in labels
-    (within 0.7 points on
-    the walk benchmark) and 20–35× faster to predict, but its probabilities sort points
+    minimised by Newton's method to a gradient of 1e-7 (from the last frame's fit: 3–4
+    Hessians and ~6 passes over the points; scikit-learn's L-BFGS stops at 1e-4 after
+    ~30 passes); two classes by scikit-learn's L-BFGS. As accurate in labels (within 0.7
+    points on the walk benchmark) and 20–35× faster to predict, but its probabilities sort points
     less well for Eq. (6): 5–8 % of its errors have p > 0.9 (svc: 0.5–3 %), and it calls
     2–4 % of the visual hull's phantom points outliers (svc: 19–33 %). It also loses
     fewer real surface points at the joints (1 % of them get p ≤ 0.5; svc: 5–6 %).
@@ -383,8 +382,8 @@ class BodyPartClassifier:
             ``"logistic"`` only: the starting point of the fit, as world-frame logits
             ``coef_init @ x + intercept_init`` (the ``coef_`` and ``intercept_`` of
             an earlier fit with the same labels). The optimum does not depend on it; from
-            the previous frame's fit a tracker's next fit takes ~5 Newton steps (one or
-            two Hessians) instead of ~13 (the 12k walk at 60 fps).
+            the previous frame's fit a tracker's next fit takes ~6 Newton steps on 3–4
+            Hessians instead of 13–16 steps on 12–14 (the 12k walk at 60 fps).
 
         Returns
         -------

@@ -305,7 +305,7 @@ class PatchTracker:
             return V, N, None
         clf = BodyPartClassifier(o.classifier, random_state=o.seed)
         # trained on the previous fit (§III-B); logistic regression starts from the last
-        # frame's solution (same optimum, one or two Newton Hessians instead of ~4)
+        # frame's solution (same optimum, 3–4 Newton Hessians instead of 12–14)
         coef, intercept = self.logits or (None, None)
         # trained on points spread evenly over the fitted surface, as the observed points
         # are, not on its vertices: a decimated body meshes flat parts (a forearm) sparsely
