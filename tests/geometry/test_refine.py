@@ -162,6 +162,9 @@ def test_a_vertex_slid_along_the_body_goes_back_to_its_place(ellipsoid):
     assert err(S) > 0.013
     assert err(normal) > 0.9 * err(S)
     assert err(many) < err(few) < 0.8 * err(S) and err(many) < 0.5 * err(S)
+    # the nearest points searched for every 4th iteration only: nearly as far back
+    sparse = ArapRefiner(V, F, iterations=30, search_every=4).refine(S, P, N)
+    assert err(sparse) < 1.1 * err(many)
 
 
 def test_the_next_frame_starts_where_the_last_left(ellipsoid):
@@ -200,6 +203,8 @@ def test_arap_refiner_refuses_bad_arguments_in_one_line(ellipsoid):
         (dict(stiffness=-1.0), "stiffness must be ≥ 0"),
         (dict(iterations=0), "iterations must be ≥ 1"),
         (dict(max_angle=0.0), "max_angle"),
+        (dict(search_every=0), "search_every must be an integer ≥ 1"),
+        (dict(search_every=2.0), "search_every must be an integer ≥ 1"),
     ):
         with pytest.raises(InputError, match=msg):
             ArapRefiner(V, F, **kw)

@@ -225,7 +225,11 @@ class ArapRefiner:
     stiffness : float
         ``μ``: pull of every vertex towards the tracked surface.
     iterations : int
-        Local and global steps (≥ 1); the targets are found again before each.
+        Local and global steps (≥ 1); the targets are projected again before each.
+    search_every : int
+        The nearest compatible observed point of each vertex is searched for again every
+        this many iterations (≥ 1); in between the same points are used, their tangent
+        planes projected onto from where the vertices are.
     reach : float
         Metres: a vertex and an observed point further apart are not matched.
     max_angle : float
@@ -246,6 +250,7 @@ class ArapRefiner:
         iterations: int = 20,
         reach: float = 0.05,
         max_angle: float = 60.0,
+        search_every: int = 4,
     ):
         rest = np.asarray(rest, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or not np.isfinite(rest).all():
@@ -257,6 +262,13 @@ class ArapRefiner:
                 raise InputError(f"ArapRefiner: {name} must be > 0, found {v!r}")
         if not (np.isfinite(stiffness) and stiffness >= 0):
             raise InputError(f"ArapRefiner: stiffness must be ≥ 0, found {stiffness!r}")
+        if isinstance(search_every, bool) or not (
+            isinstance(search_every, int | np.integer) and search_every >= 1
+        ):
+            raise InputError(
+                f"ArapRefiner: search_every must be an integer ≥ 1, found {search_every!r}"
+            )
+        self.search_every = int(search_every)
         self.F, self.n = F, n
         self.lam, self.mu, self.iterations = float(data_weight), float(stiffness), int(iterations)
         self.reach, self.cos = float(reach), float(np.cos(np.radians(max_angle)))
@@ -318,12 +330,13 @@ class ArapRefiner:
             return S.copy()
         tree = KDTree(P)
         X, R = S.copy(), Rs
-        for _ in range(self.iterations):
+        for it in range(self.iterations):
+            if it % self.search_every == 0:  # each vertex's nearest compatible point
+                N = vertex_normals(X, self.F)
+                dist, j = tree.query(X, k=1)
+                j = j.astype(np.int64)
+                ok = (dist < self.reach) & (np.einsum("ij,ij->i", N, NP[j]) > self.cos)
             # targets: the vertex projected onto its observed point's tangent plane
-            N = vertex_normals(X, self.F)
-            dist, j = tree.query(X, k=1)
-            j = j.astype(np.int64)
-            ok = (dist < self.reach) & (np.einsum("ij,ij->i", N, NP[j]) > self.cos)
             off = np.einsum("ij,ij->i", P[j] - X, NP[j])
             T = np.where(ok[:, None], X + off[:, None] * NP[j], S)
             # Eq. 9: Σ_j ½ (Rᵢ + Rⱼ)(rᵢ − rⱼ)
