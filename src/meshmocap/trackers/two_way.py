@@ -9,7 +9,8 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
    limbs lost anywhere in the run, the torso where lost at the keyframe: the forward
    track may still be off where it is no longer flagged) at the first frame after the
    run, then at the middle of the longest stretch of the run that no kept hypothesis
-   explains yet, until every stretch is explained or :func:`max_keyframes` are kept. A
+   explains yet (passes the lost rule within :data:`EXPLAINS` frames of its keyframe),
+   until every stretch is explained or :func:`max_keyframes` are kept. A
    keyframe is kept only where the tracker seated at the found pose passes the lost rule
    on that frame (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`, the same
    rule as the forward pass's flags).
@@ -99,6 +100,7 @@ from meshmocap.trackers.frame_step import read_track_frame, recovered, track_fra
 
 __all__ = [
     "DRIFT",
+    "EXPLAINS",
     "FIT_WEIGHT",
     "FOLDER",
     "FRAMES_PER_KEY",
@@ -155,6 +157,10 @@ FIT_WEIGHT = 0.1
 #: Cost per frame and limb of taking the limb from a track other than the frame's (ties stay
 #: with the frame's track).
 GRAFT = 0.05
+#: Frames from its keyframe within which a hypothesis that passes the lost rule explains a
+#: frame of its run: frames of a long run farther from every kept keyframe get another
+#: keyframe (a hypothesis far from its keyframe may pass the rule with a limb wrong).
+EXPLAINS = 12
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
 #: The folder of the pass's intermediate results, inside the track folder.
@@ -602,7 +608,8 @@ class _Run:
             for h in hyps:
                 for i, r in h.results.items():
                     k = self.pos[i] - a
-                    if 0 <= k < len(explained) and "lost" not in r.flags:
+                    near = abs(self.pos[i] - self.pos[h.keyframe]) <= EXPLAINS
+                    if 0 <= k < len(explained) and "lost" not in r.flags and near:
                         explained[k] = True
             if explained.all():
                 break
