@@ -11,16 +11,16 @@ over the footage in two passes (:mod:`meshmocap.geometry.foreground`): a tempora
 a sample of frames; the sample's masks made consistent across the cameras; then the median
 again without the pixels where the other cameras' carved volume says the subject stood.
 That second pass removes the ghost a slow subject leaves in a plain median (what one camera
-cannot tell, the others can). The subject's colours are learned from the sample's consistent masks
-(:func:`~meshmocap.geometry.foreground.colour_model`). Each frame's masks are then made
-consistent across cameras (a pixel whose ray misses the volume carved from all the other
-cameras is dropped), grown by the subject's colours where differencing lost it (without
-plates), made consistent again, grown where the hull of all the other cameras (1 cm)
-says a part is and the colour leans to the subject (a part this camera lost:
-:func:`~meshmocap.geometry.foreground.others_silhouettes`), cleaned (holes filled, small
-components dropped), made consistent once more at half the voxel (the first passes keep
-a margin of a voxel's image around the others' volume; without plates only: with them the
-masks are tight already) and written at the calibration's image size.
+cannot tell, the others can). With plates or without, the subject's colours are learned
+from the sample's consistent masks (:func:`~meshmocap.geometry.foreground.colour_model`).
+Each frame's masks are then made consistent across cameras (a pixel whose ray misses the
+volume carved from all the other cameras is dropped), grown by the subject's colours where
+differencing lost it, made consistent again, grown where the hull of all the other cameras
+(1 cm) says a part is and the colour leans to the subject (a part this camera lost:
+:func:`~meshmocap.geometry.foreground.others_silhouettes`), made consistent once more at
+half the voxel (the first passes keep a margin of a voxel's image around the others'
+volume), cleaned (holes filled, small components dropped) and written at the
+calibration's image size.
 Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
 longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
 resampled to the full size.
@@ -239,21 +239,20 @@ def silhouettes_from_video(
             for im, n in zip(images, names, strict=True)
         ]
         masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
-        if plates is None:  # the subject's colours where differencing lost it
-            masks = [
-                grow_mask(im, m, models[n][2])
-                for im, m, n in zip(images, masks, names, strict=True)
-            ]
-            masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
-            # a part every other camera sees: lost by this one (its colour evidence weaker)
-            views = others_silhouettes(masks, small, voxel_size=_RECOVER_VOXEL)
-            masks = [
-                m if v is None else grow_mask(im, m, models[n][2], threshold=0.0, within=v)
-                for im, m, n, v in zip(images, masks, names, views, strict=True)
-            ]
-            # carved again, finer: the first passes keep a margin of a voxel's image
-            fine = max(voxel_size / 2, 0.01)
-            masks = consistent_masks(masks, small, voxel_size=fine, misses=misses)
+        # the subject's colours where differencing lost it
+        masks = [
+            grow_mask(im, m, models[n][2]) for im, m, n in zip(images, masks, names, strict=True)
+        ]
+        masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
+        # a part every other camera sees: lost by this one (its colour evidence weaker)
+        views = others_silhouettes(masks, small, voxel_size=_RECOVER_VOXEL)
+        masks = [
+            m if v is None else grow_mask(im, m, models[n][2], threshold=0.0, within=v)
+            for im, m, n, v in zip(images, masks, names, views, strict=True)
+        ]
+        # carved again, finer: the first passes keep a margin of a voxel's image
+        fine = max(voxel_size / 2, 0.01)
+        masks = consistent_masks(masks, small, voxel_size=fine, misses=misses)
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
@@ -372,13 +371,16 @@ def _plate(folder: Path, name: str, size: tuple[int, int]) -> np.ndarray:
 def _backgrounds(
     root, cams, small, footage, offsets, numbers, plates, model_frames, voxel_size, overwrite
 ) -> dict[str, tuple[np.ndarray, np.ndarray, ColourModel | None]]:
-    """Each camera's background, its noise, and (without plates) its colour model."""
+    """Each camera's background, its noise, and its colour model."""
     models: dict[str, tuple[np.ndarray, np.ndarray, ColourModel | None]] = {}
+    pick = np.unique(np.linspace(0, len(numbers) - 1, min(model_frames, len(numbers))).round())
+    sample = [numbers[int(i)] for i in pick]
     if plates is not None:
         for c, s in zip(cams, small, strict=True):
             plate = _plate(Path(plates), c.name, (s.width, s.height)).astype(np.float32)
             models[c.name] = (plate, np.float32(3.0), None)
-        return models
+        stacks = _sample(cams, small, footage, offsets, sample)
+        return _colours(models, stacks, cams, small, voxel_size)
     cache = {c.name: root / "background" / f"{c.name}.npz" for c in cams}
     key = json.dumps(
         [_MODEL_VERSION, [s.width for s in small], numbers[0], numbers[-1], model_frames]
@@ -394,13 +396,7 @@ def _backgrounds(
             return models
         except (KeyError, OSError, ValueError):
             models.clear()
-    pick = np.unique(np.linspace(0, len(numbers) - 1, min(model_frames, len(numbers))).round())
-    sample = [numbers[int(i)] for i in pick]
-    stacks = {}
-    for c, s in zip(cams, small, strict=True):
-        off = offsets.get(c.name, 0)
-        got = read_frames(footage[c.name], [k + off for k in sample], size=(s.width, s.height))
-        stacks[c.name] = np.stack([im for _, im in got])
+    stacks = _sample(cams, small, footage, offsets, sample)
     first = {n: learn_background(st) for n, st in stacks.items()}
     # where the volume carved from the other cameras says the subject may stand
     keep = {n: np.zeros(st.shape[:3], bool) for n, st in stacks.items()}
@@ -411,20 +407,9 @@ def _backgrounds(
     for c in cams:
         st = stacks[c.name]
         models[c.name] = (*learn_background(st, masks=keep[c.name]), None)
-    # the subject's colours, from masks made consistent across the cameras (20 frames)
-    some = np.unique(np.linspace(0, len(sample) - 1, min(20, len(sample))).round()).astype(int)
-    found = {c.name: np.zeros((len(some), *stacks[c.name].shape[1:3]), bool) for c in cams}
-    for i, j in enumerate(some):
-        masks = [
-            clean_mask(foreground_mask(stacks[c.name][j], *models[c.name][:2]), keep=0.0)
-            for c in cams
-        ]
-        for c, m in zip(cams, consistent_masks(masks, small, voxel_size=voxel_size), strict=True):
-            found[c.name][i] = clean_mask(m, open_px=0, close_px=0)
+    models = _colours(models, stacks, cams, small, voxel_size)
     for c in cams:
-        bg, noise, _ = models[c.name]
-        colour = colour_model(stacks[c.name][some], found[c.name])
-        models[c.name] = (bg, noise, colour)
+        bg, noise, colour = models[c.name]
         with atomic_open(cache[c.name]) as f:
             np.savez(
                 f,
@@ -436,3 +421,32 @@ def _backgrounds(
                 key=np.array(key),
             )
     return models
+
+
+def _sample(cams, small, footage, offsets, sample) -> dict[str, np.ndarray]:
+    """Each camera's frames ``sample`` at the segmentation size, (n, h, w, 3) uint8."""
+    stacks = {}
+    for c, s in zip(cams, small, strict=True):
+        off = offsets.get(c.name, 0)
+        got = read_frames(footage[c.name], [k + off for k in sample], size=(s.width, s.height))
+        stacks[c.name] = np.stack([im for _, im in got])
+    return stacks
+
+
+def _colours(models, stacks, cams, small, voxel_size):
+    """``models`` with each camera's colour model, learned from 20 of the sample's masks
+    made consistent across the cameras."""
+    n = len(next(iter(stacks.values())))
+    some = np.unique(np.linspace(0, n - 1, min(20, n)).round()).astype(int)
+    found = {c.name: np.zeros((len(some), *stacks[c.name].shape[1:3]), bool) for c in cams}
+    for i, j in enumerate(some):
+        masks = [
+            clean_mask(foreground_mask(stacks[c.name][j], *models[c.name][:2]), keep=0.0)
+            for c in cams
+        ]
+        for c, m in zip(cams, consistent_masks(masks, small, voxel_size=voxel_size), strict=True):
+            found[c.name][i] = clean_mask(m, open_px=0, close_px=0)
+    return {
+        c.name: (*models[c.name][:2], colour_model(stacks[c.name][some], found[c.name]))
+        for c in cams
+    }
