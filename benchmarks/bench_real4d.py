@@ -18,7 +18,7 @@ Part 2 (``--crane``), the crane archive (../shared/data/meshes/crane, 175 frames
 (``--refines``: off, on, arap; replayed on the tracked frames), then scored as ``meshmocap
 eval`` scores: the per-vertex error of the tracked first frame's vertices against the
 files, mean over the frames, the first and last fifths (and their ratio: the target is
-≤ 1.3), the worst frame, and the error's parts along the true surface's normal and along
+≤ 1.5), the worst frame, and the error's parts along the true surface's normal and along
 the surface (tangential: a vertex slid to another point of the body; mean over every 5th
 frame); the output surface refined towards the observations along its normals (``on``),
 as rigidly as possible with its vertices anchored frame to frame (``arap``), and as the
