@@ -404,10 +404,10 @@ def test_softmax_fit_reaches_scikit_learns_optimum():
     from sklearn.linear_model import LogisticRegression
 
     Z, y, K = _softmax_problem(2)
-    ours = SoftmaxRegression.fit(Z, y, K, 10.0)
+    ours = SoftmaxRegression(10.0, K).fit(Z, y)
     ref = LogisticRegression(C=10.0, tol=1e-12, max_iter=100_000).fit(Z, y)
     np.testing.assert_allclose(ours.predict_proba(Z), ref.predict_proba(Z), atol=5e-6)
     # from a start near the optimum (the tracker's last frame): fewer steps, same minimum
-    warm = SoftmaxRegression.fit(Z, y, K, 10.0, (1.05 * ours.coef_, ours.intercept_ + 0.1))
+    warm = SoftmaxRegression(10.0, K).fit(Z, y, (1.05 * ours.coef_, ours.intercept_ + 0.1))
     assert warm.n_iter_[0] < ours.n_iter_[0]
     np.testing.assert_allclose(warm.predict_proba(Z), ours.predict_proba(Z), atol=5e-6)

@@ -94,27 +94,33 @@ def softmax_hessian(P: np.ndarray, ZZ: np.ndarray, l2: float) -> np.ndarray:
 
 
 class SoftmaxRegression:
-    """Multinomial logistic regression fitted by Newton's method (module docstring);
-    ``coef_`` (K, d), ``intercept_`` (K,), ``n_iter_`` (1,) after :meth:`fit`."""
+    """Multinomial logistic regression fitted by Newton's method (module docstring).
 
-    def __init__(self, coef: np.ndarray, intercept: np.ndarray, n_iter: int) -> None:
-        self.coef_, self.intercept_ = coef, intercept
-        self.n_iter_ = np.array([n_iter], dtype=np.int32)  # as scikit-learn's
+    Parameters
+    ----------
+    C : float > 0, inverse of the L2 penalty's strength (scikit-learn's ``C``)
+    n_classes : int ≥ 2, ``K``: the labels are class indices ``0…K−1``
 
-    @classmethod
+    Attributes (after :meth:`fit`): ``coef_`` (K, d), ``intercept_`` (K,), ``n_iter_`` (1,).
+    """
+
+    def __init__(self, C: float, n_classes: int) -> None:
+        self.C = C
+        self.n_classes = n_classes
+
     def fit(
-        cls,
+        self,
         Z: np.ndarray,
         y: np.ndarray,
-        K: int,
-        C: float,
         start: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> SoftmaxRegression:
         """The minimum of :func:`softmax_loss` (mean cross-entropy + ``|W|² / (2 C n)``)
         for points ``Z`` (n, d) float64 and class indices ``y`` (n,) in ``0…K−1``, from
         ``start`` (W (K, d), b (K,); default zeros): Newton steps with a backtracking
         line search until no gradient entry exceeds ``_NEWTON_TOL``, the Hessian
-        recomputed only where the last step did not cut the gradient tenfold."""
+        recomputed only where the last step did not cut the gradient tenfold. Returns
+        ``self``."""
+        K, C = int(self.n_classes), float(self.C)
         d = Z.shape[1]
         n, m = len(Z), K * (d + 1)
         Z = np.ascontiguousarray(Z, dtype=np.float64)
@@ -156,7 +162,9 @@ class SoftmaxRegression:
                 factor = None  # an old Hessian's step: try a new one
                 continue
             Wb, f, g, P = trial, f_t, g_t, P_t
-        return cls(Wb[:, :d].copy(), Wb[:, d].copy(), n_iter)
+        self.coef_, self.intercept_ = Wb[:, :d].copy(), Wb[:, d].copy()
+        self.n_iter_ = np.array([n_iter], dtype=np.int32)  # as scikit-learn's
+        return self
 
     def predict_proba(self, Z: np.ndarray) -> np.ndarray:
         """Class probabilities (m, K) float64 of points ``Z`` (m, d)."""

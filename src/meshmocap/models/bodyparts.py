@@ -428,7 +428,7 @@ class BodyPartClassifier:
         elif len(classes) > 2:
             if start is not None:  # world logits W x + b = (W s) z + (b + W μ), z = (x − μ)/s
                 start = (start[0] * scale, start[1] + start[0] @ mean)
-            model = SoftmaxRegression.fit(Z, np.searchsorted(classes, yt), len(classes), C, start)
+            model = SoftmaxRegression(C, len(classes)).fit(Z, np.searchsorted(classes, yt), start)
             self.coef_ = model.coef_ / scale  # the same logits on world coordinates
             self.intercept_ = model.intercept_ - self.coef_ @ mean
         else:

@@ -550,6 +550,12 @@ class _Hyp:
     results: dict[int, FrameResult]
 
 
+def _track_labels(hyps: list[_Hyp]) -> list[str]:
+    """The names the record gives the tracks of a run: the forward track, then each
+    hypothesis by its keyframe and direction."""
+    return ["forward"] + [f"keyframe {y.keyframe} {y.direction}" for y in hyps]
+
+
 class _Run:
     """The pass over one run at a time (:func:`two_way_pass`)."""
 
@@ -783,7 +789,7 @@ class _Run:
         least as well as the frame's own (:meth:`fit_cost`: a limb hung at another trunk
         may stand off the observations); else each limb alone is tried, the best kept. A
         frame whose tracks carry no pose keeps its own limbs."""
-        label = ["forward"] + [f"keyframe {y.keyframe} {y.direction}" for y in hyps]
+        label = _track_labels(hyps)
         out: list[FrameResult] = []
         notes: dict[int, str] = {}
         for t, (r, h) in enumerate(zip(chosen, path.tolist(), strict=True)):
@@ -864,7 +870,7 @@ class _Run:
         (:func:`ambiguous_limbs`); each such frame recorded in ``self.ambiguous``, each
         frame's disagreement in ``self.disagreement``."""
         names = list(LIMB_PARTS)
-        tracks = ["forward"] + [f"keyframe {h.keyframe} {h.direction}" for h in hyps]
+        tracks = _track_labels(hyps)
         out = []
         for t, (r, h) in enumerate(zip(chosen, path.tolist(), strict=True)):
             i = r.index
