@@ -18,9 +18,9 @@ QCA = """<?xml version='1.0' encoding='ASCII'?>
       <transform r11="0.0" r12="1.0" r13="0.0" r21="0.0" r22="0.0" r23="1.0"
                  r31="1.0" r32="0.0" r33="0.0" x="3000.0" y="0.0" z="1000.0"/>
       <intrinsic centerPointU="21504.0" centerPointV="15872.0" focalLengthU="38400.0"
-                 focalLengthV="38464.0" radialDistortion1="-3.2" radialDistortion2="0.64"
-                 radialDistortion3="0.0" tangentalDistortion1="0.064"
-                 tangentalDistortion2="-0.032" skew="0.0"/>
+                 focalLengthV="38464.0" radialDistortion1="-0.05" radialDistortion2="0.01"
+                 radialDistortion3="0.0" tangentalDistortion1="0.001"
+                 tangentalDistortion2="-0.0005" skew="0.0"/>
     </camera>
   </cameras>
 </calibration>
@@ -32,7 +32,8 @@ def test_qualisys_reads_the_studio_convention(tmp_path):
     path.write_text(QCA)
     (cam,) = read_calibration(path)
     assert cam.name == "cam07" and (cam.width, cam.height) == (640, 472)
-    # sub-pixel units / 64, principal point shifted by the window's corner (16, 8)
+    # sub-pixel units / 64, principal point shifted by the window's corner (16, 8);
+    # the distortion as it stands (normalised coordinates, as OpenCV's)
     np.testing.assert_allclose(cam.K, [[600.0, 0, 320.0], [0, 601.0, 240.0], [0, 0, 1]])
     np.testing.assert_allclose(cam.dist, [-0.05, 0.01, 0.001, -0.0005, 0.0])
     np.testing.assert_allclose(cam.centre, [3.0, 0.0, 1.0], atol=1e-12)
@@ -162,6 +163,8 @@ def test_pose2sim_demo_reprojects_after_round_trips(shared_data, tmp_path):
     cams = read_calibration(path)
     assert [c.name for c in cams] == ["cam01", "cam02", "cam03", "cam04"]
     assert all(c.shape == (1920, 1088) for c in cams)
+    # the lens' distortion, of the magnitude the same cameras' charuco calibration gives
+    assert all(-0.06 < c.dist[0] < -0.03 and 0.1 < c.dist[1] < 0.2 for c in cams)
     X = _volume(half=0.5)  # a person's volume over the plate
     for c in cams:  # the volume is in front of every camera and mostly in its image
         uv, depth = c.project(X)

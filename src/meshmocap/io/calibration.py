@@ -12,9 +12,13 @@ calibration defines it):
     in millimetres), an ``<intrinsic>`` in sub-pixel units (64 per pixel: focal lengths,
     principal point, skew) with radial and tangential distortion, and ``<fov_video>`` (the
     pixel window of the video image, which gives the image size and shifts the principal
-    point). The conversion is Pose2Sim's (``calib_qca_fun``, Pagnon et al. 2022), the
-    reader of the file the Pose2Sim demonstration ships: R = diag(1, −1, −1) · M, the
-    distortion coefficients divided by 64 like the intrinsics.
+    point). The axes are Pose2Sim's (``calib_qca_fun``, Pagnon et al. 2022), the reader
+    of the file the Pose2Sim demonstration ships: R = diag(1, −1, −1) · M. The distortion
+    coefficients are OpenCV's as they stand, on normalised image coordinates: Pose2Sim's
+    converter divides them by 64 like the intrinsics, which leaves ~1/64 of the lens'
+    distortion; the charuco calibration of the same four cameras in the Pose2Sim
+    demonstration (``Calib_scene.toml``) gives k1 −0.03 … −0.05 and k2 0.01 … 0.15, the
+    magnitudes the ``.qca.txt`` holds (−0.046 … −0.048, 0.135 … 0.140).
 ``toml`` (``Calib.toml``)
     Pose2Sim, anipose and FreeMoCap: one table per camera with ``name``, ``size``
     ``[width, height]``, ``matrix`` (3×3), ``distortions`` (4 or 5 numbers), ``rotation``
@@ -197,7 +201,7 @@ def _read_qualisys(path, text: str) -> list[Camera]:
             )
             / _SUBPIXEL
         )
-        dist = np.array([q[k] for k in _Q_DIST]) / _SUBPIXEL  # as Pose2Sim's converter
+        dist = np.array([q[k] for k in _Q_DIST])  # normalised coordinates: not sub-pixels
         R = _FLIP @ M
         cams.append(checked_camera(where, name, K, R, -R @ pos, dist, int(width), int(height)))
     check_unique(path, cams)
@@ -241,7 +245,7 @@ def _qualisys_text(cameras: list[Camera]) -> str:
         pos = c.centre * 1000.0
         rot = " ".join(f'r{a + 1}{b + 1}="{float(M[a, b])!r}"' for a in range(3) for b in range(3))
         xyz = " ".join(f'{k}="{v!r}"' for k, v in zip("xyz", pos.tolist(), strict=True))
-        K, d = c.K * _SUBPIXEL, c.dist * _SUBPIXEL
+        K, d = c.K * _SUBPIXEL, c.dist
         fov = f'bottom="{c.height - 1}" left="0" right="{c.width - 1}" top="0"'
         intr = {
             "centerPointU": K[0, 2],
