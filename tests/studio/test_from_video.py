@@ -9,6 +9,7 @@ from PIL import Image
 from meshmocap.cli import main
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
 from meshmocap.geometry.camera import Camera, intrinsics, look_at
+from meshmocap.geometry.foreground import others_silhouettes
 from meshmocap.geometry.raster import rasterize
 from meshmocap.io.calibration import write_calibration
 from meshmocap.io.cameras import read_cameras
@@ -102,6 +103,12 @@ def test_videos_to_a_capture_folder(tmp_path):
     assert [c.name for c in read_cameras(out / "cameras.json")] == list(truth)
     assert read_meta(out)["fps"] == pytest.approx(30)
     assert _iou(out, truth) > 0.85  # learned background: the ball never stays
+    # consistent at the end: each mask within the outline of the hull of the others (1 cm)
+    for k in (0, 5):
+        masks = [read_mask(out / "silhouettes" / c / f"{k:05d}.png") for c in truth]
+        views = others_silhouettes(masks, _rig(), voxel_size=0.01)
+        for m, v in zip(masks, views, strict=True):
+            assert (m & ~v).sum() <= 0.01 * m.sum()
     again = silhouettes_from_video(videos, calib, out, scale=1.0, show_progress=False)
     assert again.written == 0  # resumes: every frame is there
     compute_hulls(out, voxel_size=0.02, show_progress=False)

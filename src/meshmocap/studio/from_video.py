@@ -19,8 +19,9 @@ differencing lost it, made consistent again, grown where the hull of all the oth
 (1 cm) says a part is and the colour leans to the subject (a part this camera lost:
 :func:`~meshmocap.geometry.foreground.others_silhouettes`), made consistent once more at
 half the voxel (the first passes keep a margin of a voxel's image around the others'
-volume), cleaned (holes filled, small components dropped) and written at the
-calibration's image size.
+volume), trimmed to the outline of the hull of all the other cameras at 1 cm, the
+hull's own voxel (without margin: with ``misses`` 0 only), cleaned (holes filled, small
+components dropped) and written at the calibration's image size.
 Segmentation runs at ``scale`` of the image size (by default about 1000 pixels on the
 longest side: 0.52 for 1920×1080 video) with the cameras scaled to match; the masks are
 resampled to the full size.
@@ -71,7 +72,7 @@ from meshmocap.io.video import IMAGE_SUFFIXES, Footage, find_footage, open_foota
 
 _CODEC_CROP = 16  # largest encoder crop taken for the same image (macroblock size)
 _SEGMENT_PX = 1000  # default segmentation resolution: the longest side, pixels
-_RECOVER_VOXEL = 0.01  # metres: the others' hull that recovers a part one camera lost
+_OTHERS_VOXEL = 0.01  # metres: the others' hull (a part one camera lost; the last trim)
 _MODEL_VERSION = 3  # of the cached backgrounds: 2 adds the colour models, 3 keeps large holes
 
 
@@ -136,8 +137,9 @@ def silhouettes_from_video(
         Voxel edge of the multi-view consistency carving, metres.
     misses : int
         Other cameras that may miss a point the consistency keeps (0: a pixel's ray must
-        meet the hull of all the other cameras; 1 keeps what one camera lost, and the
-        clutter two cameras see).
+        meet the hull of all the other cameras, and the masks are trimmed at last to
+        the outline of that hull at 1 cm; 1 keeps what one camera lost, and the clutter
+        two cameras see, and skips the trim).
     model_frames : int
         Frames sampled (evenly) to learn a background without plate.
     overwrite : bool
@@ -245,7 +247,7 @@ def silhouettes_from_video(
         ]
         masks = consistent_masks(masks, small, voxel_size=voxel_size, misses=misses)
         # a part every other camera sees: lost by this one (its colour evidence weaker)
-        views = others_silhouettes(masks, small, voxel_size=_RECOVER_VOXEL)
+        views = others_silhouettes(masks, small, voxel_size=_OTHERS_VOXEL)
         masks = [
             m if v is None else grow_mask(im, m, models[n][2], threshold=0.0, within=v)
             for im, m, n, v in zip(images, masks, names, views, strict=True)
@@ -253,6 +255,11 @@ def silhouettes_from_video(
         # carved again, finer: the first passes keep a margin of a voxel's image
         fine = max(voxel_size / 2, 0.01)
         masks = consistent_masks(masks, small, voxel_size=fine, misses=misses)
+        if misses == 0:
+            # and trimmed to the outline of the others' hull at the hull's 1 cm: the
+            # margins above keep pixels no other camera confirms
+            views = others_silhouettes(masks, small, voxel_size=_OTHERS_VOXEL)
+            masks = [m if v is None else m & v for m, v in zip(masks, views, strict=True)]
         for cam, m in zip(cams, masks, strict=True):
             m = clean_mask(m, open_px=0, close_px=0)
             empty[cam.name] += not m.any()
