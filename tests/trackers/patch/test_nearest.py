@@ -66,3 +66,23 @@ def test_nearest_points_of_moving_queries_equal_a_new_query():
         step[rng.random(len(X)) < 0.1] *= 30  # a tenth jumps 6 cm
         X = X + step
     assert len(X) < nearest.n_queried < 3 * len(X)
+
+
+def test_nearest_among_is_a_stable_sort_of_the_candidates():
+    """The k nearest candidates by increasing distance, ties (a vertex listed twice, two
+    vertices at one place) in candidate order: a stable sort of each row's distances."""
+    from meshmocap.trackers.patch.kernels import nearest_among
+
+    rng = np.random.default_rng(3)
+    V = rng.normal(size=(200, 3))
+    V[10] = V[11]  # two vertices at one place
+    Y = rng.normal(size=(60, 3))
+    cand = rng.integers(0, 200, size=(60, 16))
+    cand[:, 3] = cand[:, 7]  # a vertex listed twice
+    cand[::2, 0], cand[::2, 5] = 10, 11
+    for k in (1, 8, 16):
+        d, idx = nearest_among(Y, V, cand, k)
+        dist = np.sqrt(np.sum((V[cand] - Y[:, None]) ** 2, axis=2))
+        order = np.argsort(dist, axis=1, kind="stable")[:, :k]
+        assert np.array_equal(idx, np.take_along_axis(cand, order, axis=1))
+        assert np.allclose(d, np.take_along_axis(dist, order, axis=1), rtol=1e-15, atol=0)

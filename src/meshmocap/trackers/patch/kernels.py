@@ -133,23 +133,26 @@ def nearest_among(Y, V, cand, k):
     m, K = cand.shape
     d = np.empty((m, k))
     idx = np.empty((m, k), dtype=np.int64)
-    bd = np.empty(K)
-    bi = np.empty(K, dtype=np.int64)
     for t in range(m):
-        for c in range(K):
+        y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
+        n = 0  # the n nearest so far, sorted, in d[t, :n] (at most k: a candidate not
+        for c in range(K):  # nearer than the k-th so far cannot enter)
             v = cand[t, c]
-            x = V[v, 0] - Y[t, 0]
-            y = V[v, 1] - Y[t, 1]
-            z = V[v, 2] - Y[t, 2]
+            x = V[v, 0] - y0
+            y = V[v, 1] - y1
+            z = V[v, 2] - y2
             dd = np.sqrt(x * x + y * y + z * z)
-            u = c  # insert into the c sorted so far
-            while u > 0 and bd[u - 1] > dd:
-                bd[u], bi[u] = bd[u - 1], bi[u - 1]
+            if n < k:
+                u = n
+                n += 1
+            elif d[t, k - 1] > dd:
+                u = k - 1
+            else:
+                continue
+            while u > 0 and d[t, u - 1] > dd:  # insert after any equal one: candidate order
+                d[t, u], idx[t, u] = d[t, u - 1], idx[t, u - 1]
                 u -= 1
-            bd[u], bi[u] = dd, v
-        for c in range(k):
-            d[t, c] = bd[c]
-            idx[t, c] = bi[c]
+            d[t, u], idx[t, u] = dd, v
     return d, idx
 
 
