@@ -130,7 +130,7 @@ def test_a_timer_records_every_frames_stages_and_changes_no_result(walk, tmp_pat
         # the tracker's stages are parts of the step
         assert sum(rec[f"step.{s}"] for s in STAGES) <= rec["step"] * 1.01 + 1e-4
     # from frame 2 the hull is read and its points derived before the step asks for them
-    assert timer.reads and "points" in timer.derived
+    assert timer.reads and "surface" in timer.derived
     assert "in all" in timer.summary()
 
 

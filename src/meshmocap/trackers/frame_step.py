@@ -125,7 +125,7 @@ def track_frame(
 #: :class:`~meshmocap.estimate.recovery.observe.ObservedFrame`). With a timer, the driver computes
 #: up front those the frame before used (``_read_and_observe``).
 FRAME_READS = ("hull_mesh", "hull")
-FRAME_DERIVED = ("points", "field")
+FRAME_DERIVED = ("surface", "points", "field")
 
 
 def _read_and_observe(timer: StageTimer, raw, frame) -> None:

@@ -356,3 +356,19 @@ def test_classifier_trains_on_points_spread_by_area_not_by_vertices():
     assert np.array_equal(labels, cls[F[faces, bary.argmax(axis=1)]])
     again = surface_training_sample(V, F, cls, seed=3)
     assert all(np.array_equal(a, b) for a, b in zip(again, (faces, bary, labels), strict=True))
+
+
+@pytest.mark.parametrize("max_points", [500, 10**6])
+def test_observations_sample_the_points_with_their_normals(walk, max_points):
+    """A mesh frame's sampled points come with the normals every point has (only the
+    sample's are computed): the frame's points and normals, drawn by the frame's seed."""
+    from meshmocap.estimate.recovery.observe import frame_points
+
+    cap, _ = walk
+    Y, N, _ = PatchTracker(PatchOptions(max_points=max_points)).observations(cap[2])
+    P, NP = frame_points(cap[2])
+    pick = np.arange(len(P))
+    if len(P) > max_points:
+        pick = np.random.default_rng([0, 2]).choice(len(P), max_points, replace=False)
+    np.testing.assert_array_equal(Y, P[pick])
+    np.testing.assert_array_equal(N, NP[pick])

@@ -62,14 +62,20 @@ class ObservedFrame:
         return LazyDistanceGrid(h.occupancy, h.origin, h.voxel_size, pad=pad)
 
     @cached_property
+    def surface(self) -> np.ndarray:
+        """(p, 3) float64: the frame's surface points (mesh vertices or cloud points),
+        metres: :attr:`points` without their normals, for a reader that needs none."""
+        V = np.ascontiguousarray(self.frame.hull_mesh[0], dtype=np.float64)
+        return V.reshape(0, 3) if len(V) == 0 else V
+
+    @cached_property
     def points(self) -> tuple[np.ndarray, np.ndarray]:
         """``(P (p, 3), N (p, 3))``: the frame's surface points (mesh vertices or cloud
-        points), metres, and their outward unit normals (a mesh's vertex normals, a cloud's
-        own or, without, estimated)."""
-        V, F = self.frame.hull_mesh
-        V = np.ascontiguousarray(V, dtype=np.float64)
+        points, :attr:`surface`), metres, and their outward unit normals (a mesh's vertex
+        normals, a cloud's own or, without, estimated)."""
+        V, F = self.surface, self.frame.hull_mesh[1]
         if len(V) == 0:
-            return V.reshape(0, 3), V.reshape(0, 3)
+            return V, V
         if F is not None and len(F):
             return V, vertex_normals(V, np.asarray(F))
         N = getattr(self.frame, "normals", None)

@@ -117,7 +117,7 @@ class Recovery:
 
     def _inputs(self, frame):
         obs = observed(frame)
-        P, _ = obs.points
+        P = obs.surface  # the points alone: their normals are not needed here
         field = obs.field
         masks = obs.silhouettes if obs.cameras else None
         return obs, P, field, obs.cameras, masks

@@ -31,8 +31,9 @@ from meshmocap.body.articulated import MAX_STEP_ANGLE
 from meshmocap.body.joint_regressor import joint_regressor, training_poses
 from meshmocap.body.template import EvalSkeleton, Template
 from meshmocap.errors import FitError
-from meshmocap.estimate.recovery.observe import frame_points
+from meshmocap.estimate.recovery.observe import frame_points, observed
 from meshmocap.geometry.levenberg_marquardt import DAMPING, damped_solve
+from meshmocap.geometry.mesh import vertex_normals_at
 from meshmocap.geometry.rotations import so3_exp, so3_log
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
@@ -291,6 +292,13 @@ class PatchTracker:
         random generator (seeded by frame, so resumed runs repeat exactly)."""
         o = self.opts
         rng = np.random.default_rng([o.seed, frame.index])  # reproducible, also when resumed
+        obs = observed(frame)
+        F = obs.hull_mesh[1]
+        if F is not None and len(F) and len(obs.surface) > o.max_points:
+            # a mesh: the normals of the sampled vertices only (the same values)
+            V = obs.surface
+            pick = rng.choice(len(V), o.max_points, replace=False)
+            return V[pick], vertex_normals_at(V, F, pick), rng
         V, N = frame_points(frame)  # a mesh's vertex normals, a point cloud's own or estimated
         if len(V) > o.max_points:
             pick = rng.choice(len(V), o.max_points, replace=False)
