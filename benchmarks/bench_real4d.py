@@ -14,17 +14,16 @@ while fine" counts frames flagged lost where no true joint error exceeds 100 mm.
 
 Part 2 (``--crane``), the crane archive (../shared/data/meshes/crane, 175 frames, Y up;
 ``--crane-frames`` N: the first N): ``meshmocap track crane.tar.gz --up y --method M
---refine off``, each frame's surface refined as ``--refine R`` would refine it
-(``--refines``: off, on, arap; replayed on the tracked frames), then scored as ``meshmocap
-eval`` scores: the per-vertex error of the tracked first frame's vertices against the
-files, mean over the frames, the first and last fifths (and their ratio: the target is
-≤ 1.5), the worst frame, and the error's parts along the true surface's normal and along
-the surface (tangential: a vertex slid to another point of the body; mean over every 5th
-frame); the output surface refined towards the observations along its normals (``on``),
-as rigidly as possible with its vertices anchored frame to frame (``arap``), and as the
-skeleton's skin leaves it (``off``): one tracking per method (the refinement never feeds
-back into the tracker), the refinement's seconds per frame (median) added to the
-tracker's.
+--refine R`` (``--refines``: off, on, arap; ``arap`` is the default path), then scored as
+``meshmocap eval`` scores: the per-vertex error of the tracked first frame's vertices
+against the files, mean over the frames, the first and last fifths (and their ratio: the
+target is ≤ 1.5), the worst frame, and the error's parts along the true surface's normal
+and along the surface (tangential: a vertex slid to another point of the body; mean over
+every 5th frame); the output surface refined towards the observations along its normals
+(``on``), as rigidly as possible with its vertices anchored frame to frame (``arap``: the
+skeleton is then held with the frame before's refined surface), and as the skeleton's skin
+leaves it (``off``): one tracking per method and refinement, its seconds per frame
+(median, frame 0 left out).
 
 Part 3 (``--clean4d``), a synthetic clean 4D capture: the synthetic walk's true surfaces
 (the performer's own connectivity) as a folder of PLY meshes, tracked like the crane
@@ -52,25 +51,19 @@ import contextlib
 import io
 import os
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from meshmocap.analysis.evaluate import evaluate
-from meshmocap.body.light import bound_vertices, tracking_body
 from meshmocap.body.pose_fit import pose_from_surface
 from meshmocap.cli import main
-from meshmocap.estimate.recovery.observe import observed
 from meshmocap.geometry.mesh import vertex_normals
-from meshmocap.geometry.refine import ArapRefiner, SurfaceRefiner
 from meshmocap.io.capture import Capture
 from meshmocap.io.meshes import write_mesh
 from meshmocap.io.results import (
     open_tracked_capture,
-    read_frame_arrays,
-    read_light_binding,
     read_track,
     tracked_template,
 )
@@ -162,20 +155,19 @@ def _finite(f, x: np.ndarray, **kw):
 
 
 def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]) -> list[list]:
-    """Each method of ``--crane-methods`` tracked on the mesh files ``source`` (``--refine
-    off``), its output surface refined each way of ``--refines`` (:func:`refined`), and
-    scored per vertex against the files (module docstring, part 2)."""
+    """Each method of ``--crane-methods`` tracked on the mesh files ``source`` with each
+    ``--refine`` of ``--refines``, and scored per vertex against the files (module
+    docstring, part 2)."""
     rows = []
     for method in args.crane_methods:
-        out = work / f"{label}_{method}_refine-off"
-        t0 = time.perf_counter()
-        argv = ["track", str(source), *extra, "--method", method, "--refine", "off"]
-        run([*argv, "--out", str(out)])
-        wall = time.perf_counter() - t0
-        tracked = read_track(out)
-        step = float(np.median(tracked.seconds[1:])) if len(tracked.seconds) > 1 else np.nan
         for refine in args.refines:
-            t, cost = (tracked, 0.0) if refine == "off" else refined(out, tracked, refine)
+            out = work / f"{label}_{method}_refine-{refine}"
+            t0 = time.perf_counter()
+            argv = ["track", str(source), *extra, "--method", method, "--refine", refine]
+            run([*argv, "--out", str(out)])
+            wall = time.perf_counter() - t0
+            t = read_track(out)
+            step = float(np.median(t.seconds[1:])) if len(t.seconds) > 1 else np.nan
             ev = evaluate(t, open_tracked_capture(t.meta), silhouettes=False, surface_frames=0)
             c = ev.correspondence
             if c is None or not len(c.per_frame):
@@ -188,7 +180,7 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
             rows.append(
                 [
                     method,
-                    refine if refine == "off" else f"{refine} ({cost:+.2f} s)",
+                    refine,
                     ev.cage_body or "-",
                     len(per),
                     c.overall.mean,
@@ -199,37 +191,11 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
                     int(c.frames[int(np.argmax(per))]),
                     normal,
                     tangential,
-                    step + cost,
+                    step,
                     wall,
                 ]
             )
     return rows
-
-
-def refined(track_dir: Path, t, refine: str):
-    """The track ``t`` of ``track_dir`` (tracked with ``--refine off``) with each frame's
-    surface refined as ``track --refine REFINE`` refines it (the refinement never feeds
-    back into the tracker: the same frames in order, each refined towards its own
-    observations, the tracked light body's vertices read out onto the template); and the
-    refinement's seconds per frame (median)."""
-    cap = open_tracked_capture(t.meta)
-    pos = {int(f): k for k, f in enumerate(cap.indices)}
-    light = tracking_body(tracked_template(track_dir, t.meta)).light
-    refiner = (
-        SurfaceRefiner(light.F, light.n_vertices)
-        if refine == "on"
-        else ArapRefiner(light.V, light.F)
-    )
-    binding = read_light_binding(track_dir)
-    out, secs = [], []
-    for f in t.frames:
-        V = read_frame_arrays(track_dir, int(f))["vertices"].astype(np.float64)
-        points = observed(cap[pos[int(f)]]).points
-        c0 = time.perf_counter()
-        X = refiner.refine(V, *points, key=int(f))
-        secs.append(time.perf_counter() - c0)
-        out.append(X if binding is None else bound_vertices(binding, X))
-    return replace(t, vertices=np.stack(out)), float(np.median(secs))
 
 
 def surface_split(t, every: int = 5) -> tuple[float, float]:
@@ -423,7 +389,9 @@ def cli() -> None:
         print(table(heads, rows))
         if rows:
             first = args.crane_methods[0]
-            mean, worst = rig_floor(work / f"crane{args.crane_frames}_{first}_refine-off")
+            mean, worst = rig_floor(
+                work / f"crane{args.crane_frames}_{first}_refine-{args.refines[0]}"
+            )
             print(
                 f"\nthe rigged first frame's own skeleton and skinning, posed to each 7th true "
                 f"mesh with known correspondences: {mean:.1f} mm per vertex (worst frame "

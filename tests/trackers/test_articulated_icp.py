@@ -242,3 +242,19 @@ def test_a_frame_that_cannot_be_fitted_raises_fit_error_and_the_driver_coasts(
     assert track.healthy.tolist() == [True, True, True, False, True]
     assert track.messages[3] == "FitError: no compatible correspondences"
     assert np.array_equal(track.joints[3], track.joints[2])  # the last good result repeated
+
+
+def test_held_it_continues_from_the_held_pose_with_its_velocity(walk, template):
+    """On a 4D capture the driver holds the pose (estimate/pose/hold.py): the tracker takes
+    the held pose as its own, its result that pose's skin, and keeps the pose before its
+    last step for the next prediction."""
+    icp = ArticulatedICP(ICPOptions(max_iter=2))
+    icp.init(template, walk[0], walk[0].truth.rotations, walk[0].truth.root)
+    icp.step(walk[1])
+    before = icp.prev
+    R, root = walk[1].truth.rotations, walk[1].truth.root
+    r = icp.hold(walk[1], R, root)
+    np.testing.assert_array_equal(icp.R, R)
+    np.testing.assert_array_equal(icp.root, root)
+    np.testing.assert_allclose(r.vertices, template.pose(R, root).V)
+    assert icp.prev is before

@@ -56,3 +56,29 @@ def test_reasons_and_finiteness():
     assert missing_reason(type("F", (), {"missing": "dropped"})()) == "dropped"
     bad = FrameResult(0, np.full((15, 3), np.nan), np.zeros((4, 3)))
     assert not is_finite_result(bad)
+
+
+def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
+    """The body the hold fits (held_rest) is the refined surface of the frame next to this
+    one, in the pose the holder held that frame in, put back at rest; none where the
+    refiner's last frame is not next to this one or not the holder's."""
+    from meshmocap.body.template import load_template
+    from meshmocap.estimate.pose.hold import SkeletonHold
+    from meshmocap.geometry.refine import ArapRefiner
+    from meshmocap.trackers.frame_step import held_rest
+
+    t = load_template("neutral_5k")
+    holder = SkeletonHold(t, n_model_points=100, iterations=1)
+    refiner = ArapRefiner(t.V, t.F, iterations=1)
+    rng = np.random.default_rng(0)
+    R = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))
+    root = t.skeleton.rest_positions[0] + [0.1, 0.0, 0.0]
+    X = t.pose(R, root).V + rng.normal(scale=0.002, size=t.V.shape)
+    assert held_rest(holder, refiner, 5) is None  # nothing refined yet
+    refiner.last_ = (4, np.zeros_like(X), X)
+    holder.last, holder.key = (R, root), 4
+    np.testing.assert_allclose(held_rest(holder, refiner, 5), X - [0.1, 0.0, 0.0], atol=1e-12)
+    assert held_rest(holder, refiner, 6) is None  # not next to frame 4
+    holder.key = 3
+    assert held_rest(holder, refiner, 5) is None  # held at another frame
+    assert held_rest(holder, None, 5) is None

@@ -37,10 +37,21 @@ the observed surface but the shape of its neighbourhood), or ``sᵢ`` where none
 reach. Alternating the rotations (the local step: the rotation of each vertex's
 neighbourhood, Eq. 6, from a rigid turn's rotation by a few iterations of Müller et al.
 2016) and the vertices (the global step: ``(L + (λ + μ) I) v = b(R) + λ t + μ s``,
-Eq. 9, whose matrix never changes: factorised once) lowers ``E``. The rest shape carries
-the correspondence. Each frame starts from the tracked surface, plus the refinement of
-the frame before it (where that was the last one refined) turned with the skin, and the
-result never feeds back into the tracker.
+Eq. 9, whose matrix never changes: factorised once) lowers ``E``; each global step is
+over-relaxed (``v ← v' + (ω − 1)(v' − v)``, ``1 ≤ ω < 2``), which the slow, smooth part of
+the local–global iteration's error needs.
+
+The rest shape carries the correspondence. Frame to frame (``anchor="previous"``, where
+the frame before was the last one refined) the rest shape is that frame's refined surface:
+a real body's surface 1/30 s later is nearly a rigid turn of each neighbourhood, while
+against the template's rest it is not (muscles, clothes, a skin rigged in another pose):
+anchored to the template, a refinement started from the true surface of a real capture
+slides away from it along the body (``docs/guide/own_capture.rst`` has the measurements).
+Each frame starts from the tracked surface, plus the refinement of the frame before it
+turned with the skin (its share ``keep``: what is given back to the skin each frame bounds
+the chain's drift). The result feeds back into the tracker only through the skeleton's
+hold on 4D captures, which fits the frame before's refined surface
+(:mod:`meshmocap.estimate.pose.hold`).
 
 Frames and units: any frame, metres.
 
@@ -58,12 +69,15 @@ References
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 from scipy.sparse.linalg import cg, splu
 
 from meshmocap._tolerances import UNDERFLOW_FLOOR
+from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import edges_unique, vertex_normals
 from meshmocap.geometry.rotations import cross, so3_exp
@@ -93,6 +107,25 @@ def _graph_laplacian(F: np.ndarray, n: int) -> tuple[np.ndarray, sp.csr_matrix]:
     A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
     A = (A + A.T).tocsr()
     return E, (sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A).tocsr()
+
+
+def _rest_frames(rest: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rest shape ``rest`` (n, 3) as the local step reads it: its edge vectors
+    ``rᵢ − rⱼ`` (e, 3) over ``edges`` (e, 2), each vertex neighbourhood's principal axes
+    (n, 3, 3: widest first; the last, its normal, turned to make a right-handed frame) and
+    the first two over their spread (n, 3, 2): the local step's start
+    (the compiled ``arap_rotations_kernel``)."""
+    a, b = edges.T
+    D = np.ascontiguousarray(rest[a] - rest[b])
+    outer = (D[:, :, None] * D[:, None, :]).reshape(-1, 9)
+    C = np.zeros((len(rest), 9))
+    np.add.at(C, a, outer)
+    np.add.at(C, b, outer)
+    lam, U = np.linalg.eigh(C.reshape(-1, 3, 3))  # ascending
+    U = U[:, :, ::-1].copy()
+    U[:, :, 2] = np.cross(U[:, :, 0], U[:, :, 1])
+    spread = U[:, :, :2] / np.maximum(lam[:, ::-1][:, None, :2], UNDERFLOW_FLOOR)
+    return D, np.ascontiguousarray(spread), np.ascontiguousarray(U)
 
 
 class SurfaceRefiner:
@@ -234,6 +267,15 @@ class ArapRefiner:
         Metres: a vertex and an observed point further apart are not matched.
     max_angle : float
         Degrees: a vertex and an observed point whose normals differ more are not matched.
+    anchor : {"previous", "rest"}
+        The shape each neighbourhood keeps: the frame before's refined surface where that
+        frame was the last one refined (else the rest shape), or always the rest shape.
+    relaxation : float
+        ``ω`` in [1, 2): each global step's over-relaxation (1: none).
+    keep : float
+        In (0, 1]: the share of a frame's refinement (its offset from the skin) that the
+        next frame starts from and keeps as its shape; the rest is given back to the skin,
+        so that what the chain of frames drifts is forgotten at that rate.
 
     Attributes
     ----------
@@ -251,7 +293,16 @@ class ArapRefiner:
         reach: float = 0.05,
         max_angle: float = 60.0,
         search_every: int = 4,
+        anchor: Literal["previous", "rest"] = "previous",
+        relaxation: float = 1.8,
+        keep: float = 0.95,
     ):
+        check_choice("ArapRefiner", "anchor", anchor, ("previous", "rest"))
+        if not (np.isfinite(relaxation) and 1.0 <= relaxation < 2.0):
+            raise InputError(f"ArapRefiner: relaxation must be in [1, 2), found {relaxation!r}")
+        if not (np.isfinite(keep) and 0.0 < keep <= 1.0):
+            raise InputError(f"ArapRefiner: keep must be in (0, 1], found {keep!r}")
+        self.anchor, self.omega, self.keep = anchor, float(relaxation), float(keep)
         rest = np.asarray(rest, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or not np.isfinite(rest).all():
             raise InputError(f"ArapRefiner: rest must be finite (n, 3), found {rest.shape}")
@@ -273,37 +324,28 @@ class ArapRefiner:
         self.lam, self.mu, self.iterations = float(data_weight), float(stiffness), int(iterations)
         self.reach, self.cos = float(reach), float(np.cos(np.radians(max_angle)))
         self.edges_, L = _graph_laplacian(F, n)
-        a, b = self.edges_.T
-        self.rest_edges_ = np.ascontiguousarray(rest[a] - rest[b])  # (e, 3) rᵢ − rⱼ
-        # each rest neighbourhood's principal axes (widest first; the last, its normal,
-        # turned to make a right-handed frame) and the first two over their spread: the
-        # local step's start (arap_rotations_kernel)
-        outer = (self.rest_edges_[:, :, None] * self.rest_edges_[:, None, :]).reshape(-1, 9)
-        C = np.zeros((n, 9))
-        np.add.at(C, a, outer)
-        np.add.at(C, b, outer)
-        lam, U = np.linalg.eigh(C.reshape(n, 3, 3))  # ascending
-        U = U[:, :, ::-1].copy()
-        U[:, :, 2] = np.cross(U[:, :, 0], U[:, :, 1])
-        self.axes_ = np.ascontiguousarray(U)
-        self.spread_ = np.ascontiguousarray(
-            U[:, :, :2] / np.maximum(lam[:, ::-1][:, None, :2], UNDERFLOW_FLOOR)
-        )
+        # (e, 3) rᵢ − rⱼ, and each rest neighbourhood's axes and spread (_rest_frames)
+        self.rest_edges_, self.spread_, self.axes_ = _rest_frames(rest, self.edges_)
         self.factor_ = splu((L + (self.lam + self.mu) * sp.identity(n)).tocsc())
-        #: (key, (n, 3) rest-frame refinement) of the last keyed call, or None
-        self.last_: tuple[int, np.ndarray] | None = None
+        #: (key, (n, 3) rest-frame refinement, (n, 3) refined surface) of the last keyed
+        #: call (the refinement's share ``keep`` of it), or None
+        self.last_: tuple[int, np.ndarray, np.ndarray] | None = None
 
     def rotations(self, V: np.ndarray, *, iterations: int = 4) -> np.ndarray:
         """The local step: each vertex's rotation (n, 3, 3) of its neighbourhood from rest
         to ``V`` (n, 3) (Eq. 6): the rotation maximising ``tr(Rᵀ Aᵢ)``,
         ``Aᵢ = Σ_j (vᵢ − vⱼ)(rᵢ − rⱼ)ᵀ``, from the one a rigid turn would have, by
         ``iterations`` of :func:`rotational_part` (compiled)."""
+        rest = (self.rest_edges_, self.spread_, self.axes_)
+        return self._rotations(V, rest, iterations=iterations)
+
+    def _rotations(self, V: np.ndarray, rest: tuple, *, iterations: int = 4) -> np.ndarray:
+        """:meth:`rotations` from the rest shape ``rest`` (:func:`_rest_frames`)."""
         from meshmocap.geometry._mesh_kernels import arap_rotations_kernel
 
+        D, spread, axes = rest
         V = np.ascontiguousarray(V, dtype=np.float64)
-        return arap_rotations_kernel(
-            V, self.edges_, self.rest_edges_, self.spread_, self.axes_, int(iterations)
-        )
+        return arap_rotations_kernel(V, self.edges_, D, spread, axes, int(iterations))
 
     def refine(
         self, V: np.ndarray, P: np.ndarray, NP: np.ndarray, *, key: int | None = None
@@ -315,7 +357,9 @@ class ArapRefiner:
         (``key ± 1``), the vertices start where that frame's refinement left them with
         respect to the skin: its refinement ``Xᵢ − Vᵢ``, turned with each vertex's
         neighbourhood from the last frame's skin to this one's (the frame-to-frame anchor
-        of what the skin cannot carry). None: from the skin alone."""
+        of what the skin cannot carry); with ``anchor="previous"`` that frame's refined
+        surface is also the rest shape the neighbourhoods keep. None: from the skin alone,
+        the template's rest shape kept."""
         from meshmocap.geometry._mesh_kernels import arap_rhs_kernel
 
         V = np.asarray(V, dtype=np.float64)
@@ -329,7 +373,11 @@ class ArapRefiner:
         if not len(P):
             return S.copy()
         tree = KDTree(P)
+        rest = (self.rest_edges_, self.spread_, self.axes_)
         X, R = S.copy(), Rs
+        if follows and self.anchor == "previous":  # the frame before's surface kept
+            rest = _rest_frames(last[2], self.edges_)
+            R = self._rotations(X, rest)
         for it in range(self.iterations):
             if it % self.search_every == 0:  # each vertex's nearest compatible point
                 N = vertex_normals(X, self.F)
@@ -340,9 +388,11 @@ class ArapRefiner:
             off = np.einsum("ij,ij->i", P[j] - X, NP[j])
             T = np.where(ok[:, None], X + off[:, None] * NP[j], S)
             # Eq. 9: Σ_j ½ (Rᵢ + Rⱼ)(rᵢ − rⱼ)
-            rhs = arap_rhs_kernel(R, self.edges_, self.rest_edges_, self.n)
-            X = self.factor_.solve(rhs + self.lam * T + self.mu * S)
-            R = self.rotations(X)
+            rhs = arap_rhs_kernel(R, self.edges_, rest[0], self.n)
+            Xn = self.factor_.solve(rhs + self.lam * T + self.mu * S)
+            X = Xn + (self.omega - 1.0) * (Xn - X) if it else Xn  # over-relaxed
+            R = self._rotations(X, rest)
         if key is not None:  # the refinement in the skin's rest frame, for the next frame
-            self.last_ = (int(key), np.einsum("nji,nj->ni", Rs, X - V))
+            kept = V + self.keep * (X - V)
+            self.last_ = (int(key), np.einsum("nji,nj->ni", Rs, kept - V), kept)
         return X

@@ -252,6 +252,14 @@ class ArticulatedICP:
         self.prev = (self.R.copy(), self.root.copy())
         return self._result(frame.index, {}, 0)
 
+    def hold(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+        """Continue from the pose ``R`` (J, 3, 3), ``root`` (3,) the driver held against
+        the observations (:mod:`meshmocap.estimate.pose.hold`; 4D captures), keeping the
+        pose before this frame's step for the next prediction."""
+        self.R = np.array(R, dtype=np.float64)
+        self.root = np.array(root, dtype=np.float64)
+        return self._result(frame.index, {}, 0)
+
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore the pose (and the previous one, for prediction) saved with a frame."""
         self.R, self.root = state["R"].astype(np.float64), state["root"].astype(np.float64)

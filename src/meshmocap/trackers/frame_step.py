@@ -96,7 +96,7 @@ def track_frame(
             if not is_finite_result(r):
                 raise FitError("non-finite joints or vertices")
             if holder is not None:
-                r = held(tracker, holder, frame, r)
+                r = held(tracker, holder, frame, r, refiner=refiner, index=index)
             if timer is not None:
                 timer.lap("hold")
             if recovery is not None:
@@ -227,17 +227,40 @@ def recovered(recovery: Recovery, frame, r: FrameResult) -> FrameResult:
     )
 
 
-def held(tracker: Tracker, holder: SkeletonHold, frame, r: FrameResult) -> FrameResult:
+def held(
+    tracker: Tracker,
+    holder: SkeletonHold,
+    frame,
+    r: FrameResult,
+    *,
+    refiner: SurfaceRefiner | ArapRefiner | None = None,
+    index: int | None = None,
+) -> FrameResult:
     """``r`` with the tracker moved onto the pose ``holder`` fits against ``frame``'s
     observed points together with the tracker's surface (:mod:`meshmocap.estimate.pose.hold`),
-    from the pose of that surface; the frame's energies, flags and message are kept."""
+    from the pose of that surface; the frame's energies, flags and message are kept. Where
+    ``refiner`` refined the frame next to ``index`` last, and that frame was held too, the
+    body fitted is its refined surface put back in the rest pose (:func:`held_rest`)."""
     R, root = holder.start(r.vertices, *holder.last)
-    R, root = holder.fit(*frame.points, r.vertices, R, root)
-    holder.last = (R, root)
+    R, root = holder.fit(*frame.points, r.vertices, R, root, rest=held_rest(holder, refiner, index))
+    holder.last, holder.key = (R, root), index
     h = tracker.hold(frame, R, root)
     if not is_finite_result(h):
         raise FitError("non-finite joints or vertices after holding the skeleton")
     return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
+
+
+def held_rest(
+    holder: SkeletonHold, refiner: SurfaceRefiner | ArapRefiner | None, index: int | None
+) -> np.ndarray | None:
+    """The rest surface (n, 3) the frame ``index``'s held pose skins: the refined surface
+    of the frame next to it (``index ± 1``, the refiner's last, an
+    :class:`~meshmocap.geometry.refine.ArapRefiner`'s) in the pose the holder held it in,
+    put back in the rest pose; None where there is none (the template's own surface)."""
+    last = getattr(refiner, "last_", None)
+    if index is None or last is None or holder.key != last[0] or abs(index - last[0]) != 1:
+        return None
+    return holder.unposed(last[2], *holder.last)
 
 
 def _tracker_pose(recovery: Recovery, r: FrameResult) -> tuple[np.ndarray, np.ndarray] | None:

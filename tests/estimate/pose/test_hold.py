@@ -69,3 +69,35 @@ def test_bad_options_are_refused_in_one_line(scene, kw):
     with pytest.raises(InputError, match="SkeletonHold") as e:
         SkeletonHold(scene[0], **kw)
     assert "\n" not in str(e.value)
+
+
+def test_unposed_puts_a_posed_surface_back_in_the_rest_pose(scene):
+    """The template's skin in a pose, put back by the inverse of each vertex's blended
+    transform, is the template's own rest surface."""
+    t, posed, (R, root), _ = scene
+    hold = SkeletonHold(t, n_model_points=200, iterations=1)
+    np.testing.assert_allclose(hold.unposed(posed.V, R, root), t.V, atol=1e-9)
+
+
+def test_a_rest_surface_is_the_body_fitted(scene):
+    """Fitted with the template's own rest surface the pose is the same as without; with
+    the rest surface grown 1 cm along its normals, observations of that body in the true
+    pose hold the true pose."""
+    t, posed, (R, root), _ = scene
+    hold = SkeletonHold(t, n_model_points=400, iterations=3)
+    N = vertex_normals(posed.V, t.F)
+    a = hold.fit(posed.V, N, posed.V, R, root)
+    b = hold.fit(posed.V, N, posed.V, R, root, rest=t.V)
+    np.testing.assert_allclose(a[0], b[0], atol=1e-12)
+    np.testing.assert_allclose(a[1], b[1], atol=1e-12)
+    grown = t.V + 0.01 * vertex_normals(t.V, t.F)
+    sk = t.skeleton
+    from meshmocap.body.skeleton import forward_kinematics
+    from meshmocap.body.skinning import skinning_transforms
+
+    G, P = forward_kinematics(sk, R, root)
+    A = skinning_transforms(G, P, sk.rest_positions)
+    B = np.asarray(t.weights @ A.reshape(len(A), 12)).reshape(-1, 3, 4)
+    Y = np.einsum("nab,nb->na", B[:, :, :3], grown) + B[:, :, 3]  # the grown body posed
+    R1, root1 = hold.fit(Y, vertex_normals(Y, t.F), posed.V, R, root, rest=grown)
+    assert _joint_error(t, R1, root1, posed) < 0.002

@@ -18,9 +18,19 @@ within a reach shrinking over the iterations; the third term an optional pull to
 tracker's surface (its vertex correspondences; off by default: the tracker's surface is
 what slid) and the last a weak pull towards the pose of that surface ``R̂``. The whole
 skinned body is one rigid-per-part shape: a part cannot move along the surface without
-another leaving it. The tracking driver then moves the tracker onto the held pose (its
-``hold`` method, where it has one: the patch tracker re-places its patches on the posed
-template, keeping its velocity; articulated ICP's own pose is such a fit already).
+another leaving it.
+
+The skinned body is the template's own surface, or (``rest``) another rest surface with
+the template's weights: the refined surface of the frame before, moved back to the rest
+pose by the inverse of each vertex's blended transform (:meth:`SkeletonHold.unposed`).
+Far from the template's own pose a skin leaves the body (the template's rig cannot follow
+a real performer's muscles and clothes), and fitted against the observations it slides to
+make up for it; the frame before's surface, where the refinement anchored each vertex to
+its place, is this frame's body one frame of motion away.
+
+The tracking driver then moves the tracker onto the held pose (its ``hold`` method: the
+patch tracker re-places its patches on the posed template, keeping its velocity;
+articulated ICP takes the pose as its own).
 
 Units: metres and radians, world frame Z up.
 
@@ -35,6 +45,8 @@ References
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from pykdtree.kdtree import KDTree
@@ -53,9 +65,12 @@ from meshmocap.body.articulated_system import (
     posed_model,
     rotation_error,
 )
+from meshmocap.body.skeleton import forward_kinematics
+from meshmocap.body.skinning import skinning_transforms
 from meshmocap.body.template import Template
 from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.pose.fit import pose_of_vertices
+from meshmocap.geometry.mesh import vertex_normals
 
 __all__ = ["SkeletonHold"]
 
@@ -89,6 +104,7 @@ class SkeletonHold:
     ----------
     model_ : ArticulatedModel, the fitted points' skinning
     last : (R (J, 3, 3), root (3,)), the last held pose (the driver's; the rest pose at first)
+    key : int or None, the frame number of ``last`` where the driver knows it
     """
 
     def __init__(
@@ -128,11 +144,25 @@ class SkeletonHold:
         )
         #: the last held pose (R, root), where the next frame's start is searched from
         self.last = (np.tile(np.eye(3), (sk.n_joints, 1, 1)), sk.rest_positions[0].copy())
+        #: the frame number of ``last`` (set by the driver; None: not known)
+        self.key: int | None = None
 
     def start(self, V: np.ndarray, R: np.ndarray, root: np.ndarray):
         """The pose (R (J, 3, 3), root (3,)) whose skinning is nearest to the tracker's
         surface ``V`` (n, 3), from ``R``, ``root`` (e.g. the last held pose)."""
         return pose_of_vertices(self.template, V, R, root, model=self.model_)
+
+    def unposed(self, X: np.ndarray, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+        """The rest surface (n, 3) float64 that the template's skinning in the pose ``R``
+        (J, 3, 3), ``root`` (3,) carries onto the surface ``X`` (n, 3) (the template's
+        vertices elsewhere, metres): each vertex moved back by the inverse of its blended
+        transform ``Σ_j w_ij A_j``."""
+        sk = self.template.skeleton
+        G, P = forward_kinematics(sk, np.asarray(R, dtype=np.float64), root)
+        A = skinning_transforms(G, P, sk.rest_positions)  # (J, 3, 4)
+        B = np.asarray(self.template.weights @ A.reshape(len(A), 12)).reshape(-1, 3, 4)
+        X = np.asarray(X, dtype=np.float64)
+        return np.linalg.solve(B[:, :, :3], (X - B[:, :, 3])[..., None])[..., 0]
 
     def fit(
         self,
@@ -141,6 +171,8 @@ class SkeletonHold:
         V: np.ndarray,
         R: np.ndarray,
         root: np.ndarray,
+        *,
+        rest: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The held pose.
 
@@ -150,6 +182,9 @@ class SkeletonHold:
         V : (n, 3) float64, the tracker's surface (the template's vertices), metres
         R : (J, 3, 3) float64, ``root`` (3,): the pose of ``V`` (:meth:`start`), where the
             fit starts and which it is pulled towards
+        rest : (n, 3) float64, optional
+            The rest surface skinned instead of the template's (module docstring; e.g.
+            :meth:`unposed` of the frame before's refined surface), metres.
 
         Returns
         -------
@@ -163,6 +198,12 @@ class SkeletonHold:
         Y = np.ascontiguousarray(Y)
         tree = KDTree(Y)
         sk = self.template.skeleton
+        plan = self.plan_
+        if rest is not None:  # the same points and weights on another rest surface
+            rest = np.asarray(rest, dtype=np.float64)
+            pick = self.model_.sample
+            N0 = vertex_normals(rest, self.template.F)[pick]
+            plan = moment_plan(replace(self.model_, X=rest[pick], N0=N0))
         R_ref = np.array(R, dtype=np.float64)
         R, root = R_ref.copy(), np.array(root, dtype=np.float64)
         target = np.asarray(V, dtype=np.float64)[self.model_.sample]
@@ -172,7 +213,7 @@ class SkeletonHold:
         act, rot = self.active, self.active[3:]
         for it in range(self.iterations):
             d = d0 * (d1 / d0) ** (it / max(self.iterations - 1, 1))
-            posed = posed_model(self.plan_, R, root)
+            posed = posed_model(plan, R, root)
             v, nv = posed.v, posed.n
             cand = dict(k=8, max_distance=d, normal_cos=self.normal_cos)
             i1, k1 = nearest_compatible(tree, NY, v, nv, **cand)  # model → data
@@ -186,8 +227,8 @@ class SkeletonHold:
                 w = np.full(m, self.mu / m)
                 S3, b3, _ = pair_moments(v, idx, target, target, w, "point_to_point")
                 S, b = S + S3, b + b3
-            H, g = normal_equations(self.plan_, posed, S, b)
-            e = rotation_error(self.plan_, posed, R, R_ref)  # (J, 3)
+            H, g = normal_equations(plan, posed, S, b)
+            e = rotation_error(plan, posed, R, R_ref)  # (J, 3)
             H[rot, rot] += self.lam
             g[rot] += self.lam * e.ravel()[rot - 3]
             try:
