@@ -109,18 +109,25 @@ def _graph_laplacian(F: np.ndarray, n: int) -> tuple[np.ndarray, sp.csr_matrix]:
     return E, (sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A).tocsr()
 
 
-def _rest_frames(rest: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _incidence(edges: np.ndarray, n: int) -> sp.csr_matrix:
+    """(n, e) sparse: 1 where a vertex is an end of an edge (``edges`` (e, 2))."""
+    e = np.arange(len(edges))
+    return sp.csr_matrix(
+        (np.ones(2 * len(edges)), (edges.T.ravel(), np.concatenate([e, e]))), shape=(n, len(e))
+    )
+
+
+def _rest_frames(
+    rest: np.ndarray, edges: np.ndarray, incidence: sp.csr_matrix
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rest shape ``rest`` (n, 3) as the local step reads it: its edge vectors
-    ``rᵢ − rⱼ`` (e, 3) over ``edges`` (e, 2), each vertex neighbourhood's principal axes
-    (n, 3, 3: widest first; the last, its normal, turned to make a right-handed frame) and
-    the first two over their spread (n, 3, 2): the local step's start
-    (the compiled ``arap_rotations_kernel``)."""
+    ``rᵢ − rⱼ`` (e, 3) over ``edges`` (e, 2) (``incidence``: :func:`_incidence`), each
+    vertex neighbourhood's principal axes (n, 3, 3: widest first; the last, its normal,
+    turned to make a right-handed frame) and the first two over their spread (n, 3, 2): the
+    local step's start (the compiled ``arap_rotations_kernel``)."""
     a, b = edges.T
     D = np.ascontiguousarray(rest[a] - rest[b])
-    outer = (D[:, :, None] * D[:, None, :]).reshape(-1, 9)
-    C = np.zeros((len(rest), 9))
-    np.add.at(C, a, outer)
-    np.add.at(C, b, outer)
+    C = incidence @ (D[:, :, None] * D[:, None, :]).reshape(-1, 9)  # Σ over each vertex's edges
     lam, U = np.linalg.eigh(C.reshape(-1, 3, 3))  # ascending
     U = U[:, :, ::-1].copy()
     U[:, :, 2] = np.cross(U[:, :, 0], U[:, :, 1])
@@ -325,7 +332,10 @@ class ArapRefiner:
         self.reach, self.cos = float(reach), float(np.cos(np.radians(max_angle)))
         self.edges_, L = _graph_laplacian(F, n)
         # (e, 3) rᵢ − rⱼ, and each rest neighbourhood's axes and spread (_rest_frames)
-        self.rest_edges_, self.spread_, self.axes_ = _rest_frames(rest, self.edges_)
+        self.incidence_ = _incidence(self.edges_, n)
+        self.rest_edges_, self.spread_, self.axes_ = _rest_frames(
+            rest, self.edges_, self.incidence_
+        )
         self.factor_ = splu((L + (self.lam + self.mu) * sp.identity(n)).tocsc())
         #: (key, (n, 3) rest-frame refinement, (n, 3) refined surface) of the last keyed
         #: call (the refinement's share ``keep`` of it), or None
@@ -376,7 +386,7 @@ class ArapRefiner:
         rest = (self.rest_edges_, self.spread_, self.axes_)
         X, R = S.copy(), Rs
         if follows and self.anchor == "previous":  # the frame before's surface kept
-            rest = _rest_frames(last[2], self.edges_)
+            rest = _rest_frames(last[2], self.edges_, self.incidence_)
             R = self._rotations(X, rest)
         for it in range(self.iterations):
             if it % self.search_every == 0:  # each vertex's nearest compatible point
