@@ -32,6 +32,9 @@ import time
 KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     "meshmocap.geometry._mesh_kernels": {
         "normals_at_kernel": ("float64[:, ::1], int64[:, ::1], int64[::1], int64",),
+        "fill_kernel": (
+            "float64[:, ::1], int64[:, ::1], boolean[::1], boolean, float64, boolean[:, ::1]",
+        ),
     },
     "meshmocap.body._articulated_kernels": {
         "posed_kernel": (

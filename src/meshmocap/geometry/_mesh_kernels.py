@@ -125,3 +125,95 @@ def arap_rhs_kernel(R, E, D0, n):  # pragma: no cover - compiled
             b[i, r] += x
             b[j, r] -= x
     return b
+
+
+@njit(cache=True, nogil=True)
+def _maximum(a, b):  # pragma: no cover - compiled
+    """``np.maximum`` of two floats: NaN where either is."""
+    if a != a or b != b:
+        return np.nan
+    return a if a >= b else b
+
+
+@njit(cache=True, nogil=True)
+def _minimum(a, b):  # pragma: no cover - compiled
+    """``np.minimum`` of two floats: NaN where either is."""
+    if a != a or b != b:
+        return np.nan
+    return a if a <= b else b
+
+
+@njit(cache=True, nogil=True)
+def fill_kernel(uv, F, valid, positive, floor, mask):  # pragma: no cover - compiled
+    """Set, in ``mask`` (H, W) bool, the pixel centres covered by the triangles ``F``
+    (m, 3) int64 of 2D vertices ``uv`` (n, 2) float64: the rule and the arithmetic of
+    :func:`~meshmocap.geometry.silhouette.fill_triangles` (its triangles, edge bounds and
+    spans, in the same floating-point operations), a triangle at a time. Skipped: a
+    triangle with a vertex not ``valid`` (n,) bool, or a signed area not finite or not
+    above ``floor`` (in absolute value unless ``positive``)."""
+    H, W = mask.shape
+    m = F.shape[0]
+    ok = np.zeros(m, dtype=np.bool_)
+    top = np.empty(m)
+    bottom = np.empty(m)
+    area = np.empty(m)
+    xmin, xmax = np.inf, -np.inf
+    for f in range(m):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        x0, x1, x2 = uv[i0, 0], uv[i1, 0], uv[i2, 0]
+        y0, y1, y2 = uv[i0, 1], uv[i1, 1], uv[i2, 1]
+        a = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+        if not np.isfinite(a):
+            continue
+        if positive:
+            if not a > floor:
+                continue
+        elif not abs(a) > floor:
+            continue
+        if not (valid[i0] and valid[i1] and valid[i2]):
+            continue
+        t = _maximum(np.ceil(_minimum(_minimum(y0, y1), y2)), 0.0)
+        b = _minimum(np.floor(_maximum(_maximum(y0, y1), y2)), H - 1.0)
+        if not b >= t:
+            continue
+        ok[f], top[f], bottom[f], area[f] = True, t, b, a
+        xmin = min(xmin, _minimum(_minimum(x0, x1), x2))
+        xmax = max(xmax, _maximum(_maximum(x0, x1), x2))
+    if xmin > xmax:  # no triangle
+        return
+    c0 = max(np.ceil(xmin), 0.0)
+    c1 = min(np.floor(xmax), W - 1.0)
+    if c1 < c0:
+        return
+    xs = np.empty(3)
+    ys = np.empty(3)
+    s = np.empty(3)
+    lower = np.empty(3, dtype=np.bool_)
+    upper = np.empty(3, dtype=np.bool_)
+    for f in range(m):
+        if not ok[f]:
+            continue
+        for i in range(3):
+            xs[i], ys[i] = uv[F[f, i], 0], uv[F[f, i], 1]
+        pos = area[f] > 0
+        for i in range(3):  # edge i: vertex i to i + 1 (silhouette._edge_bounds)
+            j = (i + 1) % 3
+            dy = ys[j] - ys[i]
+            s[i] = 0.0 if dy == 0 else (xs[j] - xs[i]) / dy
+            lower[i] = dy < 0 if pos else dy > 0
+            upper[i] = dy > 0 if pos else dy < 0
+        # the first and the last edge of each kind (the same where there is one)
+        lf = 0 if lower[0] else (1 if lower[1] else 2)
+        ll = 2 if lower[2] else (1 if lower[1] else 0)
+        uf = 0 if upper[0] else (1 if upper[1] else 2)
+        ul = 2 if upper[2] else (1 if upper[1] else 0)
+        for r in range(int(bottom[f] - top[f]) + 1):
+            row = top[f] + r
+            left = _maximum(xs[lf] + (row - ys[lf]) * s[lf], xs[ll] + (row - ys[ll]) * s[ll])
+            right = _minimum(xs[uf] + (row - ys[uf]) * s[uf], xs[ul] + (row - ys[ul]) * s[ul])
+            a = _maximum(np.ceil(left), c0)
+            b = _minimum(np.floor(right), c1)
+            if a <= b:
+                y = int(row)
+                for x in range(int(a), int(b) + 1):
+                    mask[y, x] = True

@@ -30,7 +30,6 @@ from meshmocap.geometry.camera import Camera
 
 #: Triangles :func:`fill_triangles` fills: all, or those of positive signed area.
 Orientation = Literal["any", "positive"]
-_CHUNK = 2_000_000  # (triangle, row) pairs per chunk: bounds memory for huge triangles
 #: :func:`covered_pixels` cuts only its pixels' rows up to this many distinct rows, and
 #: fills the whole image beyond (as fast for a 12k-vertex body's ~250 rows at 640×480).
 _FEW_ROWS = 100
@@ -132,30 +131,16 @@ def fill_triangles(
             f"fill_triangles: orientation must be one of {list(get_args(Orientation))}, "
             f"found {orientation!r}"
         )
+    from meshmocap.geometry._mesh_kernels import fill_kernel
+
     H, W = int(shape[0]), int(shape[1])
     mask = np.zeros((H, W), dtype=bool)
-    prep = _prepare(uv, F, H, W, valid, orientation)
-    if prep is None:
-        return mask
-    ids, counts, top, bounds, (r0, r1, c0, c1) = prep
-    bw = c1 - c0 + 2  # one extra column for the -1 after a span that ends at c1
-    size = (r1 - r0 + 1) * bw
-    diff = np.zeros(size, dtype=np.int64)
-    ends = np.cumsum(counts)
-    splits = np.searchsorted(ends, np.arange(_CHUNK, ends[-1], _CHUNK), side="right")
-    for sel in np.split(np.arange(ids.size), splits):
-        if sel.size == 0:
-            continue
-        c = counts[sel]
-        f = np.repeat(sel, c)
-        row = top[f] + (np.arange(f.size) - np.repeat(np.cumsum(c) - c, c))
-        a, b = _spans(bounds, f, row, c0, c1)
-        keep = a <= b
-        base = (row[keep] - r0).astype(np.int64) * bw - c0
-        diff += np.bincount(base + a[keep].astype(np.int64), minlength=size)
-        diff -= np.bincount(base + b[keep].astype(np.int64) + 1, minlength=size)
-    box = np.cumsum(diff.reshape(-1, bw), axis=1)[:, :-1] > 0
-    mask[r0 : r1 + 1, c0 : c1 + 1] = box
+    uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
+    valid = np.ones(len(uv), dtype=bool) if valid is None else valid
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    # a triangle at a time, compiled: the spans _prepare, _edge_bounds and _spans cut
+    fill_kernel(uv, F, valid, orientation == "positive", DIVISOR_FLOOR, mask)
     return mask
 
 
