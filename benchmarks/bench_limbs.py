@@ -36,8 +36,9 @@ more than 150 mm off and the longest such run, the ``lost`` flags' recall on bad
 joint more than 150 mm off) and rate on good ones — as tracked (the shipped rule, fitted on
 every category) and on the categories left out of the rule's fit (``bench_lost.py``'s
 leave-one-category-out fit and scores on the evidence replayed over these tracks; rule
-fitted on the other categories' default-path tracks of both passes, with the two-way
-pass's disagreement as its second part) — and the two-way pass's
+fitted on the other categories' default-path tracks of both passes, its budget held in
+each of them, the two-way pass's disagreement flagged at the rule's fixed thresholds) — and
+the two-way pass's
 seconds against the forward pass's. Trials where patch is less accurate than articulated
 ICP are listed.
 
@@ -340,7 +341,7 @@ def _pct(a: int, b: int) -> str:
 def left_out_flags(rows: list[dict], method: str, passes: str) -> dict:
     """The flags' counts on each category's ``method``/``passes`` tracks by the rule fitted
     without that category (``bench_lost``: on the other categories' tracks of both passes,
-    the disagreement's thresholds on the two-way tracks')."""
+    the budget held in each category)."""
     from bench_lost import GOOD_RATE, rule_of, score
 
     def ev(r: dict) -> dict:

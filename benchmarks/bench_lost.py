@@ -11,24 +11,26 @@ is taken against the truth. A frame is **bad** when a joint is more than 150 mm 
 
 A track of the two-way pass (``<method>-two-way``) also has, per frame it chose, the other
 tracks' disagreement (``track.json``'s ``two_way.disagreement``,
-:data:`~meshmocap.estimate.recovery.evidence.DISAGREEMENT`): the rule's disagreement
-thresholds are fitted with its evidence thresholds, on the same frames.
+:data:`~meshmocap.estimate.recovery.evidence.DISAGREEMENT`): a frame is flagged where it
+passes the rule's disagreement thresholds, fixed at the bad-frame criterion
+(:data:`~meshmocap.estimate.recovery.evidence.DISAGREE`), and those flags count against
+the evidence's budget.
 
 Leave one category out: for each motion category (``bench_limbs.TRIALS``), the rule's
 thresholds are fitted (:func:`~meshmocap.estimate.recovery.evidence.fit_rule`) on the frames
-of the other categories only and scored on that category's frames; the table gives, per
+of the other categories only, the budget of good frames flagged (``--good-rate``) held in
+each of them (``fit_rule``'s ``groups``: a margin for the category left out), and scored
+on that category's frames; the table gives, per
 left-out category and over all, the share of bad frames flagged (recall), the share of
 good frames flagged, and the thresholds fitted. The rule is held over ``--frames`` frames in
 a row (default: the shipped rule's, :attr:`~meshmocap.estimate.recovery.evidence.LostRule.frames`):
 its thresholds are fitted to the evidence held so. Targets: ≥ 90 % of bad frames
 flagged, ≤ 5 % of good frames flagged. The rule shipped
 (``meshmocap/estimate/recovery/data/lost_rule.json``) is fitted on all the frames
-(``--write``), after the left-out scores are reported; ``--keep-evidence``: only its
-disagreement thresholds are fitted, the shipped evidence thresholds kept (the forward
-pass's flags, and so the two-way pass's runs, stay as they are).
+(``--write``), after the left-out scores are reported.
 
 Run: ``python benchmarks/bench_lost.py --tracks WORK/tracks --captures WORK/captures
-[--subjects DIR] [--paths default two-way] [--good-rate 0.04] [--write [--keep-evidence]]``
+[--subjects DIR] [--paths default two-way] [--good-rate 0.04] [--write]``
 (``WORK``: a ``bench_limbs.py --work`` folder). Per-track evidence is read from
 ``bench_limbs``'s replay beside each track where there is one, else computed and cached in
 ``--work`` (``evidence-<capture>-<track>.npz``).
@@ -209,23 +211,22 @@ def as_tracked(rows: list[dict]) -> dict:
     )
 
 
-def rule_of(
-    rows: list[dict], good_rate: float, frames: int = FRAMES, keep: LostRule | None = None
-) -> LostRule:
-    """The rule fitted on ``rows`` (their evidence and disagreement; ``keep``: only the
-    disagreement's thresholds, :func:`~meshmocap.estimate.recovery.evidence.fit_rule`)."""
+def rule_of(rows: list[dict], good_rate: float, frames: int = FRAMES) -> LostRule:
+    """The rule fitted on ``rows`` (their evidence, the budget held in each of their
+    categories; their disagreement flagged at the fixed thresholds,
+    :func:`~meshmocap.estimate.recovery.evidence.fit_rule`)."""
     return fit_rule(
         [r["evidence"] for r in rows],
         [(r["error"] > BAD_MM).any(axis=1) for r in rows],
         good_rate=good_rate,
         frames=frames,
+        groups=[r["category"] for r in rows],
         disagreement=[
             r["disagreement"]
             if r.get("disagreement") is not None
             else np.zeros((len(r["evidence"]), len(DISAGREEMENT)))
             for r in rows
         ],
-        keep=keep,
     )
 
 
@@ -248,11 +249,6 @@ def main() -> None:
         "--frames", type=int, default=FRAMES, help="frames in a row the rule holds a measure"
     )
     ap.add_argument("--write", action="store_true", help="ship the rule fitted on all frames")
-    ap.add_argument(
-        "--keep-evidence",
-        action="store_true",
-        help="fit and ship only the disagreement's thresholds, the shipped evidence's kept",
-    )
     args = ap.parse_args()
     args.subjects = args.subjects or [str(Path(t).parent / "subjects") for t in args.tracks]
     rows = gather(args)
@@ -278,9 +274,7 @@ def main() -> None:
     by_method = {}
     for r in rows:
         by_method.setdefault(r["method"], []).append(r)
-    full = rule_of(
-        rows, args.good_rate, args.frames, shipped_rule() if args.keep_evidence else None
-    )
+    full = rule_of(rows, args.good_rate, args.frames)
     print(f"\nfitted on all frames: {full.describe()}; in-sample per tracker:")
     for m, rs in sorted(by_method.items()):
         s = score(full, rs)
@@ -295,9 +289,6 @@ def main() -> None:
             f"{len(rows)} tracks ({', '.join(sorted(by_method))}; {', '.join(args.paths)}), "
             f"{n_frames} frames, categories {', '.join(cats)}"
         )
-        if args.keep_evidence:
-            old = json.loads(RULE_FILE.read_text()).get("note", "")
-            note = f"disagreement thresholds {note}; evidence thresholds kept: {old}"
         full.write(RULE_FILE, note=note)
         print(f"wrote {RULE_FILE}")
 

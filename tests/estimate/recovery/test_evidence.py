@@ -6,8 +6,11 @@ import pytest
 
 from meshmocap.errors import FormatError, InputError
 from meshmocap.estimate.recovery.evidence import (
+    DISAGREE,
     DISAGREEMENT,
     EVIDENCE,
+    FITTED,
+    START,
     LostRule,
     fit_rule,
     lost_limbs,
@@ -100,17 +103,26 @@ def test_fit_rule_flags_bad_frames_within_the_budget_of_good_ones():
     bad = rng.random(n) < 0.1
     k = EVIDENCE.index("speed")
     E[bad, 2, k] += 0.3  # bad frames: a limb that jumped, and noise on the rest
-    rule = fit_rule([E[:1000], E[1000:]], [bad[:1000], bad[1000:]], good_rate=0.02)
+    tracks = dict(evidence=[E[:1000], E[1000:]], bad=[bad[:1000], bad[1000:]], good_rate=0.02)
+    rule = fit_rule(**tracks, measures=EVIDENCE)
     f = rule.flags(E)
     assert np.count_nonzero(f & ~bad) <= 0.02 * np.count_nonzero(~bad)
     assert np.count_nonzero(f & bad) >= 0.95 * np.count_nonzero(bad)
     assert np.isfinite(rule.thresholds[k])
+    assert "speed" not in FITTED and fit_rule(**tracks).thresholds[k] == np.inf  # default
+    # a limb mostly outside the observations is lost whatever the fit sees (START)
+    assert rule.thresholds[EVIDENCE.index("outside")] == START["outside"] == 0.9
+    only = fit_rule(**tracks, measures=("speed",), start={})
+    assert only.thresholds[EVIDENCE.index("outside")] == np.inf and only.thresholds[k] < 0.3
+    assert "left_arm" in lost_limbs(_evidence(left_arm={"outside": 0.95}))  # shipped
+    with pytest.raises(InputError, match=r"must be among .*found pace"):
+        fit_rule(**tracks, measures=("speed", "pace"))
 
 
-def test_fit_rule_fits_the_disagreement_where_the_evidence_cannot_see_a_bad_frame():
+def test_fit_rule_counts_the_fixed_disagreement_against_the_budget():
     """Bad frames whose evidence is clean but where another track places a limb 300 mm off
-    (a limb wrong inside the hull): the disagreement's threshold is fitted to them, between
-    the good frames' disagreement and theirs; kept evidence thresholds stay as given."""
+    (a limb wrong inside the hull) are flagged by the disagreement at its fixed thresholds,
+    not fitted; the good frames it flags leave less of the budget to the evidence."""
     rng = np.random.default_rng(2)
     n = 2000
     E = np.abs(rng.normal(0.0, 0.01, (n, len(LIMB_PARTS), len(EVIDENCE))))
@@ -119,13 +131,38 @@ def test_fit_rule_fits_the_disagreement_where_the_evidence_cannot_see_a_bad_fram
     D[:, 1] = rng.uniform(0.0, 0.12, n)  # good frames: the tracks within 120 mm
     D[bad, 1] = rng.uniform(0.25, 0.4, bad.sum())
     rule = fit_rule([E], [bad], good_rate=0.02, disagreement=[D])
-    assert rule.disagree[0] == np.inf and 0.12 <= rule.disagree[1] < 0.25
+    assert rule.disagree == DISAGREE == (0.15, 0.15)
     assert rule.disagrees(D).tolist() == bad.tolist()
-    kept = LostRule((np.inf, np.inf, 0.5, np.inf, np.inf, np.inf), frames=2)
-    again = fit_rule([E], [bad], good_rate=0.02, disagreement=[D], keep=kept)
-    assert again.thresholds == kept.thresholds and again.frames == 2
-    assert again.disagree == rule.disagree
-    assert fit_rule([E], [bad], good_rate=0.02).disagree == (np.inf, np.inf)
+    assert rule.thresholds == (0.9,) + (np.inf,) * (len(EVIDENCE) - 1)  # none left for them
+    # 1.5 % of the good frames disagree too: only 0.5 % left for the evidence
+    k = EVIDENCE.index("unexplained")
+    E[bad, 0, k] += rng.uniform(0.0, 0.05, bad.sum())  # the more budget, the more flagged
+    D[rng.choice(np.flatnonzero(~bad), int(0.015 * np.count_nonzero(~bad)), replace=False), 0] = 1
+    kept = fit_rule([E], [bad], good_rate=0.02, disagreement=[D], disagree=(0.5, np.inf))
+    f = kept.flags(E) | kept.disagrees(D)
+    assert kept.disagree == (0.5, np.inf) and np.isfinite(kept.thresholds[k])
+    assert np.count_nonzero(f & ~bad) <= 0.02 * np.count_nonzero(~bad)
+    alone = fit_rule([E], [bad], good_rate=0.02)
+    assert kept.thresholds[k] > alone.thresholds[k]
+
+
+def test_fit_rule_holds_the_budget_in_each_group():
+    """Good frames of one category (group) pass a threshold the pooled budget affords but
+    that category's does not: with the groups given, the fit does not take it."""
+    rng = np.random.default_rng(3)
+    n = 1000
+    k = EVIDENCE.index("outside")
+    E = [np.abs(rng.normal(0.0, 0.01, (n, len(LIMB_PARTS), len(EVIDENCE)))) for _ in range(3)]
+    bad = [rng.random(n) < 0.05 for _ in range(3)]
+    for e, b in zip(E, bad, strict=True):
+        e[b, 1, k] += rng.uniform(0.3, 0.9, b.sum())  # the lower, the more flagged
+    # category "c": 8 % of its good frames have a limb 60 % outside (2.7 % of all)
+    E[2][rng.choice(np.flatnonzero(~bad[2]), int(0.08 * np.count_nonzero(~bad[2]))), 1, k] = 0.6
+    pooled = fit_rule(E, bad, good_rate=0.04)
+    grouped = fit_rule(E, bad, good_rate=0.04, groups=["a", "b", "c"])
+    assert pooled.thresholds[k] < 0.6 <= grouped.thresholds[k]
+    c = grouped.flags(E[2]) & ~bad[2]
+    assert np.count_nonzero(c) <= 0.04 * np.count_nonzero(~bad[2])
 
 
 def test_fit_rule_held_over_frames_leaves_one_frame_spikes_of_good_frames_alone():

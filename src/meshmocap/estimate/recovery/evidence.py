@@ -25,14 +25,17 @@ lost; a lost limb stays lost for many frames. The rule ships as data
 (``data/lost_rule.json``, :data:`RULE_FILE`), fitted by ``benchmarks/bench_lost.py``
 (:func:`fit_rule`) on tracks of the pose library's motions by every tracker, and scored
 there leaving each motion category out of the fit in turn; the file's ``note`` says on
-which tracks it was fitted.
+which tracks it was fitted. The fit gives thresholds only to the measures of
+:data:`FITTED` and keeps its budget of good frames flagged in every motion category it
+sees, so that the rule holds on one it has not seen; the disagreement's thresholds are
+fixed (:data:`DISAGREE`).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -43,10 +46,12 @@ from meshmocap.errors import FormatError, InputError
 from meshmocap.estimate.recovery.quality import LIMB_PARTS
 
 __all__ = [
+    "DISAGREE",
     "DISAGREEMENT",
-    "DISAGREEMENT_GRID",
     "EVIDENCE",
+    "FITTED",
     "RULE_FILE",
+    "START",
     "LostRule",
     "fit_rule",
     "lost_limbs",
@@ -61,8 +66,22 @@ EVIDENCE = ("outside", "buried", "unexplained", "unseen", "residual", "speed")
 #: disagreement array: ``forward`` — to the forward track, where the rule does not flag that
 #: track's frame; ``keyframe`` — to a keyframe's track, on the limbs the rule passes there.
 DISAGREEMENT = ("forward", "keyframe")
-#: Metres: the candidate thresholds of the disagreement measures (:func:`fit_rule`).
-DISAGREEMENT_GRID = tuple(np.round(np.arange(0.1, 0.8001, 0.025), 3))
+#: Metres: the disagreement thresholds of a fitted rule, both measures (:func:`fit_rule`):
+#: the bad-frame criterion itself. Another track the evidence does not rule out places a
+#: joint of the limb this far from the chosen one: one of the two is wrong by about that
+#: much, and the evidence cannot say which. Fixed, not fitted: fitted, the threshold
+#: follows the few bad frames left after the pass in the categories it saw.
+DISAGREE = (0.15, 0.15)
+#: The measures of :data:`EVIDENCE` a fitted rule gives thresholds (:func:`fit_rule`): the
+#: fit to the observations. The others (``buried``, ``unseen``, ``residual``, ``speed``)
+#: depend on the motion (arms held against the trunk are buried in the hull) and, fitted,
+#: flag good frames of a category the fit has not seen.
+FITTED = ("outside", "unexplained")
+#: The thresholds a fitted rule starts from, which the fit may only lower (:func:`fit_rule`):
+#: a limb with more than 90 % of its vertices outside the observed solid is lost whatever
+#: the tracks it is fitted on show (a visual hull contains the body; a limb the
+#: observations miss, held where they do not show it, stands outside it).
+START = {"outside": 0.9}
 #: The shipped rule's file (in the package).
 RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "lost_rule.json"))
 
@@ -229,14 +248,18 @@ def fit_rule(
     good_rate: float = 0.04,
     quantiles: np.ndarray | None = None,
     frames: int = 1,
+    measures: Sequence[str] = FITTED,
+    groups: Sequence[str] | None = None,
     disagreement: list[np.ndarray] | None = None,
-    keep: LostRule | None = None,
+    disagree: Sequence[float] = DISAGREE,
+    start: dict[str, float] = START,
 ) -> LostRule:
     """Thresholds that flag as many bad frames as possible while flagging at most
-    ``good_rate`` of the good frames: greedily, the measure and threshold (a quantile of
-    that measure's frame maximum over the good frames; for a disagreement measure, one of
-    :data:`DISAGREEMENT_GRID`) that flags the most bad frames not yet flagged per good frame
-    newly flagged, within the budget, until none adds any.
+    ``good_rate`` of the good frames: greedily, the measure of ``measures`` and threshold
+    (a quantile of that measure's frame maximum over the good frames) that flags the most
+    bad frames not yet flagged per good frame newly flagged, within the budget, until none
+    adds any. The disagreement's thresholds are not fitted: ``disagree`` (the frames they
+    flag count against the budget).
 
     Parameters
     ----------
@@ -246,44 +269,57 @@ def fit_rule(
     quantiles : (q,) float, candidate quantiles of the good frames' values
     frames : int, the rule's frames in a row (:attr:`LostRule.frames`): the thresholds
         are fitted to the evidence held over that many frames (:meth:`LostRule.sequence`)
+    measures : sequence of str, the measures of :data:`EVIDENCE` given a threshold (the
+        others stay ``inf``; default :data:`FITTED`)
+    groups : sequence of str, optional, one per track (its motion category): the budget
+        then holds in every group, the share of each group's good frames flagged at most
+        ``good_rate`` (a margin for a group the fit has not seen: a threshold that only
+        the pooled frames afford, spent on one group, is not taken)
     disagreement : list of (T, D) float64, metres, optional
         Each track's disagreement per frame (:data:`DISAGREEMENT`; zeros on a forward
-        track): its thresholds are fitted too (else they stay ``inf``).
-    keep : LostRule, optional
-        Keep this rule's evidence thresholds and frames, fit only the disagreement's (the
-        good frames it flags count against the budget).
+        track, the default)
+    disagree : sequence of float, metres, the rule's disagreement thresholds, one per
+        :data:`DISAGREEMENT` measure (default :data:`DISAGREE`)
+    start : dict of measure → float, the thresholds the fit starts from and may only lower
+        (default :data:`START`; the other measures start at ``inf``)
 
     Returns
     -------
     LostRule
     """
-    if keep is not None:
-        frames = keep.frames
-    hold = LostRule((np.inf,) * len(EVIDENCE), frames)
+    unknown = sorted((set(measures) | set(start)) - set(EVIDENCE))
+    if unknown:
+        raise InputError(
+            f"fit_rule: measures (and start) must be among {', '.join(EVIDENCE)}, "
+            f"found {', '.join(unknown)}"
+        )
+    if groups is not None and len(groups) != len(evidence):
+        raise InputError(
+            f"fit_rule: expected one group per track ({len(evidence)}), found {len(groups)}"
+        )
+    hold = LostRule((np.inf,) * len(EVIDENCE), frames, tuple(float(t) for t in disagree))
     D = len(DISAGREEMENT)
     if disagreement is None:
         disagreement = [np.zeros((len(e), D)) for e in evidence]
-    # (N, E + D): worst limb per frame, of the evidence the rule reads, and the disagreement
-    X = np.concatenate(
-        [
-            np.hstack([hold.sequence(e).max(axis=1), np.asarray(d, np.float64).reshape(-1, D)])
-            for e, d in zip(evidence, disagreement, strict=True)
-        ]
+    # (N, E): worst limb per frame, of the evidence the rule reads
+    X = np.concatenate([hold.sequence(e).max(axis=1) for e in evidence])
+    far = np.concatenate(
+        [hold.disagrees(np.asarray(d, np.float64).reshape(-1, D)) for d in disagreement]
     )
     y = np.concatenate(bad).astype(bool)
+    groups = [""] * len(evidence) if groups is None else list(groups)
+    names = sorted(set(groups))
+    g = np.repeat([names.index(k) for k in groups], [len(e) for e in evidence])
+    n_good = np.maximum(np.bincount(g[~y], minlength=len(names)), 1)
     q = np.linspace(0.9, 1.0, 101) if quantiles is None else np.asarray(quantiles)
     good = X[~y]
-    E = len(EVIDENCE)
     candidates = [
-        np.unique(np.quantile(good[:, k], q)) if len(good) and keep is None else np.empty(0)
-        for k in range(E)
-    ] + [np.asarray(DISAGREEMENT_GRID)] * D
-    th = np.full(X.shape[1], np.inf)
-    if keep is not None:
-        th[:E] = keep.thresholds
-    budget = good_rate * max(len(good), 1)
+        np.unique(np.quantile(good[:, k], q)) if len(good) and m in measures else np.empty(0)
+        for k, m in enumerate(EVIDENCE)
+    ]
+    th = np.array([start.get(m, np.inf) for m in EVIDENCE], dtype=np.float64)
     while True:
-        flagged = (th < X).any(axis=1)
+        flagged = far | (th < X).any(axis=1)
         bad0, good0 = np.count_nonzero(flagged & y), np.count_nonzero(flagged & ~y)
         best, gain = None, 0.0
         for k in range(X.shape[1]):
@@ -291,15 +327,13 @@ def fit_rule(
                 if t >= th[k]:
                     continue
                 f = flagged | (X[:, k] > t)
-                new_good = np.count_nonzero(f & ~y) - good0
-                if good0 + new_good > budget:
+                spent = np.bincount(g[f & ~y], minlength=len(names)) / n_good
+                if spent.max() > good_rate:
                     continue
                 new_bad = np.count_nonzero(f & y) - bad0
-                score = new_bad / (new_good + 1.0)
+                score = new_bad / (np.count_nonzero(f & ~y) - good0 + 1.0)
                 if new_bad > 0 and score > gain:
                     best, gain = (k, t), score
         if best is None:
-            return LostRule(
-                tuple(float(v) for v in th[:E]), frames, tuple(float(v) for v in th[E:])
-            )
+            return replace(hold, thresholds=tuple(float(v) for v in th))
         th[best[0]] = best[1]
