@@ -24,8 +24,9 @@ temporary folder): the capture in a folder named after a digest of the code that
 (studio, geometry, body and io sources), the estimates in its cache, keyed by their own
 code (:mod:`meshmocap.estimate.capture_cache`). A re-run reuses them while that code is
 unchanged (the body estimate is most of a first run: about 4 minutes on 2 cores) and
-remakes them when it changed; the tracks are made afresh every run. It prints the wall and CPU time
-it took and the load.
+remakes them when it changed; the tracks are made afresh every run. It runs on the BLAS
+threads the demo command runs on (one, unless ``MESHMOCAP_THREADS`` says otherwise). It prints
+the wall and CPU time it took and the load.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ import time
 from pathlib import Path
 
 import meshmocap
+from meshmocap._threads import blas_threads
 from meshmocap.apps.demo import DEMO_METHODS, demo_spec, demo_tracks
 from meshmocap.studio.synth import synthesize
 
@@ -160,7 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     t0, c0 = time.perf_counter(), time.process_time()
     print(f"demo guard: meshmocap {meshmocap.__version__} at {commit()}; load {os.getloadavg()}")
     args.work.mkdir(parents=True, exist_ok=True)
-    figures = demo_figures(args.work, tuple(args.methods))
+    with blas_threads():  # as the demo command runs (meshmocap.cli)
+        figures = demo_figures(args.work, tuple(args.methods))
     record = json.loads(RECORD.read_text()) if RECORD.exists() else {}
     status, lines = verdict(figures, record, args.tolerance)
     if record:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import spearmanr
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from meshmocap.apps.figures.latent import plot_latent_space
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
@@ -160,6 +161,31 @@ def test_deterministic_with_random_state():
     assert not np.array_equal(a.X_, c.X_)
     r1, r2 = GPLVM(2, max_iter=40).fit(Y), GPLVM(2, max_iter=40).fit(Y)
     np.testing.assert_array_equal(r1.X_, r2.X_)
+
+
+def test_fit_runs_on_one_blas_thread_whatever_the_callers(monkeypatch):
+    # other thread counts sum in another order: over hundreds of L-BFGS-B iterations the
+    # last bits carry the fit to another optimum, so the fit pins one thread itself
+    import meshmocap.models.gplvm as gplvm_module
+
+    def blas():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    seen = []
+    real = gplvm_module.minimize
+
+    def spy(*args, **kwargs):
+        seen.append(blas())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(gplvm_module, "minimize", spy)
+    _, Y = curve(n=30, d=8)
+    with threadpool_limits(2):
+        before = blas()
+        GPLVM(2, max_iter=5).fit(Y)
+        after = blas()
+    assert seen and seen[0] and all(n == 1 for n in seen[0])
+    assert after == before  # the caller's setting is back
 
 
 # -- contract, validation, persistence ---------------------------------------------------------

@@ -67,6 +67,7 @@ from typing import Literal, get_args
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
 
 from meshmocap._atomic import atomic_open
 from meshmocap._npz import read_npz
@@ -353,7 +354,19 @@ class GPLVM:
         -------
         GPLVM
             self, with the fitted attributes set.
+
+        Notes
+        -----
+        The fit runs on one BLAS thread whatever the caller's setting: hundreds of L-BFGS-B
+        iterations carry the last-bit differences between thread counts' sums to another
+        optimum, so a fit is reproducible wherever it runs (a fitted model is cached
+        under a key that knows nothing of threads).
         """
+        with threadpool_limits(1):
+            return self._fit(Y)
+
+    def _fit(self, Y: np.ndarray) -> GPLVM:
+        """:meth:`fit`, inside its one-thread block."""
         Y = _check_rows("GPLVM.fit", "Y", Y, None)
         N, D = Y.shape
         self._check_options(N, D)

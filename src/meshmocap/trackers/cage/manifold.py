@@ -85,6 +85,10 @@ ON_THE_FLY_MAX_ITER = 300
 #: Environment variable naming the folder where learned default manifolds are cached
 #: (default ``$XDG_CACHE_HOME/meshmocap`` or ``~/.cache/meshmocap``; ``off``: no cache).
 CACHE_ENV = "MESHMOCAP_CACHE"
+#: How the cached default manifold was fitted, part of its cache key: manifolds cached
+#: before the GPLVM fit ran on one BLAS thread (:meth:`~meshmocap.models.gplvm.GPLVM.fit`)
+#: depend on the thread count of the call that learned them, and are learned again.
+_FIT = "one BLAS thread"
 #: Largest difference, metres, between a manifold's stored rest cage and the tracking
 #: template's OQR (a rebuilt OQR is bit-identical; anything larger is another rigging).
 CAGE_TOLERANCE = 1e-6
@@ -402,7 +406,7 @@ def default_manifold_path(template: Template) -> Path | None:
     """Where :func:`default_manifold` caches ``template``'s default manifold (None: caching
     is off, :data:`CACHE_ENV`): the file name holds the template's name and a key of
     everything the manifold depends on (template digest, pose library digest, sources,
-    q, poses, iterations, file format)."""
+    q, poses, iterations, file format, how it is fitted)."""
     from meshmocap.body.pose_library import load_pose_library
 
     folder = _cache_dir()
@@ -417,6 +421,7 @@ def default_manifold_path(template: Template) -> Path | None:
         DEFAULT_COMPONENTS,
         DEFAULT_POSES,
         ON_THE_FLY_MAX_ITER,
+        _FIT,
     )
     for part in parts:
         h.update(f"{part}\0".encode())
