@@ -80,8 +80,10 @@ DEFAULT_SOURCES = ("library:400",)
 DEFAULT_COMPONENTS = 5
 #: Training poses of the default manifold.
 DEFAULT_POSES = 400
-#: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000).
-ON_THE_FLY_MAX_ITER = 300
+#: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000). Fewer
+#: leave the fit far from an optimum, where the last bits of its sums decide where it
+#: stops, and the cage tracks worse with it (``docs/guide/cage.rst``, the demo's manifold).
+ON_THE_FLY_MAX_ITER = 1000
 #: Environment variable naming the folder where learned default manifolds are cached
 #: (default ``$XDG_CACHE_HOME/meshmocap`` or ``~/.cache/meshmocap``; ``off``: no cache).
 CACHE_ENV = "MESHMOCAP_CACHE"
