@@ -47,6 +47,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "_npz",
         "_numba",
         "_validate",
+        "_parallel",
         "_progress",
         "_threads",
         "_timing",

@@ -55,7 +55,7 @@ def test_a_small_performer_is_found_from_one_frame_of_silhouettes(small, monkeyp
     err = capsys.readouterr().err
     for stage in (
         "choosing 1 frames in different poses",
-        "a first guess of the body in frame 0 (1 of 1)",
+        "a first guess of the body in frames 0",
         "fitting the shape to the silhouettes (1 frames, iterations 1–8 of 8)",
     ):
         assert f"meshmocap: {stage} ...\n" in err and f"meshmocap: {stage}: done in" in err

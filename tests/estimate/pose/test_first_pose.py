@@ -37,5 +37,5 @@ def test_the_search_says_each_stage(walker, monkeypatch, capsys):
         limb_directions=2,
     )
     err = capsys.readouterr().err
-    for stage in ("fitting the best 2 candidates", "refining the best 1 candidates (1 of them)"):
+    for stage in ("fitting the best 2 candidates", "refining the best 1 candidates"):
         assert f"meshmocap: {stage} ...\n" in err and f"meshmocap: {stage}: done in" in err

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 
+from meshmocap._parallel import parallel_map
 from meshmocap.body.template import Template
 from meshmocap.estimate.performer.shape_fit import SilhouetteView, fit_pose, silhouette_view
 from meshmocap.io.start import Start
@@ -68,7 +69,10 @@ def refined_start(
     the candidate's."""
     if not candidates:
         raise ValueError("refined_start: no candidate")
-    fits = [fit_pose(template, views, s.R, s.root, iterations=iterations) for s in candidates]
+    # the candidates side by side (meshmocap._parallel): the same fits
+    fits = parallel_map(
+        lambda s: fit_pose(template, views, s.R, s.root, iterations=iterations), candidates
+    )
     order = sorted(range(len(fits)), key=lambda i: fits[i].cost)
     best = order[0]
     rival = fits[order[1]].cost if len(order) > 1 else None
@@ -87,9 +91,13 @@ def start_of_frame(
     frame : a capture frame
     given : Start or None, a start made with the template for this frame (its pose kept
         beside an estimated template); a ``subject-fit`` one competes with the search on
-        a frame with silhouettes, any other is used as it is
+        a frame with silhouettes, any other is used as it is, and so is one this function
+        chose already (its :attr:`~meshmocap.io.start.Start.silhouette_cost` recorded: the
+        demo finds its start once for its three trackers)
     search : callable returning the search's Start (called only when needed)
     """
+    if given is not None and given.silhouette_cost is not None:  # chosen so already
+        return given
     views = None
     if given is None or given.source == "subject-fit":
         views = frame_views(frame)

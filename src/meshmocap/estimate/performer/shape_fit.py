@@ -31,6 +31,9 @@ frame's; a frame more than ``screen_ratio`` times the best stops informing the s
 pose is still fitted, the body held for it). ``docs/measurements.rst`` has the numbers
 (section "The performer's body, its frames screened").
 
+The frames' terms are computed side by side, one process a core (``MESHMOCAP_JOBS``), and
+gathered in order: the same fit to the bit.
+
 Derivatives (exact for the model; the projection's derivative ignores lens distortion):
 a skinned point ``v_i = Σ_k w_ik (G_k (X_i − P_k) + p_k)`` moves with the shape through its
 rest position ``X_i(z)`` and the rest joints ``P_k(z)`` (both linear in ``z``), and the
@@ -50,6 +53,7 @@ import numpy as np
 from pykdtree.kdtree import KDTree
 from scipy import ndimage
 
+from meshmocap._parallel import Workers
 from meshmocap._progress import phase
 from meshmocap._tolerances import DIVISOR_FLOOR, NEAR_DEPTH, NORM_FLOOR
 from meshmocap.body.articulated import (
@@ -391,61 +395,84 @@ def fit_shape(
     use = np.ones(n_f, dtype=bool)
     cost = np.full(n_f, np.nan)
     screen = iterations // 2 if screen_ratio is not None and n_f > 1 else -1
-    for first in range(0, iterations, PROGRESS_EVERY):
-        last = min(first + PROGRESS_EVERY, iterations)
-        with phase(
-            f"fitting the shape to the silhouettes ({n_f} frames, iterations {first + 1}–"
-            f"{last} of {iterations})"
-        ):
-            for it in range(first, last):
-                z, rms, c = _shape_step(
-                    space,
-                    views,
-                    R,
-                    root,
-                    z,
-                    sample,
-                    act_pose,
-                    lambda_shape,
-                    lambda_pose,
-                    max_match,
-                    use,
-                )
-                if it == screen:
-                    use = c <= screen_ratio * c.min()
-                if screen < 0 or it <= screen:
-                    cost = c
+
+    def terms(f, z, R_f, root_f):  # one frame's rows, in a worker (meshmocap._parallel)
+        return _frame_rows(space, views[f], _posable(space, z), R_f, root_f, sample, max_match)
+
+    with Workers(terms, n_f) as workers:  # the frames side by side, the same rows
+        for first in range(0, iterations, PROGRESS_EVERY):
+            last = min(first + PROGRESS_EVERY, iterations)
+            with phase(
+                f"fitting the shape to the silhouettes ({n_f} frames, iterations {first + 1}–"
+                f"{last} of {iterations})"
+            ):
+                for it in range(first, last):
+                    z, rms, c = _shape_step(
+                        space,
+                        views,
+                        R,
+                        root,
+                        z,
+                        sample,
+                        act_pose,
+                        lambda_shape,
+                        lambda_pose,
+                        max_match,
+                        use,
+                        workers,
+                    )
+                    if it == screen:
+                        use = c <= screen_ratio * c.min()
+                    if screen < 0 or it <= screen:
+                        cost = c
     return ShapeFit(z, R, root, rms, int(iterations), use, cost)
 
 
+def _posable(space: BodyShapeSpace, z: np.ndarray):
+    """The space's body at ``z``, its model of every vertex and the space's derivatives:
+    what a frame's rows are computed from (:func:`_frame_rows`)."""
+    tmpl = space.template(z)
+    return tmpl, articulated_model(tmpl, n_points=tmpl.n_vertices), space.derivatives()
+
+
+def _frame_rows(space, views, posable, R, root, sample, max_match) -> FrameTerms:
+    """One frame's silhouette terms (:func:`frame_terms`) for the body ``posable``
+    (:func:`_posable`) in pose ``R``, ``root``: every vertex posed (the outlines), the
+    derivatives of those the terms use only."""
+    tmpl, model, deriv = posable
+    v, n, _ = pose_points(model, R, root, jacobian=False)
+    lines = outlines(views, v, n, tmpl.F)
+    rows = np.unique(np.concatenate([sample, *lines]))
+    _, _, a = pose_points(model_subset(model, rows), R, root)
+    S = shape_jacobian(space, tmpl, R, root, rows=rows, derivatives=deriv)
+    return frame_terms(views, v, n, a, S, tmpl.F, sample, max_match, lines=lines, rows=rows)
+
+
 def _shape_step(
-    space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match, use
+    space, views, R, root, z, sample, act_pose, lambda_shape, lambda_pose, max_match, use, workers
 ):
     """One damped Gauss–Newton step of :func:`fit_shape`: returns the new ``z``, the
     residuals' RMS before the step and each frame's objective (f,) before it (m²); ``R``
     and ``root`` are updated in place. Frames where ``use`` (f,) bool is False do not
-    inform the shape."""
+    inform the shape. ``workers``: the worker processes computing a frame's rows
+    (:func:`_frame_rows`) from ``(f, z, R[f], root[f])``, or one (this process)."""
     n_f, K = len(views), space.n_components
-    tmpl = space.template(z)
+    if workers.jobs > 1:
+        frames = workers.map([(f, z, R[f], root[f]) for f in range(n_f)])
+        tmpl = space.template(z)
+    else:  # the body posed once for every frame
+        posable = _posable(space, z)
+        tmpl = posable[0]
+        frames = [
+            _frame_rows(space, views[f], posable, R[f], root[f], sample, max_match)
+            for f in range(n_f)
+        ]
     J = tmpl.skeleton.n_joints
     n_pose = 3 + 3 * J
-    model = articulated_model(tmpl, n_points=tmpl.n_vertices)
-    deriv = space.derivatives()
     n_par = K + n_f * n_pose
     H = np.zeros((n_par, n_par))
     g = np.zeros(n_par)
     sq, cnt = 0.0, 0
-    frames = []
-    for f in range(n_f):
-        # every vertex posed (the outlines), the derivatives of those the terms use only
-        v, n, _ = pose_points(model, R[f], root[f], jacobian=False)
-        lines = outlines(views[f], v, n, tmpl.F)
-        rows = np.unique(np.concatenate([sample, *lines]))
-        _, _, a = pose_points(model_subset(model, rows), R[f], root[f])
-        S = shape_jacobian(space, tmpl, R[f], root[f], rows=rows, derivatives=deriv)
-        frames.append(
-            frame_terms(views[f], v, n, a, S, tmpl.F, sample, max_match, lines=lines, rows=rows)
-        )
     counts: dict[str, int] = {}
     for t in frames:
         for term, n_term in t.population.items():

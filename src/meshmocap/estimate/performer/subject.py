@@ -25,6 +25,7 @@ from typing import Literal, get_args
 import numpy as np
 from scipy import ndimage
 
+from meshmocap._parallel import parallel_map
 from meshmocap._progress import phase
 from meshmocap._validate import check_choice
 from meshmocap.body.autorig import fit_skeleton, mesh_samples, rig_mesh
@@ -286,10 +287,11 @@ def estimate_subject(
         )
     frames = [capture[k] for k in positions]
     mean = space.template(np.zeros(space.n_components))
-    inits = []
-    for k, fr in enumerate(frames, start=1):
-        with phase(f"a first guess of the body in frame {fr.index} ({k} of {len(frames)})"):
-            inits.append(initial_body_pose(mean, *_hull_surface(fr), seed=seed))
+    names = ", ".join(str(fr.index) for fr in frames)
+    with phase(f"a first guess of the body in frames {names}"):  # side by side
+        inits = parallel_map(
+            lambda fr: initial_body_pose(mean, *_hull_surface(fr), seed=seed), frames
+        )
     scale = float(np.median([f.scale for f in inits]))
     z0 = space.model.transform(scale * space.model.mean_[None])[0]
     views = []

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshmocap._parallel import parallel_map
 from meshmocap._progress import phase
 from meshmocap.body.pose_library import PoseLibrary
 from meshmocap.body.skeleton import forward_kinematics
@@ -377,25 +378,31 @@ def refined_search(
         Pc, Nc = subsample_points(P, N, 2000, seed)
         coarse = PoseFitter(template, Pc, Nc, n_model_points=500, field=field, seed=seed)
     rank = ranking_key(template, cameras, masks)
+
+    def coarse_fit(f: PoseFit) -> tuple[PoseFit, float]:
+        f = _refit(coarse, f, coarse_iterations, (0.3, 0.1), 1e-3)
+        return f, rank(f)
+
+    # the candidates are independent: fitted side by side (meshmocap._parallel), the same fits
     with phase(f"fitting the best {len(starts)} candidates"):
-        fits = [_refit(coarse, f, coarse_iterations, (0.3, 0.1), 1e-3) for f in starts]
-        keys = [rank(f) for f in fits]
-    fits = [fits[i] for i in np.argsort(keys)]
+        coarse_fits = parallel_map(coarse_fit, starts)
+    fits = [coarse_fits[i][0] for i in np.argsort([k for _, k in coarse_fits])]
     Pf, Nf = subsample_points(P, N, fine_points, seed)
     fine = PoseFitter(template, Pf, Nf, n_model_points=fine_model_points, field=field, seed=seed)
-    refined = []
-    for k, f in enumerate(fits[:keep], start=1):
-        with phase(f"refining the best {min(keep, len(fits))} candidates ({k} of them)"):
-            if poses is not None and scorer is not None:  # limb by limb from the library
-                f = refine_limbs_from_library(
-                    coarse, f, poses, scorer, limbs=limbs, n_best=limb_hypotheses, key=rank
-                )
-            elif limbs:
-                f = refine_limbs(coarse, f, limbs=limbs, directions=limb_directions, key=rank)
-            f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
-            # then settle on the near surface, barely held (a long pull undoes small moves)
-            f = _refit(fine, f, max(iterations // 2, 1), (0.04, 0.01), lam=1e-6)
-        refined.append(f)
+
+    def refine(f: PoseFit) -> PoseFit:
+        if poses is not None and scorer is not None:  # limb by limb from the library
+            f = refine_limbs_from_library(
+                coarse, f, poses, scorer, limbs=limbs, n_best=limb_hypotheses, key=rank
+            )
+        elif limbs:
+            f = refine_limbs(coarse, f, limbs=limbs, directions=limb_directions, key=rank)
+        f = _refit(fine, f, iterations, (0.15, 0.03), 1e-4)
+        # then settle on the near surface, barely held (a long pull undoes small moves)
+        return _refit(fine, f, max(iterations // 2, 1), (0.04, 0.01), lam=1e-6)
+
+    with phase(f"refining the best {min(keep, len(fits))} candidates"):
+        refined = parallel_map(refine, fits[:keep])
     rk = [rank(f) for f in refined]
     order = np.argsort(rk)
     refined = [refined[i] for i in order]
