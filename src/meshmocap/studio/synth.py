@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import folder_lock
+from meshmocap._parallel import Workers
 from meshmocap._progress import progress
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import InputError, MeshmocapWarning, MissingFrameWarning
@@ -198,9 +199,20 @@ def synthesize(
     write_truth_faces(out, subject.F)
     todo = [f for f in frames if not (out / "truth" / f"{frame_name(f)}.npz").is_file()]
     notes = {}
-    with folder_lock(out, "synth"):
-        for f in progress(todo, label="synth", enabled=show_progress):
-            notes[f] = synth_frame(out, subject, rotations[f], roots[f], cameras, f, spec)
+
+    def make(f: int) -> str:
+        return synth_frame(out, subject, rotations[f], roots[f], cameras, f, spec)
+
+    # the frames side by side, one process a core (meshmocap._parallel): the same files
+    with folder_lock(out, "synth"), Workers(make, len(todo)) as workers:
+        made = progress(
+            workers.imap([(f,) for f in todo]),
+            total=len(todo),
+            label="synth",
+            enabled=show_progress,
+        )
+        for f, note in zip(todo, made, strict=True):
+            notes[f] = note
     _warn_notes(notes)
     return Capture(out)
 
