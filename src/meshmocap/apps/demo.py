@@ -15,6 +15,7 @@ a user clip (BVH/AMC) can be added.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shutil
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open
+from meshmocap._parallel import Workers, job_count
 from meshmocap._progress import phase
 from meshmocap.analysis.evaluate import Evaluation, evaluate
 from meshmocap.apps.figures.render import render_motion
@@ -45,6 +47,7 @@ from meshmocap.body.procedural import PROCEDURAL_MOTIONS, procedural_motion
 from meshmocap.body.retarget import retarget
 from meshmocap.body.template import bundled_templates, load_template
 from meshmocap.errors import InputError, MeshError
+from meshmocap.estimate.performer.first_frame import start_of_frame
 from meshmocap.estimate.performer.tracking_template import (
     SUBJECT_FILE,
     TemplateChoice,
@@ -54,8 +57,9 @@ from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.capture import Capture
 from meshmocap.io.clips import clip_on
 from meshmocap.io.results import LIGHT_FILE, Track, done_frames, frame_path
+from meshmocap.io.start import Start
 from meshmocap.studio.synth import SynthSpec, synthesize
-from meshmocap.trackers.driver import track_sequence
+from meshmocap.trackers.driver import first_pose, track_sequence
 from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
 
@@ -138,7 +142,7 @@ def run_demo(
     with phase("rendering the motions (contact sheets)", enabled=show_progress):
         _render_motions(out, neutral, seconds, clip, files, show_progress)
     scores: list[TrackerScore] = []
-    players, sections, evaluations, tracks, notes = [], [], [], [], []
+    players, sections, evaluations, notes = [], [], [], []
     if frames is not None:
         cap = synthesize(out / "capture", demo_spec(frames, subject), show_progress=show_progress)
         files.append((f"synthetic capture ({len(cap)} frames, humaneva4, {subject})", cap.path))
@@ -149,31 +153,51 @@ def run_demo(
         methods = [method for method, _, _, _ in done]
         notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
         folders = [folder for _, folder, _, _ in done]
-        for method, folder, track, ev in done:
-            with phase(f"plotting the {method} track's evaluation", enabled=show_progress):
-                written = write_evaluation(ev, out / f"eval_{method}")
-                drop_resume_state(folder)
-            files.append((f"{method} track and evaluation", out / f"eval_{method}"))
-            worst = float(ev.joints.per_frame.max())
-            scores.append(TrackerScore(method, ev.joints.overall.mean, worst, ev.seconds.mean))
-            tracks.append(track)
-            evaluations.append(ev)
-            plots = [p for p in written if p.suffix == ".png"]
-            sections.append(evaluation_section(ev, images=plots, track=track))
-        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
-        with phase(f"exporting the {DEMO_METHODS[0]} track and analysing its gait"):
-            notes += _exports_and_gait(folders[0], out, DEMO_METHODS[0], files)
-        with phase("comparing the tracks' gaits", enabled=show_progress):
-            sections.append(gait_section(cap, tracks, methods))
+        tracks = [track for _, _, track, _ in done]
+        evaluations = [ev for _, _, _, ev in done]
         title = f"{', '.join(methods)} on the synthetic walk ({len(cap)} frames)"
         # the report holds the player's frames: a budget that keeps it under 10 MB
         templates = [choice.template] * len(tracks)
-        with phase("building the 3D player", enabled=show_progress):
-            players.append(
-                player_from_tracks(
+        first = DEMO_METHODS[0]
+
+        def part(what: str, k: int):  # one piece of the report, in a worker
+            if what == "evaluation":
+                method, folder, _, ev = done[k]
+                with phase(f"plotting the {method} track's evaluation", enabled=show_progress):
+                    written = write_evaluation(ev, out / f"eval_{method}")
+                    drop_resume_state(folder)
+                return written
+            if what == "exports":
+                files: list = []
+                with phase(f"exporting the {first} track and analysing its gait"):
+                    lines = _exports_and_gait(folders[0], out, first, files)
+                return lines, files
+            if what == "gaits":
+                with phase("comparing the tracks' gaits", enabled=show_progress):
+                    return gait_section(cap, tracks, methods)
+            with phase("building the 3D player", enabled=show_progress):
+                return player_from_tracks(
                     cap, tracks, title=title, templates=templates, max_megabytes=PLAYER_MB
                 )
-            )
+
+        # independent pieces, the longest first, side by side (meshmocap._parallel)
+        pieces = [("exports", 0), ("player", 0), ("gaits", 0)]
+        pieces += [("evaluation", k) for k in range(len(done))]
+        with Workers(part, len(pieces)) as workers:
+            made = dict(zip(pieces, workers.map(pieces), strict=True))
+        for k, (method, _, track, ev) in enumerate(done):
+            written = made["evaluation", k]
+            files.append((f"{method} track and evaluation", out / f"eval_{method}"))
+            worst = float(ev.joints.per_frame.max())
+            scores.append(TrackerScore(method, ev.joints.overall.mean, worst, ev.seconds.mean))
+            plots = [p for p in written if p.suffix == ".png"]
+            sections.append(evaluation_section(ev, images=plots, track=track))
+        notes.append(f"first pose: {_first_pose(tracks[0])}; the ground truth only scores")
+        lines, exported = made["exports", 0]
+        notes += lines
+        files += exported
+        sections.append(made["gaits", 0])
+        players.append(made["player", 0])
         with phase("dropping the hull meshes (rebuilt when read)", enabled=show_progress):
             drop_hull_meshes(cap.path)
         shared = [f / n for f in folders for n in (SUBJECT_FILE, LIGHT_FILE, "faces.npy")]
@@ -240,7 +264,7 @@ def demo_tracks(
     template: str = "auto",
     methods: tuple[str, ...] = DEMO_METHODS,
     show_progress: bool | None = None,
-) -> tuple[TemplateChoice, list[tuple[str, Path, Track, Evaluation]]]:
+) -> tuple[TemplateChoice, list[tuple[str, Path, Track, Evaluation]], list[tuple[str, str]]]:
     """Track the demo capture ``cap`` with each of ``methods`` into ``out/track_<method>``
     as the demo does and score each against the truth the studio kept (joints only).
 
@@ -249,8 +273,10 @@ def demo_tracks(
     runs on the default path: the light body the driver tracks (:mod:`meshmocap.body.light`),
     default options, the automatic first pose (the search's, cached for the capture, or
     the pose the body was fitted in, by the silhouettes' evidence:
-    :mod:`~meshmocap.estimate.performer.first_frame`), the recovery checks.
-    ``benchmarks/bench_demo_guard.py`` guards these figures.
+    :mod:`~meshmocap.estimate.performer.first_frame`; found once, :func:`first_start`, and
+    given to each), the recovery checks. The methods run side by side, one per core (at
+    most ``MESHMOCAP_JOBS`` processes; 1: one after the other, with their progress), the
+    same tracks either way. ``benchmarks/bench_demo_guard.py`` guards these figures.
 
     Returns
     -------
@@ -264,34 +290,57 @@ def demo_tracks(
     out = Path(out)
     folders = [out / f"track_{method}" for method in methods]
     choice = tracking_template(cap, template, folders[0])
-    done, refused = [], []
-    for method, folder in zip(methods, folders, strict=True):
-        if "template_file" in choice.info and folder != folders[0]:
-            folder.mkdir(parents=True, exist_ok=True)  # each track keeps its template
+    for folder in folders[1:]:
+        if "template_file" in choice.info:  # each track keeps its template
+            folder.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+    start = first_start(cap, choice)  # once for every method
+    jobs = min(job_count(), len(methods))
+    # side by side, the trackers' progress lines would mix: the parent says what runs
+    progress = show_progress if jobs == 1 else False
+
+    def track(method: str, folder: Path):
         # the light body the driver tracks (meshmocap.body.light)
         try:
-            with phase(f"setting up the {method} tracker", enabled=show_progress):
+            with phase(f"setting up the {method} tracker", enabled=progress):
                 tracker = make_tracker(method, template=tracking_body(choice.template).light)
         except MeshError as exc:  # the cage refuses a body it cannot enclose: said, not fatal
             if method == methods[0]:
                 raise
-            refused.append((method, str(exc)))
-            continue
+            return method, folder, None, str(exc)
         track = track_sequence(
             tracker,
             choice.template,
             cap,
             folder,
-            # the pose the body was fitted in competes with the search (as meshmocap.api.track)
-            TrackOptions(
-                show_progress=show_progress, template_info=choice.info, start=choice.start
-            ),
+            TrackOptions(show_progress=progress, template_info=choice.info, start=start),
         )
-        with phase(f"scoring the {method} track", enabled=show_progress):
+        with phase(f"scoring the {method} track", enabled=progress):
             ev = evaluate(track, cap, surface_frames=0, silhouettes=False)
-        done.append((method, folder, track, ev))
+        return method, folder, track, ev
+
+    done, refused = [], []
+    with Workers(track, len(methods)) as workers:  # one tracker a core (meshmocap._parallel)
+        what = f"tracking with {', '.join(methods)}, {workers.jobs} at a time"
+        with phase(what, enabled=show_progress if workers.jobs > 1 else False):
+            for method, folder, track_, ev in workers.map(list(zip(methods, folders, strict=True))):
+                if track_ is None:
+                    refused.append((method, ev))
+                else:
+                    done.append((method, folder, track_, ev))
     return choice, done, refused
+
+
+def first_start(cap: Capture, choice: TemplateChoice) -> Start:
+    """The start of the demo capture's first frame for the template ``choice``, as the
+    tracking driver finds it with ``init="auto"`` (the search's pose or the one the body
+    was fitted in, by the silhouettes' evidence:
+    :func:`~meshmocap.estimate.performer.first_frame.start_of_frame`); given to each
+    tracker, which then starts there without searching again."""
+    frame = cap[0]
+    given = choice.start if choice.start is not None and choice.start.frame == frame.index else None
+    search = functools.partial(first_pose, choice.template, frame, "auto", capture=cap)
+    return start_of_frame(choice.template, frame, given, search)
 
 
 def _report(out: Path, players, evaluations, sections, sheets, notes) -> Path:
