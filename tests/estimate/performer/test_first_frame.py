@@ -65,8 +65,8 @@ def test_the_candidate_that_fits_the_silhouettes_is_kept_and_brought_closer(scen
 
 def test_a_given_start_is_used_as_it_is_where_nothing_can_be_compared():
     """Without silhouettes (a mesh or point-cloud frame) a given start is used without a
-    search; a start that is not the body fit's is used even with silhouettes; with neither,
-    the search's."""
+    search; a start that is not the body fit's is used even with silhouettes, and so is one
+    already chosen by the silhouettes; with neither, the search's."""
     R, root = np.tile(np.eye(3), (31, 1, 1)), np.zeros(3)
     calls = []
 
@@ -85,3 +85,6 @@ def test_a_given_start_is_used_as_it_is_where_nothing_can_be_compared():
     assert start_of_frame(None, bare, fitted, search) is fitted and not calls
     assert start_of_frame(None, studio, rest, search) is rest and not calls
     assert start_of_frame(None, bare, None, search).source == "search" and len(calls) == 1
+    # a start this function chose already (the demo's, found once for its trackers)
+    chosen = Start(0, R, root, "subject-fit", silhouette_cost=1e-4, rival_cost=2e-4)
+    assert start_of_frame(None, studio, chosen, search) is chosen and len(calls) == 1
