@@ -11,8 +11,8 @@ is computed by the same code on the same inputs, and they come back in order.
 How many: ``MESHMOCAP_JOBS`` (an integer ≥ 1), else the cores this process may run on
 (``os.sched_getaffinity``: ``taskset`` limits it), never more than the pieces. One job, a
 platform without ``fork`` (only Linux forks here: macOS's system libraries are not
-fork-safe) or a worker's own pieces (no pool inside a pool): everything runs in this
-process, one piece after the other, as before.
+fork-safe), a worker's own pieces or this process's while a pool of it is open (no pool
+inside a pool): everything runs in this process, one piece after the other, as before.
 
 A worker runs one BLAS and OpenMP thread (``MESHMOCAP_THREADS`` applies to this
 process only), prints what it prints (its progress lines interleave with the parent's),
@@ -39,6 +39,9 @@ _FUNCTIONS: dict[int, Callable] = {}
 _KEYS = itertools.count()
 #: Whether this process is a pool's worker (its own pieces run serially).
 _IN_WORKER = [False]
+#: Pools open in this process: while one is, this process's own pieces (the leftover one
+#: it computes meanwhile) run serially too, the cores being busy.
+_OPEN = [0]
 
 
 def _cores() -> int:
@@ -61,7 +64,7 @@ def job_count() -> int:
             n = 0
         if n < 1:
             raise InputError(f"{JOBS_ENV} must be an integer ≥ 1, found {text!r}")
-    if _IN_WORKER[0] or not sys.platform.startswith("linux"):
+    if _IN_WORKER[0] or _OPEN[0] or not sys.platform.startswith("linux"):
         return 1
     return n
 
@@ -108,6 +111,7 @@ class Workers:
             sys.stderr.flush()
             ctx = multiprocessing.get_context("fork")
             self._pool = ctx.Pool(self.jobs, initializer=_start_worker)
+            _OPEN[0] += 1
         return self
 
     def __exit__(self, *exc) -> None:
@@ -115,6 +119,7 @@ class Workers:
             self._pool.terminate()
             self._pool.join()
             self._pool = None
+            _OPEN[0] -= 1
         if self._key is not None:
             _FUNCTIONS.pop(self._key, None)
             self._key = None

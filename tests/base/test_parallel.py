@@ -32,6 +32,7 @@ def test_the_pieces_come_back_in_order_and_equal_to_the_bit(monkeypatch):
         assert [x for x, _ in w.map([(1, 2), (3, 4), (5, 6)])] == [2, 12, 30]
         assert {pid for _, pid in w.map([(1, 1), (2, 2)], here=2)} == {os.getpid()}
         assert os.getpid() not in {pid for _, pid in w.map([(2, 2)], here=0)}
+        assert job_count() == 1  # while the pool is open, this process's pieces run here
         assert [x for x, _ in w.imap([(1, 3), (2, 3)])] == [3, 6]
 
 
@@ -57,6 +58,7 @@ def test_a_piece_s_error_is_raised_and_a_bad_count_named(monkeypatch):
 
     with pytest.raises(InputError, match="piece 2 failed"):
         parallel_map(fail, range(4))
+    assert job_count() == 2  # the pool closed
     for bad in ("0", "two"):
         monkeypatch.setenv(JOBS_ENV, bad)
         with pytest.raises(InputError, match=f"{JOBS_ENV} must be an integer ≥ 1, found '{bad}'"):
