@@ -44,7 +44,8 @@ ICP are listed.
 
 Cost. Per capture the CPU seconds of each stage are printed (synthesis, each track, the
 evidence replay) and, at the end, the projected wall time of the whole default set on two
-quiet cores (``--jobs 2``: captures tracked in two processes, one BLAS thread each). The
+quiet cores (``--jobs 2``: captures tracked in two processes, one BLAS thread each, none
+forking workers of its own: ``MESHMOCAP_JOBS=1`` unless set). The
 defaults (12 captures, each trial by one performer in turn, the three trackers, both
 passes, 150 frames) are meant to fit 45 minutes there; the projection says whether they
 do (the performer's body estimate is the largest single stage per capture). ``--quick``:
@@ -461,6 +462,9 @@ def cost_lines(costs: list[dict], cases: int, jobs: int, default_cases: int) -> 
 
 
 def main() -> None:
+    # the captures are the processes (--jobs): no worker pools inside them, so each stage's
+    # CPU seconds are its process's, as in the earlier runs (meshmocap._parallel)
+    os.environ.setdefault("MESHMOCAP_JOBS", "1")
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="3 trials × 60 frames × ICP")
     ap.add_argument("--trials", nargs="+", choices=list(TRIALS), default=None)

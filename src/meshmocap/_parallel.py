@@ -66,6 +66,8 @@ def job_count() -> int:
             raise InputError(f"{JOBS_ENV} must be an integer ≥ 1, found {text!r}")
     if _IN_WORKER[0] or _OPEN[0] or not sys.platform.startswith("linux"):
         return 1
+    if multiprocessing.current_process().daemon:  # a caller's pool worker: no children
+        return 1
     return n
 
 

@@ -65,3 +65,17 @@ def test_a_piece_s_error_is_raised_and_a_bad_count_named(monkeypatch):
             job_count()
     monkeypatch.delenv(JOBS_ENV)
     assert job_count() == len(os.sched_getaffinity(0))
+
+
+def _jobs_and_pieces():
+    return job_count(), parallel_map(abs, [-1, -2, -3])
+
+
+def test_a_caller_s_pool_worker_runs_its_pieces_itself(monkeypatch):
+    """Inside a daemonic worker of a caller's multiprocessing pool (which may not have
+    children of its own), pieces run serially instead of failing."""
+    import multiprocessing
+
+    monkeypatch.setenv(JOBS_ENV, "2")
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply(_jobs_and_pieces) == (1, [1, 2, 3])
