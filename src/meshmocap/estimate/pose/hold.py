@@ -22,7 +22,8 @@ another leaving it.
 
 The skinned body is the template's own surface, or (``rest``) another rest surface with
 the template's weights: the refined surface of the frame before, moved back to the rest
-pose by the inverse of each vertex's blended transform (:meth:`SkeletonHold.unposed`).
+pose by the inverse of each vertex's blended transform
+(:meth:`~meshmocap.estimate.pose.hold.SkeletonHold.unposed`).
 Far from the template's own pose a skin leaves the body (the template's rig cannot follow
 a real performer's muscles and clothes), and fitted against the observations it slides to
 make up for it; the frame before's surface, where the refinement anchored each vertex to
