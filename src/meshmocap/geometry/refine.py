@@ -24,9 +24,9 @@ never feeds back into the tracker's state: it cannot drift.
 A displacement along the normals cannot move a vertex that slid *along* the body (a skin
 that cannot follow the real deformation, a joint a little off): on a real 4D capture that
 tangential part is most of the per-vertex error. :class:`ArapRefiner` moves the vertices
-freely instead, as rigidly as possible with respect to the template's rest shape
-(Sorkine & Alexa 2007): it minimises over the vertices ``v`` and one rotation ``Rᵢ`` per
-vertex::
+freely instead, as rigidly as possible with respect to a rest shape (the template's, or
+the frame before's refined surface: below; Sorkine & Alexa 2007): it minimises over the
+vertices ``v`` and one rotation ``Rᵢ`` per vertex::
 
     E(v, R) = ½ Σᵢ Σ_{j∈N(i)} |(vᵢ − vⱼ) − Rᵢ (rᵢ − rⱼ)|²  +  λ Σᵢ |vᵢ − tᵢ|²  +  μ Σᵢ |vᵢ − sᵢ|²
 

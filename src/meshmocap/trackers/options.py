@@ -78,15 +78,17 @@ class TrackOptions:
         skeleton's skin cannot follow: clothing, a rig that does not bend as the body
         does): ``"on"`` along its normals
         (:class:`~meshmocap.geometry.refine.SurfaceRefiner`), ``"arap"`` as rigidly as
-        possible with respect to the template's rest shape, each frame starting where the
-        last one's refinement left the vertices with respect to the skin
-        (:class:`~meshmocap.geometry.refine.ArapRefiner`: vertices keep their place on
-        the body instead of sliding along it). Either way the joints and the tracker's
-        state stay the skeleton's. ``"auto"``: ``"arap"`` for mesh or point-cloud files (a
-        4D capture: their surface is the performer's), off for a capture folder carved
-        from its cameras (a visual hull is larger than the body, and the surface would
-        swell into it). ``track.json`` records it (``refine_surface``: false, true for
-        ``"on"``, ``"arap"``).
+        possible, each neighbourhood keeping its shape in the frame before's refined
+        surface and each frame starting where the last one's refinement left the vertices
+        with respect to the skin (:class:`~meshmocap.geometry.refine.ArapRefiner`:
+        vertices keep their place on the body instead of sliding along it). Either way the
+        joints and the tracker's state stay the skeleton's; on mesh or point-cloud files
+        the skeleton is held with the frame before's ``"arap"`` surface
+        (:mod:`meshmocap.estimate.pose.hold`). ``"auto"``: ``"arap"`` for mesh or
+        point-cloud files (a 4D capture: their surface is the performer's), off for a
+        capture folder carved from its cameras (a visual hull is larger than the body,
+        and the surface would swell into it). ``track.json`` records it
+        (``refine_surface``: false, true for ``"on"``, ``"arap"``).
     light : int or None
         Track a light copy of the template with about this many vertices
         (:mod:`meshmocap.body.light`; a template that is light already is tracked as it
