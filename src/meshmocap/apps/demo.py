@@ -136,11 +136,12 @@ def run_demo(
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if frames is not None:  # a fresh install's kernels compile in the background while the
-        start_compiling()  # motions render, the capture is made, the body estimated
+        start_compiling()  # capture is made and the body estimated
     neutral = load_template("neutral")
     files: list[tuple[str, Path]] = []
-    with phase("rendering the motions (contact sheets)", enabled=show_progress):
-        _render_motions(out, neutral, seconds, clip, files, show_progress)
+    if frames is None:  # with a capture, the motions render beside the report's pieces
+        with phase("rendering the motions (contact sheets)", enabled=show_progress):
+            _render_motions(out, neutral, seconds, clip, files, show_progress)
     scores: list[TrackerScore] = []
     players, sections, evaluations, notes = [], [], [], []
     if frames is not None:
@@ -150,6 +151,12 @@ def run_demo(
             cap, out, template=template, show_progress=show_progress
         )
         notes += [f"{method} not tracked: {why}" for method, why in refused]
+        side = min(job_count(), len(DEMO_METHODS))
+        if side > 1:  # the seconds a frame are wall seconds on shared cores
+            notes.append(
+                f"the trackers ran {side} at a time, so their seconds a frame are shared "
+                "cores' (MESHMOCAP_JOBS=1 runs them one after the other)"
+            )
         methods = [method for method, _, _, _ in done]
         notes.append(f"performer {subject!r}, not told to the trackers; {choice.note}")
         folders = [folder for _, folder, _, _ in done]
@@ -161,6 +168,11 @@ def run_demo(
         first = DEMO_METHODS[0]
 
         def part(what: str, k: int):  # one piece of the report, in a worker
+            if what == "motions":
+                sheets: list = []
+                with phase("rendering the motions (contact sheets)", enabled=show_progress):
+                    _render_motions(out, neutral, seconds, clip, sheets, False)
+                return sheets
             if what == "evaluation":
                 method, folder, _, ev = done[k]
                 with phase(f"plotting the {method} track's evaluation", enabled=show_progress):
@@ -181,10 +193,11 @@ def run_demo(
                 )
 
         # independent pieces, the longest first, side by side (meshmocap._parallel)
-        pieces = [("exports", 0), ("player", 0), ("gaits", 0)]
+        pieces = [("exports", 0), ("player", 0), ("motions", 0), ("gaits", 0)]
         pieces += [("evaluation", k) for k in range(len(done))]
         with Workers(part, len(pieces)) as workers:
             made = dict(zip(pieces, workers.map(pieces), strict=True))
+        files[:0] = made["motions", 0]  # first, as they were made first before
         for k, (method, _, track, ev) in enumerate(done):
             written = made["evaluation", k]
             files.append((f"{method} track and evaluation", out / f"eval_{method}"))
