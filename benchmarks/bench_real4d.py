@@ -149,7 +149,7 @@ def _finite(f, x: np.ndarray, **kw):
     "Mean of empty slice" warning."""
     x = np.asarray(x, dtype=np.float64)
     if "axis" in kw:
-        return np.array([_finite(f, r) for r in np.moveaxis(x, kw["axis"], 0)])
+        return np.array([_finite(f, r) for r in np.moveaxis(x, kw["axis"], -1)])
     x = x[np.isfinite(x)]
     return float(f(x)) if x.size else float("nan")
 
