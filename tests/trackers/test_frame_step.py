@@ -82,3 +82,6 @@ def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
     holder.key = 3
     assert held_rest(holder, refiner, 5) is None  # held at another frame
     assert held_rest(holder, None, 5) is None
+    holder.key = 4
+    holder.surface = False  # not a clean 4D capture: the template's own surface
+    assert held_rest(holder, refiner, 5) is None

@@ -252,6 +252,10 @@ class ArticulatedICP:
         self.prev = (self.R.copy(), self.root.copy())
         return self._result(frame.index, {}, 0)
 
+    #: Held on 4D captures only where the hold fits the frame before's refined surface (a
+    #: clean 4D capture): held with the template's own skin, its pose is such a fit already
+    hold_surface_only = True
+
     def hold(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
         """Continue from the pose ``R`` (J, 3, 3), ``root`` (3,) the driver held against
         the observations (:mod:`meshmocap.estimate.pose.hold`; 4D captures), keeping the

@@ -54,6 +54,7 @@ from meshmocap.body.template import Template
 from meshmocap.errors import InputError
 from meshmocap.estimate.performer.capture_cache import cached_first_pose
 from meshmocap.estimate.performer.first_frame import start_of_frame
+from meshmocap.estimate.performer.tracking_template import frames_kind
 from meshmocap.estimate.pose.first_pose import initial_pose_of_frame
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.pose.start import search_start, start_flags, start_message
@@ -158,8 +159,14 @@ def track_sequence(
     four_d = not getattr(capture, "cameras", None)  # mesh or point files: the surface itself
     refiner = _refiner(opts.refine, four_d, body.light)
     meta["refine_surface"] = REFINE_SURFACE[type(refiner)]
-    # a 4D capture's surface is the performer's: the skeleton is held against it each frame
-    holder = SkeletonHold(body.light) if four_d and hasattr(tracker, "hold") else None
+    # a 4D capture's surface is the performer's: the skeleton is held against it each frame;
+    # with the frame before's refined surface where the files are a clean 4D capture (closed
+    # meshes of one connectivity; hulls as files are larger than the body, and a surface
+    # refined into them would swell the body the hold fits)
+    clean = four_d and not live and frames_kind(capture) == "mesh"
+    holds = four_d and hasattr(tracker, "hold")
+    holds = holds and (clean or not getattr(tracker, "hold_surface_only", False))
+    holder = SkeletonHold(body.light, surface=clean) if holds else None
     meta["hold_skeleton"] = holder is not None
     Path(out).mkdir(parents=True, exist_ok=True)
     report = on_frame or (lambda r: None)

@@ -260,6 +260,8 @@ def held_rest(
     last = getattr(refiner, "last_", None)
     if index is None or last is None or holder.key != last[0] or abs(index - last[0]) != 1:
         return None
+    if not holder.surface:  # the driver holds with the template's own surface
+        return None
     return holder.unposed(last[2], *holder.last)
 
 

@@ -100,6 +100,9 @@ class SkeletonHold:
         mean squared residuals).
     lambda_pose : float
         ``λ``: weight of each joint's squared rotation away from the tracker's (m²/rad²).
+    surface : bool
+        Whether the driver fits the frame before's refined surface where there is one
+        (``rest`` of :meth:`fit`), or always the template's own.
 
     Attributes
     ----------
@@ -119,6 +122,7 @@ class SkeletonHold:
         normal_cos: float = 0.3,
         surface_weight: float = 0.0,
         lambda_pose: float = 1e-5,
+        surface: bool = True,
     ):
         if int(iterations) < 1 or int(n_model_points) < 1 or int(max_points) < 1:
             raise InputError(
@@ -136,6 +140,7 @@ class SkeletonHold:
         self.max_distance = (float(max_distance[0]), float(max_distance[1]))
         self.normal_cos = float(normal_cos)
         self.mu, self.lam = float(surface_weight), float(lambda_pose)
+        self.surface = bool(surface)
         sk = template.skeleton
         self.free = np.array(
             [j for j, n in enumerate(sk.names) if n not in FIXED_JOINTS], dtype=np.int64
