@@ -163,7 +163,7 @@ def track_sequence(
     # with the frame before's refined surface where the files are a clean 4D capture (closed
     # meshes of one connectivity; hulls as files are larger than the body, and a surface
     # refined into them would swell the body the hold fits)
-    clean = four_d and not live and frames_kind(capture) == "mesh"
+    clean = four_d and frames_kind(capture.snapshot() if live else capture) == "mesh"
     holds = four_d and hasattr(tracker, "hold")
     holds = holds and (clean or not getattr(tracker, "hold_surface_only", False))
     holder = SkeletonHold(body.light, surface=clean) if holds else None
