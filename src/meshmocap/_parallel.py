@@ -27,7 +27,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 
-from meshmocap.errors import InputError
+from meshmocap._threads import env_count
 
 __all__ = ["JOBS_ENV", "Workers", "job_count", "parallel_map"]
 
@@ -54,16 +54,9 @@ def _cores() -> int:
 def job_count() -> int:
     """The worker processes a job may use: ``MESHMOCAP_JOBS``, else the cores this process
     may run on; 1 inside a worker and where processes are not forked (module docstring)."""
-    text = os.environ.get(JOBS_ENV)
-    if text is None:
+    n = env_count(JOBS_ENV)
+    if n is None:
         n = _cores()
-    else:
-        try:
-            n = int(text)
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise InputError(f"{JOBS_ENV} must be an integer ≥ 1, found {text!r}")
     if _IN_WORKER[0] or _OPEN[0] or not sys.platform.startswith("linux"):
         return 1
     if multiprocessing.current_process().daemon:  # a caller's pool worker: no children

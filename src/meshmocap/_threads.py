@@ -20,16 +20,25 @@ from meshmocap.errors import InputError
 _VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
 
 
-def thread_count() -> int:
-    """The BLAS threads meshmocap uses: ``MESHMOCAP_THREADS`` (default 1)."""
-    text = os.environ.get("MESHMOCAP_THREADS", "1")
+def env_count(name: str) -> int | None:
+    """The count (an integer ≥ 1) the environment variable ``name`` sets, None where it is
+    unset; any other value is an :class:`~meshmocap.errors.InputError` naming it."""
+    text = os.environ.get(name)
+    if text is None:
+        return None
     try:
         n = int(text)
     except ValueError:
         n = 0
     if n < 1:
-        raise InputError(f"MESHMOCAP_THREADS must be an integer ≥ 1, found {text!r}")
+        raise InputError(f"{name} must be an integer ≥ 1, found {text!r}")
     return n
+
+
+def thread_count() -> int:
+    """The BLAS threads meshmocap uses: ``MESHMOCAP_THREADS`` (default 1)."""
+    n = env_count("MESHMOCAP_THREADS")
+    return 1 if n is None else n
 
 
 @contextmanager
