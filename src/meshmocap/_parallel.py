@@ -119,22 +119,31 @@ class Workers:
             _FUNCTIONS.pop(self._key, None)
             self._key = None
 
-    def map(self, args: Sequence[tuple], *, here: int | None = None) -> list:
+    def map(
+        self, args: Sequence[tuple], *, here: int | None = None, meanwhile: Callable | None = None
+    ) -> list:
         """``[func(*a) for a in args]``, the pieces spread over the workers; in order. A
         piece's exception is raised here.
 
         ``here``: the last pieces computed by this process while the workers compute the
         others (default: the pieces left over when they are shared evenly among the
-        workers, so that no core waits for one worker's extra piece)."""
+        workers, so that no core waits for one worker's extra piece). ``meanwhile``: a
+        callable (no arguments) this process calls after its own pieces, before it waits
+        for the workers' (after every piece without workers): other work of its own."""
         args = [tuple(a) for a in args]
         if self._pool is None:
-            return [self.func(*a) for a in args]
+            out = [self.func(*a) for a in args]
+            if meanwhile is not None:
+                meanwhile()
+            return out
         here = len(args) % self.jobs if here is None else max(0, min(int(here), len(args)))
         cut = len(args) - here
         tasks = [(self._key, a) for a in args[:cut]]
         pending = self._pool.map_async(_call, tasks, chunksize=1)
         try:
             mine = [self.func(*a) for a in args[cut:]]
+            if meanwhile is not None:
+                meanwhile()
         finally:
             done = pending.get()  # the workers' pieces (their error raised here)
         return done + mine

@@ -36,6 +36,19 @@ def test_the_pieces_come_back_in_order_and_equal_to_the_bit(monkeypatch):
         assert [x for x, _ in w.imap([(1, 3), (2, 3)])] == [3, 6]
 
 
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_other_work_runs_here_meanwhile(monkeypatch, jobs):
+    """``meanwhile`` runs once in this process, after its own pieces (with workers: while
+    they compute theirs), with or without a pool; the pieces' results are unchanged."""
+    monkeypatch.setenv(JOBS_ENV, jobs)
+    seen = []
+    with Workers(lambda a: (a * 2, os.getpid()), 3) as w:
+        out = w.map([(1,), (2,), (3,)], meanwhile=lambda: seen.append(os.getpid()))
+    assert [x for x, _ in out] == [2, 4, 6] and seen == [os.getpid()]
+    if jobs == "2":  # the left-over piece ran here before the other work
+        assert out[2][1] == os.getpid() and os.getpid() not in {p for _, p in out[:2]}
+
+
 def test_one_job_runs_here_and_a_worker_runs_its_own_serially(monkeypatch):
     monkeypatch.setenv(JOBS_ENV, "1")
     assert job_count() == 1

@@ -396,8 +396,12 @@ def fit_shape(
     cost = np.full(n_f, np.nan)
     screen = iterations // 2 if screen_ratio is not None and n_f > 1 else -1
 
+    posed: dict = {}  # the body at the last z this process saw: posed once an iteration
+
     def terms(f, z, R_f, root_f):  # one frame's rows, in a worker (meshmocap._parallel)
-        return _frame_rows(space, views[f], _posable(space, z), R_f, root_f, sample, max_match)
+        if posed.get("z") != z.tobytes():
+            posed["z"], posed["body"] = z.tobytes(), _posable(space, z)
+        return _frame_rows(space, views[f], posed["body"], R_f, root_f, sample, max_match)
 
     with Workers(terms, n_f) as workers:  # the frames side by side, the same rows
         for first in range(0, iterations, PROGRESS_EVERY):

@@ -25,7 +25,7 @@ from typing import Literal, get_args
 import numpy as np
 from scipy import ndimage
 
-from meshmocap._parallel import parallel_map
+from meshmocap._parallel import Workers, parallel_map
 from meshmocap._progress import phase
 from meshmocap._validate import check_choice
 from meshmocap.body.autorig import fit_skeleton, mesh_samples, rig_mesh
@@ -116,23 +116,17 @@ def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
     (:func:`whole_in_view`), the first one and then, greedily, the frame farthest from those
     chosen, in a pose descriptor of the frame's mesh: the square roots of the covariance
     eigenvalues of its vertices (metres) and its height. Returns sorted positions (not
-    indices); empty when no candidate is in view.
+    indices); empty when no candidate is in view. The candidates are read side by side
+    (:mod:`meshmocap._parallel`): the same frames.
     """
     total = len(capture)
     pos = np.unique(np.linspace(0, total - 1, min(candidates, total)).round().astype(int))
-    pos = [int(k) for k in pos if whole_in_view(capture[int(k)])]
-    if len(pos) <= n:
-        return pos
-    desc = []
-    for k in list(pos):
-        try:
-            V = capture[k].hull_mesh[0]
-        except (OSError, ValueError):  # a frame without a hull (dropped): skipped
-            pos.remove(k)
-            continue
-        ev = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov((V - V.mean(0)).T)), 0.0))
-        desc.append([*ev, np.ptp(V[:, 2])])
-    D = np.asarray(desc)
+    looks = parallel_map(lambda k: _look(capture[int(k)]), pos)
+    looks = [(int(k), d) for k, (seen, d) in zip(pos, looks, strict=True) if seen]
+    if len(looks) <= n:
+        return [k for k, _ in looks]
+    pos = [k for k, d in looks if d is not None]  # a frame without a hull (dropped): skipped
+    D = np.asarray([d for _, d in looks if d is not None])
     chosen = [0]
     dist = np.linalg.norm(D - D[0], axis=1)
     while len(chosen) < min(n, len(pos)):
@@ -140,6 +134,19 @@ def choose_frames(capture, n: int, *, candidates: int = 30) -> list[int]:
         chosen.append(k)
         dist = np.minimum(dist, np.linalg.norm(D - D[k], axis=1))
     return sorted(pos[k] for k in chosen)
+
+
+def _look(frame) -> tuple[bool, list[float] | None]:
+    """Whether the performer is whole in every view of ``frame`` (:func:`whole_in_view`) and,
+    if so, :func:`choose_frames`' pose descriptor of its hull mesh (None where it has none)."""
+    if not whole_in_view(frame):
+        return False, None
+    try:
+        V = frame.hull_mesh[0]
+    except (OSError, ValueError):
+        return True, None
+    ev = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov((V - V.mean(0)).T)), 0.0))
+    return True, [*ev, np.ptp(V[:, 2])]
 
 
 def _hull_surface(frame) -> tuple[np.ndarray, np.ndarray]:
@@ -288,20 +295,26 @@ def estimate_subject(
     frames = [capture[k] for k in positions]
     mean = space.template(np.zeros(space.n_components))
     names = ", ".join(str(fr.index) for fr in frames)
-    with phase(f"a first guess of the body in frames {names}"):  # side by side
-        inits = parallel_map(
-            lambda fr: initial_body_pose(mean, *_hull_surface(fr), seed=seed), frames
-        )
+    views = []
+
+    def read_views():  # a second or less, while the workers make their first guesses
+        for fr in frames:
+            masks = fr.silhouettes
+            if not masks:
+                raise InputError(f"{func}: frame {fr.index} has no silhouettes")
+            views.append(
+                [silhouette_view(m, c, seed=seed) for m, c in zip(masks, fr.cameras, strict=True)]
+            )
+
+    with (
+        phase(f"a first guess of the body in frames {names}"),
+        Workers(
+            lambda fr: initial_body_pose(mean, *_hull_surface(fr), seed=seed), len(frames)
+        ) as w,
+    ):  # side by side
+        inits = w.map([(fr,) for fr in frames], meanwhile=read_views)
     scale = float(np.median([f.scale for f in inits]))
     z0 = space.model.transform(scale * space.model.mean_[None])[0]
-    views = []
-    for fr in frames:  # a second or less
-        masks = fr.silhouettes
-        if not masks:
-            raise InputError(f"{func}: frame {fr.index} has no silhouettes")
-        views.append(
-            [silhouette_view(m, c, seed=seed) for m, c in zip(masks, fr.cameras, strict=True)]
-        )
     fit = fit_shape(
         space,
         views,

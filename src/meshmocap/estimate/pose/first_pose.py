@@ -143,6 +143,11 @@ def ranking_key(template: Template, cameras, masks):
     return key
 
 
+#: Coarse candidates (poses × headings) from which :func:`coarse_candidates` scores its
+#: headings side by side (:mod:`meshmocap._parallel`).
+PARALLEL_CANDIDATES = 10_000
+
+
 def subsample_points(
     P: np.ndarray, N: np.ndarray, n: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -184,13 +189,16 @@ def coarse_candidates(
     c, s = np.cos(headings), np.sin(headings)
     Rz = np.zeros((n_headings, 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
-    scores = np.empty((n_headings, N))
-    roots = np.empty((n_headings, N, 3))
-    for h in range(n_headings):  # a cheap score first (prefixes of both point sets)
-        X = X0 @ Rz[h].T
+
+    def heading(h: int) -> tuple[np.ndarray, np.ndarray]:  # a cheap score first (prefixes
+        X = X0 @ Rz[h].T  # of both point sets)
         t = scorer.centre - X.mean(axis=1)  # (N, 3): where the root goes
-        roots[h] = t
-        scores[h] = scorer.score(X + t[:, None, :], n_model=COARSE_POINTS, n_data=COARSE_POINTS)
+        return t, scorer.score(X + t[:, None, :], n_model=COARSE_POINTS, n_data=COARSE_POINTS)
+
+    # a whole search's headings side by side (meshmocap._parallel), the same scores; a few
+    # near headings are not worth the workers' start
+    each = parallel_map if N * n_headings >= PARALLEL_CANDIDATES else lambda f, x: list(map(f, x))
+    roots, scores = (np.stack(a) for a in zip(*each(heading, range(n_headings)), strict=True))
     order = np.argsort(scores, axis=None)[: 8 * n_shifted]
     hh, nn = np.unravel_index(order, scores.shape)
     X = np.einsum("cma,cba->cmb", X0[nn], Rz[hh]) + roots[hh, nn][:, None, :]
