@@ -56,7 +56,14 @@ from meshmocap.estimate.performer.tracking_template import (
 from meshmocap.io.bvh import read_bvh, write_bvh
 from meshmocap.io.capture import Capture
 from meshmocap.io.clips import clip_on
-from meshmocap.io.results import LIGHT_FILE, Track, done_frames, frame_path
+from meshmocap.io.results import (
+    LIGHT_FILE,
+    Track,
+    done_frames,
+    frame_path,
+    read_track,
+    tracked_template,
+)
 from meshmocap.io.start import Start
 from meshmocap.studio.synth import SynthSpec, synthesize
 from meshmocap.trackers.driver import first_pose, track_sequence
@@ -386,8 +393,18 @@ def _exports_and_gait(track: Path, out: Path, method: str, files: list) -> list[
     one line each for the report."""
     (out / "exports").mkdir(parents=True, exist_ok=True)
     sizes = []
+    tr = read_track(track)  # read once for the five (the same files as reading it each time)
+    template = tracked_template(track, tr.meta)
+    fit = None  # the rig's poses, fitted once for BVH and GLB
     for fmt in DEMO_EXPORTS:
-        res = export_track(track, out / "exports" / f"walk_{method}.{fmt}")
+        rig = fmt in ("bvh", "gltf", "glb")
+        res = export_track(
+            tr,
+            out / "exports" / f"walk_{method}.{fmt}",
+            template=template if rig else None,
+            fit=fit if rig else None,
+        )
+        fit = res.fit if rig else fit
         files.append((f"{method} track as {fmt.upper()}", res.path))
         sizes.append(f"{fmt.upper()} {res.size_bytes / 1e6:.1f} MB")
     lines = [f"{method} track exported ({', '.join(sizes)}; meshmocap export)"]

@@ -290,6 +290,22 @@ def test_export_command_and_mistakes(track_dir, tmp_path, capsys):
         export_track(track_dir, tmp_path / "nope" / "a.csv")
 
 
+def test_a_bvh_s_fit_serves_the_glb_of_the_same_frames(track_dir, track, bvh, glb, tmp_path):
+    """The rig's poses fitted for the BVH, given to the GLB of the same track (read once):
+    the GLB's bytes as fitted anew; a fit of other frames or for a point format is refused."""
+    res = bvh[1]
+    assert res.fit is not None and len(res.fit.rotations) == len(track.frames)
+    again = export_track(
+        track, tmp_path / "w.glb", template=load_template("neutral_5k"), fit=res.fit
+    )
+    assert again.fit is res.fit and again.path.read_bytes() == glb[0].read_bytes()
+    with pytest.raises(InputError, match="the fit given holds 8 frames, the export 3"):
+        export_track(track, tmp_path / "a.glb", frames=slice(10, 13), fit=res.fit)
+    with pytest.raises(InputError, match="a fit applies to bvh, gltf and glb, not csv"):
+        export_track(track, tmp_path / "a.csv", fit=res.fit)
+    assert export_track(track, tmp_path / "a.csv").fit is None
+
+
 def test_frame_rate_and_rows(track):
     assert track_fps(track) == (60.0, "capture.json")
     assert track_fps(track, 25.0) == (25.0, "given")

@@ -39,7 +39,7 @@ import os
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -101,6 +101,8 @@ class ExportResult:
     untracked : tuple of int
         Frames ``track.json`` planned (within ``frames``) that have no result
     planned : int, frames ``track.json`` planned within ``frames`` (0 when it lists none)
+    fit : PoseFit or None, the rig's poses fitted to the frames (BVH and glTF): another rig
+        export of the same frames can take it (:func:`export_track`'s ``fit``)
     """
 
     path: Path
@@ -116,6 +118,7 @@ class ExportResult:
     gaps: tuple[int, ...] = ()
     untracked: tuple[int, ...] = ()
     planned: int = 0
+    fit: PoseFit | None = field(default=None, compare=False, repr=False)
 
 
 def export_format(
@@ -294,17 +297,19 @@ def track_motion(
     *,
     joint_weight: float = 2.0,
     step: int | None = None,
+    fit: PoseFit | None = None,
 ) -> tuple[Motion, PoseFit]:
     """The template's rig animated by the poses fitted to the track's rows (frame rate
     ``fps`` divided by the rows' spacing, or by ``step`` when given: rows may then repeat,
-    holding a pose across frames without a result), and the fit.
+    holding a pose across frames without a result), and the fit (``fit``: made already).
 
     The motion's skeleton is the template's (:func:`~meshmocap.io.bvh.write_bvh` writes
     the root's positions absolute, as every BVH reader understands them).
     """
-    fit = pose_from_surface(
-        template, track.vertices[rows], joints=track.joints[rows], joint_weight=joint_weight
-    )
+    if fit is None:
+        fit = pose_from_surface(
+            template, track.vertices[rows], joints=track.joints[rows], joint_weight=joint_weight
+        )
     step = _step(track.frames[rows], "a motion") if step is None else int(step)
     return Motion(template.skeleton, fit.rotations, fit.root_positions, fps / step), fit
 
@@ -374,6 +379,7 @@ def export_track(
     template: Template | str | None = None,
     bvh_unit: LengthUnit = "cm",
     joint_weight: float = 2.0,
+    fit: PoseFit | None = None,
 ) -> ExportResult:
     """Write a track (a folder or a read :class:`~meshmocap.io.results.Track`) as ``out``.
 
@@ -398,6 +404,10 @@ def export_track(
     joint_weight : float
         Weight of the tracked joints in the pose fit (BVH, glTF; see
         :func:`~meshmocap.body.pose_fit.pose_from_surface`).
+    fit : PoseFit, optional
+        BVH, glTF: the rig's poses already fitted to these frames with this template and
+        ``joint_weight`` (:attr:`ExportResult.fit` of another rig export of the track: a
+        BVH and a GLB of one track fit it once).
 
     Raises
     ------
@@ -419,6 +429,8 @@ def export_track(
         raise InputError("export: markers go to c3d and trc, not csv")
     if long and fmt != "csv":
         raise InputError(f"export: long applies to csv, not {fmt}")
+    if fit is not None and fmt not in ("bvh", "gltf", "glb"):
+        raise InputError(f"export: a fit applies to bvh, gltf and glb, not {fmt}")
     tr = track if isinstance(track, Track) else read_track(track)
     posed = fmt in ("bvh", "gltf", "glb") or markers != "none"  # these need the template
     if template is None and posed and not isinstance(track, Track):
@@ -441,13 +453,20 @@ def export_track(
     if fmt in ("bvh", "gltf", "glb"):
         tpl = track_template(tr, template)
         step = _step(idx, fmt)
+        if fit is not None and len(fit.rotations) != len(rows):
+            raise InputError(
+                f"export: the fit given holds {len(fit.rotations)} frames, the export {len(rows)}"
+            )
         if fmt == "bvh":
-            motion, fit = track_motion(tr, tpl, rows, rate, joint_weight=joint_weight, step=step)
+            motion, fit = track_motion(
+                tr, tpl, rows, rate, joint_weight=joint_weight, step=step, fit=fit
+            )
             write_bvh(out, motion, unit=bvh_unit)
         else:
-            fit = pose_from_surface(
-                tpl, tr.vertices[rows], joints=tr.joints[rows], joint_weight=joint_weight
-            )
+            if fit is None:
+                fit = pose_from_surface(
+                    tpl, tr.vertices[rows], joints=tr.joints[rows], joint_weight=joint_weight
+                )
             g, _ = track_gltf(tr, tpl, rows, rate, fit=fit, frames=idx)
             write_gltf(out, g)
         own = ~ex.gap  # the pose fit's error on frames with a fit of their own
@@ -500,4 +519,5 @@ def export_track(
         tuple(int(i) for i in idx[ex.gap]),
         ex.untracked,
         ex.planned,
+        fit if fmt in ("bvh", "gltf", "glb") else None,
     )

@@ -351,7 +351,7 @@ def gait_of(source: str | os.PathLike, *, fps: float | None = None, truth: bool 
     it has one) or of a capture folder (its ground-truth joints)."""
     path = Path(source)
     if (path / "track.json").is_file():
-        track = read_track(path)
+        track = read_track(path, vertices=False)  # the joints' gait
         cap_path = Path(str(track.meta.get("capture", "")))
         cap = Capture(cap_path) if (cap_path / "capture.json").is_file() else None
         fps = input_frame(track.meta).fps if fps is None else fps  # as track recorded it
