@@ -247,3 +247,18 @@ def test_a_4d_capture_holds_the_skeleton_against_its_meshes(mesh_folder, small_w
         ),
     )
     assert plain.meta["hold_skeleton"] is True and all(plain.healthy)
+
+
+def test_a_clean_4d_capture_is_refined_with_more_steps_and_other_files_as_before():
+    """Mesh files of one connectivity (``clean``) get ``CLEAN_4D_ITERATIONS`` local and
+    global steps; hull meshes and point clouds as files the refiner's default; a capture
+    folder none by default."""
+    from meshmocap.geometry.refine import ArapRefiner
+    from meshmocap.trackers.driver import CLEAN_4D_ITERATIONS, output_refiner
+
+    t = load_template("neutral_5k")
+    default = ArapRefiner.__init__.__kwdefaults__["iterations"]
+    assert default < CLEAN_4D_ITERATIONS
+    assert output_refiner(t, four_d=True, clean=True).iterations == CLEAN_4D_ITERATIONS
+    assert output_refiner(t, refine="arap", four_d=True).iterations == default
+    assert output_refiner(t, four_d=False) is None

@@ -89,6 +89,10 @@ from meshmocap.trackers.two_way import two_way_pass
 
 #: ``track.json``'s ``refine_surface`` for each refinement (None: none ran).
 REFINE_SURFACE = {type(None): False, SurfaceRefiner: True, ArapRefiner: "arap"}
+#: The ARAP refinement's local and global steps on a clean 4D capture (closed meshes of one
+#: connectivity; elsewhere :class:`~meshmocap.geometry.refine.ArapRefiner`'s default):
+#: there the slow, smooth part of its error is what slides the vertices along the body.
+CLEAN_4D_ITERATIONS = 40
 
 
 def track_sequence(
@@ -157,13 +161,13 @@ def track_sequence(
     meta["tracked_vertices"] = body.light.n_vertices
     meta.update(_built_on(tracker, body.light))
     four_d = not getattr(capture, "cameras", None)  # mesh or point files: the surface itself
-    refiner = _refiner(opts.refine, four_d, body.light)
-    meta["refine_surface"] = REFINE_SURFACE[type(refiner)]
     # a 4D capture's surface is the performer's: the skeleton is held against it each frame;
     # with the frame before's refined surface where the files are a clean 4D capture (closed
     # meshes of one connectivity; hulls as files are larger than the body, and a surface
     # refined into them would swell the body the hold fits)
     clean = four_d and frames_kind(capture.snapshot() if live else capture) == "mesh"
+    refiner = output_refiner(body.light, refine=opts.refine, four_d=four_d, clean=clean)
+    meta["refine_surface"] = REFINE_SURFACE[type(refiner)]
     holds = four_d and hasattr(tracker, "hold")
     holds = holds and (clean or not getattr(tracker, "hold_surface_only", False))
     holder = SkeletonHold(body.light, surface=clean) if holds else None
@@ -256,21 +260,28 @@ def track_sequence(
                 frames=positions,
                 refiner=refiner,
                 hold=holder is not None,
+                hold_surface=clean,
                 exclude_trials=exclude,
                 show_progress=opts.show_progress,
             )
     return read_track(out, vertices=opts.vertices)
 
 
-def _refiner(refine: Refine, four_d: bool, light: Template):
-    """The output surface's refinement (:class:`~meshmocap.trackers.options.TrackOptions`'
-    ``refine``) of the tracked body ``light``, or None; ``four_d``: the capture is mesh or
-    point files."""
+def output_refiner(
+    light: Template, *, refine: Refine = "auto", four_d: bool, clean: bool = False
+) -> SurfaceRefiner | ArapRefiner | None:
+    """The output surface's refinement of the tracked body ``light`` (its vertices, metres),
+    or None: ``refine`` as :class:`~meshmocap.trackers.options.TrackOptions`' (checked
+    there); ``four_d``: the capture is mesh or point files; ``clean``: closed meshes of one
+    connectivity, whose refinement, anchored frame to frame, is given
+    ``CLEAN_4D_ITERATIONS`` local and global steps."""
     if refine == "auto":
         refine = "arap" if four_d else "off"
     if refine == "on":
         return SurfaceRefiner(light.F, light.n_vertices)
     if refine == "arap":
+        if clean:
+            return ArapRefiner(light.V, light.F, iterations=CLEAN_4D_ITERATIONS)
         return ArapRefiner(light.V, light.F)
     return None
 

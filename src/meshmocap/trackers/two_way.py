@@ -453,6 +453,7 @@ def two_way_pass(
     frames: Sequence[int],
     refiner: SurfaceRefiner | None = None,
     hold: bool = False,
+    hold_surface: bool = True,
     exclude_trials: tuple[str, ...] = (),
     rule: LostRule | None = None,
     show_progress: bool | None = None,
@@ -470,6 +471,8 @@ def two_way_pass(
     refiner : SurfaceRefiner, optional, as the forward pass refined its surfaces
     hold : bool, hold each hypothesis's skeleton against the observed surface, as the
         forward pass does on a 4D capture (:class:`~meshmocap.estimate.pose.hold.SkeletonHold`)
+    hold_surface : bool, the hold fits the frame before's refined surface, as the forward
+        pass does on a clean 4D capture (``SkeletonHold``'s ``surface``), or the template's own
     exclude_trials : tuple of str, pose-library trials the searches leave out
     rule : LostRule, optional, the lost rule (default: the shipped one)
 
@@ -492,7 +495,7 @@ def two_way_pass(
     keys: list[dict] = []
     changed: list[dict] = []
     run = _Run(tracker, body, capture, out, work, order, where, refiner, exclude_trials, rule)
-    run.hold = hold
+    run.hold, run.hold_surface = hold, hold_surface
     for k, (a, b) in enumerate(runs):
         # a run's hypotheses and choice stay on its side of the gaps to its neighbours
         run.floor = (runs[k - 1][1] + a) // 2 + 1 if k else 0
@@ -564,7 +567,7 @@ class _Run:
         self.out, self.work = Path(out), Path(work)
         self.order, self.where = order, where
         self.refiner, self.exclude, self.rule = refiner, tuple(excl), rule
-        self.hold = False
+        self.hold, self.hold_surface = False, True
         self.pos = {i: p for p, i in enumerate(order)}
         self.floor, self.ceiling = 0, len(order) - 1
         self.ambiguous: list[dict] = []
@@ -685,7 +688,7 @@ class _Run:
         R, root = seated.state["pose_R"], seated.state["pose_root"]
         recovery = Recovery(self.body.light, R, root, rule=self.rule)
         recovery.assess(self.frame(i0), seated.vertices)  # its history starts at the keyframe
-        holder = SkeletonHold(self.body.light) if self.hold else None
+        holder = SkeletonHold(self.body.light, surface=self.hold_surface) if self.hold else None
         if holder is not None:
             holder.last = (np.asarray(R, dtype=np.float64), np.asarray(root, dtype=np.float64))
         results: dict[int, FrameResult] = {i0: seated}
