@@ -163,6 +163,36 @@ def test_deterministic_with_random_state():
     np.testing.assert_array_equal(r1.X_, r2.X_)
 
 
+def test_fit_from_an_earlier_fit_starts_where_it_ended(curve_model, tmp_path):
+    _, Y, m = curve_model
+    # the earlier fit's latent points and kernel: the back-constraint's least squares
+    # reaches its X to the ridge, so the new fit starts at its likelihood, not PCA's
+    warm = GPLVM(2, alpha=m.alpha_, gamma=m.gamma_, beta=m.beta_, init=m.X_, max_iter=30)
+    warm.fit(Y)
+    h = warm.log_likelihood_history_
+    assert h[0] == pytest.approx(m.log_likelihood_, abs=1e-3 * abs(m.log_likelihood_))
+    assert h[0] > m.log_likelihood_history_[0] + 100 and np.all(np.diff(h) >= 0)
+    assert GPLVM.load(warm.save(tmp_path / "w.npz")).init is None  # not part of the model
+    with pytest.raises(InputError, match=r"init must have shape \(60, 2\)"):
+        GPLVM(2, init=m.X_[:10]).fit(Y)
+
+
+def test_the_likelihood_reads_the_poses_only_through_their_rank():
+    # Eq. (2) reads Y through Y Yᵀ: poses of rank 3 in 6 columns give the likelihood and
+    # gradient of their 3-column factor, to rounding
+    rng = np.random.default_rng(5)
+    Y = rng.standard_normal((10, 3)) @ rng.standard_normal((3, 6))
+    theta = np.concatenate([[0.1, -0.2, 1.0], 0.5 * rng.standard_normal(20)])
+    low = LatentProblem(Y, 2, None)
+    assert low.F.shape == (10, 3)
+    f, g = low(theta)
+    full = LatentProblem(Y, 2, None)
+    full.F = Y
+    f2, g2 = full(theta)
+    assert f == pytest.approx(f2, rel=1e-12)
+    np.testing.assert_allclose(g, g2, rtol=1e-9, atol=1e-9)
+
+
 def test_fit_runs_on_one_blas_thread_whatever_the_callers(monkeypatch):
     # other thread counts sum in another order: over hundreds of L-BFGS-B iterations the
     # last bits carry the fit to another optimum, so the fit pins one thread itself

@@ -14,6 +14,7 @@ from meshmocap.errors import FormatError, InputError
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage import manifold as manifold_module
 from meshmocap.trackers.cage.manifold import (
+    LatentStart,
     PoseManifold,
     fit_pose_manifold,
     learn_pose_manifold,
@@ -134,6 +135,24 @@ def test_registry_errors(tiny, tmp_path):
         make_tracker("cage", manifold=pm.gp, n_patches=3)
 
 
+def test_a_latent_start_serves_only_the_poses_it_was_fitted_on(tiny, tmp_path):
+    t, oqr, pm = tiny
+    gp = pm.gp
+    path = tmp_path / "start.npz"
+    np.savez(path, X=gp.X_, hyper=[gp.alpha_, gp.gamma_, gp.beta_], trials=pm.trials)
+    start = LatentStart.load(path)
+    poses = load_pose_sources(["walk", "jog"], t, oqr=oqr, duration=1.0, fps=15.0)
+    train = poses.subsample(20)
+    assert start.fits(train, 2) and not start.fits(train, 3)
+    assert not start.fits(poses.subsample(19), 2)
+    # started there, the fit begins at the earlier fit's likelihood
+    warm = fit_pose_manifold(poses, t, oqr=oqr, n_samples=20, max_iter=5, start=start)
+    assert warm.gp.log_likelihood_history_[0] == pytest.approx(gp.log_likelihood_, rel=1e-3)
+    np.savez(path, X=gp.X_)
+    with pytest.raises(FormatError, match="not a manifold start"):
+        LatentStart.load(path)
+
+
 @pytest.mark.slow
 def test_no_manifold_learns_one_from_the_pose_library_and_caches_it(
     tiny, monkeypatch, caplog, tmp_path
@@ -144,6 +163,10 @@ def test_no_manifold_learns_one_from_the_pose_library_and_caches_it(
     with caplog.at_level(logging.INFO, logger="meshmocap.trackers.cage.manifold"):
         tr = make_tracker("cage_nolocal", template=t)
     assert tr.gp.X_.shape == (400, 5) and tr.gp.n_iter_ <= 20
+    # started from the bundled fit (the PCA start's log-likelihood is about -5e5)
+    start = manifold_module.default_start()
+    assert start.X.shape == (400, 5)
+    assert tr.gp.log_likelihood_history_[0] > -1e5
     assert "learned a 5-D one from library:400 on 'neutral_5k'" in caplog.text
     path = manifold_module.default_manifold_path(t)
     assert path.parent == tmp_path / "cache" and path.is_file()

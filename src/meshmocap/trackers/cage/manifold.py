@@ -58,10 +58,12 @@ from meshmocap.trackers.cage.training_poses import PoseSet, load_pose_sources
 __all__ = [
     "DEFAULT_SOURCES",
     "MANIFOLD_FORMAT",
+    "LatentStart",
     "PoseManifold",
     "default_manifold",
     "default_manifold_note",
     "default_manifold_path",
+    "default_start",
     "fit_pose_manifold",
     "learn_manifold",
     "learn_pose_manifold",
@@ -80,10 +82,14 @@ DEFAULT_SOURCES = ("library:400",)
 DEFAULT_COMPONENTS = 5
 #: Training poses of the default manifold.
 DEFAULT_POSES = 400
-#: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000). Fewer
-#: leave the fit far from an optimum, where the last bits of its sums decide where it
-#: stops, and the cage tracks worse with it (``docs/guide/cage.rst``, the demo's manifold).
-ON_THE_FLY_MAX_ITER = 1000
+#: L-BFGS-B iterations of a manifold learned on the fly (GPLVM's default is 2000), from the
+#: bundled start (:func:`default_start`). From the PCA start 1,000 left the fit far from an
+#: optimum, where the last bits of its sums decided where it stopped, and the cage tracked
+#: worse with fewer (``docs/guide/cage.rst``, the demo's manifold); from the bundled start
+#: the likelihood begins above where 1,000 from PCA ended (``docs/measurements.rst``).
+ON_THE_FLY_MAX_ITER = 300
+#: The bundled start of the default manifold's fit (``tools/make_manifold_start.py``).
+START_FILE = Path(__file__).with_name("data") / "manifold_start.npz"
 #: Environment variable naming the folder where learned default manifolds are cached
 #: (default ``$XDG_CACHE_HOME/meshmocap`` or ``~/.cache/meshmocap``; ``off``: no cache).
 CACHE_ENV = "MESHMOCAP_CACHE"
@@ -240,6 +246,59 @@ class PoseManifold:
             raise FormatError(f"{path}: corrupt pose manifold ({why})") from None
 
 
+@dataclass(frozen=True, eq=False)
+class LatentStart:
+    """Where a manifold's fit starts: the latent points and kernel of an earlier fit on the
+    same training poses (other bodies' retargets of the same motions).
+
+    Attributes
+    ----------
+    X : (N, q) float64
+        Latent points.
+    hyper : (3,) float64
+        RBF variance α, inverse width γ and noise precision β.
+    trials : (N,) str
+        The trial of each training pose: a pose set whose trials differ is not started
+        from here.
+    digest : str
+        16 hex digits of SHA-256 over the arrays (part of a cached manifold's key).
+    """
+
+    X: np.ndarray
+    hyper: np.ndarray
+    trials: np.ndarray
+    digest: str
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> LatentStart:
+        """Read a start written by ``tools/make_manifold_start.py``."""
+        d = read_npz(path, "manifold start")
+        try:
+            X, hyper = np.asarray(d["X"], np.float64), np.asarray(d["hyper"], np.float64)
+            trials = np.asarray(d["trials"], dtype=str)
+        except KeyError as e:
+            raise FormatError(f"{path}: not a manifold start (no {e})") from None
+        if X.ndim != 2 or hyper.shape != (3,) or trials.shape != (len(X),):
+            raise FormatError(f"{path}: corrupt manifold start (X {X.shape}, hyper {hyper.shape})")
+        h = hashlib.sha256()
+        for a in (X, hyper):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update("\0".join(trials.tolist()).encode())
+        return cls(X, hyper, trials, h.hexdigest()[:16])
+
+    def fits(self, poses: PoseSet, n_components: int) -> bool:
+        """Whether ``poses`` are the poses this start was fitted on (same trials, in
+        order) and the latent dimension is its own."""
+        return self.X.shape == (len(poses), n_components) and bool(
+            np.array_equal(self.trials, np.asarray(poses.trials, dtype=str))
+        )
+
+
+def default_start() -> LatentStart:
+    """The bundled start of the default manifold's fit (:data:`START_FILE`)."""
+    return LatentStart.load(START_FILE)
+
+
 def learn_manifold(
     template: Template,
     motions: list[Motion],
@@ -275,6 +334,7 @@ def fit_pose_manifold(
     n_samples: int = 120,
     random_state: int = 0,
     max_iter: int = 2000,
+    start: LatentStart | None = None,
 ) -> PoseManifold:
     """Fit a back-constrained GPLVM on ``n_samples`` poses evenly spread over ``poses``.
 
@@ -292,6 +352,9 @@ def fit_pose_manifold(
     random_state : int
     max_iter : int
         L-BFGS-B iterations at most.
+    start : LatentStart, optional
+        Where the fit starts when the poses kept are the ones ``start`` was fitted on
+        (:meth:`LatentStart.fits`); otherwise, and by default, the PCA start.
     """
     if poses.template_name != template.name:
         raise InputError(
@@ -301,6 +364,9 @@ def fit_pose_manifold(
     oqr = oqr or build_oqr(template)
     train = poses.subsample(n_samples)
     gp = GPLVM(n_components, back_constraint="rbf", max_iter=max_iter, random_state=random_state)
+    if start is not None and start.fits(train, n_components):
+        alpha, gamma, beta = start.hyper.tolist()
+        gp.set_params(init=start.X, alpha=alpha, gamma=gamma, beta=beta)
     t0 = time.perf_counter()
     gp.fit(train.configurations)
     seconds = time.perf_counter() - t0
@@ -327,11 +393,12 @@ def learn_pose_manifold(
     asf: str | os.PathLike | None = None,
     random_state: int = 0,
     max_iter: int = 2000,
+    start: LatentStart | None = None,
 ) -> PoseManifold:
     """Read pose sources
     (:func:`~meshmocap.trackers.cage.training_poses.load_pose_source`: procedural
     names, ``.bvh``/``.amc``/``.mat`` mocap, hand-labelled ``.npz``) and fit the manifold
-    (:func:`fit_pose_manifold`)."""
+    (:func:`fit_pose_manifold`, from ``start`` where it fits the poses)."""
     oqr = oqr or build_oqr(template)
     poses = load_pose_sources(list(sources), template, oqr=oqr, asf=asf)
     return fit_pose_manifold(
@@ -342,6 +409,7 @@ def learn_pose_manifold(
         n_samples=n_samples,
         random_state=random_state,
         max_iter=max_iter,
+        start=start,
     )
 
 
@@ -408,7 +476,7 @@ def default_manifold_path(template: Template) -> Path | None:
     """Where :func:`default_manifold` caches ``template``'s default manifold (None: caching
     is off, :data:`CACHE_ENV`): the file name holds the template's name and a key of
     everything the manifold depends on (template digest, pose library digest, sources,
-    q, poses, iterations, file format, how it is fitted)."""
+    q, poses, iterations, file format, how it is fitted, the bundled start)."""
     from meshmocap.body.pose_library import load_pose_library
 
     folder = _cache_dir()
@@ -424,6 +492,7 @@ def default_manifold_path(template: Template) -> Path | None:
         DEFAULT_POSES,
         ON_THE_FLY_MAX_ITER,
         _FIT,
+        default_start().digest,
     )
     for part in parts:
         h.update(f"{part}\0".encode())
@@ -441,14 +510,15 @@ def default_manifold_note(template: Template) -> str:
     return (
         f"cage: no --manifold given: learning a {DEFAULT_COMPONENTS}-D pose manifold from "
         f"{DEFAULT_POSES} poses of the bundled CMU pose library for the cage's body "
-        f"(about a minute, once: cached)"
+        f"(seconds, once: cached)"
     )
 
 
 def default_manifold(template: Template, oqr: OQR | None = None) -> PoseManifold:
     """The cage tracker's default pose manifold of ``template``: learned at first use from
     :data:`DEFAULT_SOURCES` (:data:`DEFAULT_POSES` poses, q = :data:`DEFAULT_COMPONENTS`,
-    :data:`ON_THE_FLY_MAX_ITER` iterations; tens of seconds) and cached
+    :data:`ON_THE_FLY_MAX_ITER` iterations from the bundled start, :func:`default_start`;
+    seconds) and cached
     (:func:`default_manifold_path`); a cached file that cannot be read is learned again.
     Logged at INFO level on the ``meshmocap.trackers.cage.manifold`` logger."""
     path = default_manifold_path(template)
@@ -470,6 +540,7 @@ def default_manifold(template: Template, oqr: OQR | None = None) -> PoseManifold
         n_samples=DEFAULT_POSES,
         oqr=oqr,
         max_iter=ON_THE_FLY_MAX_ITER,
+        start=default_start(),
     )
     log.info(
         "cage: no manifold given; learned a %d-D one from %s on %r (%d poses, %.1f s fit)",
