@@ -70,6 +70,17 @@ def _lost_frame(t, frame, r, truth):
     return bad, recovery
 
 
+def test_the_shipped_rule_names_the_arm_turned_away_not_the_limbs_by_its_points(scene):
+    """The shipped rule flags the frame and names the arm (80 % outside the hull), not the
+    trunk or the leg its real points lie nearest to."""
+    t, _, frame, r, truth = scene
+    R = _arm_off(t, truth[0])
+    recovery = Recovery(t, R, truth[1])
+    bad = recovered(recovery, frame, replace(r, vertices=t.pose(R, truth[1]).V))
+    assert "lost" in bad.flags and recovery.quality.lost == ("left_arm",)
+    assert bad.message.startswith("lost left_arm (")
+
+
 def test_a_lost_run_is_searched_after_its_run_and_kept_on_its_evidence(scene):
     t, tracker, frame, r, truth = scene
     bad, recovery = _lost_frame(t, frame, r, truth)

@@ -8,6 +8,7 @@ from meshmocap.errors import FormatError, InputError
 from meshmocap.estimate.recovery.evidence import (
     DISAGREE,
     DISAGREEMENT,
+    DISPLACED,
     EVIDENCE,
     FITTED,
     START,
@@ -41,6 +42,32 @@ def test_a_limb_is_lost_when_a_measure_passes_its_threshold():
     assert rule.flags(frames).tolist() == [True, False, True]
     with pytest.raises(InputError, match="expected 6 thresholds"):
         LostRule((0.1, 0.2))
+
+
+def test_the_points_a_limb_leaves_unexplained_are_blamed_on_the_limb_outside():
+    """An arm turned away leaves its points by the trunk and a leg, which fit themselves:
+    the arm standing outside the observations is named, not them; the frame is lost
+    either way."""
+    rule = LostRule((0.9, np.inf, 0.02, np.inf, np.inf, np.inf))
+    arm = {"outside": DISPLACED + 0.3, "unexplained": 0.003}
+    E = _evidence(left_arm=arm, torso={"unexplained": 0.021}, left_leg={"unexplained": 0.15})
+    assert rule.limb_lost(E).tolist() == [True, False, False, False, True, False]
+    assert lost_limbs(E, rule) == ("left_arm",) and rule.flags(E[None]).tolist() == [True]
+    why = lost_reasons(E, rule)
+    assert why == {
+        "left_arm": "80% outside the observations, 17.1% of the points unexplained by "
+        "torso, left_leg"
+    }
+    # a limb lost by another measure, or standing outside itself, keeps its name
+    E2 = _evidence(left_arm=arm, left_leg={"unexplained": 0.15, "outside": 0.95})
+    assert lost_limbs(E2, rule) == ("left_leg",)
+    E3 = _evidence(left_arm=arm, left_leg={"unexplained": 0.15, "outside": DISPLACED + 0.1})
+    assert lost_limbs(E3, rule) == ("left_leg",)
+    # the arm past the threshold itself: the leg's points are its own too
+    E4 = _evidence(left_arm={**arm, "unexplained": 0.03}, left_leg={"unexplained": 0.15})
+    assert lost_limbs(E4, rule) == ("left_arm",)
+    # no limb outside: the limbs with the points
+    assert lost_limbs(_evidence(left_leg={"unexplained": 0.15}), rule) == ("left_leg",)
 
 
 def test_a_rule_held_over_two_frames_needs_the_measure_past_its_threshold_on_both():

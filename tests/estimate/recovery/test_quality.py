@@ -2,6 +2,7 @@
 observations it leaves unexplained."""
 
 import numpy as np
+import pytest
 
 from meshmocap.estimate.recovery.quality import fit_quality, limb_labels, uncovered_points
 from toys import observed_frame
@@ -20,6 +21,26 @@ def test_fit_quality_names_the_limb_outside_and_unexplained(walker):
     assert q.lost == ("left_arm",)
     assert q.outside["left_arm"] > 0.25 and q.unexplained["left_arm"] > 0.02
     assert "left_arm (" in q.describe() and "outside the observations" in q.describe()
+
+
+def test_unexplained_points_by_the_trunk_count_for_the_nearest_other_limb(walker, monkeypatch):
+    """An arm held away from the body while the observations have it hanging by the trunk:
+    its points nearest the tracked trunk are counted for the nearest vertex of another
+    limb; the points unexplained in all are the same."""
+    from meshmocap.estimate.recovery import quality
+
+    t, R, root, posed = walker
+    labels = limb_labels(t)
+    hang = R.copy()
+    hang[[t.skeleton.index(n) for n in ("LeftArm", "LeftForeArm")]] = np.eye(3)
+    obs = observed_frame(t.pose(hang, root).V, t.F)
+    P, field = obs.points[0], obs.field
+    q = fit_quality(posed.V, labels, P, field)  # the tracked arm in the T-pose
+    assert q.unexplained["torso"] == 0.0 and q.total_unexplained > 0.05
+    monkeypatch.setattr(quality, "UNEXPLAINED_ELSEWHERE", ())
+    q0 = fit_quality(posed.V, labels, P, field)
+    assert q0.unexplained["torso"] > 0.0
+    assert q.total_unexplained == pytest.approx(q0.total_unexplained, abs=1e-12)
 
 
 def _uncovered_by_images(V, F, P, cameras, masks):

@@ -48,6 +48,7 @@ from meshmocap.estimate.recovery.quality import LIMB_PARTS
 __all__ = [
     "DISAGREE",
     "DISAGREEMENT",
+    "DISPLACED",
     "EVIDENCE",
     "FITTED",
     "RULE_FILE",
@@ -82,6 +83,14 @@ FITTED = ("outside", "unexplained")
 #: the tracks it is fitted on show (a visual hull contains the body; a limb the
 #: observations miss, held where they do not show it, stands outside it).
 START = {"outside": 0.9}
+#: The fraction of a limb's vertices outside the observed solid beyond which the limb is
+#: named for the points another limb leaves unexplained (:meth:`LostRule.named`): where a
+#: limb past a threshold only by the points unexplained nearest to it stands inside the
+#: observations itself while another limb stands this far outside them, the points are
+#: that limb's, put elsewhere (an arm turned away from the
+#: trunk leaves its points nearest the trunk or a leg; counted for the nearest tracked
+#: vertex, they named those). The frame is lost either way (:meth:`LostRule.flags`).
+DISPLACED = 0.5
 #: The shipped rule's file (in the package).
 RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "lost_rule.json"))
 
@@ -124,6 +133,23 @@ class LostRule:
         """(..., L) bool: each limb of ``evidence`` (..., L, E) past a threshold, the
         evidence taken as it is (held over frames already: :meth:`persisted`)."""
         return np.any(np.asarray(evidence) > np.asarray(self.thresholds), axis=-1)
+
+    def named(self, evidence: np.ndarray) -> np.ndarray:
+        """(L,) bool: the limbs named lost on a frame of ``evidence`` (L, E) (held over frames
+        already: :meth:`persisted`): those past a threshold (:meth:`limb_lost`), but where
+        a limb standing more than :data:`DISPLACED` outside the observations is not, those
+        past the ``unexplained`` threshold alone that stand inside them are replaced by the
+        limbs outside (the points unexplained are theirs)."""
+        e = np.asarray(evidence, dtype=np.float64)
+        past = e > np.asarray(self.thresholds)
+        lost = past.any(axis=-1)
+        out, unx = EVIDENCE.index("outside"), EVIDENCE.index("unexplained")
+        alone = past[:, unx] & ~np.delete(past, unx, axis=-1).any(axis=-1)
+        displaced = e[:, out] > DISPLACED
+        blamed = lost & alone & ~displaced
+        if blamed.any() and displaced.any():
+            return (lost & ~blamed) | displaced
+        return lost
 
     def persisted(self, evidence: np.ndarray, before: Sequence[np.ndarray] = ()) -> np.ndarray:
         """(L, E) float64: the evidence the rule reads on a frame, per limb and measure the
@@ -212,9 +238,10 @@ def lost_limbs(
     order: those with a measure of ``evidence`` (L, E) (:data:`EVIDENCE`) over ``rule``'s
     threshold (default :func:`shipped_rule`), on this frame and, for a rule held over
     frames, on the frames just before it (``before``: their evidence, oldest first;
-    :meth:`LostRule.persisted`)."""
+    :meth:`LostRule.persisted`), or the limbs standing outside the observations that the
+    unexplained points belong to (:meth:`LostRule.named`)."""
     rule = rule or shipped_rule()
-    lost = rule.limb_lost(rule.persisted(evidence, before))
+    lost = rule.named(rule.persisted(evidence, before))
     return tuple(n for n, k in zip(LIMB_PARTS, lost, strict=True) if k)
 
 
@@ -233,10 +260,20 @@ def lost_reasons(
         "residual": lambda v: f"{1000 * v:.0f} mm off any pose of the skeleton",
         "speed": lambda v: f"moved {1000 * v:.0f} mm since the last frame",
     }
+    evidence = np.asarray(evidence)
+    named, past = rule.named(evidence), rule.limb_lost(evidence)
+    blamed = past & ~named
+    unx = evidence[blamed, EVIDENCE.index("unexplained")].sum()
+    others = ", ".join(n for n, k in zip(LIMB_PARTS, blamed, strict=True) if k)
     out = {}
-    for n, row in zip(LIMB_PARTS, np.asarray(evidence), strict=True):
+    for n, row, k in zip(LIMB_PARTS, evidence, named, strict=True):
         why = [words[m](v) for m, v, t in zip(EVIDENCE, row, rule.thresholds, strict=True) if v > t]
-        if why:
+        if k and not why:  # named for the points another limb leaves unexplained
+            why = [
+                words["outside"](row[EVIDENCE.index("outside")]),
+                f"{100 * unx:.1f}% of the points unexplained by {others}",
+            ]
+        if k:
             out[n] = ", ".join(why)
     return out
 

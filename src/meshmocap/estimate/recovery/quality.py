@@ -15,9 +15,10 @@ parts):
   it out, and nothing outside it shows it is wrong).
 * **unexplained** — observed surface points farther than :data:`UNEXPLAINED_DISTANCE`
   from every tracked vertex, as a fraction of all observed points, each counted for the
-  limb of its nearest tracked vertex. Something is there that no part of the model
-  explains: typically the real limb, while the model's is elsewhere. A hull's phantom
-  volumes leave some such points on every frame, so the threshold sits above them.
+  limb of its nearest tracked vertex (the trunk's for the nearest vertex of another limb,
+  :data:`UNEXPLAINED_ELSEWHERE`). Something is there that no part of the model explains:
+  typically the real limb, while the model's is elsewhere. A hull's phantom volumes leave
+  some such points on every frame, so the threshold sits above them.
 
 :func:`fit_quality` names a limb lost when any measure passes its threshold here
 (:data:`OUTSIDE_LOST`, :data:`BURIED_LOST`, :data:`UNEXPLAINED_LOST`): what the recovery
@@ -45,6 +46,7 @@ __all__ = [
     "OUTSIDE_LOST",
     "OUTSIDE_MARGIN",
     "UNEXPLAINED_DISTANCE",
+    "UNEXPLAINED_ELSEWHERE",
     "UNEXPLAINED_LOST",
     "UNSEEN_LOST",
     "UNSEEN_MARGIN",
@@ -86,6 +88,13 @@ SILHOUETTE_DISTANCE = 0.03
 #: Fraction of all observed points, unexplained and nearest to one limb, beyond which that
 #: limb is lost.
 UNEXPLAINED_LOST = 0.1
+#: Limbs whose unexplained points are counted for the nearest vertex of the other limbs. An
+#: observed point by the tracked trunk that no vertex explains is nearly always a limb the
+#: tracker has put elsewhere (an arm hanging by the trunk while the tracked arm points
+#: away, or stuck inside the trunk), seldom the trunk itself, which every tracker fits
+#: first: counted for the trunk, the flag named the trunk (or a leg) on about half of the
+#: frames with an arm lost (``docs/flags.rst``).
+UNEXPLAINED_ELSEWHERE = ("torso",)
 
 
 def limb_labels(template: Template) -> np.ndarray:
@@ -215,6 +224,23 @@ def uncovered_points(
     return hit
 
 
+def _elsewhere(near: np.ndarray, V: np.ndarray, labels: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """(q,) int64: the limbs ``near`` of the unexplained points ``Q`` (q, 3), those of the
+    limbs of :data:`UNEXPLAINED_ELSEWHERE` replaced by the limb of the nearest vertex of
+    ``V`` (n, 3) on another limb (``labels``, :func:`limb_labels`)."""
+    names = list(LIMB_PARTS)
+    moved = np.isin(near, [names.index(n) for n in UNEXPLAINED_ELSEWHERE])
+    others = np.flatnonzero(
+        np.isin(labels, [k for k, n in enumerate(names) if n not in UNEXPLAINED_ELSEWHERE])
+    )
+    if not moved.any() or others.size == 0:
+        return near
+    _, j = KDTree(np.ascontiguousarray(V[others])).query(np.ascontiguousarray(Q[moved]), k=1)
+    out = near.copy()
+    out[moved] = labels[others[np.asarray(j, dtype=np.int64)]]
+    return out
+
+
 def fit_quality(
     V: np.ndarray,
     labels: np.ndarray,
@@ -272,6 +298,7 @@ def fit_quality(
     else:
         far = d > UNEXPLAINED_DISTANCE
     near = labels[np.asarray(i, dtype=np.int64)[far]]
+    near = _elsewhere(near, V, labels, P[far])
     votes = np.bincount(near[near >= 0], minlength=len(limbs)) / max(len(P), 1)
     unexplained = {n: float(votes[k]) for k, n in enumerate(limbs)}
     lost = tuple(
