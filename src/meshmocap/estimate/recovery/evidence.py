@@ -87,10 +87,11 @@ START = {"outside": 0.9}
 #: named for the points another limb leaves unexplained (:meth:`LostRule.named`): where a
 #: limb past a threshold only by the points unexplained nearest to it stands inside the
 #: observations itself while another limb stands this far outside them, the points are
-#: that limb's, put elsewhere (an arm turned away from the
-#: trunk leaves its points nearest the trunk or a leg; counted for the nearest tracked
-#: vertex, they named those). The frame is lost either way (:meth:`LostRule.flags`).
-DISPLACED = 0.5
+#: that limb's, put elsewhere (an arm turned away from the trunk leaves its points nearest
+#: the trunk or a leg; counted for the nearest tracked vertex, they named those). Above the
+#: cage's good frames (its smooth arms often stand half outside a hull). The frame is lost
+#: either way (:meth:`LostRule.flags`).
+DISPLACED = 0.7
 #: The shipped rule's file (in the package).
 RULE_FILE = Path(str(resources.files("meshmocap.estimate.recovery") / "data" / "lost_rule.json"))
 
