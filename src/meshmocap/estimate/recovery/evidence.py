@@ -137,10 +137,10 @@ class LostRule:
 
     def named(self, evidence: np.ndarray) -> np.ndarray:
         """(L,) bool: the limbs named lost on a frame of ``evidence`` (L, E) (held over frames
-        already: :meth:`persisted`): those past a threshold (:meth:`limb_lost`), but where
-        a limb standing more than :data:`DISPLACED` outside the observations is not, those
-        past the ``unexplained`` threshold alone that stand inside them are replaced by the
-        limbs outside (the points unexplained are theirs)."""
+        already: :meth:`persisted`): those past a threshold (:meth:`limb_lost`), except
+        that where a limb stands more than :data:`DISPLACED` outside the observations, the
+        limbs past the ``unexplained`` threshold alone that stand inside them are replaced
+        by the limbs outside (the points unexplained are theirs)."""
         e = np.asarray(evidence, dtype=np.float64)
         past = e > np.asarray(self.thresholds)
         lost = past.any(axis=-1)
