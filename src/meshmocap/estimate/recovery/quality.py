@@ -92,8 +92,8 @@ UNEXPLAINED_LOST = 0.1
 #: observed point by the tracked trunk that no vertex explains is nearly always a limb the
 #: tracker has put elsewhere (an arm hanging by the trunk while the tracked arm points
 #: away, or stuck inside the trunk), seldom the trunk itself, which every tracker fits
-#: first: counted for the trunk, the flag named the trunk (or a leg) on about half of the
-#: frames with an arm lost (``docs/flags.rst``).
+#: first: counted for the trunk, they named the trunk when an arm was lost
+#: (``docs/measurements.rst``).
 UNEXPLAINED_ELSEWHERE = ("torso",)
 
 
