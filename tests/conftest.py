@@ -86,6 +86,27 @@ def _manifold_cache(tmp_path_factory):
 
 
 _COMPILING = pytest.StashKey[object]()
+_THREADS = pytest.StashKey[object]()
+#: The threading variables the BLAS and OpenMP libraries read when they load.
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+def pytest_configure(config) -> None:
+    """One BLAS and OpenMP thread in every test process (``MESHMOCAP_THREADS`` sets
+    another count) and in the processes the tests start, as meshmocap's commands and
+    tracking run (:mod:`meshmocap._threads`): a test that calls numpy, scipy or pykdtree
+    outside them otherwise runs a pool thread per core, which spins beside the other
+    pytest-xdist worker on a small machine (a two-frame shape fit's test took 17 CPU s so,
+    6 on one thread). The pools loaded already are capped, those loaded later read the
+    variables (set where the caller has not)."""
+    from threadpoolctl import threadpool_limits
+
+    from meshmocap._threads import thread_count
+
+    n = thread_count()
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, str(n))
+    config.stash[_THREADS] = threadpool_limits(n)
 
 
 def pytest_sessionstart(session) -> None:
