@@ -75,9 +75,11 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     "meshmocap.trackers.patch.kernels": {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
+        "vertex_moves": ("float64[:, ::1], float64[:, :, ::1], int64[::1]",),
         "stale_rows": (
             "float64[:, ::1], float64[:], float64[::1], int64[::1], float64[:, ::1], "
-            "int64[:, ::1], float64[:, ::1], float64[::1]",
+            "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], "
+            "int64[::1], int64[::1]",
         ),
         "assign_kernel": (
             "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
@@ -89,6 +91,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, :, ::1], float64[:, ::1], int64[:], int64[:], float64[::1], "
             "float64[:, :, ::1], float64[:, :, :, :, ::1]",
         ),
+        "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
         ),

@@ -10,8 +10,10 @@
 * :func:`point_moments`: the per-patch sums of the point terms, one pass.
 * :func:`rigidity_blocks`: the rigidity term's blocks, gradient and energy from the pairs'
   rest moments (:func:`rotated_moments`), one pass.
-* :func:`nearest_among`, :func:`stale_rows`: the candidate vertices re-used across a
-  frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
+* :func:`nearest_among`, :func:`vertex_moves`, :func:`stale_rows`: the candidate vertices
+  re-used across a frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
+* :func:`in_image_kernel`: the reverse term's visibility test, each camera's projection
+  after its rotation (:func:`~meshmocap.geometry.camera.in_view`'s operations, one pass).
 * :func:`block_cholesky`, :func:`block_cholesky_solve`: the normal equations' sparse
   Cholesky factor in 3×3 blocks on a structure computed once
   (:class:`~meshmocap.trackers.patch.solver.BlockFactor`), and its solve.
@@ -29,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
+from meshmocap._tolerances import DEPTH_FLOOR, ZERO_EXTENT
 
 
 @njit(cache=True, nogil=True)
@@ -157,35 +160,126 @@ def nearest_among(Y, V, cand, k):
 
 
 @njit(cache=True, nogil=True)
-def stale_rows(Y, kth, far, epoch, moved, order, centres, radius):
+def vertex_moves(Vm, snaps, start):
+    """How far each vertex moved since each snapshot: ``Vm`` (n, 3) the vertices now and
+    ``snaps`` (S, n, 3) at each snapshot, both in patch order (patch ``p``'s vertices in
+    rows ``start[p]:start[p + 1]``). Returns the distances (S, n) and their largest per
+    patch (S, P), metres, and each patch's bounding box now (P, 6): lowest x, y, z, then
+    highest."""
+    S, n = snaps.shape[0], Vm.shape[0]
+    P = start.shape[0] - 1
+    dv = np.empty((S, n))
+    moved = np.zeros((S, P))
+    box = np.empty((P, 6))
+    for p in range(P):
+        for a in range(3):
+            box[p, a] = np.inf
+            box[p, 3 + a] = -np.inf
+        for s in range(start[p], start[p + 1]):
+            for a in range(3):
+                box[p, a] = min(box[p, a], Vm[s, a])
+                box[p, 3 + a] = max(box[p, 3 + a], Vm[s, a])
+    for e in range(S):
+        for p in range(P):
+            top = 0.0
+            for s in range(start[p], start[p + 1]):
+                x = Vm[s, 0] - snaps[e, s, 0]
+                y = Vm[s, 1] - snaps[e, s, 1]
+                z = Vm[s, 2] - snaps[e, s, 2]
+                d = np.sqrt(x * x + y * y + z * z)
+                dv[e, s] = d
+                if d > top:
+                    top = d
+            moved[e, p] = top
+    return dv, moved, box
+
+
+@njit(cache=True, nogil=True)
+def stale_rows(Y, kth, far, epoch, moved, dv, order, box, Vm, cand, start, members):
     """Points whose ``k`` nearest candidates may miss a nearer vertex
     (:mod:`~meshmocap.trackers.patch.nearest`): point t (``Y[t]``, k-th candidate at
     ``kth[t]``, every other vertex at least ``far[t]`` away at snapshot ``epoch[t]``) is
-    stale if a patch ``p`` that moved at least ``far[t] − kth[t]`` since that snapshot
-    (``moved[epoch[t], p]``) now reaches within ``kth[t]`` of it (its vertices lie within
-    ``radius[p]`` of ``centres[p]``). ``order[e]`` lists the patches by decreasing
-    ``moved[e]``, so a point looks only at the patches that moved enough. Returns (m,)
-    bool."""
+    stale if a vertex outside its candidates ``cand[t]`` (m, K) now lies within ``kth[t]``
+    (ties included). Only a vertex that moved at least ``far[t] − kth[t]`` since that
+    snapshot (``dv[epoch[t]]`` (S, n), in patch order: patch ``p``'s vertices are
+    ``members[start[p]:start[p + 1]]``, at ``Vm`` (n, 3) now, in that order) can, and only
+    in a patch that moved that much (``moved`` (S, P), the most of its vertices) and whose
+    bounding box now (``box`` (P, 6), :func:`vertex_moves`) reaches within ``kth[t]``;
+    each distance counts a nanometre more movement for rounding. ``order[e]`` lists the
+    patches by decreasing ``moved[e]``, so a point looks only at the patches that moved
+    enough. Returns (m,) bool."""
     m = Y.shape[0]
-    P = centres.shape[0]
+    P = box.shape[0]
+    K = cand.shape[1]
     out = np.zeros(m, dtype=np.bool_)
     for t in range(m):
-        slack = far[t] - kth[t]
+        slack = far[t] - kth[t] - ZERO_EXTENT
         if not slack > 0:
             out[t] = True
             continue
         e = epoch[t]
+        y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
+        reach = kth[t] * kth[t] + ZERO_EXTENT
         for u in range(P):
             p = order[e, u]
             if moved[e, p] < slack:
                 break
-            x = centres[p, 0] - Y[t, 0]
-            y = centres[p, 1] - Y[t, 1]
-            z = centres[p, 2] - Y[t, 2]
-            if np.sqrt(x * x + y * y + z * z) - radius[p] < kth[t]:
-                out[t] = True
+            x = max(box[p, 0] - y0, y0 - box[p, 3], 0.0)
+            y = max(box[p, 1] - y1, y1 - box[p, 4], 0.0)
+            z = max(box[p, 2] - y2, y2 - box[p, 5], 0.0)
+            if not x * x + y * y + z * z <= reach:
+                continue
+            for s in range(start[p], start[p + 1]):  # the patch reaches: its vertices
+                if dv[e, s] < slack:
+                    continue
+                x = Vm[s, 0] - y0
+                y = Vm[s, 1] - y1
+                z = Vm[s, 2] - y2
+                if not np.sqrt(x * x + y * y + z * z) <= kth[t]:
+                    continue
+                i = members[s]
+                known = False
+                for c in range(K):
+                    if cand[t, c] == i:
+                        known = True
+                        break
+                if not known:
+                    out[t] = True
+                    break
+            if out[t]:
                 break
     return out
+
+
+@njit(cache=True, nogil=True)
+def in_image_kernel(Xc, cam, ok):
+    """In place, ``ok`` (n,) bool and-ed with whether a camera sees each point: camera-frame
+    points ``Xc`` (n, 3) (``X @ R.T + t``) at positive depth that project into the image
+    (``0 ≤ u ≤ width``, ``0 ≤ v ≤ height``), the camera given as ``cam`` (12,) float64:
+    ``K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]``, the distortion ``k1, k2, p1, p2, k3``,
+    ``width, height``. The operations of :meth:`~meshmocap.geometry.camera.Camera.project`
+    in the same order; points already False are skipped."""
+    fx, skew, cx, fy, cy = cam[0], cam[1], cam[2], cam[3], cam[4]
+    k1, k2, p1, p2, k3 = cam[5], cam[6], cam[7], cam[8], cam[9]
+    width, height = cam[10], cam[11]
+    distort = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
+    for i in range(Xc.shape[0]):
+        if not ok[i]:
+            continue
+        depth = Xc[i, 2]
+        safe = DEPTH_FLOOR if np.abs(depth) < DEPTH_FLOOR else depth
+        x = Xc[i, 0] / safe
+        y = Xc[i, 1] / safe
+        if distort:
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            x, y = (
+                x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y,
+            )
+        u = fx * x + skew * y + cx
+        v = fy * y + cy
+        ok[i] = depth > 0 and u >= 0 and u <= width and v >= 0 and v <= height
 
 
 @njit(cache=True, nogil=True)

@@ -6,13 +6,14 @@ two iterations the vertices move little, so a point's nearest vertices rarely ch
 query keeps ``k + spare`` of them, and a later iteration ranks those candidates again at
 the vertices' new positions. The result is the one a new k-d query would give whenever it
 provably is: every vertex outside the candidates was at least ``far`` (the last
-candidate's distance) from the point at the query, and has moved at most ``δ_p`` since
-(its patch ``p`` is rigid: ``δ_p = |Δc_p| + ρ_p |R_p − R_p'|₂`` with ``ρ_p`` the patch's
-radius), so it lies at least ``far − δ_p`` away now. A patch whose ``δ_p`` is below
-``far − d_k`` (``d_k`` the k-th candidate's distance now) cannot bring a vertex nearer
-than the k-th candidate, nor can a patch whose bounding sphere lies farther than ``d_k``;
-if every patch is one or the other, the k nearest are all candidates. The points for
-which this fails are queried again.
+candidate's distance) from the point at the query, and lies at least ``far − δ_v`` away
+now, ``δ_v`` its distance from where it was then. Only a vertex with ``δ_v`` above
+``far − d_k`` (``d_k`` the k-th candidate's distance now) can have come nearer than the
+k-th candidate; such vertices are looked at one by one, in the patches that moved that
+much (their largest ``δ_v``) and whose bounding box reaches within ``d_k``. If none
+outside the candidates lies within ``d_k``, the k nearest are all candidates; the points
+for which this fails are queried again (on the 12k walk about a tenth of the points a
+bound on each rigid patch's motion alone would re-query).
 """
 
 from __future__ import annotations
@@ -20,8 +21,7 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
-from meshmocap._tolerances import ZERO_EXTENT
-from meshmocap.trackers.patch.kernels import nearest_among, stale_rows
+from meshmocap.trackers.patch.kernels import nearest_among, stale_rows, vertex_moves
 
 
 def k_nearest(V: np.ndarray, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -42,8 +42,7 @@ class NearestVertices:
     Parameters
     ----------
     Y : (m, 3) float64, the observed points, metres
-    radius : (P,) float64, metres, the largest distance of a patch's vertices from its
-        centre (the patches are rigid)
+    labels : (n,) int, each vertex's patch (``0 … P − 1``)
     k : int, neighbours returned per point
     spare : int, extra candidates kept per point (0: a new k-d query every call)
 
@@ -52,28 +51,33 @@ class NearestVertices:
     n_queried : int, points queried on a k-d tree so far (the rest were re-ranked)
     """
 
-    def __init__(self, Y: np.ndarray, radius: np.ndarray, *, k: int, spare: int):
+    def __init__(self, Y: np.ndarray, labels: np.ndarray, *, k: int, spare: int):
         self.Y = np.ascontiguousarray(Y, dtype=np.float64)
-        self.radius = np.ascontiguousarray(radius, dtype=np.float64)
+        labels = np.asarray(labels, dtype=np.int64)
+        # each patch's vertices: members[start[p]:start[p + 1]]
+        self.members = np.argsort(labels, kind="stable").astype(np.int64)
+        P = int(labels.max()) + 1 if len(labels) else 0
+        self.start = np.searchsorted(labels[self.members], np.arange(P + 1)).astype(np.int64)
         self.k, self.spare = k, spare
         self.cand: np.ndarray | None = None  # (m, K) int64 candidates per point
         self.far = np.zeros(len(Y))  # distance of each point's last candidate at its query
         self.epoch = np.zeros(len(Y), dtype=np.int64)  # which snapshot it was queried on
-        self.snapshots: list[tuple] = []  # patch rotations and centres at each query
+        self.snapshots = np.zeros((0, len(labels), 3))  # the vertices (patch order) then
+        self.n_snapshots = 0
         self.n_queried = 0
 
-    def query(self, V: np.ndarray, R: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The ``k`` nearest vertices of ``V`` (n, 3) to every point, by increasing
-        distance: distances (m, k) float64, metres, and indices (m, k) int64. ``R``
-        (P, 3, 3), ``c`` (P, 3): the patch rotations and centres that place ``V``."""
+        distance: distances (m, k) float64, metres, and indices (m, k) int64."""
         V = np.ascontiguousarray(V, dtype=np.float64)
         m, n = len(self.Y), len(V)
         k, K = min(self.k, n), min(self.k + self.spare, n)
+        Vm = V[self.members]
         if self.cand is None or self.spare == 0:
             d, idx = np.empty((m, k)), np.empty((m, k), dtype=np.int64)
             rows = np.arange(m)
         else:
-            moved = np.stack([_patch_moves(R, c, Rs, cs, self.radius) for Rs, cs in self.snapshots])
+            dv, moved, box = vertex_moves(Vm, self.snapshots[: self.n_snapshots], self.start)
             d, idx = nearest_among(self.Y, V, self.cand, k)
             stale = stale_rows(
                 self.Y,
@@ -81,9 +85,13 @@ class NearestVertices:
                 self.far,
                 self.epoch,
                 moved,
+                dv,
                 np.argsort(-moved, axis=1, kind="stable"),
-                np.ascontiguousarray(c),
-                self.radius,
+                box,
+                Vm,
+                self.cand,
+                self.start,
+                self.members,
             )
             rows = np.flatnonzero(stale)
         if len(rows):
@@ -93,22 +101,20 @@ class NearestVertices:
             self.cand[rows] = iq
             # with every vertex a candidate, no other vertex can come nearer
             self.far[rows] = dq[:, -1] if n > K else np.inf
-            self.epoch[rows] = len(self.snapshots)
-            self.snapshots.append((R.copy(), c.copy()))
+            self.epoch[rows] = self.n_snapshots
+            self._snapshot(Vm)
             d[rows], idx[rows] = dq[:, :k], iq[:, :k]
             self.n_queried += len(rows)
         return d, idx
 
-
-def _patch_moves(
-    R: np.ndarray, c: np.ndarray, R0: np.ndarray, c0: np.ndarray, radius: np.ndarray
-) -> np.ndarray:
-    """Largest displacement (P,) of a vertex of each rigid patch from ``R0``, ``c0`` to
-    ``R``, ``c`` (a bound): ``|c − c0| + ρ |R − R0|₂``, with ``|R − R0|₂ = 2 sin(θ/2) =
-    sqrt(3 − tr(R R0ᵀ))`` for the angle θ between them; plus a nanometre for rounding."""
-    tr = np.einsum("pij,pij->p", R, R0)
-    turn = np.sqrt(np.maximum(3.0 - tr, 0.0))
-    return np.linalg.norm(c - c0, axis=1) + radius * turn + ZERO_EXTENT
+    def _snapshot(self, Vm: np.ndarray) -> None:
+        """Keep the vertices ``Vm`` (n, 3, patch order) of a query (room doubled as needed)."""
+        if self.n_snapshots == len(self.snapshots):
+            grown = np.empty((max(4, 2 * len(self.snapshots)), *Vm.shape))
+            grown[: self.n_snapshots] = self.snapshots[: self.n_snapshots]
+            self.snapshots = grown
+        self.snapshots[self.n_snapshots] = Vm
+        self.n_snapshots += 1
 
 
 class NearestPoints:

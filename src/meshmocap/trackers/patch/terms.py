@@ -39,8 +39,9 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from meshmocap._tolerances import DIVISOR_FLOOR
-from meshmocap.geometry.camera import Camera, in_view
+from meshmocap.geometry.camera import Camera
 from meshmocap.io.capture import CaptureFrame
+from meshmocap.trackers.patch.kernels import in_image_kernel
 from meshmocap.trackers.patch.model import PatchModel
 from meshmocap.trackers.patch.nearest import NearestPoints
 from meshmocap.trackers.patch.residuals import (
@@ -120,6 +121,26 @@ class FrameData:
         """Nearest kept observed points of moving query points (the reverse term's
         vertices), built at first use, once a frame."""
         return NearestPoints(self.Y, spare=REVERSE_SPARE)
+
+    @cached_property
+    def camera_rows(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per camera, ``R.T`` (3, 3), ``t`` (3,) and the (12,) row
+        :func:`~meshmocap.trackers.patch.kernels.in_image_kernel` reads."""
+        rows = []
+        for cam in self.cameras:
+            K = cam.K
+            row = [K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], *cam.dist, cam.width, cam.height]
+            rows.append((cam.R.T, cam.t, np.array(row, dtype=np.float64)))
+        return rows
+
+    def in_view(self, X: np.ndarray) -> np.ndarray:
+        """(n,) bool: which of the points ``X`` (n, 3) every camera sees, as
+        :func:`~meshmocap.geometry.camera.in_view` (its projection, compiled)."""
+        X = np.asarray(X, dtype=np.float64)
+        ok = np.ones(len(X), dtype=bool)
+        for RT, t, row in self.camera_rows:
+            in_image_kernel(np.ascontiguousarray(X @ RT + t), row, ok)
+        return ok
 
     @cached_property
     def rays(self) -> SilhouetteRays | None:
@@ -263,7 +284,7 @@ class ReverseTerm(_Weighted):
         d, j = fd.nearest_points.query(it.V[v])
         ok = (np.einsum("ij,ij->i", it.N[v], fd.NY[j]) > fd.normal_cos) & (d < self.cap)
         near = np.flatnonzero(ok)
-        ok[near] = in_view(it.V[v[near]], fd.cameras)
+        ok[near] = fd.in_view(it.V[v[near]])
         v, y = v[ok], fd.Y[j[ok]]
         if len(v) == 0:
             return 0.0

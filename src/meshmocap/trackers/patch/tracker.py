@@ -151,11 +151,6 @@ class PatchTracker:
         m = self.model
         self.vertex_patch = m.labels.astype(np.int64)
         self.rest_offsets = np.ascontiguousarray(m.V0 - m.centres0[m.labels])  # v0 − c0_k
-        # each patch's radius: its vertices' largest distance from its centre
-        self.patch_radius = np.zeros(m.P)
-        np.maximum.at(
-            self.patch_radius, m.labels, np.linalg.norm(m.V0 - m.centres0[m.labels], axis=1)
-        )
         self.pairs = _held_pairs(template.eval_skeleton)
         self.train_faces, self.train_bary, self.train_class = surface_training_sample(
             template.V, template.F, m.vertex_class, seed=o.seed
@@ -480,7 +475,7 @@ class PatchTracker:
     def nearest_vertices(self, Y: np.ndarray, *, spare: int) -> NearestVertices:
         """The nearest vertices of observed points ``Y`` (m, 3) over a frame's iterations,
         ``spare`` candidates kept beyond ``k_neighbours``."""
-        return NearestVertices(Y, self.patch_radius, k=self.opts.k_neighbours, spare=spare)
+        return NearestVertices(Y, self.model.labels, k=self.opts.k_neighbours, spare=spare)
 
     def correspondences(
         self,
@@ -507,7 +502,7 @@ class PatchTracker:
         if nearest is None:
             d, idx = k_nearest(Vc, Y, min(o.k_neighbours, len(Vc)))
         else:
-            d, idx = nearest.query(Vc, self.R, self.c)
+            d, idx = nearest.query(Vc)
         if o.interior_scale > 0:  # the E-step with depth penalties, in numpy
             return self._assign_interior(Y, NY, ycls, Vc, Nc, d, idx)
         # per point, the nearest vertex per patch among those whose normals agree and, with
