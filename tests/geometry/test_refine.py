@@ -191,25 +191,6 @@ def test_the_next_frame_starts_where_the_last_left(ellipsoid, anchor):
     np.testing.assert_allclose(turned, nxt @ Q.T, atol=1e-6)
 
 
-def test_rebased_the_next_frame_starts_from_the_new_skin_plus_the_same_shape(ellipsoid):
-    """Re-expressed against another skin of the same frame, the refinement kept is what the
-    kept shape adds to that skin: nothing changes against the same skin, and nothing is
-    left to add against the kept shape itself."""
-    V, F, P, N = ellipsoid
-    S = _twisted(V)
-    a, b = (ArapRefiner(V, F, iterations=3) for _ in range(2))
-    for ref in (a, b):
-        ref.refine(S, P, N, key=4)
-    b.rebase(S)  # the same skin: nothing changes
-    np.testing.assert_allclose(b.last_[1], a.last_[1], atol=1e-9)
-    kept = a.last_[2]
-    b.rebase(kept)  # a skin that is the kept shape: nothing left to add
-    assert np.abs(b.last_[1]).max() < 1e-12
-    c = ArapRefiner(V, F)
-    c.rebase(S)  # nothing refined yet: nothing to re-express
-    assert c.last_ is None
-
-
 def _stretched(V: np.ndarray, k: int, fine: np.ndarray, axes: np.ndarray):
     """Frame ``k`` of an ellipsoid growing 4 % a frame in height and losing 2 % in width
     (not a rigid turn of any neighbourhood of the rest shape): its vertices, and dense

@@ -85,36 +85,3 @@ def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
     holder.key = 4
     holder.surface = False  # not a clean 4D capture: the template's own surface
     assert held_rest(holder, refiner, 5) is None
-
-
-def test_regauge_starts_the_next_hold_from_the_pose_of_the_refined_surface(walker):
-    """On a clean 4D capture (the hold fits the refined surface, the refinement anchored
-    frame to frame) the holder's last pose becomes the pose whose skin is nearest to the
-    refined surface, and the kept refinement is re-expressed against that skin: here the
-    refined surface is a skin itself, so nearly nothing is left to add. Elsewhere nothing
-    changes."""
-    from meshmocap.estimate.pose.hold import SkeletonHold
-    from meshmocap.geometry.mesh import vertex_normals
-    from meshmocap.geometry.refine import ArapRefiner
-    from meshmocap.trackers.frame_step import regauge
-
-    t, R, root, posed = walker
-    X = posed.V
-    P, N = X, vertex_normals(X, t.F)
-    for surface, key in ((False, 3), (True, 2), (True, 3)):
-        holder = SkeletonHold(t, surface=surface)
-        holder.last, holder.key = (R.copy(), root + 0.02), 3  # 2 cm off: a slid skin
-        ref = ArapRefiner(t.V, t.F, iterations=2)
-        ref.refine(X, P, N, key=3)
-        before = ref.last_[1].copy()
-        regauge(holder, ref, X, key)
-        if not (surface and key == 3):
-            np.testing.assert_array_equal(holder.last[1], root + 0.02)
-            np.testing.assert_array_equal(ref.last_[1], before)
-            continue
-        np.testing.assert_allclose(holder.last[1], root, atol=1e-3)
-        skin = t.pose(*holder.last).V
-        kept = ref.last_[2]
-        # the refinement of a skin leaves it nearly there (it bends a little at the joints)
-        assert np.linalg.norm(kept - skin, axis=1).mean() < 0.001
-        assert np.linalg.norm(ref.last_[1], axis=1).mean() < 0.001

@@ -357,18 +357,6 @@ class ArapRefiner:
         V = np.ascontiguousarray(V, dtype=np.float64)
         return arap_rotations_kernel(V, self.edges_, D, spread, axes, int(iterations))
 
-    def rebase(self, V: np.ndarray) -> None:
-        """Re-express the last keyed refinement against the skin ``V`` (n, 3), metres,
-        instead of the one it was refined from (the same frame's surface in another pose:
-        the pose that skins nearest to the refined surface), so that the next frame starts
-        from its skin in that pose plus what that skin does not carry. Nothing happens
-        without a last keyed refinement."""
-        if self.last_ is None:
-            return
-        key, _, kept = self.last_
-        V = np.asarray(V, dtype=np.float64)
-        self.last_ = (key, np.einsum("nji,nj->ni", self.rotations(V), kept - V), kept)
-
     def refine(
         self, V: np.ndarray, P: np.ndarray, NP: np.ndarray, *, key: int | None = None
     ) -> np.ndarray:

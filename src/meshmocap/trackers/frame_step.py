@@ -105,8 +105,6 @@ def track_frame(
                     timer.lap("checks")
             if refiner is not None:
                 r = replace(r, vertices=refiner.refine(r.vertices, *frame.points, key=index))
-                if holder is not None:
-                    regauge(holder, refiner, r.vertices, index)
             if timer is not None:
                 timer.lap("refine")
             if timer is not None:  # what this frame read and derived, the next reads first
@@ -250,23 +248,6 @@ def held(
     if not is_finite_result(h):
         raise FitError("non-finite joints or vertices after holding the skeleton")
     return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
-
-
-def regauge(
-    holder: SkeletonHold, refiner: SurfaceRefiner | ArapRefiner, X: np.ndarray, index: int
-) -> None:
-    """Where the holder fits the frame before's refined surface (a clean 4D capture) and
-    ``refiner`` anchors frame to frame: the pose whose skin is nearest to the frame
-    ``index``'s refined surface ``X`` (n, 3) becomes the pose the next frame's hold starts
-    from and puts that surface back at rest with, and the refinement kept is re-expressed
-    against that skin (:meth:`~meshmocap.geometry.refine.ArapRefiner.rebase`). The held pose
-    and the kept shape otherwise share what the skin puts where: a pose a little off leaves
-    its error in the shape put back at rest, where nothing pulls it back."""
-    if not (holder.surface and isinstance(refiner, ArapRefiner) and holder.key == index):
-        return
-    R, root = holder.start(X, *holder.last)
-    holder.last = (R, root)
-    refiner.rebase(holder.template.pose(R, root).V)
 
 
 def held_rest(
