@@ -2,8 +2,12 @@
 
 Protocol: the procedural walk on ``neutral_5k`` with its root held in place (x = y = 0, the
 height kept), one pass of the clip at 30 fps (121 frames) rendered in the 4-camera studio
-and carved at 1 cm; the stream plays those frames in a loop (frame k shows hull k mod 121,
-read from disk every time, as a live capture would be) for ``--frames`` frames. Each tracker
+and carved at 1 cm; the stream plays those frames in a loop, read from disk every time as
+a live capture would be, for ``--frames`` frames: forward then backward (``--loop mirror``,
+the default: frame k shows hull 0, 1, ..., 120, 119, ..., 1, 0, 1, ...; the body never
+jumps) or over again from the start (``--loop wrap``: hull k mod 121; from the walk's last
+frame to its first one joint jumps ~0.75 m in a frame, a fault no tracker is meant to
+follow). Each tracker
 starts from the first frame's true pose and writes its track folder frame by frame through
 the usual driver. Resident memory (``VmRSS``) is sampled at every frame and appended to
 ``WORK/rss_<tracker>.tsv`` (frame, MB, seconds, process id) as it goes; the table gives its
@@ -19,7 +23,7 @@ which frames, so a chunked run's "last 1,000" are read as such. Timings depend o
 
 Usage: ``python benchmarks/bench_long_run.py [--frames 10000] [--trackers patch cage
 articulated_icp] [--limit patch=2000 ...] [--seconds 600] [--parallel] [--restart]
-[--work DIR]``
+[--loop mirror|wrap] [--work DIR]``
 """
 
 from __future__ import annotations
@@ -80,6 +84,17 @@ def in_place_walk(out: Path, n: int | None = None) -> Capture:
     return Capture(out)
 
 
+LOOPS = ("mirror", "wrap")
+
+
+def looped(k: int, n: int, loop: str) -> int:
+    """The base frame (of ``n``) that frame ``k`` of the stream shows (``--loop``)."""
+    if loop == "wrap" or n < 2:
+        return k % n
+    p = k % (2 * n - 2)
+    return p if p < n else 2 * n - 2 - p
+
+
 class OutOfTime(BaseException):
     """``--seconds`` reached: raised when the driver asks for the next frame, so the tracker
     stops after its last whole frame (a BaseException: no per-frame handler of the driver
@@ -90,8 +105,17 @@ class LoopCapture:
     """``n`` frames of ``base`` played in a loop; each time a frame is read, the resident
     memory is appended to the file ``log`` (frame, MB, seconds since start, process id)."""
 
-    def __init__(self, base: Capture, n: int, log: Path, *, seconds: float | None = None):
+    def __init__(
+        self,
+        base: Capture,
+        n: int,
+        log: Path,
+        *,
+        seconds: float | None = None,
+        loop: str = "mirror",
+    ):
         self.base, self.path, self.cameras = base, base.path, base.cameras
+        self.loop = loop
         self.indices = list(range(n))
         self.truth_faces, self.fps, self.meta = base.truth_faces, base.fps, {}
         self.log = log
@@ -106,7 +130,7 @@ class LoopCapture:
             raise OutOfTime  # between two frames: every finished frame is on disk
         with self.log.open("a") as f:  # line by line: a killed run keeps its samples
             f.write(f"{k}\t{rss_mb():.1f}\t{time.perf_counter() - self.t0:.3f}\t{os.getpid()}\n")
-        return _LoopFrame(k, self.base, k % len(self.base))
+        return _LoopFrame(k, self.base, looped(k, len(self.base), self.loop))
 
 
 class _LoopFrame(CaptureFrame):
@@ -135,15 +159,24 @@ def du(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
 
-def run_one(name: str, n: int, work: Path, *, seconds: int | None, restart: bool) -> None:
+def run_one(
+    name: str, n: int, work: Path, *, seconds: int | None, restart: bool, loop: str = "mirror"
+) -> None:
     """Track (or resume) ``n`` frames of the stream with ``name`` into ``work/track_NAME``."""
     base = in_place_walk(work / "capture")
     out, log = work / f"track_{name}", work / f"rss_{name}.tsv"
+    kind = work / f"loop_{name}.txt"
     if restart:
         shutil.rmtree(out, ignore_errors=True)
         log.unlink(missing_ok=True)
+        kind.unlink(missing_ok=True)
+    # a track made before --loop existed played the stream wrapped
+    made = kind.read_text().strip() if kind.is_file() else ("wrap" if out.is_dir() else loop)
+    if made != loop:
+        sys.exit(f"{out}: tracked with --loop {made}, asked to resume with --loop {loop}")
+    kind.write_text(loop)
     template = load_template("neutral_5k")
-    stream = LoopCapture(base, n, log, seconds=seconds)
+    stream = LoopCapture(base, n, log, seconds=seconds, loop=loop)
     t0 = time.perf_counter()
     try:
         track_sequence(
@@ -207,6 +240,9 @@ def main() -> int:
     ap.add_argument("--parallel", action="store_true", help="one process per tracker, at once")
     ap.add_argument("--restart", action="store_true", help="start the tracks over")
     ap.add_argument(
+        "--loop", choices=LOOPS, default="mirror", help="forward then back, or over again"
+    )
+    ap.add_argument(
         "--clip-frames", type=int, help="loop only the clip's first N frames (quick checks)"
     )
     ap.add_argument("--one", help=argparse.SUPPRESS)  # a --parallel child: this tracker alone
@@ -220,6 +256,7 @@ def main() -> int:
             work,
             seconds=args.seconds,
             restart=args.restart,
+            loop=args.loop,
         )
         return 0
     t0 = time.perf_counter()
@@ -254,6 +291,7 @@ def main() -> int:
                 work,
                 seconds=args.seconds,
                 restart=args.restart,
+                loop=args.loop,
             )
     print(
         "\n| tracker | frames done / asked | s/frame (median) | RSS first window mean / max "
