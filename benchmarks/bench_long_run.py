@@ -170,8 +170,8 @@ def run_one(
         shutil.rmtree(out, ignore_errors=True)
         log.unlink(missing_ok=True)
         kind.unlink(missing_ok=True)
-    # a track made before --loop existed played the stream wrapped
-    made = kind.read_text().strip() if kind.is_file() else ("wrap" if out.is_dir() else loop)
+    # a track made before --loop existed played the stream wrapped; no track, no constraint
+    made = (kind.read_text().strip() if kind.is_file() else "wrap") if out.is_dir() else loop
     if made != loop:
         sys.exit(f"{out}: tracked with --loop {made}, asked to resume with --loop {loop}")
     kind.write_text(loop)
