@@ -86,6 +86,14 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "int64[::1], int64[::1], float64, float64, float64",
         ),
         "point_moments": ("int64[::1], float64[:, ::1], float64[:, ::1], float64[::1], int64",),
+        "vertex_moments": (
+            "int64[::1], int64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+            "float64[::1], int64",
+        ),
+        "add_moment_blocks": (
+            "float64[:, :, ::1], float64[::1], float64[::1], float64[:, ::1], "
+            "float64[:, :, ::1], float64[:, ::1], float64",
+        ),
         "rotated_moments": ("float64[:, :, ::1], int64[:], int64[:], float64[:, :, :, :, ::1]",),
         "rigidity_blocks": (
             "float64[:, :, ::1], float64[:, ::1], int64[:], int64[:], float64[::1], "

@@ -86,6 +86,44 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
 
 
 @njit(cache=True, nogil=True)
+def _moment_arrays(n_p):
+    """Zeroed ``W`` (n_p,), ``s`` (n_p, 3), ``Q`` (n_p, 3, 3), ``G`` (n_p, 6)."""
+    return np.zeros(n_p), np.zeros((n_p, 3)), np.zeros((n_p, 3, 3)), np.zeros((n_p, 6))
+
+
+@njit(cache=True, nogil=True)
+def _add_moment(W, s, Q, G, k, wt, q0, q1, q2, r0, r1, r2):
+    """Add one weighted residual ``r`` moved by patch ``k`` at offset ``q`` to the moments
+    (upper triangle of ``Q``); returns ``wt · |r|²``."""
+    W[k] += wt
+    s[k, 0] += wt * q0
+    s[k, 1] += wt * q1
+    s[k, 2] += wt * q2
+    Q[k, 0, 0] += wt * q0 * q0
+    Q[k, 0, 1] += wt * q0 * q1
+    Q[k, 0, 2] += wt * q0 * q2
+    Q[k, 1, 1] += wt * q1 * q1
+    Q[k, 1, 2] += wt * q1 * q2
+    Q[k, 2, 2] += wt * q2 * q2
+    G[k, 0] += wt * (q1 * r2 - q2 * r1)
+    G[k, 1] += wt * (q2 * r0 - q0 * r2)
+    G[k, 2] += wt * (q0 * r1 - q1 * r0)
+    G[k, 3] += wt * r0
+    G[k, 4] += wt * r1
+    G[k, 5] += wt * r2
+    return wt * (r0 * r0 + r1 * r1 + r2 * r2)
+
+
+@njit(cache=True, nogil=True)
+def _symmetric(Q):
+    """Copy the upper triangles of ``Q`` (n, 3, 3) to the lower ones."""
+    for k in range(Q.shape[0]):
+        Q[k, 1, 0] = Q[k, 0, 1]
+        Q[k, 2, 0] = Q[k, 0, 2]
+        Q[k, 2, 1] = Q[k, 1, 2]
+
+
+@njit(cache=True, nogil=True)
 def point_moments(patch, q, r, w, n_p):
     """Per-patch moments of weighted residuals, in one pass.
 
@@ -94,38 +132,77 @@ def point_moments(patch, q, r, w, n_p):
     in one pass: ``W = Σ w``, ``s = Σ w q``, ``Q = Σ w q qᵀ`` (P, 3, 3), the gradient
     ``G = Σ w [q × r, r]`` (P, 6) and the value ``Σ w |r|²``
     (:func:`~meshmocap.trackers.patch.solver.add_point_terms`)."""
-    W = np.zeros(n_p)
-    s = np.zeros((n_p, 3))
-    Q = np.zeros((n_p, 3, 3))
-    G = np.zeros((n_p, 6))
+    W, s, Q, G = _moment_arrays(n_p)
     value = 0.0
     for t in range(patch.shape[0]):
-        k = patch[t]
-        wt = w[t]
-        q0, q1, q2 = q[t, 0], q[t, 1], q[t, 2]
-        r0, r1, r2 = r[t, 0], r[t, 1], r[t, 2]
-        W[k] += wt
-        s[k, 0] += wt * q0
-        s[k, 1] += wt * q1
-        s[k, 2] += wt * q2
-        Q[k, 0, 0] += wt * q0 * q0
-        Q[k, 0, 1] += wt * q0 * q1
-        Q[k, 0, 2] += wt * q0 * q2
-        Q[k, 1, 1] += wt * q1 * q1
-        Q[k, 1, 2] += wt * q1 * q2
-        Q[k, 2, 2] += wt * q2 * q2
-        G[k, 0] += wt * (q1 * r2 - q2 * r1)
-        G[k, 1] += wt * (q2 * r0 - q0 * r2)
-        G[k, 2] += wt * (q0 * r1 - q1 * r0)
-        G[k, 3] += wt * r0
-        G[k, 4] += wt * r1
-        G[k, 5] += wt * r2
-        value += wt * (r0 * r0 + r1 * r1 + r2 * r2)
-    for k in range(n_p):
-        Q[k, 1, 0] = Q[k, 0, 1]
-        Q[k, 2, 0] = Q[k, 0, 2]
-        Q[k, 2, 1] = Q[k, 1, 2]
+        value += _add_moment(
+            W, s, Q, G, patch[t], w[t], q[t, 0], q[t, 1], q[t, 2], r[t, 0], r[t, 1], r[t, 2]
+        )
+    _symmetric(Q)
     return W, s, Q, G, value
+
+
+@njit(cache=True, nogil=True)
+def vertex_moments(patch, vert, V, c, Y, w, n_p):
+    """:func:`point_moments` of the residuals of vertices moved by their own patch:
+    row ``t`` has ``q = V[vert[t]] − c[patch[t]]`` and ``r = V[vert[t]] − Y[t]``
+    (``V`` (n, 3) each vertex as its own patch places it, ``c`` (P, 3) the patch centres,
+    ``Y`` (m, 3) the targets), computed as it goes instead of gathered first (the same
+    subtractions)."""
+    W, s, Q, G = _moment_arrays(n_p)
+    value = 0.0
+    for t in range(patch.shape[0]):
+        k, i = patch[t], vert[t]
+        value += _add_moment(
+            W,
+            s,
+            Q,
+            G,
+            k,
+            w[t],
+            V[i, 0] - c[k, 0],
+            V[i, 1] - c[k, 1],
+            V[i, 2] - c[k, 2],
+            V[i, 0] - Y[t, 0],
+            V[i, 1] - Y[t, 1],
+            V[i, 2] - Y[t, 2],
+        )
+    _symmetric(Q)
+    return W, s, Q, G, value
+
+
+@njit(cache=True, nogil=True)
+def add_moment_blocks(D, g, W, s, Q, G, weight):
+    """In place: ``D[k] += weight · Σ w A(q)ᵀ A(q)`` (D (P, 6, 6)) for every patch ``k``
+    with ``W[k] > 0``, from its moments ``W`` (n_p,), ``s`` (n_p, 3), ``Q`` (n_p, 3, 3)
+    (:func:`~meshmocap.trackers.patch.solver.add_point_terms` states the blocks), and
+    ``g[6k:6k + 6] += weight · G[k]`` (g (n,), G (n_p, 6)) for every ``k < n_p``; the
+    operations of the numpy expressions it replaced, in their order."""
+    for k in range(W.shape[0]):
+        if W[k] > 0:
+            tr = (Q[k, 0, 0] + Q[k, 1, 1]) + Q[k, 2, 2]
+            s0, s1, s2 = s[k, 0], s[k, 1], s[k, 2]
+            for i in range(3):
+                for j in range(3):
+                    e = tr * 1.0 if i == j else tr * 0.0  # tr I − Q
+                    D[k, i, j] += weight * (e - Q[k, i, j])
+                    e = W[k] * 1.0 if i == j else W[k] * 0.0  # W I
+                    D[k, 3 + i, 3 + j] += weight * e
+            # [s]× top right, −[s]× bottom left (their zero diagonals add nothing)
+            D[k, 0, 4] += weight * -s2
+            D[k, 0, 5] += weight * s1
+            D[k, 1, 3] += weight * s2
+            D[k, 1, 5] += weight * -s0
+            D[k, 2, 3] += weight * -s1
+            D[k, 2, 4] += weight * s0
+            D[k, 3, 1] += weight * s2
+            D[k, 3, 2] += weight * -s1
+            D[k, 4, 0] += weight * -s2
+            D[k, 4, 2] += weight * s0
+            D[k, 5, 0] += weight * s1
+            D[k, 5, 1] += weight * -s0
+        for i in range(6):
+            g[6 * k + i] += weight * G[k, i]
 
 
 @njit(cache=True, nogil=True)
@@ -342,13 +419,17 @@ def block_cholesky(L, colptr, rowidx, row_ptr, row_col, row_entry):
             pos[rowidx[e]] = e
         for t in range(row_ptr[j], row_ptr[j + 1]):
             ejk = row_entry[t]  # L[j, k]: the rows of column k from j on follow it
+            # L[j, k] in scalars (column k < j: no block of it is written here)
+            b00, b01, b02 = L[ejk, 0, 0], L[ejk, 0, 1], L[ejk, 0, 2]
+            b10, b11, b12 = L[ejk, 1, 0], L[ejk, 1, 1], L[ejk, 1, 2]
+            b20, b21, b22 = L[ejk, 2, 0], L[ejk, 2, 1], L[ejk, 2, 2]
             for e in range(ejk, colptr[row_col[t] + 1]):  # L[i, j] −= L[i, k] L[j, k]ᵀ
                 dst = pos[rowidx[e]]
                 for a in range(3):
-                    for b in range(3):
-                        L[dst, a, b] -= (L[e, a, 0] * L[ejk, b, 0] + L[e, a, 1] * L[ejk, b, 1]) + L[
-                            e, a, 2
-                        ] * L[ejk, b, 2]
+                    a0, a1, a2 = L[e, a, 0], L[e, a, 1], L[e, a, 2]
+                    L[dst, a, 0] -= (a0 * b00 + a1 * b01) + a2 * b02
+                    L[dst, a, 1] -= (a0 * b10 + a1 * b11) + a2 * b12
+                    L[dst, a, 2] -= (a0 * b20 + a1 * b21) + a2 * b22
         d = colptr[j]  # the diagonal block: its 3×3 Cholesky factor
         for a in range(3):
             s = L[d, a, a]

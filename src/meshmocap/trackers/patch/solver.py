@@ -44,10 +44,12 @@ from meshmocap.geometry.levenberg_marquardt import (
 )
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.patch.kernels import (
+    add_moment_blocks,
     block_cholesky,
     block_cholesky_solve,
     point_moments,
     rigidity_blocks,
+    vertex_moments,
 )
 from meshmocap.trackers.patch.model import PatchModel
 
@@ -443,19 +445,6 @@ def group_basis(groups: np.ndarray, c: np.ndarray, n_joints: int) -> sp.csr_matr
     )
 
 
-def _ata_blocks(
-    Q_ab: np.ndarray, Q_ba: np.ndarray, s_a: np.ndarray, s_b: np.ndarray, W: np.ndarray
-) -> np.ndarray:
-    """(m, 6, 6) blocks ``Σ w A(q_a)ᵀ A(q_b)`` from moments (see the module docstring)."""
-    out = np.zeros((len(W), 6, 6))
-    tr = np.trace(Q_ab, axis1=1, axis2=2)
-    out[:, :3, :3] = tr[:, None, None] * np.eye(3) - Q_ba
-    out[:, :3, 3:] = skew(s_a)
-    out[:, 3:, :3] = -skew(s_b)
-    out[:, 3:, 3:] = W[:, None, None] * np.eye(3)
-    return out
-
-
 def add_rigidity(
     sys: System,
     model: PatchModel,
@@ -503,11 +492,36 @@ def add_point_terms(
         np.ascontiguousarray(w, dtype=np.float64),
         n_p,
     )
-    used = np.flatnonzero(W > 0)
-    sys.add_patches(
-        used, weight * _ata_blocks(Q[used], Q[used], s[used], s[used], W[used]), unique=True
+    add_moment_blocks(sys.D, sys.g, W, s, Q, G, float(weight))
+    return float(value)
+
+
+def add_vertex_terms(
+    sys: System,
+    patch: np.ndarray,
+    vertex: np.ndarray,
+    V: np.ndarray,
+    c: np.ndarray,
+    Y: np.ndarray,
+    w: np.ndarray,
+    weight: float,
+) -> float:
+    """:func:`add_point_terms` for vertices moved by their own patch: row ``t`` pulls
+    vertex ``vertex[t]`` of patch ``patch[t]`` (m,) int, placed at ``V`` (n, 3) (each
+    vertex as its own patch predicts it; ``c`` (P, 3) the patch centres), to ``Y[t]``
+    (m, 3), weight ``w[t]`` (m,): ``q = V[vertex] − c[patch]``, ``r = V[vertex] − Y``,
+    formed in the one pass. Returns the weighted sum before ``weight``."""
+    n_p = int(patch.max()) + 1 if len(patch) else 0
+    W, s, Q, G, value = vertex_moments(
+        np.ascontiguousarray(patch, dtype=np.int64),
+        np.ascontiguousarray(vertex, dtype=np.int64),
+        np.ascontiguousarray(V, dtype=np.float64),
+        np.ascontiguousarray(c, dtype=np.float64),
+        np.ascontiguousarray(Y, dtype=np.float64),
+        np.ascontiguousarray(w, dtype=np.float64),
+        n_p,
     )
-    sys.g[: 6 * n_p] += weight * G.ravel()
+    add_moment_blocks(sys.D, sys.g, W, s, Q, G, float(weight))
     return float(value)
 
 

@@ -58,6 +58,7 @@ from meshmocap.trackers.patch.solver import (
     add_plane_terms,
     add_point_terms,
     add_rigidity,
+    add_vertex_terms,
 )
 
 #: Candidate observed points kept per reverse-term vertex across a frame's iterations
@@ -220,16 +221,16 @@ class DataTerm(_Weighted):
     def add(self, sys: System, it: Iterate) -> float:
         k = it.corr
         patch, v, w, y = k.patch, k.vertex, k.weight, k.point
-        q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k): v is a vertex of its patch k
-        r = it.V[v] - y
         wd = max(float(w.sum()), DIVISOR_FLOOR)
         if self.residual == "point_to_plane":  # slide along the surface, with a little pull
+            q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k): v is a vertex of its patch k
+            r = it.V[v] - y
             s_n = np.sum(k.normal * r, axis=1)
             e = add_plane_terms(sys, patch, q, k.normal, s_n, w, self.coefficient / wd)
             add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * self.coefficient / wd)
-        else:  # Eq. (7) as printed
-            e = add_point_terms(sys, patch, q, r, w, self.coefficient / wd)
-        return e / wd
+            return e / wd
+        # Eq. (7) as printed
+        return add_vertex_terms(sys, patch, v, it.V, it.c, y, w, self.coefficient / wd) / wd
 
 
 # Eq. (2): Er(Θ) = Σ_k Σ_(l ∈ N_k) Σ_(v ∈ P_k ∪ P_l) w_kl ‖x_k(v) − x_l(v)‖²
@@ -289,9 +290,8 @@ class ReverseTerm(_Weighted):
         if len(v) == 0:
             return 0.0
         patch = m.labels[v]
-        q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k)
         w = 1.0 / (1.0 + (d[ok] / self.cauchy_scale) ** 2)  # Cauchy IRLS weights
-        e = add_point_terms(sys, patch, q, it.V[v] - y, w, self.coefficient / len(v))
+        e = add_vertex_terms(sys, patch, v, it.V, it.c, y, w, self.coefficient / len(v))
         return e / len(v)
 
 
