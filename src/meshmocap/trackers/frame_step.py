@@ -240,14 +240,33 @@ def held(
     observed points together with the tracker's surface (:mod:`meshmocap.estimate.pose.hold`),
     from the pose of that surface; the frame's energies, flags and message are kept. Where
     ``refiner`` refined the frame next to ``index`` last, and that frame was held too, the
-    body fitted is its refined surface put back in the rest pose (:func:`held_rest`)."""
+    body fitted is its refined surface put back in the rest pose (:func:`held_rest`). On a
+    clean 4D capture (``holder.surface``), where the tracker's surface is not its own
+    articulated fit (the patch cloud, which slides along a loose surface such as a skirt,
+    and whose pose then starts the fit far off), the fit is also started from the last held
+    pose and the pose of lower :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is
+    kept."""
+    rest = held_rest(holder, refiner, index)
     R, root = holder.start(r.vertices, *holder.last)
-    R, root = holder.fit(*frame.points, r.vertices, R, root, rest=held_rest(holder, refiner, index))
+    R, root = holder.fit(*frame.points, r.vertices, R, root, rest=rest)
+    if holder.surface and not _own_pose(r, holder):  # a clean 4D capture's slid surface
+        R2, root2 = holder.fit(*frame.points, r.vertices, *holder.last, rest=rest)
+        if holder.cost(*frame.points, R2, root2, rest=rest) < holder.cost(
+            *frame.points, R, root, rest=rest
+        ):
+            R, root = R2, root2
     holder.last, holder.key = (R, root), index
     h = tracker.hold(frame, R, root)
     if not is_finite_result(h):
         raise FitError("non-finite joints or vertices after holding the skeleton")
     return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
+
+
+def _own_pose(r: FrameResult, holder: SkeletonHold) -> bool:
+    """Whether the tracker's result ``r`` carries an articulated pose of the holder's
+    skeleton (its state's ``R`` (J, 3, 3) and ``root``: articulated ICP's, a fit against
+    the observations already)."""
+    return "root" in r.state and np.shape(r.state.get("R")) == np.shape(holder.last[0])
 
 
 def held_rest(

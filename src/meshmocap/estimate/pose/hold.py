@@ -196,20 +196,10 @@ class SkeletonHold:
         -------
         R : (J, 3, 3) float64, local rotations; root : (3,) float64, metres
         """
-        Y = np.asarray(Y, dtype=np.float64)
-        NY = np.asarray(NY, dtype=np.float64)
-        if len(Y) > self.max_points:
-            pick = np.linspace(0, len(Y) - 1, self.max_points).astype(np.int64)
-            Y, NY = Y[pick], NY[pick]
-        Y = np.ascontiguousarray(Y)
+        Y, NY = self._observed(Y, NY)
         tree = KDTree(Y)
         sk = self.template.skeleton
-        plan = self.plan_
-        if rest is not None:  # the same points and weights on another rest surface
-            rest = np.asarray(rest, dtype=np.float64)
-            pick = self.model_.sample
-            N0 = vertex_normals(rest, self.template.F)[pick]
-            plan = moment_plan(replace(self.model_, X=rest[pick], N0=N0))
+        plan = self._plan(rest)
         R_ref = np.array(R, dtype=np.float64)
         R, root = R_ref.copy(), np.array(root, dtype=np.float64)
         target = np.asarray(V, dtype=np.float64)[self.model_.sample]
@@ -244,3 +234,51 @@ class SkeletonHold:
             except FitError:  # a singular system: keep the pose reached
                 break
         return R, root
+
+    def cost(
+        self,
+        Y: np.ndarray,
+        NY: np.ndarray,
+        R: np.ndarray,
+        root: np.ndarray,
+        *,
+        rest: np.ndarray | None = None,
+    ) -> float:
+        """How well the pose ``R`` (J, 3, 3), ``root`` (3,) fits the observed points ``Y``
+        (p, 3) with outward unit normals ``NY`` (p, 3) (the points :meth:`fit` uses, the
+        body ``rest`` as there), m²: the mean squared point-to-plane distance of each
+        skinned model point to its nearest compatible observed point plus that of each
+        observed point to its nearest compatible model point, within the fit's last reach
+        (the reach's square where there is none, and at most that): two fits from
+        different starts compared on the same frame."""
+        Y, NY = self._observed(Y, NY)
+        d = self.max_distance[1]
+        posed = posed_model(self._plan(rest), R, root)
+        v, nv = posed.v, posed.n
+        cand = dict(k=8, max_distance=d, normal_cos=self.normal_cos)
+        i1, k1 = nearest_compatible(KDTree(Y), NY, v, nv, **cand)  # model → data
+        k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
+        r1 = np.einsum("ij,ij->i", v[i1] - Y[k1], NY[k1])
+        r2 = np.einsum("ij,ij->i", Y[k2] - v[i2], nv[i2])
+        c1 = np.minimum(r1**2, d**2).sum() + (len(v) - len(i1)) * d**2
+        c2 = np.minimum(r2**2, d**2).sum() + (len(Y) - len(k2)) * d**2
+        return float(c1 / len(v) + c2 / max(len(Y), 1))
+
+    def _observed(self, Y: np.ndarray, NY: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The observed points and normals the fit uses (at most ``max_points``, evenly)."""
+        Y = np.asarray(Y, dtype=np.float64)
+        NY = np.asarray(NY, dtype=np.float64)
+        if len(Y) > self.max_points:
+            pick = np.linspace(0, len(Y) - 1, self.max_points).astype(np.int64)
+            Y, NY = Y[pick], NY[pick]
+        return np.ascontiguousarray(Y), NY
+
+    def _plan(self, rest: np.ndarray | None):
+        """The model points' moment plan on the template, or the same points and weights on
+        another rest surface ``rest`` (n, 3)."""
+        if rest is None:
+            return self.plan_
+        rest = np.asarray(rest, dtype=np.float64)
+        pick = self.model_.sample
+        N0 = vertex_normals(rest, self.template.F)[pick]
+        return moment_plan(replace(self.model_, X=rest[pick], N0=N0))
