@@ -90,6 +90,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "int64[::1], int64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
             "float64[::1], int64",
         ),
+        "reverse_moments": (
+            "boolean[::1], int64[::1], int64[::1], float64[::1], int64[::1], float64[:, ::1], "
+            "float64[:, ::1], float64[:, ::1], float64, int64",
+        ),
         "add_moment_blocks": (
             "float64[:, :, ::1], float64[::1], float64[::1], float64[:, ::1], "
             "float64[:, :, ::1], float64[:, ::1], float64",
@@ -98,6 +102,14 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "rigidity_blocks": (
             "float64[:, :, ::1], float64[:, ::1], int64[:], int64[:], float64[::1], "
             "float64[:, :, ::1], float64[:, :, :, :, ::1]",
+        ),
+        "add_pair_blocks": (
+            "float64[:, :, ::1], float64[:, :, ::1], float64[::1], float64[:, :, ::1], "
+            "float64[:, :, ::1], float64[:, :, ::1], int64[:], int64[:], float64",
+        ),
+        "add_bone_joint_blocks": (
+            "float64[:, :, :, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
+            "float64[:, ::1], int64[:, ::1], int64, float64",
         ),
         "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
         "patch_points": (

@@ -115,6 +115,26 @@ def _add_moment(W, s, Q, G, k, wt, q0, q1, q2, r0, r1, r2):
 
 
 @njit(cache=True, nogil=True)
+def _add_vertex_moment(W, s, Q, G, k, wt, V, i, c, Y, y):
+    """:func:`_add_moment` for vertex ``V[i]`` of patch ``k`` pulled to ``Y[y]``: ``q =
+    V[i] − c[k]``, ``r = V[i] − Y[y]``."""
+    return _add_moment(
+        W,
+        s,
+        Q,
+        G,
+        k,
+        wt,
+        V[i, 0] - c[k, 0],
+        V[i, 1] - c[k, 1],
+        V[i, 2] - c[k, 2],
+        V[i, 0] - Y[y, 0],
+        V[i, 1] - Y[y, 1],
+        V[i, 2] - Y[y, 2],
+    )
+
+
+@njit(cache=True, nogil=True)
 def _symmetric(Q):
     """Copy the upper triangles of ``Q`` (n, 3, 3) to the lower ones."""
     for k in range(Q.shape[0]):
@@ -152,21 +172,25 @@ def vertex_moments(patch, vert, V, c, Y, w, n_p):
     W, s, Q, G = _moment_arrays(n_p)
     value = 0.0
     for t in range(patch.shape[0]):
-        k, i = patch[t], vert[t]
-        value += _add_moment(
-            W,
-            s,
-            Q,
-            G,
-            k,
-            w[t],
-            V[i, 0] - c[k, 0],
-            V[i, 1] - c[k, 1],
-            V[i, 2] - c[k, 2],
-            V[i, 0] - Y[t, 0],
-            V[i, 1] - Y[t, 1],
-            V[i, 2] - Y[t, 2],
-        )
+        value += _add_vertex_moment(W, s, Q, G, patch[t], w[t], V, vert[t], c, Y, t)
+    _symmetric(Q)
+    return W, s, Q, G, value
+
+
+@njit(cache=True, nogil=True)
+def reverse_moments(ok, vert, near, d, labels, V, c, Y, scale, n_p):
+    """:func:`vertex_moments` of the reverse term's pairs: each row ``t`` with ``ok[t]``
+    pulls vertex ``vert[t]`` (its patch ``labels[vert[t]]``, placed at ``V`` (n, 3); ``c``
+    (P, 3) the patch centres) to ``Y[near[t]]``, ``d[t]`` away, with the Cauchy weight
+    ``1 / (1 + (d / scale)²)``. Returns the moments over ``n_p`` patches and the value."""
+    W, s, Q, G = _moment_arrays(n_p)
+    value = 0.0
+    for t in range(ok.shape[0]):
+        if not ok[t]:
+            continue
+        x = d[t] / scale
+        k = labels[vert[t]]
+        value += _add_vertex_moment(W, s, Q, G, k, 1.0 / (1.0 + x * x), V, vert[t], c, Y, near[t])
     _symmetric(Q)
     return W, s, Q, G, value
 
@@ -203,6 +227,70 @@ def add_moment_blocks(D, g, W, s, Q, G, weight):
             D[k, 5, 1] += weight * -s0
         for i in range(6):
             g[6 * k + i] += weight * G[k, i]
+
+
+@njit(cache=True, nogil=True)
+def add_pair_blocks(D, O, g, H2, Hkl, G, k, l, weight):
+    """In place, the rigidity term's pieces (:func:`rigidity_blocks`) times ``weight``
+    added to a system's blocks: ``H2`` (2E, 6, 6) to the diagonal blocks ``D`` (P, 6, 6)
+    of each pair's first patches ``k`` (E,) then second ones ``l`` (E,), ``Hkl`` (E, 6, 6)
+    to the pair blocks ``O``, and the gradient pieces ``G`` (E, 2, 6) to ``g`` at the
+    rows of patch k then of patch l. Each sum is taken in the order of the numpy
+    expressions it replaced: per patch over its pair ends in order, then added."""
+    E = k.shape[0]
+    acc = np.zeros(D.shape)
+    for e in range(2 * E):
+        p = k[e] if e < E else l[e - E]
+        for i in range(6):
+            for j in range(6):
+                acc[p, i, j] += weight * H2[e, i, j]
+    for p in range(D.shape[0]):
+        for i in range(6):
+            for j in range(6):
+                D[p, i, j] += acc[p, i, j]
+    for e in range(E):
+        for i in range(6):
+            for j in range(6):
+                O[e, i, j] += weight * Hkl[e, i, j]
+    for end in range(2):
+        sums = np.zeros(g.shape[0])
+        for e in range(E):
+            p = k[e] if end == 0 else l[e]
+            for i in range(6):
+                sums[6 * p + i] += weight * G[e, end, i]
+        for i in range(g.shape[0]):
+            g[i] += sums[i]
+
+
+@njit(cache=True, nogil=True)
+def add_bone_joint_blocks(PJ, g, q, r, cw, ends, base, weight):
+    """In place, the bone term's patch–joint blocks and joint gradient: for each end
+    (0: the bone's start joint, 1: its end) and patch ``k``, ``PJ[k, end] += weight ·
+    cw[end, k] · A(q_k)ᵀ`` (``A(q)ᵀ = [[q]×; I]`` (6, 3), ``q`` (P, 3)) and ``weight ·
+    cw[end, k] · r_k`` (``r`` (P, 3)) summed into ``g`` at joint ``ends[end, k]``'s rows
+    (``base + 3 j``) over the patches in order, then added; ``cw`` (2, P) the residuals'
+    coefficients on the joints (:func:`~meshmocap.trackers.patch.solver.add_bone`)."""
+    P = q.shape[0]
+    A = np.zeros((6, 3))
+    for end in range(2):
+        sums = np.zeros(g.shape[0])
+        for k in range(P):
+            a = weight * cw[end, k]
+            q0, q1, q2 = q[k, 0], q[k, 1], q[k, 2]
+            A[0, 0], A[0, 1], A[0, 2] = 0.0, -q2, q1
+            A[1, 0], A[1, 1], A[1, 2] = q2, 0.0, -q0
+            A[2, 0], A[2, 1], A[2, 2] = -q1, q0, 0.0
+            A[3, 0], A[3, 1], A[3, 2] = 1.0, 0.0, 0.0
+            A[4, 0], A[4, 1], A[4, 2] = 0.0, 1.0, 0.0
+            A[5, 0], A[5, 1], A[5, 2] = 0.0, 0.0, 1.0
+            for i in range(6):
+                for j in range(3):
+                    PJ[k, end, i, j] += a * A[i, j]
+            row = base + 3 * ends[end, k]
+            for i in range(3):
+                sums[row + i] += a * r[k, i]
+        for i in range(g.shape[0]):
+            g[i] += sums[i]
 
 
 @njit(cache=True, nogil=True)

@@ -44,7 +44,9 @@ from meshmocap.geometry.levenberg_marquardt import (
 )
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.patch.kernels import (
+    add_bone_joint_blocks,
     add_moment_blocks,
+    add_pair_blocks,
     block_cholesky,
     block_cholesky_solve,
     point_moments,
@@ -203,8 +205,6 @@ class Pattern:
         :class:`System` (``D``, ``O``, ``Oᵀ``, ``PJ``, ``PJᵀ``, ``JJ``; no entry repeats: the
         pairs are distinct and a bone joins two different joints)
     diag : (n,) int, stored positions of the ordered diagonal
-    pair_sum : (P, 2E) sparse, sums blocks given per pair end (the first patches of every
-        pair, then the second ones) into per-patch blocks
     factor : BlockFactor, the structure of ``H``'s Cholesky factor (:meth:`System.solve`)
     """
 
@@ -216,7 +216,6 @@ class Pattern:
     indices: np.ndarray
     gather: np.ndarray
     diag: np.ndarray
-    pair_sum: sp.csr_matrix
     factor: BlockFactor
 
     @property
@@ -265,12 +264,8 @@ def normal_pattern(model: PatchModel, n_joints: int) -> Pattern:
     indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))])
     indices = r[gather]
     diag = np.flatnonzero(indices == c[gather])
-    ends = np.concatenate([k, l])
-    pair_sum = sp.csr_matrix(
-        (np.ones(len(ends)), (ends, np.arange(len(ends)))), shape=(P, len(ends))
-    )
     factor = block_factor(rows, cols, n)
-    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag, pair_sum, factor)
+    return Pattern(P, K, model.pairs, order, indptr, indices, gather, diag, factor)
 
 
 @dataclass
@@ -313,21 +308,6 @@ class System:
             self.D[k] += B
         else:
             np.add.at(self.D, k, B)
-
-    def add_pair_ends(self, B: np.ndarray) -> None:
-        """Add 6×6 blocks ``B`` (2E, 6, 6) to the diagonal blocks of the pattern's pairs'
-        first patches (``B[:E]``) and second patches (``B[E:]``)."""
-        self.D += (self.pattern.pair_sum @ B.reshape(len(B), 36)).reshape(-1, 6, 6)
-
-    def add_pairs(self, B: np.ndarray) -> None:
-        """Add blocks ``B`` (E, 6, 6) between the pattern's neighbouring pairs (k, l): rows
-        of k, columns of l (the transposes follow)."""
-        self.O += B
-
-    def add_patch_joints(self, end: int, B: np.ndarray) -> None:
-        """Add 6×3 blocks ``B`` (P, 6, 3) between every patch and its bone's start
-        (``end = 0``) or end joint (``end = 1``); the transposes follow."""
-        self.PJ[:, end] += B
 
     def add_joints(self, a: np.ndarray, b: np.ndarray, B: np.ndarray) -> None:
         """Add 3×3 blocks ``B`` (m, 3, 3) at joint rows ``a`` (m,) and columns ``b`` (m,)."""
@@ -467,10 +447,7 @@ def add_rigidity(
     H2, Hkl, G, value = rigidity_blocks(
         R, np.ascontiguousarray(c), k, l, mom.W, np.ascontiguousarray(mom.m), mom.M
     )
-    sys.add_pair_ends(weight * H2)
-    sys.add_pairs(weight * Hkl)
-    sys.add_g(6 * k, weight * G[:, 0])
-    sys.add_g(6 * l, weight * G[:, 1])
+    add_pair_blocks(sys.D, sys.O, sys.g, H2, Hkl, G, k, l, float(weight))
     return float(value)
 
 
@@ -526,9 +503,19 @@ def add_vertex_terms(
 
 
 def add_bone(
-    sys: System, model: PatchModel, R: np.ndarray, c: np.ndarray, X: np.ndarray, weight: float
+    sys: System,
+    model: PatchModel,
+    R: np.ndarray,
+    c: np.ndarray,
+    X: np.ndarray,
+    weight: float,
+    *,
+    joints: np.ndarray | None = None,
 ) -> float:
-    """Add ``weight · Ebone`` (Eq. 11): ``Σ w_k |T_k(Δ0_k) − (γ x_j + (1 − γ) x_child)|²``."""
+    """Add ``weight · Ebone`` (Eq. 11): ``Σ w_k |T_k(Δ0_k) − (γ x_j + (1 − γ) x_child)|²``.
+
+    ``joints``: the term's joint–joint blocks before ``weight`` (3K, 3K), which depend on
+    the bone binding only (:func:`bone_joint_blocks`; default: computed here)."""
     P = model.P
     k = np.arange(P)
     q = np.einsum("kij,kj->ki", R, model.delta0 - model.centres0)
@@ -536,20 +523,33 @@ def add_bone(
     r = q + c - (g[:, None] * X[model.bone_j] + (1 - g)[:, None] * X[model.bone_child])
     w = model.bone_w
     value = add_point_terms(sys, k, q, r, w, weight)
-    # joint columns: ∂r/∂x_j = −γ I, ∂r/∂x_child = −(1 − γ) I
-    base = 6 * P
-    A_t = np.concatenate([skew(q), np.broadcast_to(np.eye(3), (P, 3, 3))], 1)  # A(q)ᵀ (P, 6, 3)
-    for end, (jj, coef) in enumerate(((model.bone_j, g), (model.bone_child, 1 - g))):
-        sys.add_patch_joints(end, weight * (-(w * coef))[:, None, None] * A_t)
-        sys.add_g(base + 3 * jj, weight * (-(w * coef))[:, None] * r)
-    # joint–joint blocks: multiples of I, Σ_k w_k c_a c_b at (joint a, joint b), one sum
-    K = sys.pattern.n_joints
+    # joint columns: ∂r/∂x_j = −γ I, ∂r/∂x_child = −(1 − γ) I, A(q)ᵀ = [[q]×; I]
+    add_bone_joint_blocks(
+        sys.PJ,
+        sys.g,
+        np.ascontiguousarray(q),
+        np.ascontiguousarray(r),
+        np.stack([-(w * g), -(w * (1 - g))]),
+        np.stack([model.bone_j, model.bone_child]).astype(np.int64),
+        6 * P,
+        float(weight),
+    )
+    if joints is None:
+        joints = bone_joint_blocks(model, sys.pattern.n_joints)
+    sys.JJ += weight * joints
+    return value
+
+
+def bone_joint_blocks(model: PatchModel, n_joints: int) -> np.ndarray:
+    """The bone term's joint–joint blocks before its weight, (3K, 3K) for ``K =
+    n_joints``: multiples of I, ``Σ_k w_k c_a c_b`` at (joint a, joint b) with ``c`` the
+    coefficients γ, 1 − γ of a patch's bone ends, one sum."""
+    K, g, w = n_joints, model.gamma, model.bone_w
     ends = ((model.bone_j, g), (model.bone_child, 1 - g))
     at = np.concatenate([j1 * K + j2 for j1, _ in ends for j2, _ in ends])
     coef = np.concatenate([w * c1 * c2 for _, c1 in ends for _, c2 in ends])
     C = np.bincount(at, coef, minlength=K * K).reshape(K, K)
-    sys.JJ += weight * np.kron(C, np.eye(3))
-    return value
+    return np.kron(C, np.eye(3))
 
 
 def add_plane_terms(

@@ -41,7 +41,7 @@ import numpy as np
 from meshmocap._tolerances import DIVISOR_FLOOR
 from meshmocap.geometry.camera import Camera
 from meshmocap.io.capture import CaptureFrame
-from meshmocap.trackers.patch.kernels import in_image_kernel
+from meshmocap.trackers.patch.kernels import add_moment_blocks, in_image_kernel, reverse_moments
 from meshmocap.trackers.patch.model import PatchModel
 from meshmocap.trackers.patch.nearest import NearestPoints
 from meshmocap.trackers.patch.residuals import (
@@ -59,6 +59,7 @@ from meshmocap.trackers.patch.solver import (
     add_point_terms,
     add_rigidity,
     add_vertex_terms,
+    bone_joint_blocks,
 )
 
 #: Candidate observed points kept per reverse-term vertex across a frame's iterations
@@ -116,6 +117,17 @@ class FrameData:
     cover_sample: np.ndarray
     cover_radius: float
     normal_cos: float
+
+    @cached_property
+    def labels(self) -> np.ndarray:
+        """(n,) int64, each vertex's patch."""
+        return self.model.labels.astype(np.int64)
+
+    @cached_property
+    def bone_joints(self) -> np.ndarray:
+        """The bone term's joint–joint blocks before its weight (3K, 3K), fixed over a
+        frame (:func:`~meshmocap.trackers.patch.solver.bone_joint_blocks`)."""
+        return bone_joint_blocks(self.model, len(self.X_hat))
 
     @cached_property
     def nearest_points(self) -> NearestPoints:
@@ -262,7 +274,8 @@ class BoneTerm(_Weighted):
     def add(self, sys: System, it: Iterate) -> float:
         m = it.frame.model
         total = m.bone_w.sum()
-        return add_bone(sys, m, it.R, it.c, it.X, self.coefficient / total) / total
+        joints = it.frame.bone_joints
+        return add_bone(sys, m, it.R, it.c, it.X, self.coefficient / total, joints=joints) / total
 
 
 # not in the paper: Σ_v ρ(d_v) ‖x(v) − y_nn(v)‖² / n (model to data)
@@ -286,13 +299,15 @@ class ReverseTerm(_Weighted):
         ok = (np.einsum("ij,ij->i", it.N[v], fd.NY[j]) > fd.normal_cos) & (d < self.cap)
         near = np.flatnonzero(ok)
         ok[near] = fd.in_view(it.V[v[near]])
-        v, y = v[ok], fd.Y[j[ok]]
-        if len(v) == 0:
+        n = int(np.count_nonzero(ok))
+        if n == 0:
             return 0.0
-        patch = m.labels[v]
-        w = 1.0 / (1.0 + (d[ok] / self.cauchy_scale) ** 2)  # Cauchy IRLS weights
-        e = add_vertex_terms(sys, patch, v, it.V, it.c, y, w, self.coefficient / len(v))
-        return e / len(v)
+        # Cauchy IRLS weights 1 / (1 + (d / scale)²), the moments in one pass
+        W, s, Q, G, e = reverse_moments(
+            ok, v, j, d, fd.labels, it.V, it.c, fd.Y, float(self.cauchy_scale), m.P
+        )
+        add_moment_blocks(sys.D, sys.g, W, s, Q, G, float(self.coefficient / n))
+        return e / n
 
 
 # not in the paper: Σ_(a,b) (‖x_a − x_b‖ − L_ab)² / n
