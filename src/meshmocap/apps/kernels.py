@@ -78,8 +78,8 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "vertex_moves": ("float64[:, ::1], float64[:, :, ::1], int64[::1]",),
         "stale_rows": (
             "float64[:, ::1], float64[:], float64[::1], int64[::1], float64[:, ::1], "
-            "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], "
-            "int64[::1], int64[::1]",
+            "float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], int64[::1], "
+            "int64[::1], int64[::1], int64[::1]",
         ),
         "assign_kernel": (
             "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "

@@ -360,7 +360,7 @@ def vertex_moves(Vm, snaps, start):
 
 
 @njit(cache=True, nogil=True)
-def stale_rows(Y, kth, far, epoch, moved, dv, order, box, Vm, cand, start, members):
+def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gstart, gmembers):
     """Points whose ``k`` nearest candidates may miss a nearer vertex
     (:mod:`~meshmocap.trackers.patch.nearest`): point t (``Y[t]``, k-th candidate at
     ``kth[t]``, every other vertex at least ``far[t]`` away at snapshot ``epoch[t]``) is
@@ -370,12 +370,27 @@ def stale_rows(Y, kth, far, epoch, moved, dv, order, box, Vm, cand, start, membe
     ``members[start[p]:start[p + 1]]``, at ``Vm`` (n, 3) now, in that order) can, and only
     in a patch that moved that much (``moved`` (S, P), the most of its vertices) and whose
     bounding box now (``box`` (P, 6), :func:`vertex_moves`) reaches within ``kth[t]``;
-    each distance counts a nanometre more movement for rounding. ``order[e]`` lists the
-    patches by decreasing ``moved[e]``, so a point looks only at the patches that moved
-    enough. Returns (m,) bool."""
+    each distance counts a nanometre more movement for rounding. The patches come in
+    groups (group ``g``: patches ``gmembers[gstart[g]:gstart[g + 1]]``, e.g. a bone's),
+    and a point looks into a group only where the group moved that much and its box (all
+    its patches') reaches. Returns (m,) bool."""
     m = Y.shape[0]
-    P = box.shape[0]
+    S = moved.shape[0]
+    n_g = gstart.shape[0] - 1
     K = cand.shape[1]
+    gmoved = np.zeros((S, n_g))  # per snapshot, the most a group's patches moved
+    gbox = np.empty((n_g, 6))  # each group's box: its patches' boxes together
+    for g in range(n_g):
+        for a in range(3):
+            gbox[g, a] = np.inf
+            gbox[g, 3 + a] = -np.inf
+        for u in range(gstart[g], gstart[g + 1]):
+            p = gmembers[u]
+            for a in range(3):
+                gbox[g, a] = min(gbox[g, a], box[p, a])
+                gbox[g, 3 + a] = max(gbox[g, 3 + a], box[p, 3 + a])
+            for e in range(S):
+                gmoved[e, g] = max(gmoved[e, g], moved[e, p])
     out = np.zeros(m, dtype=np.bool_)
     for t in range(m):
         slack = far[t] - kth[t] - ZERO_EXTENT
@@ -385,31 +400,41 @@ def stale_rows(Y, kth, far, epoch, moved, dv, order, box, Vm, cand, start, membe
         e = epoch[t]
         y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
         reach = kth[t] * kth[t] + ZERO_EXTENT
-        for u in range(P):
-            p = order[e, u]
-            if moved[e, p] < slack:
-                break
-            x = max(box[p, 0] - y0, y0 - box[p, 3], 0.0)
-            y = max(box[p, 1] - y1, y1 - box[p, 4], 0.0)
-            z = max(box[p, 2] - y2, y2 - box[p, 5], 0.0)
-            if not x * x + y * y + z * z <= reach:
+        for g in range(n_g):
+            if gmoved[e, g] < slack:
                 continue
-            for s in range(start[p], start[p + 1]):  # the patch reaches: its vertices
-                if dv[e, s] < slack:
+            x = max(gbox[g, 0] - y0, y0 - gbox[g, 3], 0.0)
+            y = max(gbox[g, 1] - y1, y1 - gbox[g, 4], 0.0)
+            z = max(gbox[g, 2] - y2, y2 - gbox[g, 5], 0.0)
+            if not x * x + y * y + z * z <= reach:  # no patch of the group reaches
+                continue
+            for u in range(gstart[g], gstart[g + 1]):
+                p = gmembers[u]
+                if moved[e, p] < slack:
                     continue
-                x = Vm[s, 0] - y0
-                y = Vm[s, 1] - y1
-                z = Vm[s, 2] - y2
-                if not np.sqrt(x * x + y * y + z * z) <= kth[t]:
+                x = max(box[p, 0] - y0, y0 - box[p, 3], 0.0)
+                y = max(box[p, 1] - y1, y1 - box[p, 4], 0.0)
+                z = max(box[p, 2] - y2, y2 - box[p, 5], 0.0)
+                if not x * x + y * y + z * z <= reach:
                     continue
-                i = members[s]
-                known = False
-                for c in range(K):
-                    if cand[t, c] == i:
-                        known = True
+                for s in range(start[p], start[p + 1]):  # the patch reaches: its vertices
+                    if dv[e, s] < slack:
+                        continue
+                    x = Vm[s, 0] - y0
+                    y = Vm[s, 1] - y1
+                    z = Vm[s, 2] - y2
+                    if not np.sqrt(x * x + y * y + z * z) <= kth[t]:
+                        continue
+                    i = members[s]
+                    known = False
+                    for c in range(K):
+                        if cand[t, c] == i:
+                            known = True
+                            break
+                    if not known:
+                        out[t] = True
                         break
-                if not known:
-                    out[t] = True
+                if out[t]:
                     break
             if out[t]:
                 break

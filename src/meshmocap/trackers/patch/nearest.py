@@ -36,6 +36,16 @@ def k_nearest_on(tree: KDTree, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
     return d.reshape(len(Y), k).astype(np.float64), i.reshape(len(Y), k).astype(np.int64)
 
 
+def _members(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The items of each label ``0 … L − 1`` of ``labels`` (n,) int64: ``items
+    [first[j]:first[j + 1]]`` (ascending) for label ``j``; returns ``items`` (n,) and
+    ``first`` (L + 1,), int64."""
+    items = np.argsort(labels, kind="stable").astype(np.int64)
+    L = int(labels.max()) + 1 if len(labels) else 0
+    first = np.searchsorted(labels[items], np.arange(L + 1)).astype(np.int64)
+    return items, first
+
+
 class NearestVertices:
     """Nearest vertices of fixed points ``Y`` (m, 3) while the vertices move.
 
@@ -45,19 +55,31 @@ class NearestVertices:
     labels : (n,) int, each vertex's patch (``0 … P − 1``)
     k : int, neighbours returned per point
     spare : int, extra candidates kept per point (0: a new k-d query every call)
+    groups : (P,) int, optional
+        A group of each patch (e.g. its bone): the test for vertices that may have come
+        nearer looks into a group only where the group's box reaches (default: one group)
 
     Attributes
     ----------
     n_queried : int, points queried on a k-d tree so far (the rest were re-ranked)
     """
 
-    def __init__(self, Y: np.ndarray, labels: np.ndarray, *, k: int, spare: int):
+    def __init__(
+        self,
+        Y: np.ndarray,
+        labels: np.ndarray,
+        *,
+        k: int,
+        spare: int,
+        groups: np.ndarray | None = None,
+    ):
         self.Y = np.ascontiguousarray(Y, dtype=np.float64)
         labels = np.asarray(labels, dtype=np.int64)
         # each patch's vertices: members[start[p]:start[p + 1]]
-        self.members = np.argsort(labels, kind="stable").astype(np.int64)
-        P = int(labels.max()) + 1 if len(labels) else 0
-        self.start = np.searchsorted(labels[self.members], np.arange(P + 1)).astype(np.int64)
+        self.members, self.start = _members(labels)
+        P = len(self.start) - 1
+        groups = np.zeros(P, np.int64) if groups is None else np.asarray(groups, np.int64)
+        self.gmembers, self.gstart = _members(groups)  # each group's patches
         self.k, self.spare = k, spare
         self.cand: np.ndarray | None = None  # (m, K) int64 candidates per point
         self.far = np.zeros(len(Y))  # distance of each point's last candidate at its query
@@ -86,12 +108,13 @@ class NearestVertices:
                 self.epoch,
                 moved,
                 dv,
-                np.argsort(-moved, axis=1, kind="stable"),
                 box,
                 Vm,
                 self.cand,
                 self.start,
                 self.members,
+                self.gstart,
+                self.gmembers,
             )
             rows = np.flatnonzero(stale)
         if len(rows):

@@ -475,7 +475,10 @@ class PatchTracker:
     def nearest_vertices(self, Y: np.ndarray, *, spare: int) -> NearestVertices:
         """The nearest vertices of observed points ``Y`` (m, 3) over a frame's iterations,
         ``spare`` candidates kept beyond ``k_neighbours``."""
-        return NearestVertices(Y, self.model.labels, k=self.opts.k_neighbours, spare=spare)
+        m = self.model
+        return NearestVertices(
+            Y, m.labels, k=self.opts.k_neighbours, spare=spare, groups=m.bone_of_patch
+        )
 
     def correspondences(
         self,
