@@ -130,6 +130,15 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], "
             "float64[:, ::1], int64[::1], float64, float64",
         ),
+        "skinned_directions": (
+            "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, :, ::1], "
+            "float64[:, :, :, ::1], float64[:, :, ::1], int64[::1], int64[::1], float64[::1], "
+            "int64",
+        ),
+        "local_normal_equations": (
+            "float64[:, :, ::1], float64[::1], float64[:, ::1], float64[::1], float64[:, ::1], "
+            "int64[::1], int64[::1], float64[::1], float64[:, ::1], int64",
+        ),
     },
     "meshmocap.trackers.cage.field": {
         "_boundary_buckets": ("Array(boolean, 3, 'C', readonly=True), int64",),

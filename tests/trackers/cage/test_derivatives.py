@@ -186,3 +186,26 @@ def test_surface_directions_against_central_differences(surface):
         if not ex.all():
             err = np.linalg.norm(D[k][~ex] - fd[~ex]) / np.linalg.norm(fd[~ex])
             assert err < 0.25, err
+
+
+def test_local_normal_equations_equal_the_dense_products():
+    """The compiled ``Jᵀ r`` and ``Jᵀ J`` of the local adjustment (a few quads per point row)
+    equal the dense products of :meth:`SkinnedSurface.quad_rows` and ``pose_jacobian``'s
+    rows to rounding, on every sampled vertex (quad-less joints included)."""
+    t = load_template("neutral_5k")
+    oqr = build_oqr(t)
+    m = walk(t, duration=0.5, fps=10.0)
+    c, Q = quads_from_pose(oqr, t, m.rotations[2:3], m.root_positions[2:3])
+    y = configuration_vector(c, Q)[0]
+    Rp, cp = Q[0, 0], c[0, 0]
+    sample = np.random.default_rng(0).choice(len(t.V), 300, replace=False)
+    s = SkinnedSurface(oqr, t, sample)
+    rng = np.random.default_rng(2)
+    P = s.points(y, Rp, cp)
+    G = rng.normal(size=(2, len(sample), 3))
+    r = rng.normal(size=2 * len(sample))
+    pelvis = pose_jacobian(np.tile(P, (2, 1)), G.reshape(-1, 3), cp)
+    J = np.concatenate([s.quad_rows(y, Rp, cp, G), pelvis])
+    g, H = s.local_normal_equations(y, Rp, cp, G, P, r)
+    np.testing.assert_allclose(g, J @ r, rtol=0, atol=1e-12 * np.abs(J @ r).max())
+    np.testing.assert_allclose(H, J @ J.T, rtol=0, atol=1e-12 * np.abs(J @ J.T).max())

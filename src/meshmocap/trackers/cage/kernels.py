@@ -1,4 +1,4 @@
-"""Compiled loops (numba) behind the cage tracker's two most frequent evaluations.
+"""Compiled loops (numba) behind the cage tracker's most frequent evaluations.
 
 * :func:`silhouette_residuals`, behind
   :meth:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage.residuals`: every contour
@@ -7,9 +7,15 @@
   are outliers, which cost nothing), then its residual and gradient, in one pass;
 * :func:`quad_skinning_transforms`, behind
   :meth:`~meshmocap.trackers.cage.oqr_skinning.QuadSkinning.transforms`: the rig's joint
-  frames from the quads' (a few dozen 3 × 3 products and one small Procrustes fit).
+  frames from the quads' (a few dozen 3 × 3 products and one small Procrustes fit);
+* :func:`local_normal_equations`, behind
+  :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.local_normal_equations`: the
+  local adjustment's ``Jᵀ r`` and ``Jᵀ J`` from the few quads each point row touches;
+* :func:`skinned_directions`, behind
+  :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.directions`: the points' motion
+  along the latent shape's directions (Eq. 6), pair by pair.
 
-Both are the array code they replace written as loops, to rounding
+Each is the array code it replaces written as loops, to rounding
 (``tests/trackers/cage/test_kernels.py``): the tracker calls them tens of times a frame on a
 few hundred points, where numpy's per-call overhead was most of the cost.
 
@@ -30,7 +36,12 @@ import numpy as np
 from meshmocap._numba import njit
 from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, DIVISOR_FLOOR, NEAR_DEPTH
 
-__all__ = ["quad_skinning_transforms", "silhouette_residuals"]
+__all__ = [
+    "local_normal_equations",
+    "quad_skinning_transforms",
+    "silhouette_residuals",
+    "skinned_directions",
+]
 
 
 @njit(cache=True, nogil=True)
@@ -193,4 +204,104 @@ def quad_skinning_transforms(
     for j in range(J):
         out[j, :, :3] = G[j]
         out[j, :, 3] = P[j] - G[j] @ P0[j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def local_normal_equations(G, r, P, cp, Rp, ptr, quad, w, arm, n_quads):  # pragma: no cover
+    """Gradient ``Jᵀ r`` (6 q + 6,) and Gauss–Newton matrix ``Jᵀ J`` of the local adjustment
+    (see :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.local_normal_equations`),
+    one point row at a time: row ``k = s n + i`` (block ``s`` of point gradients ``G``
+    (S, n, 3), residuals ``r`` (S n,)) touches only the quads its point's pairs move with
+    (pairs ``ptr[i]:ptr[i + 1]``: quad ``quad`` (0-based among the 20), weight ``w``,
+    lever ``arm`` (m, 3) from the quad's centre, world frame) and the pelvis (the last 6
+    columns: ``[(P_i − cp) × g, g]``), so each row adds a few 6 × 6 blocks, not a dense
+    outer product of the 126 columns."""
+    S, n = G.shape[0], G.shape[1]
+    m6 = 6 * n_quads + 6
+    H = np.zeros((m6, m6))
+    grad = np.zeros(m6)
+    qs = np.empty(16, dtype=np.int64)
+    vs = np.empty((16, 6))
+    for s in range(S):
+        for i in range(n):
+            k = s * n + i
+            g0, g1, g2 = G[s, i, 0], G[s, i, 1], G[s, i, 2]
+            nb = 0
+            for e in range(ptr[i], ptr[i + 1]):
+                b = quad[e]
+                a0, a1, a2 = arm[e, 0], arm[e, 1], arm[e, 2]
+                c0, c1, c2 = a1 * g2 - a2 * g1, a2 * g0 - a0 * g2, a0 * g1 - a1 * g0
+                slot = -1
+                for t in range(nb):
+                    if qs[t] == b:
+                        slot = t
+                if slot < 0:
+                    slot = nb
+                    qs[nb] = b
+                    for c in range(6):
+                        vs[nb, c] = 0.0
+                    nb += 1
+                for c in range(3):  # w [Rpᵀ g, Rpᵀ (arm × g)]
+                    vs[slot, c] += w[e] * (g0 * Rp[0, c] + g1 * Rp[1, c] + g2 * Rp[2, c])
+                    vs[slot, 3 + c] += w[e] * (c0 * Rp[0, c] + c1 * Rp[1, c] + c2 * Rp[2, c])
+            d0, d1, d2 = P[i, 0] - cp[0], P[i, 1] - cp[1], P[i, 2] - cp[2]
+            qs[nb] = n_quads
+            vs[nb, 0] = d1 * g2 - d2 * g1
+            vs[nb, 1] = d2 * g0 - d0 * g2
+            vs[nb, 2] = d0 * g1 - d1 * g0
+            vs[nb, 3], vs[nb, 4], vs[nb, 5] = g0, g1, g2
+            nb += 1
+            rk = r[k]
+            for ta in range(nb):
+                oa = 6 * qs[ta]
+                for c in range(6):
+                    grad[oa + c] += vs[ta, c] * rk
+                for tb in range(nb):
+                    ob = 6 * qs[tb]
+                    for c in range(6):
+                        vc = vs[ta, c]
+                        for d in range(6):
+                            H[oa + c, ob + d] += vc * vs[tb, d]
+    return grad, H
+
+
+@njit(cache=True, nogil=True)
+def skinned_directions(V, cw, Rp, R, dR, dc, pi, pb, pw, n):  # pragma: no cover - compiled
+    """Point directions (k, n, 3) of the skinned surface along ``k`` configuration
+    directions (see :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.directions`):
+    pair ``e`` (point ``pi[e]``, world position ``V[e]``, weight ``pw[e]``) moving with quad
+    ``b = pb[e] ≥ 1`` (world centre ``cw[b]``; pelvis-relative rotation ``R[b − 1]`` and its
+    derivatives ``dR[b − 1]`` (k, 3, 3), centre derivatives ``dc[b − 1]`` (k, 3)) adds
+    ``w Rp (dc + dR l)``, ``l`` its position in the quad's frame; pairs on the pelvis
+    (``b = 0``) add nothing."""
+    k = dR.shape[1]
+    out = np.zeros((k, n, 3))
+    x = np.empty(3)
+    loc = np.empty(3)
+    d = np.empty(3)
+    for e in range(V.shape[0]):
+        b = pb[e]
+        if b <= 0:
+            continue
+        q = b - 1
+        for a in range(3):  # (V − c_b) Rp: pelvis frame
+            x[a] = (
+                (V[e, 0] - cw[b, 0]) * Rp[0, a]
+                + (V[e, 1] - cw[b, 1]) * Rp[1, a]
+                + (V[e, 2] - cw[b, 2]) * Rp[2, a]
+            )
+        for a in range(3):  # quad frame: R_qᵀ x
+            loc[a] = R[q, 0, a] * x[0] + R[q, 1, a] * x[1] + R[q, 2, a] * x[2]
+        i, w = pi[e], pw[e]
+        for j in range(k):
+            for a in range(3):
+                d[a] = (
+                    dR[q, j, a, 0] * loc[0]
+                    + dR[q, j, a, 1] * loc[1]
+                    + dR[q, j, a, 2] * loc[2]
+                    + dc[q, j, a]
+                )
+            for a in range(3):
+                out[j, i, a] += w * (Rp[a, 0] * d[0] + Rp[a, 1] * d[1] + Rp[a, 2] * d[2])
     return out

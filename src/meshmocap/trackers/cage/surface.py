@@ -43,6 +43,7 @@ from meshmocap.body.skinning import apply_skinning, skinning_operator
 from meshmocap.body.template import Template
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import cross, skew
+from meshmocap.trackers.cage.kernels import local_normal_equations, skinned_directions
 from meshmocap.trackers.cage.oqr import OQR
 from meshmocap.trackers.cage.oqr_skinning import QuadSkinning
 from meshmocap.trackers.cage.quad_frames import gram_schmidt, gram_schmidt_forward, rig
@@ -153,9 +154,14 @@ class SkinnedSurface:
         self._pi, self._pj, self._pw = Wc.row.astype(np.intp), Wc.col.astype(np.intp), Wc.data
         self._pb = self.skin.joint_quad[self._pj]  # the quad each (point, joint) pair moves with
         self._X = np.concatenate([template.V[sample][self._pi], np.ones((len(self._pi), 1))], 1)
-        n, m = len(sample), len(self._pi)
-        self._sum = sp.csr_matrix((self._pw, (self._pi, np.arange(m))), shape=(n, m))
+        n = len(sample)
         self.n = n
+        # the pairs that move with a quad ≥ 1, by point (local_normal_equations)
+        on = self._pb > 0
+        self._on = on
+        self._on_quad = np.ascontiguousarray(self._pb[on] - 1, dtype=np.int64)
+        self._on_w = np.ascontiguousarray(self._pw[on], dtype=np.float64)
+        self._on_ptr = np.searchsorted(self._pi[on], np.arange(n + 1)).astype(np.int64)
 
     @staticmethod
     def _has_quad_below(j, own, parents) -> bool:
@@ -213,13 +219,18 @@ class SkinnedSurface:
             D[:, 2].transpose(0, 2, 1).reshape(-1, 3),
         )
         R, dR = R.reshape(-1, k, 3, 3)[:, 0], dR.reshape(-1, k, 3, 3)
-        on = self._pb > 0
-        q = self._pb[on] - 1
-        l = np.einsum("mji,mj->mi", R[q], (V[on] - cw[self._pb[on]]) @ Rp)  # quad frame
-        d = np.einsum("mkij,mj->mki", dR[q], l) + D[q, 0].transpose(0, 2, 1)  # pelvis frame
-        out = np.zeros((len(V), k, 3))
-        out[on] = d @ Rp.T
-        return (self._sum @ out.reshape(len(V), 3 * k)).reshape(self.n, k, 3).transpose(1, 0, 2)
+        return skinned_directions(  # pair by pair, compiled (equal to rounding)
+            np.ascontiguousarray(V),
+            np.ascontiguousarray(cw),
+            np.ascontiguousarray(Rp, dtype=np.float64),
+            np.ascontiguousarray(R),
+            np.ascontiguousarray(dR),
+            np.ascontiguousarray(D[:, 0].transpose(0, 2, 1)),
+            self._pi,
+            self._pb,
+            self._pw,
+            self.n,
+        )
 
     def quad_rows(self, y, Rp, cp, G):
         """(120, s n) for point gradients ``G`` (s, n, 3): pair (i, j) moving with quad
@@ -236,4 +247,27 @@ class SkinnedSurface:
         idx = ((6 * np.tile(b, s))[:, None] + np.arange(6)) * (s * n) + rows[:, None]
         return np.bincount(idx.ravel(), vals.reshape(-1, 6).ravel(), minlength=120 * s * n).reshape(
             120, s * n
+        )
+
+    def local_normal_equations(self, y, Rp, cp, G, P, r):
+        """``Jᵀ r`` (126,) and ``Jᵀ J`` (126, 126) of the local adjustment, ``J`` the rows of
+        :meth:`quad_rows` over :func:`~meshmocap.trackers.cage.quad_frames.pose_jacobian`'s
+        (the pelvis's 6 columns last), for point gradients ``G`` (s, n, 3) at the points
+        ``P`` (n, 3) and residuals ``r`` (s n,): each point row touches the few quads its
+        skinning pairs move with, so the products are summed row by row in a compiled loop
+        (:func:`~meshmocap.trackers.cage.kernels.local_normal_equations`) instead of over a
+        dense (126, s n) ``J`` (equal to rounding)."""
+        V, cw = self._pairs(y, Rp, cp)
+        arm = V[self._on] - cw[self._on_quad + 1]
+        return local_normal_equations(
+            np.ascontiguousarray(G, dtype=np.float64),
+            np.ascontiguousarray(r, dtype=np.float64),
+            np.ascontiguousarray(P, dtype=np.float64),
+            np.ascontiguousarray(cp, dtype=np.float64),
+            np.ascontiguousarray(Rp, dtype=np.float64),
+            self._on_ptr,
+            self._on_quad,
+            self._on_w,
+            np.ascontiguousarray(arm),
+            len(self.oqr.quads.centres) - 1,
         )

@@ -480,6 +480,9 @@ class CageTracker:
             sys, P = cache
             r, g = sys.point_rows()
             G = g.reshape(-1, len(P), 3)  # data rows, then coverage rows
+            if self.surface.kind == "skinned":  # the few quads of each row (compiled)
+                gJ, H = self.surface.local_normal_equations(y, Rp, cp, G, P, r)
+                return gJ + sys.grad, H + sys.H
             J = np.concatenate(
                 [
                     self.surface.quad_rows(y, Rp, cp, G),
