@@ -29,6 +29,9 @@ a real performer's muscles and clothes), and fitted against the observations it 
 make up for it; the frame before's surface, where the refinement anchored each vertex to
 its place, is this frame's body one frame of motion away.
 
+On a clean 4D capture the driver also fits the patch tracker's frame from the last held
+pose, and keeps the fit of lower :meth:`SkeletonHold.cost` (the patches can slide along a
+loose surface, a skirt, far enough that a fit started from their pose does not come back).
 The tracking driver then moves the tracker onto the held pose (its ``hold`` method: the
 patch tracker re-places its patches on the posed template, keeping its velocity;
 articulated ICP takes the pose as its own).
