@@ -2,12 +2,21 @@
 as before, a damaged one refused in one line."""
 
 import io
+import zipfile
 import zlib
 
 import numpy as np
 import pytest
 
-from meshmocap._npz import SHUFFLED, open_npz, read_npz, shuffled_float32, unshuffled_float32
+from meshmocap._npz import (
+    SHUFFLED,
+    STORED_BYTES,
+    open_npz,
+    read_npz,
+    shuffled_float32,
+    unshuffled_float32,
+    write_npz,
+)
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError
 from meshmocap.io.results import FrameResult, read_frame_arrays, start_track, write_frame
@@ -60,3 +69,29 @@ def test_a_frame_is_written_shuffled_and_an_older_plain_one_still_reads(tmp_path
     assert len(plain.getvalue()) > f.stat().st_size
     f.write_bytes(plain.getvalue())
     np.testing.assert_array_equal(read_frame_arrays(tmp_path, 0)["vertices"], V.astype(np.float32))
+
+
+def test_written_archives_read_as_numpys_own(tmp_path):
+    arrays = {
+        "big": RNG.normal(size=(STORED_BYTES // 8 + 1,)),
+        "small": RNG.normal(size=(31, 3, 3)),
+        "n": 7,
+        "flag": True,
+        "text": np.str_("lost left_arm"),
+        "empty": np.zeros((0, 3)),
+    }
+    ours, theirs = tmp_path / "ours.npz", tmp_path / "theirs.npz"
+    with open(ours, "wb") as f:
+        write_npz(f, **arrays)
+    np.savez_compressed(theirs, **arrays)
+    a, b = read_npz(ours, "test"), read_npz(theirs, "test")
+    assert list(a) == list(b) == list(arrays)
+    for k in arrays:
+        assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape, k
+        np.testing.assert_array_equal(a[k], b[k])
+    with np.load(ours) as z:
+        np.testing.assert_array_equal(z["big"], arrays["big"])
+    with zipfile.ZipFile(ours) as z:  # the big array deflated, the others stored
+        kinds = {i.filename: i.compress_type for i in z.infolist()}
+    assert kinds.pop("big.npy") == zipfile.ZIP_DEFLATED
+    assert set(kinds.values()) == {zipfile.ZIP_STORED}

@@ -223,6 +223,21 @@ def test_binary_masks_read_without_warning_and_0_1_masks_are_binary(tmp_path):
         assert np.array_equal(read_mask(tmp_path / f"{name}.png"), m.astype(bool)), name
 
 
+def test_8_bit_masks_read_as_the_general_rule_reads_them():
+    # the 8-bit path (one pass) against the rule in floats: > 50 % of full scale, binary
+    # when only 0 and full scale (or 0 and 1, full scale then 1) occur
+    from meshmocap.io.silhouettes import _threshold
+
+    for v in range(256):
+        for base in ((0, 255), (0, 1), (0,), (255,)):
+            grey = np.array([[*base, v]], dtype=np.uint8)
+            g = grey.astype(np.float64)
+            full = 1.0 if g.max() == 1.0 else 255.0
+            mask, binary = _threshold(Image.fromarray(grey, "L"))
+            assert np.array_equal(mask, g > 0.5 * full), (base, v)
+            assert binary == bool(np.all((g == 0) | (g == full))), (base, v)
+
+
 def test_unreadable_masks_raise_one_line_errors(tmp_path):
     good = tmp_path / "good.png"
     write_mask(good, np.eye(8, dtype=bool), bits=8)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from meshmocap._atomic import atomic_open, write_text_atomic
-from meshmocap._npz import SHUFFLED, read_npz, shuffled_float32
+from meshmocap._npz import SHUFFLED, read_npz, shuffled_float32, write_npz
 from meshmocap.body.light import SurfaceBinding, bound_vertices
 from meshmocap.body.template import Template, load_template
 from meshmocap.errors import FormatError, InputError, MeshmocapFileNotFoundError
@@ -514,7 +514,7 @@ def write_frame(path: str | os.PathLike, r: FrameResult) -> None:
     extra = {f"energy_{k}": np.float64(v) for k, v in r.energies.items()}
     extra.update({f"state_{k}": np.asarray(v) for k, v in r.state.items()})
     with atomic_open(frame_path(path, r.index)) as f:
-        np.savez_compressed(
+        write_npz(
             f,
             index=r.index,
             joints=r.joints,

@@ -102,6 +102,11 @@ def _threshold(img: Image.Image) -> tuple[np.ndarray, bool]:
         full = 255.0
     if grey.ndim != 2:
         raise ValueError(f"expected one channel, found shape {grey.shape}")
+    if grey.dtype == np.uint8 and grey.size:  # the usual mask: the same answers, one pass
+        if grey.max() <= 1:  # 0 and 1 only: binary, thresholded at 0.5
+            return grey > 0, True
+        # > 127.5 is ≥ 128; 0 and 255 are the values that wrap to ≤ 1 when 1 is added
+        return grey > 127, bool((grey + np.uint8(1)).max() <= 1)
     if grey.size and grey.max() == 1.0 and _only(grey, 1.0):
         full = 1.0  # a mask stored as 0 and 1 rather than 0 and full scale
     return grey > 0.5 * full, _only(grey, full)
