@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from pykdtree.kdtree import KDTree
 
 from meshmocap.errors import InputError
 from meshmocap.geometry.distance_field import (
@@ -125,6 +126,30 @@ def test_prefetch_moves_the_work_not_the_values():
     assert a.n_evaluated == b.n_evaluated  # the prefetched points were among those needed
     b.prefetch(P)  # nothing new to compute
     assert b.n_evaluated == a.n_evaluated
+
+
+def test_at_points_looks_around_each_point_then_in_the_tree_with_the_same_distances():
+    # the voxels within a few rings first, the k-d tree for points they do not settle:
+    # every distance the one the tree alone gives, near the surface, deep inside, far
+    # beyond the box
+    occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
+    lazy = LazyDistanceGrid(occ, origin, h, pad=pad)
+    rng = np.random.default_rng(3)
+    box = lazy.upper - lazy.origin
+    P = np.concatenate(
+        [
+            lazy.boundary + rng.normal(scale=h, size=lazy.boundary.shape),  # near
+            lazy.origin + rng.uniform(-0.5, 1.5, (2000, 3)) * box,  # anywhere, beyond too
+            lazy.boundary[:5] + 0.5 * h,  # halfway between voxel centres: ties
+        ]
+    )
+    g = (P - (lazy.origin + pad * h)) / h
+    e = KDTree(np.argwhere(inner_boundary(occ)).astype(np.float64)).query(g, k=1)[0]
+    ijk = np.round(g).astype(np.intp)
+    ok = np.all((ijk >= 0) & (ijk < occ.shape), axis=1)
+    inside = np.zeros(len(g), dtype=bool)
+    inside[ok] = occ[tuple(ijk[ok].T)]
+    np.testing.assert_array_equal(lazy.at_points(P), np.where(inside, -0.5 - e, e - 0.5) * h)
 
 
 def test_at_points_is_the_grid_value_at_grid_points_and_close_between():

@@ -35,6 +35,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "fill_kernel": (
             "float64[:, ::1], int64[:, ::1], boolean[::1], boolean, float64, boolean[:, ::1]",
         ),
+        "boundary_distance_kernel": ("float64[:, ::1], boolean[:, :, ::1], int64, float64[::1]",),
     },
     "meshmocap.body._articulated_kernels": {
         "posed_kernel": (

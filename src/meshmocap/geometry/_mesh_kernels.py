@@ -217,3 +217,51 @@ def fill_kernel(uv, F, valid, positive, floor, mask):  # pragma: no cover - comp
                 y = int(row)
                 for x in range(int(a), int(b) + 1):
                     mask[y, x] = True
+
+
+@njit(cache=True, nogil=True)
+def boundary_distance_kernel(g, mask, rings, out):  # pragma: no cover - compiled
+    """``out[t]`` ← the distance from ``g[t]`` (voxel units) to the nearest voxel centre
+    of ``mask`` (nx, ny, nz) bool (centres at integer coordinates), squared distances
+    summed axis by axis as a k-d tree sums them; NaN where the voxels within ``rings``
+    rings of the nearest voxel do not settle it (a voxel beyond ring ``r`` is farther than
+    ``r + ½``)."""
+    nx, ny, nz = mask.shape
+    for t in range(g.shape[0]):
+        out[t] = np.nan
+        g0, g1, g2 = g[t, 0], g[t, 1], g[t, 2]
+        if not (np.isfinite(g0) and np.isfinite(g1) and np.isfinite(g2)):
+            continue
+        if max(abs(g0), abs(g1), abs(g2)) > 1e9:  # far beyond any grid
+            continue
+        c0 = int(np.floor(g0 + 0.5))
+        c1 = int(np.floor(g1 + 0.5))
+        c2 = int(np.floor(g2 + 0.5))
+        best = np.inf
+        for r in range(rings + 1):
+            for i in range(max(c0 - r, 0), min(c0 + r, nx - 1) + 1):
+                di = abs(i - c0)
+                for j in range(max(c1 - r, 0), min(c1 + r, ny - 1) + 1):
+                    dij = max(di, abs(j - c1))
+                    if dij == r:  # on the ring: every k
+                        k0, k1, step = c2 - r, c2 + r, 1
+                    else:  # inside it: its two faces only
+                        k0, k1, step = c2 - r, c2 + r, 2 * r
+                    k = k0
+                    while k <= k1:
+                        if 0 <= k < nz and mask[i, j, k]:
+                            a0 = g0 - i
+                            a1 = g1 - j
+                            a2 = g2 - k
+                            d = a0 * a0
+                            d += a1 * a1
+                            d += a2 * a2
+                            if d < best:
+                                best = d
+                        if step == 0:
+                            break
+                        k += step
+            h = r + 0.5
+            if best <= h * h:
+                out[t] = np.sqrt(best)
+                break

@@ -26,6 +26,7 @@ References
 from __future__ import annotations
 
 import time
+from functools import cached_property
 
 import numpy as np
 from pykdtree.kdtree import KDTree
@@ -90,6 +91,15 @@ class DistanceGrid:
     def _gather(self, idx: np.ndarray) -> np.ndarray:
         """Values at flat grid indices ``idx`` (any shape)."""
         return self._flat[idx]
+
+    @cached_property
+    def _tree(self) -> KDTree:
+        """The k-d tree of the inner-boundary voxel centres (voxel units), built on first
+        use (its time booked to :attr:`seconds`)."""
+        t0 = time.perf_counter()
+        tree = KDTree(self._ijk)
+        self.seconds += time.perf_counter() - t0
+        return tree
 
     def _cells(self, base: np.ndarray) -> np.ndarray:
         """Values (8, n) at the corners of the cells whose corner 000 is at flat ``base`` (n,)."""
@@ -209,6 +219,12 @@ def inner_boundary(occ: np.ndarray) -> np.ndarray:
     return inner
 
 
+#: Rings of voxels around a point :meth:`LazyDistanceGrid.at_points` looks at before its
+#: k-d tree (a point farther than ``AT_POINTS_RINGS + ½`` voxels from the surface goes to
+#: the tree).
+AT_POINTS_RINGS = 2
+
+
 class LazyDistanceGrid(DistanceGrid):
     """:func:`signed_distance` of a padded occupancy, computed only where it is looked up.
 
@@ -286,12 +302,13 @@ class LazyDistanceGrid(DistanceGrid):
             v.setflags(write=False)
         self.upper = self.origin + (np.array(self.shape) - 1) * m * h
         self._set_strides()
-        flat = np.flatnonzero(inner_boundary(occ))
+        self._inner = inner_boundary(occ)
+        flat = np.flatnonzero(self._inner)
         ijk = np.empty((len(flat), 3))  # np.unravel_index, without int → float copies
         _, ny, nz = occ.shape
         ijk[:, 0], rest = np.divmod(flat, ny * nz)
         ijk[:, 1], ijk[:, 2] = np.divmod(rest, nz)
-        self._tree = KDTree(ijk)  # voxel units
+        self._ijk = ijk  # voxel units; the k-d tree over them is built when first needed
         self.boundary = ijk * h + origin
         self.boundary.setflags(write=False)
         size = int(np.prod(self.shape))
@@ -334,9 +351,18 @@ class LazyDistanceGrid(DistanceGrid):
         4× the work for a mesh's vertices at the voxels' spacing), and exact beyond the
         grid's box. It differs from the lookup by the interpolation's error (a fraction of
         a voxel), not used for gradients."""
+        from meshmocap.geometry._mesh_kernels import boundary_distance_kernel
+
         P, lead = _query_points(points)
         g = (P.reshape(-1, 3) - (self.origin + self._pad * self._h)) / self._h  # voxel units
-        e = self._tree.query(np.ascontiguousarray(g), k=1)[0]
+        g = np.ascontiguousarray(g)
+        # the voxels around each point first (most points lie within a few of the
+        # surface), the k-d tree for the others: the same distances
+        e = np.empty(len(g))
+        boundary_distance_kernel(g, self._inner, AT_POINTS_RINGS, e)
+        rest = np.flatnonzero(np.isnan(e))
+        if len(rest):
+            e[rest] = self._tree.query(np.ascontiguousarray(g[rest]), k=1)[0]
         ijk = np.round(g).astype(np.intp)
         n = self._occ.shape
         ok = np.all((ijk >= 0) & (ijk < np.array(n)), axis=1)
