@@ -1,6 +1,7 @@
 """Silhouette rasterisation and PNG mask files."""
 
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -223,19 +224,22 @@ def test_binary_masks_read_without_warning_and_0_1_masks_are_binary(tmp_path):
         assert np.array_equal(read_mask(tmp_path / f"{name}.png"), m.astype(bool)), name
 
 
-def test_8_bit_masks_read_as_the_general_rule_reads_them():
+def test_8_bit_masks_read_as_the_general_rule_reads_them(tmp_path):
     # the 8-bit path (one pass) against the rule in floats: > 50 % of full scale, binary
-    # when only 0 and full scale (or 0 and 1, full scale then 1) occur
-    from meshmocap.io.silhouettes import _threshold
-
-    for v in range(256):
+    # (no warning) when only 0 and full scale (or 0 and 1, full scale then 1) occur
+    for v in (0, 1, 2, 126, 127, 128, 129, 254, 255):
         for base in ((0, 255), (0, 1), (0,), (255,)):
             grey = np.array([[*base, v]], dtype=np.uint8)
             g = grey.astype(np.float64)
             full = 1.0 if g.max() == 1.0 else 255.0
-            mask, binary = _threshold(Image.fromarray(grey, "L"))
+            path = tmp_path / f"{v}-{len(base)}-{base[-1]}.png"
+            Image.fromarray(grey, "L").save(path)
+            with warnings.catch_warnings(record=True) as seen:
+                warnings.simplefilter("always")
+                mask = read_mask(path)
             assert np.array_equal(mask, g > 0.5 * full), (base, v)
-            assert binary == bool(np.all((g == 0) | (g == full))), (base, v)
+            binary = bool(np.all((g == 0) | (g == full)))
+            assert binary == (not any(w.category is GreyMaskWarning for w in seen)), (base, v)
 
 
 def test_unreadable_masks_raise_one_line_errors(tmp_path):
