@@ -295,3 +295,27 @@ def test_in_view_needs_every_camera():
     np.testing.assert_array_equal(in_view(X, [back]), [True, True, False, True])
     np.testing.assert_array_equal(in_view(X, [front, back]), [True, True, False, False])
     assert in_view(X, []).all()  # no rig: nothing is known to be unseen
+
+
+def test_in_view_is_the_projection_tested_against_the_image():
+    """in_view's compiled pass gives the answer of :meth:`Camera.project` and the image's
+    bounds to the bit, with and without distortion, for points behind, beside and inside
+    the images."""
+    rng = np.random.default_rng(7)
+    cams = []
+    for k, (eye, dist) in enumerate(
+        [((3, 0, 1), None), ((0, -3, 1.5), (-0.2, 0.05, 0.001, -0.002, 0.01)), ((-2, 2, 1), None)]
+    ):
+        R, t = look_at(np.array(eye, float), np.zeros(3))
+        cams.append(Camera(intrinsics(64, 48, 50), R, t, 64, 48, dist=dist, name=f"c{k}"))
+    X = rng.uniform(-3, 3, size=(4000, 3))
+    for cameras in (cams, cams[1:2], []):
+        expected = np.ones(len(X), dtype=bool)
+        for cam in cameras:
+            uv, depth = cam.project(X)
+            expected &= (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width)
+            expected &= (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height)
+        ok = in_view(X, cameras)
+        assert np.array_equal(ok, expected)
+        assert 0 < ok.sum() < len(X) or not cameras
+    assert in_view(np.zeros((0, 3)), cams).shape == (0,)

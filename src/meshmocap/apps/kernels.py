@@ -36,6 +36,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, ::1], int64[:, ::1], boolean[::1], boolean, float64, boolean[:, ::1]",
         ),
         "boundary_distance_kernel": ("float64[:, ::1], boolean[:, :, ::1], int64, float64[::1]",),
+        "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
     },
     "meshmocap.body._articulated_kernels": {
         "posed_kernel": (
@@ -112,7 +113,6 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, :, :, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
             "float64[:, ::1], int64[:, ::1], int64, float64",
         ),
-        "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
         ),

@@ -189,10 +189,20 @@ def in_view(X: np.ndarray, cameras: list[Camera]) -> np.ndarray:
         True where every camera projects the point to ``0 ≤ u ≤ width``, ``0 ≤ v ≤ height``
         at positive depth. A visual hull exists only there: carving removes what one camera
         cannot see, so a body part outside this region has no observations.
+
+    Each camera's rotation is NumPy's, as in :meth:`Camera.project`; its projection and
+    the image test one compiled pass (the operations of :meth:`Camera.project`, in their
+    order), which skips the points an earlier camera does not see.
     """
+    X = np.asarray(X, dtype=np.float64)
     ok = np.ones(len(X), dtype=bool)
+    if not cameras or not len(X):
+        return ok
+    from meshmocap.geometry._mesh_kernels import in_image_kernel
+
     for cam in cameras:
-        uv, depth = cam.project(X)
-        ok &= (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width)
-        ok &= (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height)
+        K = cam.K
+        row = [K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], *cam.dist, cam.width, cam.height]
+        Xc = np.ascontiguousarray(X @ cam.R.T + cam.t)
+        in_image_kernel(Xc, np.array(row, dtype=np.float64), ok)
     return ok

@@ -126,22 +126,3 @@ def test_negative_weights_are_rejected(name):
 
     with pytest.raises(InputError, match=f"{name} must be a number ≥ 0, found -1.0"):
         PatchOptions(**{name: -1.0})
-
-
-def test_frame_in_view_is_the_cameras_in_view():
-    """The reverse term's compiled visibility test gives :func:`in_view`'s answer to the
-    bit, with and without distortion, for points behind, beside and inside the images."""
-    from meshmocap.geometry.camera import Camera, in_view, intrinsics, look_at
-
-    cams = []
-    for k, (eye, dist) in enumerate(
-        [((3, 0, 1), None), ((0, -3, 1.5), (-0.2, 0.05, 0.001, -0.002, 0.01)), ((-2, 2, 1), None)]
-    ):
-        R, t = look_at(np.array(eye, float), np.zeros(3))
-        cams.append(Camera(intrinsics(64, 48, 50), R, t, 64, 48, dist=dist, name=f"c{k}"))
-    X = RNG.uniform(-3, 3, size=(4000, 3))
-    for cameras in (cams, cams[1:2], []):
-        fd = FrameData(*[None] * 4, cameras, *[None] * 8)
-        ok = fd.in_view(X)
-        assert np.array_equal(ok, in_view(X, cameras))
-        assert 0 < ok.sum() < len(X) or not cameras

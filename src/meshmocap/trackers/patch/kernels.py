@@ -12,8 +12,6 @@
   rest moments (:func:`rotated_moments`), one pass.
 * :func:`nearest_among`, :func:`vertex_moves`, :func:`stale_rows`: the candidate vertices
   re-used across a frame's iterations (:mod:`~meshmocap.trackers.patch.nearest`).
-* :func:`in_image_kernel`: the reverse term's visibility test, each camera's projection
-  after its rotation (:func:`~meshmocap.geometry.camera.in_view`'s operations, one pass).
 * :func:`block_cholesky`, :func:`block_cholesky_solve`: the normal equations' sparse
   Cholesky factor in 3×3 blocks on a structure computed once
   (:class:`~meshmocap.trackers.patch.solver.BlockFactor`), and its solve.
@@ -31,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshmocap._numba import njit
-from meshmocap._tolerances import DEPTH_FLOOR, ZERO_EXTENT
+from meshmocap._tolerances import ZERO_EXTENT
 
 
 @njit(cache=True, nogil=True)
@@ -439,37 +437,6 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
             if out[t]:
                 break
     return out
-
-
-@njit(cache=True, nogil=True)
-def in_image_kernel(Xc, cam, ok):
-    """In place, ``ok`` (n,) bool and-ed with whether a camera sees each point: camera-frame
-    points ``Xc`` (n, 3) (``X @ R.T + t``) at positive depth that project into the image
-    (``0 ≤ u ≤ width``, ``0 ≤ v ≤ height``), the camera given as ``cam`` (12,) float64:
-    ``K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]``, the distortion ``k1, k2, p1, p2, k3``,
-    ``width, height``. The operations of :meth:`~meshmocap.geometry.camera.Camera.project`
-    in the same order; points already False are skipped."""
-    fx, skew, cx, fy, cy = cam[0], cam[1], cam[2], cam[3], cam[4]
-    k1, k2, p1, p2, k3 = cam[5], cam[6], cam[7], cam[8], cam[9]
-    width, height = cam[10], cam[11]
-    distort = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
-    for i in range(Xc.shape[0]):
-        if not ok[i]:
-            continue
-        depth = Xc[i, 2]
-        safe = DEPTH_FLOOR if np.abs(depth) < DEPTH_FLOOR else depth
-        x = Xc[i, 0] / safe
-        y = Xc[i, 1] / safe
-        if distort:
-            r2 = x * x + y * y
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            x, y = (
-                x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y,
-            )
-        u = fx * x + skew * y + cx
-        v = fy * y + cy
-        ok[i] = depth > 0 and u >= 0 and u <= width and v >= 0 and v <= height
 
 
 @njit(cache=True, nogil=True)

@@ -39,9 +39,9 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from meshmocap._tolerances import DIVISOR_FLOOR
-from meshmocap.geometry.camera import Camera
+from meshmocap.geometry.camera import Camera, in_view
 from meshmocap.io.capture import CaptureFrame
-from meshmocap.trackers.patch.kernels import add_moment_blocks, in_image_kernel, reverse_moments
+from meshmocap.trackers.patch.kernels import add_moment_blocks, reverse_moments
 from meshmocap.trackers.patch.model import PatchModel
 from meshmocap.trackers.patch.nearest import NearestPoints
 from meshmocap.trackers.patch.residuals import (
@@ -135,25 +135,10 @@ class FrameData:
         vertices), built at first use, once a frame."""
         return NearestPoints(self.Y, spare=REVERSE_SPARE)
 
-    @cached_property
-    def camera_rows(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Per camera, ``R.T`` (3, 3), ``t`` (3,) and the (12,) row
-        :func:`~meshmocap.trackers.patch.kernels.in_image_kernel` reads."""
-        rows = []
-        for cam in self.cameras:
-            K = cam.K
-            row = [K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], *cam.dist, cam.width, cam.height]
-            rows.append((cam.R.T, cam.t, np.array(row, dtype=np.float64)))
-        return rows
-
     def in_view(self, X: np.ndarray) -> np.ndarray:
-        """(n,) bool: which of the points ``X`` (n, 3) every camera sees, as
-        :func:`~meshmocap.geometry.camera.in_view` (its projection, compiled)."""
-        X = np.asarray(X, dtype=np.float64)
-        ok = np.ones(len(X), dtype=bool)
-        for RT, t, row in self.camera_rows:
-            in_image_kernel(np.ascontiguousarray(X @ RT + t), row, ok)
-        return ok
+        """(n,) bool: which of the points ``X`` (n, 3) every camera sees
+        (:func:`~meshmocap.geometry.camera.in_view`)."""
+        return in_view(X, self.cameras)
 
     @cached_property
     def rays(self) -> SilhouetteRays | None:
