@@ -137,6 +137,13 @@ def test_each_limb_is_chosen_on_its_own_evidence():
     # the per-limb costs sum to the whole frame's
     ev = np.random.default_rng(0).uniform(0, 0.05, (3, L, len(EVIDENCE)))
     assert np.allclose(limb_costs(ev).sum(axis=-1), evidence_cost(ev))
+    # named: the points an arm turned away leaves by a leg are charged to the arm
+    rule = LostRule((0.9, np.inf, 0.02, np.inf, np.inf, np.inf))
+    turned = np.zeros((L, len(EVIDENCE)))
+    turned[left, EVIDENCE.index("outside")] = 0.8
+    turned[4, EVIDENCE.index("unexplained")] = 0.05
+    raw, named = limb_costs(turned, rule), limb_costs(turned, rule, named=True)
+    assert raw[4] >= 1 > raw[left] and named[left] >= 1 > named[4]
 
 
 def _truth_search(capture, seen=None):

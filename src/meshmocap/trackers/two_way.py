@@ -29,10 +29,10 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
    distance between the two poses at the switch (the choice switches where they agree);
    before the run the forward track costs :data:`DRIFT` more (it often drifts off before it
    is flagged). Then each limb (arms, legs) is chosen the same way on its own evidence
-   (:func:`limb_costs`, the switch priced by the limb's joints), a track other than the
-   frame's costing :data:`GRAFT` more a frame: two tracks that each lost a different limb
-   give one frame with neither lost. Where a limb's choice differs from the frame's, the
-   limb is grafted onto the frame's trunk
+   (:func:`limb_costs`, a limb charged where the rule names it lost, the switch priced by
+   the limb's joints), a track other than the frame's costing :data:`GRAFT` more a frame:
+   two tracks that each lost a different limb give one frame with neither lost. Where a
+   limb's choice differs from the frame's, the limb is grafted onto the frame's trunk
    (:func:`~meshmocap.estimate.recovery.limbs.graft_limbs`: its world rotations from its
    track, hung at the frame's shoulder or hip); elsewhere the chosen track's vertices,
    joints and state as tracked.
@@ -270,17 +270,22 @@ def max_keyframes(length: int) -> int:
     return 1 + max(1, -(-int(length) // FRAMES_PER_KEY))
 
 
-def limb_costs(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
+def limb_costs(
+    evidence: np.ndarray, rule: LostRule | None = None, *, named: bool = False
+) -> np.ndarray:
     """(..., L) float64: per limb the terms of :func:`evidence_cost` (1 where ``rule`` finds
     the limb lost, plus :data:`FIT_WEIGHT` times its largest fit measure in units of its
-    threshold, at most 1) of ``evidence`` (..., L, E)."""
+    threshold, at most 1) of ``evidence`` (..., L, E). With ``named``, a limb is lost where
+    the rule names it (:meth:`~meshmocap.estimate.recovery.evidence.LostRule.named`: the
+    points another limb leaves unexplained charged to that limb)."""
     rule = rule or shipped_rule()
     th = np.asarray(rule.thresholds, dtype=np.float64)
     e = np.asarray(evidence, dtype=np.float64)
     fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
     finite = np.isfinite(th[fit])
     ratio = np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0)
-    return rule.limb_lost(e) + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0)
+    lost = rule.named(e) if named else rule.limb_lost(e)
+    return lost + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0)
 
 
 def evidence_cost(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
@@ -935,12 +940,13 @@ class _Run:
         return lost_limbs(ev, self.rule)
 
     def limb_cost(self, r: FrameResult) -> np.ndarray:
-        """(L,) the evidence's cost of each limb of a frame (:func:`limb_costs`); a frame
-        without recorded evidence: its lost flag on every limb."""
+        """(L,) the evidence's cost of each limb of a frame (:func:`limb_costs`, the limbs the
+        rule names lost: those the flag names); a frame without recorded evidence: its lost
+        flag on every limb."""
         ev = r.state.get("evidence")
         if ev is None or np.shape(ev) != (len(LIMB_PARTS), len(EVIDENCE)):
             return np.full(len(LIMB_PARTS), float("lost" in r.flags))
-        return limb_costs(ev, self.rule)
+        return limb_costs(ev, self.rule, named=True)
 
     def cost(self, r: FrameResult) -> float:
         """The evidence's cost of a frame (:func:`evidence_cost`); a frame without recorded

@@ -69,6 +69,11 @@ def test_the_points_a_limb_leaves_unexplained_are_blamed_on_the_limb_outside():
     assert lost_limbs(E4, rule) == ("left_arm",)
     # no limb outside: the limbs with the points
     assert lost_limbs(_evidence(left_leg={"unexplained": 0.15}), rule) == ("left_leg",)
+    # frames stacked: each named as on its own
+    E5 = _evidence(left_leg={"unexplained": 0.15})
+    stack = np.stack([E, E2, E3, E4, E5])
+    assert np.array_equal(rule.named(stack), np.stack([rule.named(e) for e in stack]))
+    assert rule.named(stack[None]).shape == (1, 5, len(LIMB_PARTS))
 
 
 def test_a_rule_held_over_two_frames_needs_the_measure_past_its_threshold_on_both():

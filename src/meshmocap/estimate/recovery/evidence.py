@@ -136,21 +136,21 @@ class LostRule:
         return np.any(np.asarray(evidence) > np.asarray(self.thresholds), axis=-1)
 
     def named(self, evidence: np.ndarray) -> np.ndarray:
-        """(L,) bool: the limbs named lost on a frame of ``evidence`` (L, E) (held over frames
-        already: :meth:`persisted`): those past a threshold (:meth:`limb_lost`), except
-        that where a limb stands more than :data:`DISPLACED` outside the observations, the
-        limbs past the ``unexplained`` threshold alone that stand inside them are replaced
-        by the limbs outside (the points unexplained are theirs)."""
+        """(..., L) bool: the limbs named lost on frames of ``evidence`` (..., L, E) (held
+        over frames already: :meth:`persisted`): those past a threshold
+        (:meth:`limb_lost`), except that on a frame where a limb stands more than
+        :data:`DISPLACED` outside the observations, the limbs past the ``unexplained``
+        threshold alone that stand inside them are replaced by the limbs outside (the
+        points unexplained are theirs)."""
         e = np.asarray(evidence, dtype=np.float64)
         past = e > np.asarray(self.thresholds)
         lost = past.any(axis=-1)
         out, unx = EVIDENCE.index("outside"), EVIDENCE.index("unexplained")
-        alone = past[:, unx] & ~np.delete(past, unx, axis=-1).any(axis=-1)
-        displaced = e[:, out] > DISPLACED
+        alone = past[..., unx] & ~np.delete(past, unx, axis=-1).any(axis=-1)
+        displaced = e[..., out] > DISPLACED
         blamed = lost & alone & ~displaced
-        if blamed.any() and displaced.any():
-            return (lost & ~blamed) | displaced
-        return lost
+        moved = blamed.any(axis=-1, keepdims=True) & displaced.any(axis=-1, keepdims=True)
+        return np.where(moved, (lost & ~blamed) | displaced, lost)
 
     def persisted(self, evidence: np.ndarray, before: Sequence[np.ndarray] = ()) -> np.ndarray:
         """(L, E) float64: the evidence the rule reads on a frame, per limb and measure the
