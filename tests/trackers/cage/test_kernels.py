@@ -77,3 +77,22 @@ def test_quad_skinning_kernel_equals_the_array_code():
         np.testing.assert_allclose(
             sk.transforms(c, Q), sk.transforms_reference(c, Q), rtol=0, atol=1e-12
         )
+
+
+def test_skinned_points_kernel_equals_apply_skinning_to_the_bit():
+    """The compiled skinning of the sampled points sums in scipy's order: the same bits."""
+    from meshmocap.body.procedural import walk
+    from meshmocap.body.skinning import apply_skinning
+    from meshmocap.body.template import load_template
+    from meshmocap.trackers.cage.oqr import build_oqr, configuration_vector, quads_from_pose
+    from meshmocap.trackers.cage.surface import SkinnedSurface
+
+    t = load_template("neutral_5k")
+    oqr = build_oqr(t)
+    m = walk(t, duration=0.5, fps=10.0)
+    c, Q = quads_from_pose(oqr, t, m.rotations, m.root_positions)
+    s = SkinnedSurface(oqr, t, np.random.default_rng(0).choice(len(t.V), 300, replace=False))
+    for k in range(len(c)):
+        y = configuration_vector(c[k], Q[k])
+        A = s.transforms(y, Q[k, 0], c[k, 0])[0]
+        np.testing.assert_array_equal(s.points(y, Q[k, 0], c[k, 0]), apply_skinning(s._S, A))

@@ -212,6 +212,7 @@ class Articulation:
         self.rigid = np.array([jq[a] == jq[b] for a, b in zip(q, p, strict=True)])
         self.B = np.swapaxes(R0[p], 1, 2) @ R0[q]  # rest frame of the child in the parent's
         self.weights = np.ones(len(q))
+        self._layout(len(jq))
 
     def calibrate(self, c: np.ndarray, R: np.ndarray, sigma: float) -> np.ndarray:
         """Weigh the pairs by the gaps of poses ``c`` (N, 21, 3), ``R`` (N, 21, 3, 3)
@@ -248,20 +249,44 @@ class Articulation:
         w = np.concatenate([np.repeat(self.weights, 3), np.repeat(self.weights[r], 6)])
         if not jacobian:
             return w * e
-        # d(R l) = −[R l]× ω; the pelvis quad (index 0) does not move in its own frame
-        J = np.zeros((k, 3, len(c), 6))
-        rows = np.arange(k)
-        J[rows, :, q, :3] = -np.eye(3)
-        J[rows, :, q, 3:] = skew(b)
-        J[rows, :, p, :3] = np.eye(3)
-        J[rows, :, p, 3:] = -skew(a)
-        Jr = np.zeros((len(r), 2, 3, len(c), 6))
-        rr, cols = np.arange(len(r))[:, None], [0, 1]
+        # d(R l) = −[R l]× ω; the pelvis quad (index 0) does not move in its own frame: its
+        # columns are left out (the 3 × 3 blocks written straight into the rows × 6 · 20
+        # columns, at the flat places of :meth:`_layout`)
+        on, ron = self.parent > 0, self.parent[r] > 0
         sk = [skew(x.transpose(0, 2, 1).reshape(-1, 3)).reshape(len(r), 2, 3, 3) for x in (u, v)]
-        Jr[rr, cols, :, q[r][:, None], 3:] = -sk[0]
-        Jr[rr, cols, :, p[r][:, None], 3:] = sk[1]
-        J = np.concatenate([J[:, :, 1:].reshape(3 * k, -1), Jr[..., 1:, :].reshape(6 * len(r), -1)])
+        vals = [self._eye[0], skew(b), self._eye[1], -skew(a)[on], -sk[0], sk[1][ron]]
+        J = np.zeros((3 * k + 6 * len(r), 6 * (len(c) - 1)))
+        J.ravel()[self._flat] = np.concatenate([x.ravel() for x in vals])
         return w * e, w[:, None] * J
+
+    def _layout(self, n_quads: int) -> None:
+        """The flat places in the Jacobian (rows × 6 (n_quads − 1)) of its 3 × 3 blocks, in
+        :meth:`residuals`' order (each block row-major): the children's ``dc`` (−I) and
+        ``ω`` (``[b]×``), the parents' (I, −[a]×; not the pelvis's), then the rigid pairs'
+        child ``ω`` and parent ``ω``; and the constant blocks (−I, I)."""
+        k, q, p, r = len(self.child), self.child, self.parent, np.flatnonzero(self.rigid)
+        on, ron = p > 0, p[r] > 0
+        n = 6 * (n_quads - 1)
+        rows = np.arange(3 * k).reshape(k, 3, 1)
+        rigid = 3 * k + np.arange(6 * len(r)).reshape(len(r), 2, 3, 1)
+
+        def at(rows, quads, first):  # rows (m, ..., 3, 1) of blocks at quads' columns
+            cols = 6 * (quads - 1) + first
+            return rows * n + cols.reshape(-1, *[1] * (rows.ndim - 1)) + np.arange(3)
+
+        places = [
+            at(rows, q, 0),
+            at(rows, q, 3),
+            at(rows[on], p[on], 0),
+            at(rows[on], p[on], 3),
+            at(rigid, q[r], 3),
+            at(rigid[ron], p[r][ron], 3),
+        ]
+        self._flat = np.concatenate([x.ravel() for x in places])
+        self._eye = (
+            np.broadcast_to(-np.eye(3), (k, 3, 3)),
+            np.broadcast_to(np.eye(3), (on.sum(), 3, 3)),
+        )
 
 
 class SilhouetteCoverage:

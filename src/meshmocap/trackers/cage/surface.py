@@ -43,7 +43,11 @@ from meshmocap.body.skinning import apply_skinning, skinning_operator
 from meshmocap.body.template import Template
 from meshmocap.geometry.green import GreenDeformer
 from meshmocap.geometry.rotations import cross, skew
-from meshmocap.trackers.cage.kernels import local_normal_equations, skinned_directions
+from meshmocap.trackers.cage.kernels import (
+    local_normal_equations,
+    skinned_directions,
+    skinned_points,
+)
 from meshmocap.trackers.cage.oqr import OQR
 from meshmocap.trackers.cage.oqr_skinning import QuadSkinning
 from meshmocap.trackers.cage.quad_frames import gram_schmidt, gram_schmidt_forward, rig
@@ -189,7 +193,8 @@ class SkinnedSurface:
         return self.skin.transforms(cw, Rw), cw
 
     def points(self, y, Rp, cp):
-        return apply_skinning(self._S, self.transforms(y, Rp, cp)[0])
+        S = self._S  # apply_skinning's product, compiled (the same numbers, tens of calls)
+        return skinned_points(S.indptr, S.indices, S.data, self.transforms(y, Rp, cp)[0], self.n)
 
     def points_batch(self, Y, Rp, cp):
         A = np.stack([self.transforms(y, Rp, cp)[0] for y in Y])
