@@ -421,7 +421,10 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
                     x = Vm[s, 0] - y0
                     y = Vm[s, 1] - y1
                     z = Vm[s, 2] - y2
-                    if not np.sqrt(x * x + y * y + z * z) <= kth[t]:
+                    d2 = x * x + y * y + z * z
+                    if d2 > reach * (1.0 + 1e-9):  # surely beyond kth[t], whatever the rounding
+                        continue
+                    if not np.sqrt(d2) <= kth[t]:
                         continue
                     i = members[s]
                     known = False

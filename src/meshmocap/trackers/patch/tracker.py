@@ -512,13 +512,13 @@ class PatchTracker:
         # classes, on the point's body part (§III-B); posterior against an outlier class
         cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
         i, patch, v, w = assign_kernel(
-            d.astype(np.float64),
+            np.ascontiguousarray(d, dtype=np.float64),
             idx,
             np.ascontiguousarray(Nc, dtype=np.float64),
             np.ascontiguousarray(NY, dtype=np.float64),
             cls,
-            m.labels.astype(np.int64),
-            m.bone_of_patch.astype(np.int64),
+            np.ascontiguousarray(m.labels, dtype=np.int64),
+            np.ascontiguousarray(m.bone_of_patch, dtype=np.int64),
             float(o.normal_cos),
             self.sigma**2,
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
