@@ -95,3 +95,37 @@ def test_written_archives_read_as_numpys_own(tmp_path):
         kinds = {i.filename: i.compress_type for i in z.infolist()}
     assert kinds.pop("big.npy") == zipfile.ZIP_DEFLATED
     assert set(kinds.values()) == {zipfile.ZIP_STORED}
+
+
+def test_arrays_read_as_numpy_reads_them_whatever_their_header(tmp_path):
+    # plain headers are parsed by a pattern, any other by numpy: the same arrays either way
+    arrays = {
+        "f8": RNG.normal(size=(31, 3, 3)),
+        "fortran": np.asfortranarray(RNG.normal(size=(4, 3))),
+        "big_endian": RNG.normal(size=7).astype(">f4"),
+        "text": np.str_("lost left_arm"),
+        "texts": np.array(["ab", "c"]),
+        "flag": np.asarray(True),
+        "scalar": np.float64(2.5),
+        "empty": np.zeros((0, 3)),
+        "ints": np.arange(5, dtype=np.int32),
+        "complex": np.complex128(1 + 2j),
+        "record": np.zeros(3, dtype=[("a", "<f4"), ("b", "<i2")]),  # numpy's reader
+    }
+    p = tmp_path / "a.npz"
+    np.savez(p, **arrays)
+    d = read_npz(p, "test")
+    with np.load(p) as z:
+        for k in arrays:
+            ref = z[k]
+            assert d[k].dtype == ref.dtype and d[k].shape == ref.shape, k
+            assert d[k].flags.writeable and d[k].flags.f_contiguous == ref.flags.f_contiguous, k
+            np.testing.assert_array_equal(d[k], ref)
+    raw = io.BytesIO()  # a member cut short: refused in one line, as before
+    with zipfile.ZipFile(raw, "w") as zf:
+        member = io.BytesIO()
+        np.lib.format.write_array(member, RNG.normal(size=(31, 3, 3)))
+        zf.writestr("cut.npy", member.getvalue()[:-8])
+    (tmp_path / "cut.npz").write_bytes(raw.getvalue())
+    with pytest.raises(FormatError, match=r"cut\.npz: not a readable \.npz test"):
+        read_npz(tmp_path / "cut.npz", "test")
