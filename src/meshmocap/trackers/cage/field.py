@@ -81,14 +81,21 @@ def _boundary_buckets(occ, b):  # pragma: no cover - compiled
     return pts, count, np.array([bx, by, bz], dtype=np.int64)
 
 
+#: Squared voxel distances start above any a grid holds (:func:`_nearest`).
+_NONE = 1 << 62
+
+
 @njit(cache=True, nogil=True)
 def _nearest(x, y, z, pts, start, bshape, b):  # pragma: no cover - compiled
     """Squared distance (voxels²) from voxel ``(x, y, z)`` (any integers) to the nearest
     boundary voxel: buckets ring by ring (Chebyshev distance ``r`` from the query's bucket)
-    until every unvisited bucket lies farther than the best so far."""
+    until every unvisited bucket lies farther than the best so far. ``pts`` (3, m): the
+    boundary voxels' coordinates, one row per axis (a bucket's scan is then a vectorised
+    minimum of integers, exact)."""
     bx, by, bz = bshape[0], bshape[1], bshape[2]
     qx, qy, qz = x // b, y // b, z // b  # floor division: buckets of points outside too
-    best = np.inf
+    px, py, pz = pts[0], pts[1], pts[2]
+    best = _NONE
     # the rings needed at most: to the far corner of the bucket grid
     far = max(abs(qx), abs(qx - bx + 1), abs(qy), abs(qy - by + 1), abs(qz), abs(qz - bz + 1))
     for r in range(far + 1):
@@ -101,28 +108,30 @@ def _nearest(x, y, z, pts, start, bshape, b):  # pragma: no cover - compiled
                 while k <= kk1:
                     if ej or abs(k - qz) == r:  # on the ring
                         q = (i * by + j) * bz + k
+                        s0, s1 = start[q], start[q + 1]
+                        if s0 == s1:  # an empty bucket (most of them)
+                            k += 1
+                            continue
                         # skip a bucket whose box lies no nearer than the best so far
                         lo = max(i * b - x, 0, x - i * b - b + 1)
-                        box = float(lo * lo)
+                        box = lo * lo
                         lo = max(j * b - y, 0, y - j * b - b + 1)
-                        box += float(lo * lo)
+                        box += lo * lo
                         lo = max(k * b - z, 0, z - k * b - b + 1)
-                        box += float(lo * lo)
+                        box += lo * lo
                         if box >= best:
                             k += 1
                             continue
-                        for o in range(start[q], start[q + 1]):
-                            dx, dy, dz = pts[o, 0] - x, pts[o, 1] - y, pts[o, 2] - z
-                            d2 = float(dx * dx + dy * dy + dz * dz)
-                            if d2 < best:
-                                best = d2
+                        for o in range(s0, s1):
+                            dx, dy, dz = px[o] - x, py[o] - y, pz[o] - z
+                            best = min(best, dx * dx + dy * dy + dz * dz)
                         k += 1
                     else:  # inside the ring: only its two z faces remain
                         k = qz + r if qz + r <= kk1 else kk1 + 1
         # an unvisited boundary voxel lies in a bucket r + 1 rings away: ≥ r b + 1 voxels
-        if best <= float(r * b + 1) ** 2:
+        if best <= (r * b + 1) ** 2:
             break
-    return best
+    return float(best) if best < _NONE else np.inf
 
 
 @njit(cache=True, nogil=True)
@@ -257,6 +266,7 @@ class HullDistanceField:
         self.origin = origin - k * h
         self.spacing = np.full(3, m * h)
         self._pts, self._start, self._bshape = _boundary_buckets(occ, _BUCKET)
+        self._axes = np.ascontiguousarray(self._pts.T)  # (3, m): _nearest's layout
         self._origin0 = origin
         size = int(np.prod(self.shape))
         self._known = np.zeros(size, dtype=np.bool_)
@@ -287,7 +297,7 @@ class HullDistanceField:
             self._flat,
             self._known,
             self._occ,
-            self._pts,
+            self._axes,
             self._start,
             self._bshape,
             _BUCKET,
