@@ -15,6 +15,7 @@ from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
 from meshmocap.models._softmax import (
     SoftmaxRegression,
+    pair_products,
     softmax_gradient,
     softmax_hessian,
     softmax_loss,
@@ -374,6 +375,12 @@ def _softmax_problem(seed=0, n=400, K=4):
     y = rng.integers(0, K, n)
     Z = centres[y] + 0.8 * rng.normal(size=(n, 3))  # overlapping classes: a finite optimum
     return Z, y.astype(np.int64), K
+
+
+def test_pair_products_are_the_broadcast_products():
+    P, Q = np.random.default_rng(2).random((2, 50, 7))
+    assert np.array_equal(pair_products(P, P), (P[:, :, None] * P[:, None, :]).reshape(50, -1))
+    assert np.array_equal(pair_products(P, Q), (P[:, :, None] * Q[:, None, :]).reshape(50, -1))
 
 
 def test_softmax_derivatives_match_finite_differences():

@@ -74,6 +74,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     "meshmocap.models._softmax": {
         "softmax_probabilities": ("float64[:, ::1], float64[:, ::1], int64[::1]",),
+        "pair_products": ("float64[:, ::1], float64[:, ::1]",),
     },
     "meshmocap.trackers.patch.kernels": {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),

@@ -54,6 +54,22 @@ def softmax_probabilities(Wb, Z, y):
     return P, loss
 
 
+@njit(cache=True, nogil=True)
+def pair_products(P, Q):
+    """``p_i q_iᵀ`` of every row of ``P`` (n, K) and ``Q`` (n, L) float64, flattened: (n,
+    K L) with ``[i, a L + b] = P[i, a] · Q[i, b]`` (the products of ``P[:, :, None] *
+    Q[:, None, :]``, without its broadcast temporaries)."""
+    n, K = P.shape
+    L = Q.shape[1]
+    out = np.empty((n, K * L))
+    for i in range(n):
+        for a in range(K):
+            pa = P[i, a]
+            for b in range(L):
+                out[i, a * L + b] = pa * Q[i, b]
+    return out
+
+
 def softmax_loss(Wb: np.ndarray, Z: np.ndarray, y: np.ndarray, l2: float) -> float:
     """Mean softmax cross-entropy of labels ``y`` (n,) int64 in ``0…K−1`` at points ``Z``
     (n, d) float64 under logits ``W[k] · z + b[k]`` (``Wb`` (K, d + 1) float64), plus
@@ -84,7 +100,8 @@ def softmax_hessian(P: np.ndarray, ZZ: np.ndarray, l2: float) -> np.ndarray:
     n, K = P.shape
     m = math.isqrt(ZZ.shape[1])
     # two products over the points
-    B = ((P[:, :, None] * P[:, None, :]).reshape(n, -1).T @ ZZ).reshape(K, K, m, m)
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    B = (pair_products(P, P).T @ ZZ).reshape(K, K, m, m)
     H = -B.transpose(0, 2, 1, 3) / n
     H[np.arange(K), :, np.arange(K), :] += (P.T @ ZZ).reshape(K, m, m) / n
     pen = np.zeros((K, m))
