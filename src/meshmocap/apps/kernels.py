@@ -117,6 +117,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",
         ),
+        "factor_values": (
+            "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1], float64[:, ::1], "
+            "int64[::1]",
+        ),
         "block_cholesky": (
             "float64[:, :, ::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1]",
         ),

@@ -251,3 +251,19 @@ def test_block_cholesky_solves_a_sparse_definite_system():
     bad = A.copy()
     bad[5, 5] = -1.0
     assert not factor(bad)[1]
+
+
+def test_the_factor_reads_the_blocks_where_they_lie(setup):
+    """The factor's entries, read from the block arrays (transposes included), are the
+    concatenated blocks' to the bit, and 0 at its fill."""
+    from meshmocap.trackers.patch.kernels import factor_values
+
+    m = setup[0]
+    sys = System.empty(normal_pattern(m, 15))
+    for a in (sys.D, sys.O, sys.PJ, sys.JJ):
+        a[...] = RNG.normal(size=a.shape)
+    f = sys.pattern.factor
+    want = sys._blocks()[f.src]
+    want[f.src < 0] = 0.0
+    assert (f.src < 0).any()
+    assert np.array_equal(factor_values(sys.D, sys.O, sys.PJ, sys.JJ, f.src), want)

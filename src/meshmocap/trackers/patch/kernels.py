@@ -486,6 +486,37 @@ def rotated_moments(R, k, l, M):
 
 
 @njit(cache=True, nogil=True)
+def factor_values(D, O, PJ, JJ, src):
+    """The entries ``src`` (m,) int64 of a system's blocks concatenated as
+    :class:`~meshmocap.trackers.patch.solver.System` orders them (``D`` (P, 6, 6), ``O``
+    (E, 6, 6), ``O`` transposed, ``PJ`` (P, 2, 6, 3), ``PJ`` transposed, ``JJ`` (3K, 3K),
+    each flattened), 0 where ``src`` is negative: (m,) float64, read where they lie
+    instead of from a concatenated copy."""
+    n0, n1, n3 = D.size, O.size, PJ.size
+    Df, Of, Pf, Jf = D.ravel(), O.ravel(), PJ.ravel(), JJ.ravel()
+    out = np.empty(src.shape[0])
+    for i in range(src.shape[0]):
+        j = src[i]
+        if j < 0:
+            out[i] = 0.0
+        elif j < n0:
+            out[i] = Df[j]
+        elif j < n0 + n1:
+            out[i] = Of[j - n0]
+        elif j < n0 + 2 * n1:  # Oᵀ: (e, r, c) is O[e, c, r]
+            j -= n0 + n1
+            out[i] = O[j // 36, j % 6, (j // 6) % 6]
+        elif j < n0 + 2 * n1 + n3:
+            out[i] = Pf[j - n0 - 2 * n1]
+        elif j < n0 + 2 * n1 + 2 * n3:  # PJᵀ: (p, end, r, c) is PJ[p, end, c, r]
+            j -= n0 + 2 * n1 + n3
+            out[i] = PJ[j // 36, (j // 18) % 2, j % 6, (j // 6) % 3]
+        else:
+            out[i] = Jf[j - n0 - 2 * n1 - 2 * n3]
+    return out
+
+
+@njit(cache=True, nogil=True)
 def block_cholesky(L, colptr, rowidx, row_ptr, row_col, row_entry):
     """In place, the Cholesky factor of a symmetric positive definite matrix stored as the
     lower 3×3 blocks ``L`` (nnz, 3, 3) of its factor's pattern (compressed columns

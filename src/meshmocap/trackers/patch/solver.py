@@ -49,6 +49,7 @@ from meshmocap.trackers.patch.kernels import (
     add_pair_blocks,
     block_cholesky,
     block_cholesky_solve,
+    factor_values,
     point_moments,
     rigidity_blocks,
     vertex_moments,
@@ -359,8 +360,7 @@ class System:
             Singular normal equations (after the rule's retries with more damping).
         """
         f = self.pattern.factor
-        L0 = self._blocks()[f.src]
-        L0[f.src < 0] = 0.0
+        L0 = factor_values(self.D, self.O, self.PJ, self.JJ, f.src)  # _blocks()[f.src], fill 0
         d = L0[f.diag]  # H's diagonal, unknowns in their own order
         rhs = np.ascontiguousarray(-self.g[f.scalar].reshape(-1, 3))
 
