@@ -31,6 +31,10 @@ import numpy as np
 from meshmocap._numba import njit
 from meshmocap._tolerances import ZERO_EXTENT
 
+#: A squared distance above the k-th candidate's squared reach by more than this relative
+#: margin is beyond it whatever the rounding of the square root (the re-query test).
+REACH_ROUNDING = 1e-9
+
 
 @njit(cache=True, nogil=True)
 def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_out):
@@ -422,7 +426,7 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
                     y = Vm[s, 1] - y1
                     z = Vm[s, 2] - y2
                     d2 = x * x + y * y + z * z
-                    if d2 > reach * (1.0 + 1e-9):  # surely beyond kth[t], whatever the rounding
+                    if d2 > reach * (1.0 + REACH_ROUNDING):  # surely beyond kth[t]
                         continue
                     if not np.sqrt(d2) <= kth[t]:
                         continue
