@@ -162,11 +162,9 @@ def test_pose_jacobian_is_the_rigid_motion_of_the_points(tracker):
     np.testing.assert_allclose(J.T @ d, (moved(h) - moved(-h)) / (2 * h), rtol=0, atol=1e-7)
 
 
-@pytest.mark.parametrize("surface", [SkinnedSurface, GreenSurface])
-def test_surface_directions_against_central_differences(surface):
-    """``directions`` along random configuration directions: exact (1e-7 m) for the
-    vertices :attr:`SkinnedSurface.exact` marks (all of the Green surface's), within 25 %
-    for the skinned vertices of quad-less joints (the Gauss–Newton approximation)."""
+def _walk_configuration():
+    """The light body's quads, template, 300 sampled vertices and configuration ``y``
+    (with the pelvis's ``Rp``, ``cp``) at the third frame of a short walk."""
     t = load_template("neutral_5k")
     oqr = build_oqr(t)
     m = walk(t, duration=0.5, fps=10.0)
@@ -174,6 +172,15 @@ def test_surface_directions_against_central_differences(surface):
     y = configuration_vector(c, Q)[0]
     Rp, cp = Q[0, 0], c[0, 0]
     sample = np.random.default_rng(0).choice(len(t.V), 300, replace=False)
+    return oqr, t, sample, y, Rp, cp
+
+
+@pytest.mark.parametrize("surface", [SkinnedSurface, GreenSurface])
+def test_surface_directions_against_central_differences(surface):
+    """``directions`` along random configuration directions: exact (1e-7 m) for the
+    vertices :attr:`SkinnedSurface.exact` marks (all of the Green surface's), within 25 %
+    for the skinned vertices of quad-less joints (the Gauss–Newton approximation)."""
+    oqr, t, sample, y, Rp, cp = _walk_configuration()
     s = surface(oqr, t, sample)
     rng = np.random.default_rng(1)
     dy = rng.normal(size=(180, 2)) * 0.01
@@ -192,13 +199,7 @@ def test_local_normal_equations_equal_the_dense_products():
     """The compiled ``Jᵀ r`` and ``Jᵀ J`` of the local adjustment (a few quads per point row)
     equal the dense products of :meth:`SkinnedSurface.quad_rows` and ``pose_jacobian``'s
     rows to rounding, on every sampled vertex (quad-less joints included)."""
-    t = load_template("neutral_5k")
-    oqr = build_oqr(t)
-    m = walk(t, duration=0.5, fps=10.0)
-    c, Q = quads_from_pose(oqr, t, m.rotations[2:3], m.root_positions[2:3])
-    y = configuration_vector(c, Q)[0]
-    Rp, cp = Q[0, 0], c[0, 0]
-    sample = np.random.default_rng(0).choice(len(t.V), 300, replace=False)
+    oqr, t, sample, y, Rp, cp = _walk_configuration()
     s = SkinnedSurface(oqr, t, sample)
     rng = np.random.default_rng(2)
     P = s.points(y, Rp, cp)
