@@ -152,6 +152,31 @@ def test_at_points_looks_around_each_point_then_in_the_tree_with_the_same_distan
     np.testing.assert_array_equal(lazy.at_points(P), np.where(inside, -0.5 - e, e - 0.5) * h)
 
 
+def test_at_points_looks_further_around_a_few_points_before_building_the_tree():
+    # a body's vertices: most within a couple of voxels of the surface, a few farther
+    # (within AT_POINTS_FAR_RINGS, then beyond): the tree's distances, and the tree built
+    # only for those beyond
+    occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
+    rng = np.random.default_rng(5)
+    tree = KDTree(np.argwhere(inner_boundary(occ)).astype(np.float64))
+    for beyond in (0, 3):
+        lazy = LazyDistanceGrid(occ, origin, h, pad=pad)
+        B = lazy.boundary
+        far = rng.normal(size=(20 + beyond, 3))
+        far *= (rng.uniform(3, 9, len(far)) * h / np.linalg.norm(far, axis=1))[:, None]
+        far[20:] *= 4  # 12–36 voxels away
+        P = np.concatenate([B[:400] + rng.normal(scale=h / 2, size=(400, 3)), B[: len(far)] + far])
+        g = (P - (lazy.origin + pad * h)) / h
+        e = tree.query(g, k=1)[0]
+        ijk = np.round(g).astype(np.intp)
+        ok = np.all((ijk >= 0) & (ijk < occ.shape), axis=1)
+        inside = np.zeros(len(g), dtype=bool)
+        inside[ok] = occ[tuple(ijk[ok].T)]
+        want = np.where(inside, -0.5 - e, e - 0.5) * h
+        np.testing.assert_array_equal(lazy.at_points(P), want)
+        assert ("_tree" in lazy.__dict__) == bool(beyond)
+
+
 def test_at_points_is_the_grid_value_at_grid_points_and_close_between():
     occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
     lazy = LazyDistanceGrid(occ, origin, h, pad=pad)

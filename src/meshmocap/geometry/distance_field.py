@@ -224,6 +224,13 @@ def inner_boundary(occ: np.ndarray) -> np.ndarray:
 #: the tree).
 AT_POINTS_RINGS = 2
 
+#: Rings looked at for the points the first :data:`AT_POINTS_RINGS` leave, while the k-d
+#: tree is not built yet and they are at most :data:`AT_POINTS_FEW` of the points: a
+#: tracked body's vertices lie within a few voxels of its observations, and building the
+#: tree for the last few costs more than looking further around them.
+AT_POINTS_FAR_RINGS = 12
+AT_POINTS_FEW = 0.2
+
 
 class LazyDistanceGrid(DistanceGrid):
     """:func:`signed_distance` of a padded occupancy, computed only where it is looked up.
@@ -361,6 +368,11 @@ class LazyDistanceGrid(DistanceGrid):
         e = np.empty(len(g))
         boundary_distance_kernel(g, self._inner, AT_POINTS_RINGS, e)
         rest = np.flatnonzero(np.isnan(e))
+        if 0 < len(rest) <= AT_POINTS_FEW * len(g) and "_tree" not in self.__dict__:
+            far = np.empty(len(rest))
+            boundary_distance_kernel(g[rest], self._inner, AT_POINTS_FAR_RINGS, far)
+            e[rest] = far
+            rest = rest[np.isnan(far)]
         if len(rest):
             e[rest] = self._tree.query(np.ascontiguousarray(g[rest]), k=1)[0]
         ijk = np.round(g).astype(np.intp)

@@ -290,6 +290,11 @@ class ArticulatedICP:
     def observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray]:
         """Observed points (p, 3) and unit normals (p, 3), at most ``max_points`` of the
         frame's hull vertices (seeded per frame, so a resumed run sees the same points)."""
+        return self._observations(frame)[:2]
+
+    def _observations(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`observations` and the order (p,) int64 in which to search them: the
+        frame's own (a mesh's vertex order, spatially coherent; the sample is random)."""
         o = self.opts
         V, F = frame.hull_mesh
         V = np.asarray(V, dtype=np.float64)
@@ -301,7 +306,7 @@ class ArticulatedICP:
             pick = rng.choice(len(V), o.max_points, replace=False)
         # a mesh: the normals of the sampled vertices only
         N = vertex_normals_at(V, F, pick) if F is not None else N[pick]
-        return np.ascontiguousarray(V[pick]), N
+        return np.ascontiguousarray(V[pick]), N, np.argsort(pick)
 
     def step(self, frame: CaptureFrame) -> FrameResult:
         """Fit ``frame`` by articulated ICP (see the module docstring).
@@ -319,7 +324,7 @@ class ArticulatedICP:
         sk = self.template.skeleton
         self._t = time.perf_counter()
         self.n_steps += 1
-        Y, NY = self.observations(frame)
+        Y, NY, order = self._observations(frame)
         if len(Y) < 10:
             raise FitError(f"only {len(Y)} observed points")
         last = (self.R.copy(), self.root.copy())
@@ -336,7 +341,7 @@ class ArticulatedICP:
         while n_iter < o.max_iter:
             n_iter += 1
             posed = posed_model(self.plan, self.R, self.root)
-            H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref)
+            H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref, order)
             act = self.active
             self._lap("system")
             self.R, self.root, delta = articulated_step(
@@ -357,7 +362,7 @@ class ArticulatedICP:
         self._lap("output")
         return out
 
-    def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref):
+    def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref, order):
         """Gauss–Newton system ``H δ = −g`` at the current pose, and the energy terms."""
         o = self.opts
         v, nv = posed.v, posed.n
@@ -365,7 +370,7 @@ class ArticulatedICP:
         i, k = nearest_compatible(data_tree, NY, v, nv, **cand)  # model → data
         parts = [(i, k, 1.0, "model_to_data")]
         if o.correspondences == "both":
-            k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand)  # data → model
+            k2, i2 = nearest_compatible(KDTree(v), nv, Y, NY, **cand, order=order)  # data → model
             parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
         self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
