@@ -310,20 +310,32 @@ class LazyDistanceGrid(DistanceGrid):
         self.upper = self.origin + (np.array(self.shape) - 1) * m * h
         self._set_strides()
         self._inner = inner_boundary(occ)
-        flat = np.flatnonzero(self._inner)
-        ijk = np.empty((len(flat), 3))  # np.unravel_index, without int → float copies
-        _, ny, nz = occ.shape
-        ijk[:, 0], rest = np.divmod(flat, ny * nz)
-        ijk[:, 1], ijk[:, 2] = np.divmod(rest, nz)
-        self._ijk = ijk  # voxel units; the k-d tree over them is built when first needed
-        self.boundary = ijk * h + origin
-        self.boundary.setflags(write=False)
+        self._occ_origin = origin
         size = int(np.prod(self.shape))
         self._known = np.zeros(size, dtype=bool)  # grid points computed
         self._cell_known = np.zeros(size, dtype=bool)  # cells (by corner 000) all computed
         self._flat = np.empty(size)
         self.n_evaluated = 0
         self.seconds = time.perf_counter() - t0
+
+    @cached_property
+    def _ijk(self) -> np.ndarray:
+        """(m, 3) float64: the inner-boundary voxels, voxel units (what the k-d tree holds;
+        made on first need: the signed distance at points near the surface needs neither)."""
+        flat = np.flatnonzero(self._inner)
+        ijk = np.empty((len(flat), 3))  # np.unravel_index, without int → float copies
+        _, ny, nz = self._occ.shape
+        ijk[:, 0], rest = np.divmod(flat, ny * nz)
+        ijk[:, 1], ijk[:, 2] = np.divmod(rest, nz)
+        return ijk
+
+    @cached_property
+    def boundary(self) -> np.ndarray:
+        """(m, 3) float64: the inner-boundary voxel centres, metres, world frame (made on
+        first use)."""
+        boundary = self._ijk * self._h + self._occ_origin
+        boundary.setflags(write=False)
+        return boundary
 
     def __repr__(self) -> str:
         return (
