@@ -131,11 +131,6 @@ def test_nearest_compatible_is_the_first_compatible_of_k(setup):
         assert np.array_equal(qi, np.flatnonzero(has))
         assert np.array_equal(partner, safe[has, np.argmax(ok[has], axis=1)])
         assert 0.1 * len(q) < len(qi) < len(q)  # some rejected, some found
-        # searched in another order: the same answer, in the queries' own order
-        order = rng.permutation(len(q))
-        cand = dict(k=k, max_distance=0.15, normal_cos=0.3)
-        got = nearest_compatible(tree, NY, q, nq, **cand, order=order)
-        assert np.array_equal(got[0], qi) and np.array_equal(got[1], partner)
 
 
 def test_vertex_normals_are_the_area_weighted_face_normals(setup):
