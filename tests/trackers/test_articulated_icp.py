@@ -21,7 +21,7 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
-from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions, _data_to_model
+from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions, data_to_model
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
@@ -136,7 +136,7 @@ def tracked(walk, template, tmp_path_factory):
     )
 
 
-def test_data_to_model_pairs_searched_in_another_order_are_the_same(template):
+def testdata_to_model_pairs_searched_in_another_order_are_the_same(template):
     """The observed points searched in the frame's own order: the pairs of a search in the
     sample's order, in that order."""
     from pykdtree.kdtree import KDTree
@@ -150,7 +150,7 @@ def test_data_to_model_pairs_searched_in_another_order_are_the_same(template):
     cand = dict(k=8, max_distance=0.1, normal_cos=0.3)
     want = nearest_compatible(KDTree(v), nv, Y, NY, **cand)
     perm = np.argsort(pick)
-    got = _data_to_model(KDTree(v), nv, (perm, np.ascontiguousarray(Y[perm]), NY[perm]), cand)
+    got = data_to_model(KDTree(v), nv, perm, np.ascontiguousarray(Y[perm]), NY[perm], **cand)
     assert 100 < len(want[0]) < 1000
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 

@@ -372,7 +372,7 @@ class ArticulatedICP:
         i, k = nearest_compatible(data_tree, NY, v, nv, **cand)  # model → data
         parts = [(i, k, 1.0, "model_to_data")]
         if o.correspondences == "both":
-            k2, i2 = _data_to_model(KDTree(v), nv, order, cand)
+            k2, i2 = data_to_model(KDTree(v), nv, *order, **cand)
             parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
         self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
@@ -406,15 +406,38 @@ class ArticulatedICP:
         return H, g, energies
 
 
-def _data_to_model(tree: KDTree, nv: np.ndarray, order: tuple, cand: dict) -> tuple:
-    """:func:`~meshmocap.body.articulated.nearest_compatible` from the observed points to the
-    model points (``tree`` of them, normals ``nv``): the observed points searched in the
-    frame's own order (``order``: the permutation (p,) int64 and the points and normals in
-    it), which a k-d tree answers ~15 % faster than the sample's random one; the same pairs,
-    in the same order (observed point, then model point indices, int64)."""
-    perm, Yo, NYo = order
+def data_to_model(
+    tree: KDTree,
+    nv: np.ndarray,
+    perm: np.ndarray,
+    Yo: np.ndarray,
+    NYo: np.ndarray,
+    *,
+    k: int,
+    max_distance: float,
+    normal_cos: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each observed point's nearest compatible model point
+    (:func:`~meshmocap.body.articulated.nearest_compatible`), the observed points searched
+    in another order than their own: the frame's (a mesh's vertex order, spatially
+    coherent, which a k-d tree answers faster than the random order of the sample).
+
+    Parameters
+    ----------
+    tree : KDTree of the model points (m, 3); ``nv`` (m, 3) float64 their unit normals
+    perm : (p,) int64, a permutation of the observed points
+    Yo, NYo : (p, 3) float64, the observed points (metres) and unit normals in that order
+        (``Y[perm]``, ``NY[perm]``)
+    k, max_distance, normal_cos : as for ``nearest_compatible``
+
+    Returns
+    -------
+    The pairs ``nearest_compatible(tree, nv, Y, NY, ...)`` gives, in its order: the indices
+    (int64) of the observed points that found one and of their model points.
+    """
+    cand = dict(k=k, max_distance=max_distance, normal_cos=normal_cos)
     queries, partner = nearest_compatible(tree, nv, Yo, NYo, **cand)
     found = np.full(len(perm), -1, dtype=np.int64)
     found[perm[queries]] = partner
-    k = np.flatnonzero(found >= 0)
-    return k, found[k]
+    i = np.flatnonzero(found >= 0)
+    return i, found[i]
