@@ -78,11 +78,12 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     "meshmocap.trackers.patch.kernels": {
         "nearest_among": ("float64[:, ::1], float64[:, ::1], int64[:, ::1], int64",),
-        "vertex_moves": ("float64[:, ::1], float64[:, :, ::1], int64[::1]",),
+        "vertex_moves": ("float64[:, ::1], float64[:, :, ::1], int64[::1], int64[::1]",),
         "stale_rows": (
             "float64[:, ::1], float64[:], float64[::1], int64[::1], float64[:, ::1], "
             "float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], int64[::1], "
-            "int64[::1], int64[::1], int64[::1]",
+            "int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], "
+            "float64[:, ::1]",
         ),
         "assign_kernel": (
             "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
@@ -113,6 +114,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "add_bone_joint_blocks": (
             "float64[:, :, :, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
             "float64[:, ::1], int64[:, ::1], int64, float64",
+        ),
+        "add_length_blocks": (
+            "float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], int64[::1], "
+            "int64[::1], int64, float64",
         ),
         "patch_points": (
             "float64[:, :, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[:, ::1]",

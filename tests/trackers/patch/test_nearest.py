@@ -7,22 +7,25 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.template import load_template
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.trackers.patch.model import build_patch_model
-from meshmocap.trackers.patch.nearest import NearestPoints, NearestVertices
+from meshmocap.trackers.patch.nearest import NearestPoints, NearestVertices, morton_codes
 
 
+@pytest.mark.parametrize("ordered", [False, True])
 @pytest.mark.parametrize("scale", [0.0005, 0.005, 0.03])
-def test_reranked_candidates_equal_a_new_query(scale):
+def test_reranked_candidates_equal_a_new_query(scale, ordered):
     """Patches turned and moved at random (steps of ``scale`` metres and ``10 · scale``
     radians, as in a frame's Gauss–Newton iterations): every call returns the k-d query's
     neighbours, in its order, and its distances to rounding, while re-using candidates
-    for some points (small steps: most)."""
+    for some points (small steps: most); the same with each patch's vertices in compact
+    chunks (``ordered``: by their Morton code at rest, as the tracker orders them)."""
     rng = np.random.default_rng(7)
     t = load_template("neutral_5k")
     m = build_patch_model(t, n_patches=80, seed=2)
     Y = m.V0[rng.choice(len(m.V0), 1500, replace=False)] + rng.normal(scale=0.01, size=(1500, 3))
     R = np.broadcast_to(np.eye(3), (m.P, 3, 3)).copy()
     c = m.centres0.copy()
-    nearest = NearestVertices(Y, m.labels, k=8, spare=8)
+    key = morton_codes(m.V0) if ordered else None
+    nearest = NearestVertices(Y, m.labels, k=8, spare=8, groups=m.bone_of_patch, key=key)
     for _ in range(8):
         V = np.einsum("nij,nj->ni", R[m.labels], m.V0 - m.centres0[m.labels]) + c[m.labels]
         d, idx = nearest.query(V)
@@ -83,3 +86,15 @@ def test_nearest_among_is_a_stable_sort_of_the_candidates():
         order = np.argsort(dist, axis=1, kind="stable")[:, :k]
         assert np.array_equal(idx, np.take_along_axis(cand, order, axis=1))
         assert np.allclose(d, np.take_along_axis(dist, order, axis=1), rtol=1e-15, atol=0)
+
+
+def test_morton_codes_keep_near_points_near():
+    """Points sorted by their Morton codes come in runs that are compact: runs of 8 along
+    the order span far less than the cloud (a curve filling space)."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(0, 1, size=(4096, 3))
+    code = morton_codes(X)
+    assert code.dtype == np.uint64 and len(np.unique(code)) > 4000
+    runs = X[np.argsort(code)].reshape(-1, 8, 3)
+    extent = np.ptp(runs, axis=1).max(axis=1)
+    assert np.median(extent) < 0.25

@@ -206,6 +206,33 @@ def test_bone_length_prior_gradient_and_hessian(setup):
     assert energy(X + step) < 0.05 * energy(X)
 
 
+def test_bone_length_blocks_are_the_numpy_expressions_they_replaced(setup):
+    """The prior's compiled pass adds, bit for bit, what its numpy expressions added:
+    ``weight · u uᵀ`` with ``np.add.at`` at (b, b), (p, p), −(b, p), −(p, b), and the
+    gradient pieces ``± weight · r u`` through ``np.bincount``, to a system already holding
+    other terms (repeated joints accumulate in pair order)."""
+    from meshmocap.trackers.patch.solver import length_residuals
+
+    m, mom, R, c, X, obs = setup
+    pairs = np.array([[1, 0], [2, 1], [3, 1], [4, 3], [3, 4], [5, 0]])
+    L = RNG.uniform(0.1, 0.4, size=len(pairs))
+    sys, _ = _system(m, mom, R, c, X, obs)
+    JJ, g = sys.JJ.copy(), sys.g.copy()
+    add_bone_lengths(sys, X, pairs, L, 7.3)
+    K, w = 15, 7.3
+    b, p = pairs[:, 0], pairs[:, 1]
+    u, r = length_residuals(X, pairs, L)
+    uu = w * u[:, :, None] * u[:, None, :]
+    a_, b_ = np.concatenate([b, p, b, p]), np.concatenate([b, p, p, b])
+    blocks = np.concatenate([uu, uu, -uu, -uu])
+    np.add.at(JJ.reshape(K, 3, K, 3), (a_, slice(None), b_, slice(None)), blocks)
+    for rows, G in ((6 * m.P + 3 * b, w * r[:, None] * u), (6 * m.P + 3 * p, -w * r[:, None] * u)):
+        idx = rows[:, None] + np.arange(3)
+        g += np.bincount(idx.ravel(), G.ravel(), minlength=len(g))
+    assert np.array_equal(sys.JJ, JJ)
+    assert np.array_equal(sys.g, g)
+
+
 def _block_sparse_spd(nb: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A symmetric positive definite (3 nb, 3 nb) matrix on a random sparse pattern of
     3×3 blocks (a ring of blocks plus random pairs), with its entries' rows and columns."""

@@ -296,6 +296,37 @@ def add_bone_joint_blocks(PJ, g, q, r, cw, ends, base, weight):
 
 
 @njit(cache=True, nogil=True)
+def add_length_blocks(JJ, g, u, r, b, p, base, weight):
+    """In place, the bone-length prior's joint blocks and gradient
+    (:func:`~meshmocap.trackers.patch.solver.add_bone_lengths`): for each pair ``t``
+    (joints ``b[t]``, ``p[t]``, unit direction ``u`` (m, 3), length error ``r`` (m,)),
+    ``weight · u uᵀ`` added to ``JJ`` (3K, 3K) at (b, b) and (p, p) and subtracted at
+    (b, p) and (p, b), in that order over the pairs, then ``± weight · r u`` summed into
+    ``g`` at the rows ``base + 3 b`` (+) and ``base + 3 p`` (−), each sum over the pairs
+    in order, then added: the operations of the numpy expressions it replaced."""
+    m = u.shape[0]
+    for blk in range(4):  # (b, b), (p, p), (b, p), (p, b)
+        for t in range(m):
+            ja = b[t] if blk == 0 or blk == 2 else p[t]
+            jb = b[t] if blk == 0 or blk == 3 else p[t]
+            for i in range(3):
+                wu = weight * u[t, i]
+                for j in range(3):
+                    v = wu * u[t, j]
+                    JJ[3 * ja + i, 3 * jb + j] += v if blk < 2 else -v
+    for end in range(2):
+        sums = np.zeros(g.shape[0])
+        w = weight if end == 0 else -weight
+        for t in range(m):
+            row = base + 3 * (b[t] if end == 0 else p[t])
+            wr = w * r[t]
+            for i in range(3):
+                sums[row + i] += wr * u[t, i]
+        for i in range(g.shape[0]):
+            g[i] += sums[i]
+
+
+@njit(cache=True, nogil=True)
 def nearest_among(Y, V, cand, k):
     """For each point ``Y[t]`` (m, 3), its ``k`` nearest vertices of ``V`` (n, 3) among the
     candidates ``cand[t]`` (m, K) int64, by increasing distance (ties in candidate order):
@@ -327,29 +358,42 @@ def nearest_among(Y, V, cand, k):
 
 
 @njit(cache=True, nogil=True)
-def vertex_moves(Vm, snaps, start):
+def vertex_moves(Vm, snaps, start, cstart):
     """How far each vertex moved since each snapshot: ``Vm`` (n, 3) the vertices now and
     ``snaps`` (S, n, 3) at each snapshot, both in patch order (patch ``p``'s vertices in
-    rows ``start[p]:start[p + 1]``). Returns the distances (S, n) and their largest per
-    patch (S, P), metres, and each patch's bounding box now (P, 6): lowest x, y, z, then
-    highest."""
+    rows ``start[p]:start[p + 1]``), each patch's rows cut into chunks (chunk ``c``: rows
+    ``cstart[c]:cstart[c + 1]``, no chunk across two patches). Returns the distances
+    (S, n), their largest per patch (S, P) and per chunk (S, C), metres, and each patch's
+    and each chunk's bounding box now, (P, 6) and (C, 6): lowest x, y, z, then highest."""
     S, n = snaps.shape[0], Vm.shape[0]
     P = start.shape[0] - 1
+    C = cstart.shape[0] - 1
     dv = np.empty((S, n))
     moved = np.zeros((S, P))
+    cmoved = np.zeros((S, C))
     box = np.empty((P, 6))
+    cbox = np.empty((C, 6))
+    c = 0
     for p in range(P):
         for a in range(3):
             box[p, a] = np.inf
             box[p, 3 + a] = -np.inf
-        for s in range(start[p], start[p + 1]):
+        while c < C and cstart[c] < start[p + 1]:
             for a in range(3):
-                box[p, a] = min(box[p, a], Vm[s, a])
-                box[p, 3 + a] = max(box[p, 3 + a], Vm[s, a])
+                cbox[c, a] = np.inf
+                cbox[c, 3 + a] = -np.inf
+            for s in range(cstart[c], cstart[c + 1]):
+                for a in range(3):
+                    cbox[c, a] = min(cbox[c, a], Vm[s, a])
+                    cbox[c, 3 + a] = max(cbox[c, 3 + a], Vm[s, a])
+            for a in range(3):
+                box[p, a] = min(box[p, a], cbox[c, a])
+                box[p, 3 + a] = max(box[p, 3 + a], cbox[c, 3 + a])
+            c += 1
     for e in range(S):
-        for p in range(P):
+        for c in range(C):
             top = 0.0
-            for s in range(start[p], start[p + 1]):
+            for s in range(cstart[c], cstart[c + 1]):
                 x = Vm[s, 0] - snaps[e, s, 0]
                 y = Vm[s, 1] - snaps[e, s, 1]
                 z = Vm[s, 2] - snaps[e, s, 2]
@@ -357,12 +401,37 @@ def vertex_moves(Vm, snaps, start):
                 dv[e, s] = d
                 if d > top:
                     top = d
+            cmoved[e, c] = top
+        c = 0
+        for p in range(P):
+            top = 0.0
+            while c < C and cstart[c] < start[p + 1]:
+                top = max(top, cmoved[e, c])
+                c += 1
             moved[e, p] = top
-    return dv, moved, box
+    return dv, moved, box, cmoved, cbox
 
 
 @njit(cache=True, nogil=True)
-def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gstart, gmembers):
+def stale_rows(
+    Y,
+    kth,
+    far,
+    epoch,
+    moved,
+    dv,
+    box,
+    Vm,
+    cand,
+    start,
+    members,
+    gstart,
+    gmembers,
+    pchunk,
+    cstart,
+    cmoved,
+    cbox,
+):
     """Points whose ``k`` nearest candidates may miss a nearer vertex
     (:mod:`~meshmocap.trackers.patch.nearest`): point t (``Y[t]``, k-th candidate at
     ``kth[t]``, every other vertex at least ``far[t]`` away at snapshot ``epoch[t]``) is
@@ -371,8 +440,11 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
     snapshot (``dv[epoch[t]]`` (S, n), in patch order: patch ``p``'s vertices are
     ``members[start[p]:start[p + 1]]``, at ``Vm`` (n, 3) now, in that order) can, and only
     in a patch that moved that much (``moved`` (S, P), the most of its vertices) and whose
-    bounding box now (``box`` (P, 6), :func:`vertex_moves`) reaches within ``kth[t]``;
-    each distance counts a nanometre more movement for rounding. The patches come in
+    bounding box now (``box`` (P, 6), :func:`vertex_moves`) reaches within ``kth[t]``,
+    and there in the chunks of the patch (patch ``p``'s chunks ``pchunk[p]:pchunk[p + 1]``,
+    chunk ``c`` its rows ``cstart[c]:cstart[c + 1]``) that moved that much (``cmoved``
+    (S, C)) and whose box (``cbox`` (C, 6)) reaches; each distance counts a nanometre more
+    movement for rounding. The patches come in
     groups (group ``g``: patches ``gmembers[gstart[g]:gstart[g + 1]]``, e.g. a bone's),
     and a point looks into a group only where the group moved that much and its box (all
     its patches') reaches. Returns (m,) bool."""
@@ -394,6 +466,7 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
             for e in range(S):
                 gmoved[e, g] = max(gmoved[e, g], moved[e, p])
     out = np.zeros(m, dtype=np.bool_)
+    mark = np.full(Vm.shape[0], -1, dtype=np.int64)  # mark[v] == t: v a candidate of t
     for t in range(m):
         slack = far[t] - kth[t] - ZERO_EXTENT
         if not slack > 0:
@@ -402,6 +475,7 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
         e = epoch[t]
         y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
         reach = kth[t] * kth[t] + ZERO_EXTENT
+        marked = False
         for g in range(n_g):
             if gmoved[e, g] < slack:
                 continue
@@ -419,25 +493,33 @@ def stale_rows(Y, kth, far, epoch, moved, dv, box, Vm, cand, start, members, gst
                 z = max(box[p, 2] - y2, y2 - box[p, 5], 0.0)
                 if not x * x + y * y + z * z <= reach:
                     continue
-                for s in range(start[p], start[p + 1]):  # the patch reaches: its vertices
-                    if dv[e, s] < slack:
+                for h in range(pchunk[p], pchunk[p + 1]):  # the patch reaches: its chunks
+                    if cmoved[e, h] < slack:
                         continue
-                    x = Vm[s, 0] - y0
-                    y = Vm[s, 1] - y1
-                    z = Vm[s, 2] - y2
-                    d2 = x * x + y * y + z * z
-                    if d2 > reach * (1.0 + REACH_ROUNDING):  # surely beyond kth[t]
+                    x = max(cbox[h, 0] - y0, y0 - cbox[h, 3], 0.0)
+                    y = max(cbox[h, 1] - y1, y1 - cbox[h, 4], 0.0)
+                    z = max(cbox[h, 2] - y2, y2 - cbox[h, 5], 0.0)
+                    if not x * x + y * y + z * z <= reach:
                         continue
-                    if not np.sqrt(d2) <= kth[t]:
-                        continue
-                    i = members[s]
-                    known = False
-                    for c in range(K):
-                        if cand[t, c] == i:
-                            known = True
+                    for s in range(cstart[h], cstart[h + 1]):  # the chunk reaches: its vertices
+                        if dv[e, s] < slack:
+                            continue
+                        x = Vm[s, 0] - y0
+                        y = Vm[s, 1] - y1
+                        z = Vm[s, 2] - y2
+                        d2 = x * x + y * y + z * z
+                        if d2 > reach * (1.0 + REACH_ROUNDING):  # surely beyond kth[t]
+                            continue
+                        if not np.sqrt(d2) <= kth[t]:
+                            continue
+                        if not marked:  # the point's candidates, marked once
+                            for c in range(K):
+                                mark[cand[t, c]] = t
+                            marked = True
+                        if mark[members[s]] != t:  # not a candidate
+                            out[t] = True
                             break
-                    if not known:
-                        out[t] = True
+                    if out[t]:
                         break
                 if out[t]:
                     break

@@ -10,7 +10,9 @@ candidate's distance) from the point at the query, and lies at least ``far − �
 now, ``δ_v`` its distance from where it was then. Only a vertex with ``δ_v`` above
 ``far − d_k`` (``d_k`` the k-th candidate's distance now) can have come nearer than the
 k-th candidate; such vertices are looked at one by one, in the patches that moved that
-much (their largest ``δ_v``) and whose bounding box reaches within ``d_k``. If none
+much (their largest ``δ_v``) and whose bounding box reaches within ``d_k``, and there in
+the chunks of a few neighbouring vertices (:data:`CHUNK`) that moved that much and whose
+box reaches (a patch is rigid: vertices close at rest stay close). If none
 outside the candidates lies within ``d_k``, the k nearest are all candidates; the points
 for which this fails are queried again (on the 12k walk about a tenth of the points a
 bound on each rigid patch's motion alone would re-query).
@@ -21,7 +23,13 @@ from __future__ import annotations
 import numpy as np
 from pykdtree.kdtree import KDTree
 
+from meshmocap._tolerances import ZERO_EXTENT
 from meshmocap.trackers.patch.kernels import nearest_among, stale_rows, vertex_moves
+
+#: Vertices per chunk of a patch in the re-query test (:class:`NearestVertices`).
+CHUNK = 8
+#: Bits per axis of the rest positions' Morton code that orders a patch's vertices.
+MORTON_BITS = 10
 
 
 def k_nearest(V: np.ndarray, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -36,14 +44,42 @@ def k_nearest_on(tree: KDTree, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
     return d.reshape(len(Y), k).astype(np.float64), i.reshape(len(Y), k).astype(np.int64)
 
 
-def _members(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _members(labels: np.ndarray, key: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The items of each label ``0 … L − 1`` of ``labels`` (n,) int64: ``items
-    [first[j]:first[j + 1]]`` (ascending) for label ``j``; returns ``items`` (n,) and
-    ``first`` (L + 1,), int64."""
-    items = np.argsort(labels, kind="stable").astype(np.int64)
+    [first[j]:first[j + 1]]`` for label ``j``, by increasing ``key`` (n,) (default:
+    ascending items); returns ``items`` (n,) and ``first`` (L + 1,), int64."""
+    if key is None:
+        items = np.argsort(labels, kind="stable").astype(np.int64)
+    else:
+        items = np.lexsort((key, labels)).astype(np.int64)
     L = int(labels.max()) + 1 if len(labels) else 0
     first = np.searchsorted(labels[items], np.arange(L + 1)).astype(np.int64)
     return items, first
+
+
+def morton_codes(X: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
+    """Morton (Z-order) codes (n,) uint64 of points ``X`` (n, 3) on a grid of ``2**bits``
+    cells per axis over their bounding box: points with near codes lie close together."""
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    cells = (X - lo) / np.maximum(hi - lo, ZERO_EXTENT) * (2**bits - 1)
+    q = np.clip(cells, 0, 2**bits - 1).astype(np.uint64)
+    code = np.zeros(len(X), dtype=np.uint64)
+    for b in range(bits):
+        for a in range(3):
+            code |= ((q[:, a] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + a)
+    return code
+
+
+def _chunks(start: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each patch's rows ``start[p]:start[p + 1]`` (``start`` (P + 1,)) cut into runs of at
+    most ``size``: the runs' first rows (C + 1,) (the last: the end) and each patch's
+    first run (P + 1,), int64."""
+    count = -(-np.diff(start) // size)  # runs per patch
+    pchunk = np.concatenate([[0], np.cumsum(count)]).astype(np.int64)
+    first = np.repeat(start[:-1], count) + size * (
+        np.arange(pchunk[-1]) - np.repeat(pchunk[:-1], count)
+    )
+    return np.concatenate([first, start[-1:]]).astype(np.int64), pchunk
 
 
 class NearestVertices:
@@ -58,6 +94,10 @@ class NearestVertices:
     groups : (P,) int, optional
         A group of each patch (e.g. its bone): the test for vertices that may have come
         nearer looks into a group only where the group's box reaches (default: one group)
+    key : (n,) optional
+        The order of each patch's vertices before they are cut into chunks of
+        :data:`CHUNK`: e.g. the vertices' :func:`morton_codes` at rest, so that a chunk is
+        compact in every pose (default: index order; the results are the same)
 
     Attributes
     ----------
@@ -72,11 +112,14 @@ class NearestVertices:
         k: int,
         spare: int,
         groups: np.ndarray | None = None,
+        key: np.ndarray | None = None,
     ):
         self.Y = np.ascontiguousarray(Y, dtype=np.float64)
         labels = np.asarray(labels, dtype=np.int64)
-        # each patch's vertices: members[start[p]:start[p + 1]]
-        self.members, self.start = _members(labels)
+        # each patch's vertices: members[start[p]:start[p + 1]], in chunks cstart[c]:
+        # cstart[c + 1] (patch p's chunks pchunk[p]:pchunk[p + 1])
+        self.members, self.start = _members(labels, key)
+        self.cstart, self.pchunk = _chunks(self.start, CHUNK)
         P = len(self.start) - 1
         groups = np.zeros(P, np.int64) if groups is None else np.asarray(groups, np.int64)
         self.gmembers, self.gstart = _members(groups)  # each group's patches
@@ -99,7 +142,9 @@ class NearestVertices:
             d, idx = np.empty((m, k)), np.empty((m, k), dtype=np.int64)
             rows = np.arange(m)
         else:
-            dv, moved, box = vertex_moves(Vm, self.snapshots[: self.n_snapshots], self.start)
+            dv, moved, box, cmoved, cbox = vertex_moves(
+                Vm, self.snapshots[: self.n_snapshots], self.start, self.cstart
+            )
             d, idx = nearest_among(self.Y, V, self.cand, k)
             stale = stale_rows(
                 self.Y,
@@ -115,6 +160,10 @@ class NearestVertices:
                 self.members,
                 self.gstart,
                 self.gmembers,
+                self.pchunk,
+                self.cstart,
+                cmoved,
+                cbox,
             )
             rows = np.flatnonzero(stale)
         if len(rows):

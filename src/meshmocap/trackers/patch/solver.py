@@ -45,6 +45,7 @@ from meshmocap.geometry.levenberg_marquardt import (
 from meshmocap.geometry.rotations import skew
 from meshmocap.trackers.patch.kernels import (
     add_bone_joint_blocks,
+    add_length_blocks,
     add_moment_blocks,
     add_pair_blocks,
     block_cholesky,
@@ -360,15 +361,16 @@ class System:
             Singular normal equations (after the rule's retries with more damping).
         """
         f = self.pattern.factor
-        L0 = factor_values(self.D, self.O, self.PJ, self.JJ, f.src)  # _blocks()[f.src], fill 0
-        d = L0[f.diag]  # H's diagonal, unknowns in their own order
+        fresh = [factor_values(self.D, self.O, self.PJ, self.JJ, f.src)]  # _blocks()[f.src]
+        d = fresh[0][f.diag]  # H's diagonal, unknowns in their own order
         rhs = np.ascontiguousarray(-self.g[f.scalar].reshape(-1, 3))
 
         def factor_and_solve(add: np.ndarray) -> np.ndarray:
             # H is symmetric positive definite and sparse (each patch couples with its ~6
             # neighbours and its bone's joints): a Cholesky factor in 3×3 blocks on the
-            # pattern's fill-reducing order, its structure computed once (BlockFactor)
-            L = L0.copy()
+            # pattern's fill-reducing order, its structure computed once (BlockFactor);
+            # factored in place in H's entries (read again for a retry, which is rare)
+            L = fresh.pop() if fresh else factor_values(self.D, self.O, self.PJ, self.JJ, f.src)
             L[f.diag] += add
             L = L.reshape(-1, 3, 3)
             if not block_cholesky(L, f.colptr, f.rowidx, f.row_ptr, f.row_col, f.row_entry):
@@ -618,15 +620,16 @@ def add_bone_lengths(
     -------
     float, the sum of squared length errors (before ``weight``)
     """
-    b, p = pairs[:, 0], pairs[:, 1]
     u, r = length_residuals(X, pairs, lengths)
-    base = 6 * sys.pattern.n_patches
-    uu = weight * u[:, :, None] * u[:, None, :]
-    sys.add_joints(
-        np.concatenate([b, p, b, p]),
-        np.concatenate([b, p, p, b]),
-        np.concatenate([uu, uu, -uu, -uu]),
+    pairs = np.asarray(pairs, dtype=np.int64)
+    add_length_blocks(  # the blocks weight · u uᵀ (±) and the gradient ± weight · r u
+        sys.JJ,
+        sys.g,
+        np.ascontiguousarray(u),
+        np.ascontiguousarray(r),
+        np.ascontiguousarray(pairs[:, 0]),
+        np.ascontiguousarray(pairs[:, 1]),
+        6 * sys.pattern.n_patches,
+        float(weight),
     )
-    sys.add_g(base + 3 * b, weight * r[:, None] * u)
-    sys.add_g(base + 3 * p, -weight * r[:, None] * u)
     return float(np.sum(r * r))

@@ -47,7 +47,7 @@ from meshmocap.trackers.patch.model import (
     rebind_bones,
     skeleton_floor,
 )
-from meshmocap.trackers.patch.nearest import NearestVertices, k_nearest
+from meshmocap.trackers.patch.nearest import NearestVertices, k_nearest, morton_codes
 from meshmocap.trackers.patch.options import PatchOptions
 from meshmocap.trackers.patch.solver import (
     System,
@@ -150,6 +150,7 @@ class PatchTracker:
         self.moments = rigidity_moments(self.model)
         m = self.model
         self.vertex_patch = m.labels.astype(np.int64)
+        self.vertex_key = morton_codes(m.V0)  # each patch's vertices in compact chunks
         self.rest_offsets = np.ascontiguousarray(m.V0 - m.centres0[m.labels])  # v0 − c0_k
         self.pairs = _held_pairs(template.eval_skeleton)
         self.train_faces, self.train_bary, self.train_class = surface_training_sample(
@@ -477,7 +478,12 @@ class PatchTracker:
         ``spare`` candidates kept beyond ``k_neighbours``."""
         m = self.model
         return NearestVertices(
-            Y, m.labels, k=self.opts.k_neighbours, spare=spare, groups=m.bone_of_patch
+            Y,
+            m.labels,
+            k=self.opts.k_neighbours,
+            spare=spare,
+            groups=m.bone_of_patch,
+            key=self.vertex_key,
         )
 
     def correspondences(
