@@ -80,21 +80,3 @@ def test_uncovered_points_looked_up_per_point_is_the_image_definition(walker):
     assert np.array_equal(got, _uncovered_by_images(V, t.F, P, cams, masks))
     assert 0 < got.sum() < len(P) // 2  # the real arm's points, not the rest
 
-
-def test_a_subsample_of_the_points_scores_as_those_points_given(walker):
-    """The subsampled points are searched in the observations' own order (faster): the
-    same scores as those points given in the sample's order."""
-    t, R, root, posed = walker
-    labels = limb_labels(t)
-    down = R.copy()
-    down[t.skeleton.index("LeftArm")] = np.eye(3)
-    obs = observed_frame(posed.V, t.F)
-    P, field = obs.points[0], obs.field
-    V = t.pose(down, root).V
-    m = len(P) // 3
-    q = fit_quality(V, labels, P, field, max_points=m, seed=4)
-    pick = np.random.default_rng(4).choice(len(P), m, replace=False)
-    q0 = fit_quality(V, labels, P[pick], field, max_points=m, seed=4)
-    for a in ("outside", "buried", "unexplained", "lost"):
-        assert getattr(q, a) == getattr(q0, a)
-    assert q.unexplained["left_arm"] > 0

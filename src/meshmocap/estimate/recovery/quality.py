@@ -241,19 +241,6 @@ def _elsewhere(near: np.ndarray, V: np.ndarray, labels: np.ndarray, Q: np.ndarra
     return out
 
 
-def _nearest(V: np.ndarray, P: np.ndarray, order: np.ndarray | None) -> tuple[np.ndarray, ...]:
-    """The distance (p,) and index (p,) of the nearest vertex of ``V`` (n, 3) to each of
-    ``P`` (p, 3), the points searched in ``order`` (p,) where given: the observed points'
-    own order, spatially coherent where the sample's is random (the k-d tree answers the
-    same, faster)."""
-    tree = KDTree(np.ascontiguousarray(V))
-    if order is None:
-        return tree.query(np.ascontiguousarray(P), k=1)
-    d, i = np.empty(len(P)), np.empty(len(P), dtype=np.int64)
-    d[order], i[order] = tree.query(np.ascontiguousarray(P[order]), k=1)
-    return d, i
-
-
 def fit_quality(
     V: np.ndarray,
     labels: np.ndarray,
@@ -298,15 +285,13 @@ def fit_quality(
     FitQuality
     """
     limbs = list(LIMB_PARTS)
-    order = None
     if len(P) > max_points:
-        pick = np.random.default_rng(seed).choice(len(P), max_points, replace=False)
-        P, order = P[pick], np.argsort(pick)
+        P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
     if sdf is None:
         sdf = field(V)
     outside = limb_shares(labels, sdf > OUTSIDE_MARGIN)
     buried = limb_shares(labels, sdf < -BURIED_DEPTH)
-    d, i = _nearest(V, P, order)
+    d, i = KDTree(np.ascontiguousarray(V)).query(np.ascontiguousarray(P), k=1)
     if cameras and masks is not None and F is not None:
         far = d > SILHOUETTE_DISTANCE  # only these can be unexplained: only they are imaged
         far[far] = uncovered_points(V, F, P[far], cameras, masks)
