@@ -79,4 +79,3 @@ def test_uncovered_points_looked_up_per_point_is_the_image_definition(walker):
     got = uncovered_points(V, t.F, P, cams, masks)
     assert np.array_equal(got, _uncovered_by_images(V, t.F, P, cams, masks))
     assert 0 < got.sum() < len(P) // 2  # the real arm's points, not the rest
-
