@@ -7,6 +7,7 @@ from meshmocap.body.procedural import walk
 from meshmocap.body.template import load_template
 from meshmocap.errors import FormatError, InputError
 from meshmocap.geometry.rotations import so3_exp
+from meshmocap.io.results import read_state
 from meshmocap.models.gplvm import GPLVM
 from meshmocap.trackers.cage.options import manifold_digest
 from meshmocap.trackers.cage.quad_frames import gram_schmidt_forward
@@ -64,6 +65,35 @@ def test_cage_tracker_follows_a_walk_and_resumes(setup, tmp_path):
         CageTracker(gp, opts), t, cap, tmp_path / "tr", truth_options(show_progress=False)
     )
     assert np.allclose(again.joints, track.joints, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_frame_after_one_off_the_manifold_alternates_once_and_a_resumed_run_knows(
+    setup, tmp_path
+):
+    """After a frame off the manifold the next alternates pose and shape
+    ``off_alternations`` times; the flag is in the frame's state, so a run killed and resumed
+    there tracks the same frame to the bit (without it, the resumed frame alternates twice)."""
+    t, gp, cap = setup
+    opts = CageOptions(local_iters=1, alternations=2, off_manifold=1e-9)  # every frame off
+    run = truth_options(positions=range(3), show_progress=False)
+    first = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", run)
+    assert np.all(first.energies["off_manifold"][1:] > 0)
+    before = read_state(tmp_path / "tr", 2)
+    assert read_state(tmp_path / "tr", 1)["off_manifold"]
+    (tmp_path / "tr" / "frames" / "00002.npz").unlink()
+    again = track_sequence(CageTracker(gp, opts), t, cap, tmp_path / "tr", run)
+    after = read_state(tmp_path / "tr", 2)
+    assert np.array_equal(again.joints, first.joints)
+    assert all(np.array_equal(before[k], after[k]) for k in before)
+    state = read_state(tmp_path / "tr", 1)
+    n_iter = []  # Levenberg–Marquardt linearisations of frame 2
+    for s in (state, {k: v for k, v in state.items() if k != "off_manifold"}):
+        tr = CageTracker(gp, opts)
+        tr.setup(t)
+        tr.set_state(s)
+        n_iter.append(tr.step(cap[2]).n_iter)
+    assert n_iter[1] > n_iter[0]  # the flag forgotten: a second alternation
 
 
 def test_the_body_the_cage_is_built_on_is_said(setup):

@@ -90,6 +90,10 @@ class CageOptions:
         :class:`~meshmocap.trackers.cage.residuals.Articulation`).
     alternations, pose_iters, shape_iters : int
         Pose/shape alternations (§5.3) and Levenberg–Marquardt steps in each.
+    off_alternations : int
+        Pose/shape alternations on a frame that follows one off the manifold
+        (``off_manifold``): there the latent point only proposes the local adjustment's
+        start and the limbs grafted from it, and the adjustment is not pulled towards it.
     restarts : int
         Training poses, nearest to the previous frame's quads, tried as the latent
         starting point (0: only the previous latent point and the back-constraint's).
@@ -165,6 +169,7 @@ class CageOptions:
     articulation: float = 10.0
     off_manifold: float = 4.0
     alternations: int = 3
+    off_alternations: int = 1
     pose_iters: int = 1
     shape_iters: int = 2
     restarts: int = 3
@@ -198,6 +203,7 @@ class CageOptions:
         "articulation": Interval(Real, 0, None, closed="neither"),
         "off_manifold": Interval(Real, 0, None),
         "alternations": Interval(Integral, 1, None),
+        "off_alternations": Interval(Integral, 1, None),
         "pose_iters": Interval(Integral, 0, None),
         "shape_iters": Interval(Integral, 0, None),
         "restarts": Interval(Integral, 0, None),

@@ -17,7 +17,9 @@ alternated (§5.3), then adjusts the quads locally (Eq. 12). Joints follow their
 rigidly (``joints="quads"``) or the cage through Green coordinates taken on the first
 frame (§6.2). ``E_c`` is a silhouette coverage term where the frame has silhouettes, else
 the hull's. A frame whose manifold configuration fits far worse than the tracked quads
-is off the manifold (``off_manifold``): its adjustment is not pulled back and runs longer.
+is off the manifold (``off_manifold``): its adjustment is not pulled back and runs longer,
+and the next frame alternates pose and shape once (``off_alternations``): off the manifold
+the latent point only proposes the adjustment's start and the limbs grafted from it.
 
 Choices where the paper is silent or ambiguous (each stated where it is coded):
 
@@ -262,6 +264,7 @@ class CageTracker:
         self.local = y.copy()  # the quads after local adjustment (relative to the pelvis)
         self._velocity = (np.zeros_like(y), np.zeros(3), np.zeros(3))  # last frame's motion
         self._lam: dict = {}  # Levenberg–Marquardt damping per problem (_lm's key)
+        self._off = False  # the last frame was off the manifold (fewer alternations)
         return c, Q
 
     def _set_keep(self, keep: np.ndarray) -> None:
@@ -288,6 +291,7 @@ class CageTracker:
             if v[0] is not None
             else (np.zeros_like(self.local), np.zeros(3), np.zeros(3))
         )
+        self._off = bool(state.get("off_manifold", False))
 
     def _result(self, index: int, energies: dict[str, float], n_iter: int) -> FrameResult:
         cage = self._rig(self.local, self.pelvis_R, self.pelvis_c)[0]
@@ -311,6 +315,7 @@ class CageTracker:
             "velocity_w": self._velocity[1],
             "velocity_c": self._velocity[2],
             "lm_damping": np.array([self._lam.get(k, np.nan) for k in _LM_KEYS]),
+            "off_manifold": np.array(self._off),
         }
         V = self.surface.vertices(self.local, self.pelvis_R, self.pelvis_c)
         return FrameResult(
@@ -522,7 +527,7 @@ class CageTracker:
         previous = (orthonormalised(self.local), *pelvis)  # last frame's adjusted quads
         if o.space == "latent":
             self.x = self._restart(fd)
-            for _ in range(o.alternations):
+            for _ in range(o.off_alternations if self._off else o.alternations):
                 y = self.gp.predict(self.x[None])[0]
                 pelvis, _, _, n = self._lm(pelvis, o.pose_iters, *self._pose_problem(fd, y), key=0)
                 self.pelvis_R, self.pelvis_c = pelvis
@@ -561,6 +566,7 @@ class CageTracker:
                 e = fit((y, *state[1:]))[0]
                 if e < best:
                     state, best = (y, *state[1:]), e
+        self._off = off
         if off:
             n_local *= 2
         (self.local, self.pelvis_R, self.pelvis_c), _, cache, n = self._lm(
