@@ -86,8 +86,8 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, ::1]",
         ),
         "assign_kernel": (
-            "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
-            "int64[::1], int64[::1], float64, float64, float64",
+            "float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+            "int64[::1], int64[::1], int64[::1], float64, float64, float64",
         ),
         "point_moments": ("int64[::1], float64[:, ::1], float64[:, ::1], float64[::1], int64",),
         "vertex_moments": (

@@ -37,8 +37,9 @@ REACH_ROUNDING = 1e-9
 
 
 @njit(cache=True, nogil=True)
-def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_out):
-    """Pairs of the E-step: rows, patches, vertices and posterior weights.
+def assign_kernel(d, idx, Nc, Y, NY, cls, labels, bone_of_patch, normal_cos, s2, p_out):
+    """Pairs of the E-step: rows, patches, vertices, posterior weights, and each pair's
+    observed point ``Y[t]`` (m, 3) and its normal ``NY[t]`` (m, 3), gathered in the pass.
 
     For each point t (in order) and each patch (ascending) whose nearest compatible
     candidate among ``idx[t]`` (k,) (by increasing distance ``d[t]``) is candidate c: the
@@ -51,6 +52,8 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
     patch = np.empty(n * k, dtype=np.int64)
     vert = np.empty(n * k, dtype=np.int64)
     w = np.empty(n * k)
+    pts = np.empty((n * k, 3))
+    nrm = np.empty((n * k, 3))
     m = 0
     for t in range(n):
         start = m
@@ -84,7 +87,10 @@ def assign_kernel(d, idx, Nc, NY, cls, labels, bone_of_patch, normal_cos, s2, p_
         for u in range(start, m):
             rows[u] = t
             w[u] = w[u] / (total + p_out)
-    return rows[:m], patch[:m], vert[:m], w[:m]
+            for a in range(3):
+                pts[u, a] = Y[t, a]
+                nrm[u, a] = NY[t, a]
+    return rows[:m], patch[:m], vert[:m], w[:m], pts[:m], nrm[:m]
 
 
 @njit(cache=True, nogil=True)

@@ -30,12 +30,15 @@ from meshmocap.trackers.patch.kernels import nearest_among, stale_rows, vertex_m
 CHUNK = 8
 #: Bits per axis of the rest positions' Morton code that orders a patch's vertices.
 MORTON_BITS = 10
+#: Points per leaf of the vertices' k-d tree (pykdtree's default 16; the same neighbours,
+#: a little faster on ~5,000 vertices and 16 neighbours: ``docs/measurements.rst``).
+KD_LEAFSIZE = 32
 
 
 def k_nearest(V: np.ndarray, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest points of ``V`` (n, 3) to each point of ``Y`` (m, 3) by a k-d
     query, by increasing distance: distances (m, k) float64 and indices (m, k) int64."""
-    return k_nearest_on(KDTree(V), Y, k)
+    return k_nearest_on(KDTree(V, leafsize=KD_LEAFSIZE), Y, k)
 
 
 def k_nearest_on(tree: KDTree, Y: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

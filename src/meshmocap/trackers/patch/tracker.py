@@ -517,10 +517,11 @@ class PatchTracker:
         # per point, the nearest vertex per patch among those whose normals agree and, with
         # classes, on the point's body part (§III-B); posterior against an outlier class
         cls = np.zeros(0, np.int64) if ycls is None else np.asarray(ycls, dtype=np.int64)
-        i, patch, v, w = assign_kernel(
+        _, patch, v, w, y, ny = assign_kernel(
             np.ascontiguousarray(d, dtype=np.float64),
             idx,
             np.ascontiguousarray(Nc, dtype=np.float64),
+            np.ascontiguousarray(Y, dtype=np.float64),
             np.ascontiguousarray(NY, dtype=np.float64),
             cls,
             np.ascontiguousarray(m.labels, dtype=np.int64),
@@ -529,7 +530,7 @@ class PatchTracker:
             self.sigma**2,
             float(np.exp(-0.5 * o.outlier_sigmas**2)),
         )
-        return Correspondences(patch, v, w, Y[i], NY[i])
+        return Correspondences(patch, v, w, y, ny)
 
     def _assign_interior(self, Y, NY, ycls, Vc, Nc, d, idx) -> Correspondences:
         """:meth:`correspondences` with ``interior_scale``: each metre a point lies deeper than
