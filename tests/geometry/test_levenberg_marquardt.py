@@ -45,6 +45,17 @@ def test_an_unconstrained_unknown_stays_at_zero():
     assert floor == pytest.approx(np.full(5, 1e-9 * np.median(np.diag(H)[:4])), rel=1e-12)
 
 
+def test_the_floor_is_numpys_median_of_the_positive_curvatures_to_the_bit():
+    """The floor's median is taken by a sort (np.median's overhead was a fifth of a small
+    solve): the same number as np.median for odd and even counts, none positive gives 1."""
+    for n in (1, 2, 3, 6, 7, 126):
+        d = RNG.normal(size=n) * 10.0 ** RNG.uniform(-6, 6, size=n)
+        d[0] = abs(d[0])  # at least one positive
+        expected = 1e-3 * d + 1e-9 * float(np.median(d[d > 0]))
+        assert np.array_equal(damped_diagonal(d, 1e-3, 1e-9), expected)
+    assert np.array_equal(damped_diagonal(-np.ones(3), 0.0, 2.0), np.full(3, 2.0))
+
+
 def test_a_singular_system_is_retried_with_more_damping_then_a_fit_error():
     calls = []
 

@@ -105,8 +105,17 @@ def damped_diagonal(d: np.ndarray, lam: float, floor: float) -> np.ndarray:
     (n,) float64
     """
     d = np.asarray(d, dtype=np.float64)
-    pos = d[d > 0]
-    scale = float(np.median(pos)) if len(pos) else 1.0
+    # the median of the positive entries as np.median takes it (the middle one, or the
+    # mean of the two middle ones), without its ~20 µs of overhead a call: solves come
+    # hundreds of times a frame (NaN never passes d > 0)
+    pos = np.sort(d[d > 0])
+    m = len(pos) // 2
+    if not len(pos):
+        scale = 1.0
+    elif len(pos) % 2:
+        scale = float(pos[m])
+    else:
+        scale = float((pos[m - 1] + pos[m]) / 2)
     return lam * d + floor * scale
 
 
