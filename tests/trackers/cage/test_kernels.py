@@ -9,6 +9,7 @@ from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.trackers.cage.oqr import build_oqr, quads_from_pose
 from meshmocap.trackers.cage.oqr_skinning import QuadSkinning
+from meshmocap.trackers.cage.quad_frames import gram_schmidt, gram_schmidt_reference
 from meshmocap.trackers.cage.residuals import SilhouetteCoverage
 
 
@@ -96,3 +97,15 @@ def test_skinned_points_kernel_equals_apply_skinning_to_the_bit():
         y = configuration_vector(c[k], Q[k])
         A = s.transforms(y, Q[k, 0], c[k, 0])[0]
         np.testing.assert_array_equal(s.points(y, Q[k, 0], c[k, 0]), apply_skinning(s._S, A))
+
+
+def test_gram_schmidt_kernel_equals_the_array_code_to_the_bit():
+    """The quads' frames, compiled, are the array code's numbers: the tracker's results do
+    not move (axes of every scale, nearly parallel pairs, strided views as the tracker
+    passes them)."""
+    rng = np.random.default_rng(5)
+    Y = rng.normal(size=(200, 3, 3)) * 10.0 ** rng.uniform(-3, 3, size=(200, 1, 1))
+    Y[:20, 2] = Y[:20, 1] + 1e-7 * rng.normal(size=(20, 3))  # nearly parallel axes
+    R = gram_schmidt(Y[:, 1], Y[:, 2])
+    assert np.array_equal(R, gram_schmidt_reference(Y[:, 1], Y[:, 2]))
+    assert np.abs(np.swapaxes(R[20:], 1, 2) @ R[20:] - np.eye(3)).max() < 1e-12

@@ -14,6 +14,9 @@
 * :func:`skinned_directions`, behind
   :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.directions`: the points' motion
   along the latent shape's directions (Eq. 6), pair by pair;
+* :func:`gram_schmidt_frames`, behind
+  :func:`~meshmocap.trackers.cage.quad_frames.gram_schmidt`: the quads' frames from their
+  axes, the same operations in the same order (the same numbers), called ~70 times a frame;
 * :func:`skinned_points`, behind
   :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.points`: the sampled points'
   skinning, the sparse product summed in scipy's order (the same numbers).
@@ -40,6 +43,7 @@ from meshmocap._numba import njit
 from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, DIVISOR_FLOOR, NEAR_DEPTH
 
 __all__ = [
+    "gram_schmidt_frames",
     "local_normal_equations",
     "quad_skinning_transforms",
     "silhouette_residuals",
@@ -141,6 +145,29 @@ def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover -
             for a in range(3):
                 g[i, a] /= r[i]
     return r, g
+
+
+@njit(cache=True, nogil=True)
+def gram_schmidt_frames(a, b):  # pragma: no cover - compiled
+    """Frames ``R = [u v u×v]`` (Q, 3, 3) of the axes ``a, b`` (Q, 3), as the array code of
+    :func:`~meshmocap.trackers.cage.quad_frames.gram_schmidt` computes them: sums of
+    squares and products left to right, the cross product's two products subtracted."""
+    R = np.empty((a.shape[0], 3, 3))
+    for q in range(a.shape[0]):
+        a0, a1, a2 = a[q, 0], a[q, 1], a[q, 2]
+        n = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        u0, u1, u2 = a0 / n, a1 / n, a2 / n
+        b0, b1, b2 = b[q, 0], b[q, 1], b[q, 2]
+        d = u0 * b0 + u1 * b1 + u2 * b2
+        w0, w1, w2 = b0 - d * u0, b1 - d * u1, b2 - d * u2
+        n = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        v0, v1, v2 = w0 / n, w1 / n, w2 / n
+        R[q, 0, 0], R[q, 1, 0], R[q, 2, 0] = u0, u1, u2
+        R[q, 0, 1], R[q, 1, 1], R[q, 2, 1] = v0, v1, v2
+        R[q, 0, 2] = u1 * v2 - u2 * v1
+        R[q, 1, 2] = u2 * v0 - u0 * v2
+        R[q, 2, 2] = u0 * v1 - u1 * v0
+    return R
 
 
 @njit(cache=True, nogil=True)
