@@ -162,23 +162,51 @@ class System:
 
     Attributes
     ----------
-    grad : (n,) float64 and H : (n, n) float64
-        Gradient and Gauss–Newton matrix of the parameter rows over the problem's ``n``
-        parameters (the local adjustment: 6 per quad 1…20, then the pelvis's 6).
+    n : int
+        The problem's parameters (the local adjustment: 6 per quad 1…20, then the
+        pelvis's 6).
     r, g : lists of (m,) and (m, 3) float64
         Point rows, one block per point term (coefficients included): ``½ Σ r²`` is their
         energy, ``g`` the gradients with respect to the points.
+    grad : (n,) float64 and H : (n, n) float64
+        Gradient and Gauss–Newton matrix of the parameter rows (properties): the rows the
+        terms handed over (:meth:`add_rows`) summed, in their order, when first read. A
+        problem reads them only where it linearises; about half of its evaluations are
+        steps it rejects or its last, whose rows were never used.
     """
 
-    grad: np.ndarray
-    H: np.ndarray
+    n: int
     r: list = field(default_factory=list)
     g: list = field(default_factory=list)
+    _rows: list = field(default_factory=list, repr=False)
+    _sums: tuple | None = field(default=None, repr=False)
 
     @classmethod
     def empty(cls, n: int) -> System:
         """No rows, over ``n`` parameters."""
-        return cls(np.zeros(n), np.zeros((n, n)))
+        return cls(n)
+
+    def add_rows(self, rows: Callable[[np.ndarray, np.ndarray], None]) -> None:
+        """Hand over parameter rows: ``rows(grad, H)`` adds them in place, when
+        :attr:`grad` or :attr:`H` is first read."""
+        self._rows.append(rows)
+        self._sums = None
+
+    def _summed(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._sums is None:
+            grad, H = np.zeros(self.n), np.zeros((self.n, self.n))
+            for rows in self._rows:
+                rows(grad, H)
+            self._sums = grad, H
+        return self._sums
+
+    @property
+    def grad(self) -> np.ndarray:
+        return self._summed()[0]
+
+    @property
+    def H(self) -> np.ndarray:
+        return self._summed()[1]
 
     def add_points(self, r: np.ndarray, g: np.ndarray) -> None:
         """Add a block of point rows ``r`` (m,) and gradients ``g`` (m, 3)."""
@@ -327,9 +355,13 @@ class VarianceTerm(_Weighted):
             return 0.0
         var = max(it.var, 0.0) + it.frame.noise
         if it.dvar is not None:
-            c = self.coefficient
-            sys.grad += c * it.dvar / var
-            sys.H += c * np.outer(it.dvar, it.dvar) / var**2
+            c, dvar = self.coefficient, it.dvar
+
+            def rows(grad, H):
+                grad += c * dvar / var
+                H += c * np.outer(dvar, dvar) / var**2
+
+            sys.add_rows(rows)
         return float(np.log(var))
 
 
@@ -350,14 +382,18 @@ class AnchorTerm(_Weighted):
         w = self.coefficient
         y = it.y
         Y, E = y.reshape(-1, 3, 3), (y - it.anchor).reshape(-1, 3, 3)
-        nq = len(Y)
-        Hq = np.zeros((nq, 6, 6))
-        Hq[:, :3, :3] = np.eye(3)
-        Hq[:, 3:, 3:] = sum(skew(Y[:, i]).transpose(0, 2, 1) @ skew(Y[:, i]) for i in (1, 2))
-        gq = np.concatenate([E[:, 0], sum(np.cross(Y[:, i], E[:, i]) for i in (1, 2))], axis=1)
-        idx = np.arange(6 * nq).reshape(nq, 6)
-        sys.H[idx[:, :, None], idx[:, None, :]] += w * Hq
-        sys.grad[: 6 * nq] += w * gq.ravel()
+
+        def rows(grad, H):
+            nq = len(Y)
+            Hq = np.zeros((nq, 6, 6))
+            Hq[:, :3, :3] = np.eye(3)
+            Hq[:, 3:, 3:] = sum(skew(Y[:, i]).transpose(0, 2, 1) @ skew(Y[:, i]) for i in (1, 2))
+            gq = np.concatenate([E[:, 0], sum(np.cross(Y[:, i], E[:, i]) for i in (1, 2))], axis=1)
+            idx = np.arange(6 * nq).reshape(nq, 6)
+            H[idx[:, :, None], idx[:, None, :]] += w * Hq
+            grad[: 6 * nq] += w * gq.ravel()
+
+        sys.add_rows(rows)
         return 0.5 * float(np.sum(E * E))
 
 
@@ -375,8 +411,14 @@ class ArticulationTerm(_Weighted):
     def add(self, sys: System, it: Iterate) -> float:
         if it.quads is None:
             return 0.0
-        a, Ja = it.frame.articulation.residuals(*it.quads, jacobian=True)
-        k = Ja.shape[1]
-        sys.H[:k, :k] += self.coefficient * Ja.T @ Ja
-        sys.grad[:k] += self.coefficient * Ja.T @ a
+        art, quads, w = it.frame.articulation, it.quads, self.coefficient
+
+        def rows(grad, H):
+            a, Ja = art.residuals(*quads, jacobian=True)
+            k = Ja.shape[1]
+            H[:k, :k] += w * Ja.T @ Ja
+            grad[:k] += w * Ja.T @ a
+
+        sys.add_rows(rows)
+        a = art.residuals(*quads)  # the residuals residuals(jacobian=True) returns
         return 0.5 * float(a @ a)
