@@ -107,13 +107,14 @@ class LatentProblem:
     and the latent points X (N, q) for ``None``; arrays are flattened in C order.
     """
 
-    def __init__(self, Ys: np.ndarray, q: int, bc: str | None, *, Kbc=None, n_hidden=0):
+    def __init__(self, Ys: np.ndarray, q: int, bc: str | None, *, Kbc=None, n_hidden=0, svd=None):
         self.Y, self.q, self.bc, self.Kbc, self.H = Ys, q, bc, Kbc, n_hidden
         self.N, self.D = Ys.shape
         # Eq. (2) reads Y only through Y Yᵀ: a factor F with F Fᵀ = Y Yᵀ and no more columns
         # than Y's rank (its singular vectors times their values, the null directions left
-        # out) gives the same likelihood and gradient with fewer columns to multiply
-        U, sv, _ = np.linalg.svd(Ys, full_matrices=False)
+        # out) gives the same likelihood and gradient with fewer columns to multiply; ``svd``:
+        # ``np.linalg.svd(Ys, full_matrices=False)`` where the caller has it already
+        U, sv, _ = np.linalg.svd(Ys, full_matrices=False) if svd is None else svd
         rank = int(np.sum(sv > _RANK_CLIP * sv[0])) if sv.size and sv[0] > 0 else 0
         self.F = np.ascontiguousarray(U[:, :rank] * sv[:rank]) if rank < self.D else Ys
         N, D, H = self.N, self.D, n_hidden
@@ -398,17 +399,18 @@ class GPLVM:
         if not scale > 0:
             raise InputError("GPLVM.fit: Y has no variance (all rows identical)")
         Ys = Yc / scale
-        # PCA initialisation, sign fixed so the largest loading of each axis is positive
-        Vt = np.linalg.svd(Ys, full_matrices=False)[2]
-        Vt = Vt[:q] * np.sign(Vt[:q][np.arange(q), np.argmax(np.abs(Vt[:q]), 1)])[:, None]
-        X0 = Ys @ Vt.T
-        X0 /= max(float(X0[:, 0].std()), NORM_FLOOR)
+        svd = np.linalg.svd(Ys, full_matrices=False)  # once: the PCA start and LatentProblem
         if self.init is not None:
             X0 = _check_rows("GPLVM.fit", "init", self.init, q)
             if len(X0) != N:
                 raise InputError(
                     f"GPLVM.fit: init must have shape ({N}, {q}) for {N} poses, found {X0.shape}"
                 )
+        else:  # PCA initialisation, sign fixed so the largest loading of each axis is positive
+            Vt = svd[2][:q]
+            Vt = Vt * np.sign(Vt[np.arange(q), np.argmax(np.abs(Vt), 1)])[:, None]
+            X0 = Ys @ Vt.T
+            X0 /= max(float(X0[:, 0].std()), NORM_FLOOR)
 
         Kbc, bc_gamma, w0 = None, float("nan"), []
         if bc == "rbf":
@@ -433,7 +435,7 @@ class GPLVM:
             w0 = [W1, b1, sol[:H], sol[H]]
         else:
             w0 = [X0]
-        prob = LatentProblem(Ys, q, bc, Kbc=Kbc, n_hidden=int(self.n_hidden))
+        prob = LatentProblem(Ys, q, bc, Kbc=Kbc, n_hidden=int(self.n_hidden), svd=svd)
         logs = np.log([self.alpha, self.gamma, self.beta])
         phi0 = prob.from_model(np.concatenate([logs, *[w.ravel() for w in w0]]))
         bounds = _HYPER_BOUNDS + [(None, None)] * (phi0.size - 3)
