@@ -23,7 +23,11 @@ every 5th frame); the output surface refined towards the observations along its 
 (``on``), as rigidly as possible with its vertices anchored frame to frame (``arap``: the
 skeleton is then held with the frame before's refined surface), and as the skeleton's skin
 leaves it (``off``): one tracking per method and refinement, its seconds per frame
-(median, frame 0 left out).
+(median, frame 0 left out). ``--refit N``: then each method tracked again (the first
+refinement of ``--refines``) with ``--template``, the tracked template whose skinning
+weights are fitted to that first track's own refined surfaces of its first N frames in
+their stored poses (a skinning decomposition with the skeleton given, no true surface:
+:func:`~meshmocap.body.skinning.fit_weights`).
 
 Part 3 (``--clean4d``), a synthetic clean 4D capture: the synthetic walk's true surfaces
 (the performer's own connectivity) as a folder of PLY meshes, tracked like the crane
@@ -38,10 +42,10 @@ Part 4 (``--peer K``), the peer: trimesh's non-rigid ICP (``nricp_amberg``, Ambe
 frame starting from the last one's result, the per-vertex error against the files and
 the CPU seconds per frame.
 
-Run: ``python benchmarks/bench_real4d.py [--frames 24] [--crane] [--clean4d] [--clothed] [--peer 3]
-[--work DIR]``. Captures and tracks are cached in ``--work`` (runs resume); the tables are
-printed. Timings are the tracker's seconds per frame (frame 0 left out) and depend on the
-machine's load (printed).
+Run: ``python benchmarks/bench_real4d.py [--frames 24] [--crane] [--clean4d] [--clothed]
+[--peer 3] [--refit 60] [--work DIR]``. Captures and tracks are cached in ``--work`` (runs
+resume); the tables are printed. Timings are the tracker's seconds per frame (frame 0 left
+out) and depend on the machine's load (printed).
 """
 
 from __future__ import annotations
@@ -159,43 +163,77 @@ def per_vertex_rows(source: Path, label: str, args, work: Path, extra: list[str]
     ``--refine`` of ``--refines``, and scored per vertex against the files (module
     docstring, part 2)."""
     rows = []
-    for method in args.crane_methods:
-        for refine in args.refines:
-            out = work / f"{label}_{method}_refine-{refine}"
-            t0 = time.perf_counter()
-            argv = ["track", str(source), *extra, "--method", method, "--refine", refine]
-            run([*argv, "--out", str(out)])
-            wall = time.perf_counter() - t0
-            t = read_track(out)
-            step = float(np.median(t.seconds[1:])) if len(t.seconds) > 1 else np.nan
-            ev = evaluate(t, open_tracked_capture(t.meta), silhouettes=False, surface_frames=0)
-            c = ev.correspondence
-            if c is None or not len(c.per_frame):
-                rows.append([method, refine, "not scored (no file connectivity)"] + [""] * 11)
-                continue
-            per = c.per_frame
-            fifth = max(1, len(per) // 5)
-            first, last = float(per[:fifth].mean()), float(per[-fifth:].mean())
-            normal, tangential = surface_split(t)
-            rows.append(
-                [
-                    method,
-                    refine,
-                    ev.cage_body or "-",
-                    len(per),
-                    c.overall.mean,
-                    first,
-                    last,
-                    last / first if first > 0 else float("nan"),
-                    float(per.max()),
-                    int(c.frames[int(np.argmax(per))]),
-                    normal,
-                    tangential,
-                    step,
-                    wall,
-                ]
-            )
+    runs = [(m, r, None) for m in args.crane_methods for r in args.refines]
+    if args.refit:  # then each method again with the weights fitted on its first track
+        runs += [(m, args.refines[0], args.refit) for m in args.crane_methods]
+    for method, refine, refit in runs:
+        out = work / f"{label}_{method}_refine-{refine}"
+        argv = ["track", str(source), *extra, "--method", method, "--refine", refine]
+        if refit:
+            body = refitted(out, refit, work / f"{label}_{method}_refit{refit}.npz")
+            argv += ["--template", str(body)]
+            out = out.with_name(f"{out.name}_refit{refit}")
+            refine = f"{refine}, refit {refit}"
+        t0 = time.perf_counter()
+        run([*argv, "--out", str(out)])
+        wall = time.perf_counter() - t0
+        t = read_track(out)
+        step = float(np.median(t.seconds[1:])) if len(t.seconds) > 1 else np.nan
+        ev = evaluate(t, open_tracked_capture(t.meta), silhouettes=False, surface_frames=0)
+        c = ev.correspondence
+        if c is None or not len(c.per_frame):
+            rows.append([method, refine, "not scored (no file connectivity)"] + [""] * 11)
+            continue
+        per = c.per_frame
+        fifth = max(1, len(per) // 5)
+        first, last = float(per[:fifth].mean()), float(per[-fifth:].mean())
+        normal, tangential = surface_split(t)
+        rows.append(
+            [
+                method,
+                refine,
+                ev.cage_body or "-",
+                len(per),
+                c.overall.mean,
+                first,
+                last,
+                last / first if first > 0 else float("nan"),
+                float(per.max()),
+                int(c.frames[int(np.argmax(per))]),
+                normal,
+                tangential,
+                step,
+                wall,
+            ]
+        )
     return rows
+
+
+def refitted(track_dir: Path, frames: int, path: Path) -> Path:
+    """The template of the track ``track_dir`` with its skinning weights fitted to the
+    track's own refined surfaces of its first ``frames`` frames, in the poses stored with
+    them (:func:`~meshmocap.body.skinning.fit_weights` over each vertex's
+    :func:`~meshmocap.body.skinning.weight_candidates`; no true surface), saved to
+    ``path``: a second tracking with it (``--template``) is the skinning decomposition's
+    measure."""
+    from dataclasses import replace
+
+    from meshmocap.body.skeleton import forward_kinematics
+    from meshmocap.body.skinning import fit_weights, skinning_transforms, weight_candidates
+    from meshmocap.body.template import save_template
+    from meshmocap.io.results import read_state
+
+    t = read_track(track_dir)
+    template = tracked_template(track_dir, t.meta)
+    sk = template.skeleton
+    A = []
+    for i in t.frames[:frames]:
+        st = read_state(track_dir, int(i))
+        G, P = forward_kinematics(sk, st["pose_R"], st["pose_root"])
+        A.append(skinning_transforms(G, P, sk.rest_positions))
+    C = weight_candidates(template.weights, template.F, sk.parents)
+    W = fit_weights(template.V, np.stack(A), t.vertices[:frames], template.weights, C)
+    return save_template(path, replace(template, weights=W))
 
 
 def surface_split(t, every: int = 5) -> tuple[float, float]:
@@ -322,6 +360,12 @@ def cli() -> None:
     )
     ap.add_argument("--clean4d", action="store_true", help="the walk's true meshes as files")
     ap.add_argument("--clothed", action="store_true", help="the same, performed in a skirt")
+    ap.add_argument(
+        "--refit",
+        type=int,
+        default=0,
+        help="then track again with weights fitted on the first track's first N frames",
+    )
     ap.add_argument("--peer", type=int, default=0, help="nricp_amberg on K crane frames")
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--work", default="/tmp/meshmocap-real4d")

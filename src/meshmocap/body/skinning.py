@@ -9,6 +9,14 @@ References
 ----------
 - N. Magnenat-Thalmann, R. Laperrière, D. Thalmann, *Joint-dependent local
   deformations for hand animation and object grasping*, Graphics Interface, 26–33, 1988.
+- B. H. Le, Z. Deng, *Smooth skinning decomposition with rigid bones*, ACM Transactions
+  on Graphics 31(6):199, 2012. https://doi.org/10.1145/2366145.2366218 (the weights'
+  update with the bones given, as :func:`fit_weights` does).
+- M. Held, P. Wolfe, H. P. Crowder, *Validation of subgradient optimization*,
+  Mathematical Programming 6:62–88, 1974. https://doi.org/10.1007/BF01580223
+- A. Beck, M. Teboulle, *A fast iterative shrinkage-thresholding algorithm for linear
+  inverse problems*, SIAM Journal on Imaging Sciences 2(1):183–202, 2009.
+  https://doi.org/10.1137/080716542
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshmocap._tolerances import UNDERFLOW_FLOOR
+from meshmocap.errors import InputError
 from meshmocap.geometry.mesh import edges_unique
 
 
@@ -127,3 +136,135 @@ def smooth_weights(
     out[rows, cut] = X[rows, cut]
     out /= np.maximum(out.sum(axis=1, keepdims=True), UNDERFLOW_FLOOR)
     return sp.csr_matrix(out)
+
+
+def weight_candidates(
+    W: sp.spmatrix, F: np.ndarray, parents: np.ndarray, *, spread: int = 40, count: int = 8
+) -> np.ndarray:
+    """The joints each vertex's weights may be fitted over (:func:`fit_weights`): the
+    ``count`` largest of its weights ``W`` (n, J) diffused ``spread`` times over the mesh's
+    edges (:func:`smooth_weights`; triangles ``F`` (m, 3)), and the parents of those
+    (``parents`` (J,) int, −1 for the root).
+
+    Returns (n, K) int64 joint indices, each row's distinct ones first, −1 padded."""
+    S = smooth_weights(W, F, iterations=spread, max_weights=count)
+    has = np.asarray(S.todense()) > 0
+    parents = np.asarray(parents, dtype=np.int64)
+    rows, cols = np.nonzero(has)
+    up = parents[cols]
+    ok = up >= 0
+    has[rows[ok], up[ok]] = True
+    K = int(has.sum(axis=1).max())
+    order = np.argsort(~has, axis=1, kind="stable")[:, :K]  # the candidates first
+    out = np.where(np.take_along_axis(has, order, axis=1), order, -1)
+    return out.astype(np.int64)
+
+
+def simplex_projection(X: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Each row of ``X`` (n, K) float64 projected onto the probability simplex of its
+    ``valid`` (n, K) bool entries (the others 0; each row needs one): the nearest
+    non-negative row summing to 1, ``max(x − θ, 0)`` with one ``θ`` a row, by sorting
+    (Held, Wolfe and Crowder 1974). Returns (n, K) float64."""
+    U = np.where(valid, X, -np.inf)
+    U = -np.sort(-U, axis=1)
+    U = np.where(np.isfinite(U), U, 0.0)
+    css = np.cumsum(U, axis=1)
+    j = np.arange(1, X.shape[1] + 1)
+    m = valid.sum(axis=1)
+    cond = (U - (css - 1.0) / j > 0) & (j <= m[:, None])
+    rho = np.maximum(cond.shape[1] - np.argmax(cond[:, ::-1], axis=1), 1)
+    theta = (np.take_along_axis(css, (rho - 1)[:, None], axis=1)[:, 0] - 1.0) / rho
+    return np.where(valid, np.maximum(X - theta[:, None], 0.0), 0.0)
+
+
+def fit_weights(
+    V0: np.ndarray,
+    A: np.ndarray,
+    X: np.ndarray,
+    W: sp.spmatrix,
+    candidates: np.ndarray,
+    *,
+    prior: float = 1e-5,
+    max_weights: int = 4,
+    iterations: int = 300,
+) -> sp.csr_matrix:
+    """Skinning weights fitted to surfaces in known poses (a skinning decomposition with
+    the skeleton given): for each vertex ``i`` the weights ``w`` (non-negative, summing to
+    1, over its ``candidates`` joints) minimising::
+
+        Σ_t |Σ_k w_k A_t,k [v_i; 1] − x_t,i|²  +  prior · T · |w − w⁰|²
+
+    (``w⁰`` its weights in ``W``, the pull where the frames do not tell the joints apart),
+    by accelerated projected gradient (Beck and Teboulle 2009) over all vertices at once;
+    then its ``max_weights`` largest weights, renormalised.
+
+    Parameters
+    ----------
+    V0 : (n, 3) float64
+        Rest vertices, metres.
+    A : (T, J, 3, 4) float64
+        The frames' skinning transforms (:func:`skinning_transforms`).
+    X : (T, n, 3) float64
+        The surfaces the skinned vertices should reach, metres (the same vertices).
+    W : (n, J) sparse
+        The weights to start from and pull towards, rows summing to 1.
+    candidates : (n, K) int64
+        Each vertex's joints, −1 padded (:func:`weight_candidates`).
+    prior : float
+        m² per frame: the squared distance a unit change of one weight costs as much as.
+    max_weights, iterations : int
+        Weights kept per vertex; gradient steps.
+
+    Returns
+    -------
+    (n, J) scipy.sparse CSR float64, rows summing to 1.
+    """
+    V0 = np.asarray(V0, dtype=np.float64)
+    A = np.asarray(A, dtype=np.float64)
+    X = np.asarray(X, dtype=np.float64)
+    C = np.asarray(candidates, dtype=np.int64)
+    n, K = C.shape
+    T, J = A.shape[:2]
+    if X.shape != (T, n, 3) or V0.shape != (n, 3) or A.shape[2:] != (3, 4):
+        raise InputError(
+            f"fit_weights: V0 (n, 3), A (T, J, 3, 4) and X (T, n, 3) must agree, found "
+            f"{V0.shape}, {A.shape}, {X.shape}"
+        )
+    if not (np.isfinite(prior) and prior > 0):
+        raise InputError(f"fit_weights: prior must be > 0, found {prior!r}")
+    valid = C >= 0
+    Cv = np.where(valid, C, 0)
+    Vh = np.concatenate([V0, np.ones((n, 1))], axis=1)
+    M = np.zeros((n, K, K))
+    b = np.zeros((n, K))
+    rows = np.arange(n)[:, None]
+    for t in range(T):  # per frame: (n, K, 3) each candidate joint's image of each vertex
+        Y = np.einsum("jab,nb->nja", A[t], Vh)[rows, Cv] * valid[..., None]
+        M += np.einsum("nka,nla->nkl", Y, Y)
+        b += np.einsum("nka,na->nk", Y, X[t])
+    W0 = np.asarray(sp.csr_matrix(W)[rows, Cv].todense()) * valid
+    lam = float(prior) * T
+    M += lam * np.eye(K)
+    b += lam * W0
+    # 1 / the Lipschitz constant of the gradient along the simplex's plane (Σ w = 1): the
+    # candidates' images lie close together, so M's largest eigenvalue (along 1) is far
+    # above those within the plane, which alone bound the steps there
+    v = valid.astype(np.float64)
+    P = v[:, :, None] * np.eye(K) - v[:, :, None] * v[:, None, :] / v.sum(axis=1)[:, None, None]
+    step = 1.0 / np.maximum(np.linalg.eigvalsh(P @ M @ P)[:, -1], lam)
+    w = simplex_projection(W0, valid)
+    z, s = w.copy(), 1.0
+    for _ in range(int(iterations)):
+        g = np.einsum("nkl,nl->nk", M, z) - b
+        w_next = simplex_projection(z - step[:, None] * g, valid)
+        s_next = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * s * s))
+        z = w_next + ((s - 1.0) / s_next) * (w_next - w)
+        w, s = w_next, s_next
+    out = np.zeros((n, J))
+    np.add.at(out, (np.broadcast_to(rows, C.shape)[valid], C[valid]), w[valid])
+    keep = min(int(max_weights), J)
+    cut = np.argpartition(-out, keep - 1, axis=1)[:, :keep]
+    kept = np.zeros_like(out)
+    kept[rows, cut] = out[rows, cut]
+    kept /= np.maximum(kept.sum(axis=1, keepdims=True), UNDERFLOW_FLOOR)
+    return sp.csr_matrix(kept)
