@@ -28,7 +28,9 @@ from meshmocap.trackers.two_way import (
     ambiguous_limbs,
     choose,
     choose_limbs,
+    clearly_passes,
     evidence_cost,
+    fit_margin,
     flagged_runs,
     limb_costs,
     max_keyframes,
@@ -45,7 +47,7 @@ def test_flagged_runs_merge_close_runs_and_drop_short_ones():
     assert flagged_runs(f) == [(2, 7), (20, 23)]
     assert flagged_runs(f, merge_gap=0, min_run=1) == [(2, 4), (6, 7), (12, 12), (20, 23), (29, 29)]
     assert flagged_runs(np.zeros(5, dtype=bool)) == []
-    assert max_keyframes(10) == 2 and max_keyframes(120) == 4
+    assert max_keyframes(10) == 3 and max_keyframes(120) == 5
 
 
 def test_the_evidence_cost_counts_lost_limbs_first_then_the_fit():
@@ -58,6 +60,24 @@ def test_the_evidence_cost_counts_lost_limbs_first_then_the_fit():
     assert c[0] == 0.0
     assert c[1] == pytest.approx(two_way.FIT_WEIGHT * 0.5)
     assert c[2] == pytest.approx(1.0 + two_way.FIT_WEIGHT)
+
+
+def test_a_frame_is_explained_where_its_fit_measures_pass_clearly_on_the_run_s_limbs():
+    rule = shipped_rule()
+    th = np.asarray(rule.thresholds)
+    ev = np.zeros((len(LIMB_PARTS), len(EVIDENCE)))
+    u, b = EVIDENCE.index("unexplained"), EVIDENCE.index("buried")
+    arm, leg = list(LIMB_PARTS).index("left_arm"), list(LIMB_PARTS).index("right_leg")
+    ev[arm, u] = 0.8 * th[u]  # passes the rule, barely
+    ev[leg, u] = 0.2 * th[u]
+    ev[leg, b] = 10.0  # buried never flags under the shipped rule: it counts 0
+    assert np.isinf(th[b])
+    m = fit_margin(ev, rule)
+    assert m[arm] == pytest.approx(0.8) and m[leg] == pytest.approx(0.2)
+    assert not rule.limb_lost(ev).any()
+    assert not clearly_passes(ev, ("left_arm", "right_leg"), rule)
+    assert clearly_passes(ev, ("right_leg",), rule) and clearly_passes(ev, (), rule)
+    assert two_way.CLEAR == 0.5
 
 
 def test_a_limb_is_ambiguous_where_a_track_the_evidence_passes_places_it_elsewhere():

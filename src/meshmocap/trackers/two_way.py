@@ -9,8 +9,9 @@ backward and forward, and per frame the hypothesis the evidence prefers is kept.
    limbs lost anywhere in the run, the torso where lost at the keyframe: the forward
    track may still be off where it is no longer flagged) at the first frame after the
    run, then at the middle of the longest stretch of the run that no kept hypothesis
-   explains yet (passes the lost rule within :data:`EXPLAINS` frames of its keyframe),
-   until every stretch is explained or :func:`max_keyframes` are kept. A
+   explains yet (passes the lost rule within :data:`EXPLAINS` frames of its keyframe,
+   clearly on the run's lost limbs: :data:`CLEAR`), until every stretch is explained or
+   :func:`max_keyframes` are kept. A
    keyframe is kept only where the tracker seated at the found pose passes the lost rule
    on that frame (:meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`, the same
    rule as the forward pass's flags).
@@ -99,6 +100,7 @@ from meshmocap.trackers.base import Tracker
 from meshmocap.trackers.frame_step import read_track_frame, recovered, track_frame
 
 __all__ = [
+    "CLEAR",
     "DRIFT",
     "EXPLAINS",
     "FIT_WEIGHT",
@@ -118,7 +120,9 @@ __all__ = [
     "ambiguous_limbs",
     "choose",
     "choose_limbs",
+    "clearly_passes",
     "evidence_cost",
+    "fit_margin",
     "flagged_runs",
     "keyframe_search",
     "limb_costs",
@@ -161,6 +165,12 @@ GRAFT = 0.05
 #: frame of its run: frames of a long run farther from every kept keyframe get another
 #: keyframe (a hypothesis far from its keyframe may pass the rule with a limb wrong).
 EXPLAINS = 12
+#: A hypothesis explains a frame of its run only where, on the limbs lost in the run, its
+#: fit measures (outside, buried, unexplained) stay under this share of their thresholds
+#: (the recovery's own "fits well", :meth:`~meshmocap.estimate.recovery.reinit.Recovery.assess`):
+#: a hypothesis drifting off a fast limb passes the rule barely before it fails it, and
+#: such frames get a keyframe of their own.
+CLEAR = 0.5
 #: Frames of a run per kept keyframe (:func:`max_keyframes`).
 FRAMES_PER_KEY = 50
 #: The folder of the pass's intermediate results, inside the track folder.
@@ -265,9 +275,33 @@ def flagged_runs(
 
 
 def max_keyframes(length: int) -> int:
-    """Keyframes kept at most for a run of ``length`` frames: one after it, and one per
-    :data:`FRAMES_PER_KEY` frames of it."""
-    return 1 + max(1, -(-int(length) // FRAMES_PER_KEY))
+    """Keyframes kept at most for a run of ``length`` frames: one after it, one per
+    :data:`FRAMES_PER_KEY` frames of it (at least one), and one more for a stretch that
+    the others' hypotheses explain only barely (:data:`CLEAR`)."""
+    return 2 + max(1, -(-int(length) // FRAMES_PER_KEY))
+
+
+def fit_margin(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
+    """(..., L) float64: per limb of ``evidence`` (..., L, E) its largest fit measure
+    (outside, buried, unexplained) in units of ``rule``'s threshold (0 for a measure that
+    never flags): 1 and above, the rule finds the limb lost on it."""
+    rule = rule or shipped_rule()
+    th = np.asarray(rule.thresholds, dtype=np.float64)
+    e = np.asarray(evidence, dtype=np.float64)
+    fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
+    finite = np.isfinite(th[fit])
+    return np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0).max(axis=-1)
+
+
+def clearly_passes(
+    evidence: np.ndarray, limbs: Sequence[str], rule: LostRule | None = None
+) -> bool:
+    """Whether the frame of ``evidence`` (L, E) fits the observations clearly on ``limbs``
+    (:data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS` keys): each one's fit
+    measures under :data:`CLEAR` of ``rule``'s thresholds (:func:`fit_margin`); True
+    without limbs."""
+    k = [list(LIMB_PARTS).index(n) for n in limbs]
+    return bool(np.all(fit_margin(evidence, rule)[k] < CLEAR))
 
 
 def limb_costs(
@@ -279,13 +313,9 @@ def limb_costs(
     the rule names it (:meth:`~meshmocap.estimate.recovery.evidence.LostRule.named`: the
     points another limb leaves unexplained charged to that limb)."""
     rule = rule or shipped_rule()
-    th = np.asarray(rule.thresholds, dtype=np.float64)
     e = np.asarray(evidence, dtype=np.float64)
-    fit = [EVIDENCE.index(m) for m in ("outside", "buried", "unexplained")]
-    finite = np.isfinite(th[fit])
-    ratio = np.where(finite, e[..., fit] / np.where(finite, th[fit], 1.0), 0.0)
     lost = rule.named(e) if named else rule.limb_lost(e)
-    return lost + FIT_WEIGHT * np.minimum(ratio.max(axis=-1), 1.0)
+    return lost + FIT_WEIGHT * np.minimum(fit_margin(e, rule), 1.0)
 
 
 def evidence_cost(evidence: np.ndarray, rule: LostRule | None = None) -> np.ndarray:
@@ -623,7 +653,7 @@ class _Run:
                 for i, r in h.results.items():
                     k = self.pos[i] - a
                     near = abs(self.pos[i] - self.pos[h.keyframe]) <= EXPLAINS
-                    if 0 <= k < len(explained) and "lost" not in r.flags and near:
+                    if 0 <= k < len(explained) and near and self.clear(r, run_lost):
                         explained[k] = True
             if explained.all():
                 break
@@ -634,6 +664,16 @@ class _Run:
         have = [self.pos[i] for h in hyps for i in h.results]
         lo, hi = max(min(have) - 1, self.floor), min(max(have) + 1, self.ceiling)
         return keys, self.write_choice(fwd, hyps, lo, hi, first=a)
+
+    def clear(self, r: FrameResult, limbs: tuple[str, ...]) -> bool:
+        """Whether a hypothesis's frame ``r`` passes the lost rule, clearly on ``limbs``
+        (:func:`clearly_passes`; a frame without recorded evidence: its flag)."""
+        if "lost" in r.flags:
+            return False
+        ev = r.state.get("evidence")
+        if ev is None or np.shape(ev) != (len(LIMB_PARTS), len(EVIDENCE)):
+            return True
+        return clearly_passes(ev, limbs, self.rule)
 
     def keyframe(
         self, fwd, p: int, a: int, run_lost: tuple[str, ...] = ()
@@ -995,12 +1035,12 @@ def _meets(r: FrameResult, f: FrameResult) -> bool:
 
 def _middle_of_longest(explained: np.ndarray, tried: set[int], a: int) -> int | None:
     """The position (``a`` + offset) of the middle of the longest stretch of False in
-    ``explained`` at least :data:`MIN_RUN` long and not within :data:`MIN_RUN` of a tried
-    position; None when there is none."""
+    ``explained`` at least :data:`MIN_RUN` long and at least :data:`MIN_RUN` from every
+    tried position; None when there is none."""
     runs = flagged_runs(~explained, merge_gap=0, min_run=MIN_RUN)
     for s, e in sorted(runs, key=lambda r: r[0] - r[1]):
         p = a + (s + e) // 2
-        if all(abs(p - q) > MIN_RUN for q in tried):
+        if all(abs(p - q) >= MIN_RUN for q in tried):
             return p
     return None
 
