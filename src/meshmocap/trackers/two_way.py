@@ -647,8 +647,12 @@ class _Run:
             if seated is None:
                 continue
             past = (fwd, a - MARGIN, b + MARGIN)
-            hyps.append(self.hypothesis(seated, p, range(p - 1, lo - 1, -1), "backward", past))
-            hyps.append(self.hypothesis(seated, p, range(p + 1, hi + 1), "forward", past))
+            # the keyframe for a stretch barely explained (the last one kept) tracks only as
+            # far as it can explain (:data:`EXPLAINS`)
+            last = sum(bool(k["kept"]) for k in keys) == most
+            first, stop = (max(lo, p - EXPLAINS), min(hi, p + EXPLAINS)) if last else (lo, hi)
+            hyps.append(self.hypothesis(seated, p, range(p - 1, first - 1, -1), "backward", past))
+            hyps.append(self.hypothesis(seated, p, range(p + 1, stop + 1), "forward", past))
             for h in hyps:
                 for i, r in h.results.items():
                     k = self.pos[i] - a
