@@ -7,6 +7,7 @@ import pytest
 from meshmocap.body.template import load_template
 from meshmocap.geometry.camera import Camera
 from meshmocap.geometry.rotations import so3_exp
+from meshmocap.trackers.cage.kernels import contour_pixels
 from meshmocap.trackers.cage.oqr import build_oqr, quads_from_pose
 from meshmocap.trackers.cage.oqr_skinning import QuadSkinning
 from meshmocap.trackers.cage.quad_frames import gram_schmidt, gram_schmidt_reference
@@ -109,3 +110,19 @@ def test_gram_schmidt_kernel_equals_the_array_code_to_the_bit():
     R = gram_schmidt(Y[:, 1], Y[:, 2])
     assert np.array_equal(R, gram_schmidt_reference(Y[:, 1], Y[:, 2]))
     assert np.abs(np.swapaxes(R[20:], 1, 2) @ R[20:] - np.eye(3)).max() < 1e-12
+
+
+def test_contour_kernel_finds_the_pixels_erosion_clears_in_their_order():
+    """A mask's contour pixels, compiled, are ``np.nonzero(m & ~binary_erosion(m))``: the
+    same pixels in the same order (the silhouette samples drawn from them do not move);
+    masks touching the image's edges, empty, full, a single pixel, thin lines."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(11)
+    masks = [ndimage.binary_opening(rng.random((40, 60)) < p) for p in (0.3, 0.6, 0.9)]
+    masks += [np.zeros((5, 7), bool), np.ones((5, 7), bool), np.eye(6, dtype=bool)]
+    masks += [np.zeros((1, 1), bool) | True, rng.random((1, 9)) < 0.5, rng.random((9, 1)) < 0.5]
+    for m in masks:
+        rows, cols = np.nonzero(m & ~ndimage.binary_erosion(m))
+        found = contour_pixels(np.ascontiguousarray(m), 3, 5)  # m at row 3, column 5
+        assert np.array_equal(found[0], rows + 3) and np.array_equal(found[1], cols + 5)

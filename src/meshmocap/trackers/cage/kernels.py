@@ -14,6 +14,10 @@
 * :func:`skinned_directions`, behind
   :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.directions`: the points' motion
   along the latent shape's directions (Eq. 6), pair by pair;
+* :func:`contour_pixels`, behind
+  :class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`: a mask's contour pixels
+  (set, with a 4-neighbour unset or beyond the image), as ``np.nonzero(m &
+  ~ndimage.binary_erosion(m))`` finds them, in its order, in one pass;
 * :func:`gram_schmidt_frames`, behind
   :func:`~meshmocap.trackers.cage.quad_frames.gram_schmidt`: the quads' frames from their
   axes, the same operations in the same order (the same numbers), called ~70 times a frame;
@@ -43,6 +47,7 @@ from meshmocap._numba import njit
 from meshmocap._tolerances import ANTIPARALLEL, DEGENERATE_AXIS, DIVISOR_FLOOR, NEAR_DEPTH
 
 __all__ = [
+    "contour_pixels",
     "gram_schmidt_frames",
     "local_normal_equations",
     "quad_skinning_transforms",
@@ -145,6 +150,33 @@ def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover -
             for a in range(3):
                 g[i, a] /= r[i]
     return r, g
+
+
+@njit(cache=True, nogil=True)
+def contour_pixels(m, r0, c0):  # pragma: no cover - compiled
+    """Rows and columns (k,) int64, plus ``r0`` and ``c0`` (where ``m`` lies in its image),
+    of the set pixels of ``m`` (h, w) bool with a 4-neighbour unset or outside ``m``, row by
+    row (``np.nonzero``'s order): the pixels ``binary_erosion`` (cross structure, border
+    unset) clears."""
+    h, w = m.shape
+    rows = np.empty(h * w, dtype=np.int64)
+    cols = np.empty(h * w, dtype=np.int64)
+    k = 0
+    for i in range(h):
+        for j in range(w):
+            if m[i, j] and (
+                i == 0
+                or j == 0
+                or i == h - 1
+                or j == w - 1
+                or not m[i - 1, j]
+                or not m[i + 1, j]
+                or not m[i, j - 1]
+                or not m[i, j + 1]
+            ):
+                rows[k], cols[k] = i + r0, j + c0
+                k += 1
+    return rows[:k], cols[:k]
 
 
 @njit(cache=True, nogil=True)

@@ -45,7 +45,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap._tolerances import NEAR_DEPTH, RELATIVE_DEGENERATE
 from meshmocap.errors import InputError
 from meshmocap.geometry.rotations import skew
-from meshmocap.trackers.cage.kernels import silhouette_residuals
+from meshmocap.trackers.cage.kernels import contour_pixels, silhouette_residuals
 
 #: Pixels between views in :class:`SilhouetteCoverage`'s k-d tree (no image is this wide).
 _VIEW_GAP = 1e12
@@ -353,12 +353,14 @@ class SilhouetteCoverage:
                 if n > 1:
                     size = np.bincount(lab.ravel())[1:]
                     m = np.isin(lab, 1 + np.flatnonzero(size >= min_component * size.max()))
-            rows, cols = np.nonzero(m & ~ndimage.binary_erosion(m))
+            # the contour: m & ~binary_erosion(m)'s pixels in np.nonzero's order, in the whole
+            # image's rows and columns (compiled)
+            rows, cols = contour_pixels(np.array(m, dtype=np.bool_, order="C"), r0, c0)
             if len(rows) > n_per_camera:
                 pick = rng.choice(len(rows), n_per_camera, replace=False)
                 rows, cols = rows[pick], cols[pick]
             # (x, y) = (column, row) in the whole image
-            qs.append(np.stack([cols + c0, rows + r0], axis=1).astype(np.float64))
+            qs.append(np.stack([cols, rows], axis=1).astype(np.float64))
             Ks.append(np.asarray(camera.K, dtype=np.float64))
             Rs.append(np.asarray(camera.R, dtype=np.float64))
             ts.append(np.asarray(camera.t, dtype=np.float64))
