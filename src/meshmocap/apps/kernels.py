@@ -152,7 +152,7 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         ),
         "skinned_points": ("int32[::1], int32[::1], float64[::1], float64[:, :, ::1], int64",),
         "gram_schmidt_frames": ("float64[:, ::1], float64[:, ::1]",),
-        "contour_pixels": ("boolean[:, ::1], int64, int64",),
+        "contour_pixels": ("boolean[:, ::1], float64, int64, int64",),
     },
     "meshmocap.trackers.cage.field": {
         "_boundary_buckets": ("Array(boolean, 3, 'C', readonly=True), int64",),

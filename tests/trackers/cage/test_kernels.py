@@ -112,17 +112,25 @@ def test_gram_schmidt_kernel_equals_the_array_code_to_the_bit():
     assert np.abs(np.swapaxes(R[20:], 1, 2) @ R[20:] - np.eye(3)).max() < 1e-12
 
 
-def test_contour_kernel_finds_the_pixels_erosion_clears_in_their_order():
-    """A mask's contour pixels, compiled, are ``np.nonzero(m & ~binary_erosion(m))``: the
-    same pixels in the same order (the silhouette samples drawn from them do not move);
-    masks touching the image's edges, empty, full, a single pixel, thin lines."""
+def test_contour_kernel_equals_label_then_erosion_in_their_order():
+    """A mask's pieces and contour, compiled, are those of ``ndimage.label`` (pieces below
+    ``min_component`` of the largest dropped) and ``np.nonzero(m & ~binary_erosion(m))``:
+    the same pixels in the same order (the silhouette samples drawn from them do not move);
+    masks touching the image's edges, empty, full, a single pixel, thin lines, many pieces."""
     from scipy import ndimage
 
     rng = np.random.default_rng(11)
     masks = [ndimage.binary_opening(rng.random((40, 60)) < p) for p in (0.3, 0.6, 0.9)]
+    masks += [rng.random((30, 30)) < p for p in (0.2, 0.5)]  # many small pieces
     masks += [np.zeros((5, 7), bool), np.ones((5, 7), bool), np.eye(6, dtype=bool)]
     masks += [np.zeros((1, 1), bool) | True, rng.random((1, 9)) < 0.5, rng.random((9, 1)) < 0.5]
     for m in masks:
-        rows, cols = np.nonzero(m & ~ndimage.binary_erosion(m))
-        found = contour_pixels(np.ascontiguousarray(m), 3, 5)  # m at row 3, column 5
-        assert np.array_equal(found[0], rows + 3) and np.array_equal(found[1], cols + 5)
+        for frac in (0.0, 0.02, 0.3, 1.0):
+            kept = m
+            lab, n = ndimage.label(m)
+            if frac > 0 and n > 1:
+                size = np.bincount(lab.ravel())[1:]
+                kept = np.isin(lab, 1 + np.flatnonzero(size >= frac * size.max()))
+            rows, cols = np.nonzero(kept & ~ndimage.binary_erosion(kept))
+            found = contour_pixels(np.ascontiguousarray(m), frac, 3, 5)  # m at row 3, col 5
+            assert np.array_equal(found[0], rows + 3) and np.array_equal(found[1], cols + 5)

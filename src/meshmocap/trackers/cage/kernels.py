@@ -15,9 +15,9 @@
   :meth:`~meshmocap.trackers.cage.surface.SkinnedSurface.directions`: the points' motion
   along the latent shape's directions (Eq. 6), pair by pair;
 * :func:`contour_pixels`, behind
-  :class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`: a mask's contour pixels
-  (set, with a 4-neighbour unset or beyond the image), as ``np.nonzero(m &
-  ~ndimage.binary_erosion(m))`` finds them, in its order, in one pass;
+  :class:`~meshmocap.trackers.cage.residuals.SilhouetteCoverage`: a mask's small pieces
+  dropped and its contour pixels found, as ``ndimage.label`` and ``np.nonzero(m &
+  ~ndimage.binary_erosion(m))`` find them, in that order;
 * :func:`gram_schmidt_frames`, behind
   :func:`~meshmocap.trackers.cage.quad_frames.gram_schmidt`: the quads' frames from their
   axes, the same operations in the same order (the same numbers), called ~70 times a frame;
@@ -153,26 +153,57 @@ def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover -
 
 
 @njit(cache=True, nogil=True)
-def contour_pixels(m, r0, c0):  # pragma: no cover - compiled
+def contour_pixels(m, min_component, r0, c0):  # pragma: no cover - compiled
     """Rows and columns (k,) int64, plus ``r0`` and ``c0`` (where ``m`` lies in its image),
-    of the set pixels of ``m`` (h, w) bool with a 4-neighbour unset or outside ``m``, row by
-    row (``np.nonzero``'s order): the pixels ``binary_erosion`` (cross structure, border
-    unset) clears."""
+    of the contour of mask ``m`` (h, w) bool, row by row (``np.nonzero``'s order): the kept
+    pixels with a 4-neighbour not kept or outside ``m`` (the pixels ``binary_erosion``,
+    cross structure and border unset, clears). With ``min_component`` > 0 and more than one
+    4-connected piece (``ndimage.label``'s), a piece is kept where its size is at least
+    ``min_component`` times the largest's; else every set pixel is."""
     h, w = m.shape
+    keep = m.copy()
+    if min_component > 0:
+        lab = np.zeros((h, w), dtype=np.int64)
+        size = np.zeros(h * w + 1, dtype=np.int64)
+        stack = np.empty(h * w, dtype=np.int64)
+        n = 0
+        for i in range(h):
+            for j in range(w):
+                if not m[i, j] or lab[i, j]:
+                    continue
+                n += 1
+                lab[i, j] = n
+                top, stack[0] = 1, i * w + j
+                while top:
+                    top -= 1
+                    a, b = stack[top] // w, stack[top] % w
+                    size[n] += 1
+                    for da, db in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                        x, y = a + da, b + db
+                        if 0 <= x < h and 0 <= y < w and m[x, y] and not lab[x, y]:
+                            lab[x, y] = n
+                            stack[top] = x * w + y
+                            top += 1
+        if n > 1:
+            big = size[1 : n + 1].max()
+            for i in range(h):
+                for j in range(w):
+                    if m[i, j] and not size[lab[i, j]] >= min_component * big:
+                        keep[i, j] = False
     rows = np.empty(h * w, dtype=np.int64)
     cols = np.empty(h * w, dtype=np.int64)
     k = 0
     for i in range(h):
         for j in range(w):
-            if m[i, j] and (
+            if keep[i, j] and (
                 i == 0
                 or j == 0
                 or i == h - 1
                 or j == w - 1
-                or not m[i - 1, j]
-                or not m[i + 1, j]
-                or not m[i, j - 1]
-                or not m[i, j + 1]
+                or not keep[i - 1, j]
+                or not keep[i + 1, j]
+                or not keep[i, j - 1]
+                or not keep[i, j + 1]
             ):
                 rows[k], cols[k] = i + r0, j + c0
                 k += 1

@@ -334,8 +334,6 @@ class SilhouetteCoverage:
         cap: float = 0.0,
         min_component: float = 0.0,
     ) -> None:
-        from scipy import ndimage
-
         rng = np.random.default_rng(seed)
         qs, Ks, Rs, ts, cam = [], [], [], [], []
         for camera, mask in zip(cameras, masks, strict=True):
@@ -347,15 +345,11 @@ class SilhouetteCoverage:
             # labelling and erosion there equal the whole image's (the same contour pixels,
             # in the same order) at a fraction of the pixels
             r0, c0 = max(rows_on[0] - 1, 0), max(cols_on[0] - 1, 0)
-            m = full[r0 : rows_on[-1] + 2, c0 : cols_on[-1] + 2]
-            if min_component > 0:  # small pieces apart from the body: noise
-                lab, n = ndimage.label(m)
-                if n > 1:
-                    size = np.bincount(lab.ravel())[1:]
-                    m = np.isin(lab, 1 + np.flatnonzero(size >= min_component * size.max()))
-            # the contour: m & ~binary_erosion(m)'s pixels in np.nonzero's order, in the whole
-            # image's rows and columns (compiled)
-            rows, cols = contour_pixels(np.array(m, dtype=np.bool_, order="C"), r0, c0)
+            m = np.array(full[r0 : rows_on[-1] + 2, c0 : cols_on[-1] + 2], order="C")
+            # small pieces apart from the body (noise) dropped where min_component > 0, then
+            # the contour: ndimage.label's pieces and m & ~binary_erosion(m)'s pixels in
+            # np.nonzero's order, in the whole image's rows and columns (compiled)
+            rows, cols = contour_pixels(m, float(min_component), r0, c0)
             if len(rows) > n_per_camera:
                 pick = rng.choice(len(rows), n_per_camera, replace=False)
                 rows, cols = rows[pick], cols[pick]
