@@ -229,6 +229,8 @@ AT_POINTS_RINGS = 2
 #: tracked body's vertices lie within a few voxels of its observations, and building the
 #: tree for the last few costs more than looking further around them.
 AT_POINTS_FAR_RINGS = 12
+#: The largest share of the points left by the first rings that
+#: :data:`AT_POINTS_FAR_RINGS` are looked at for (more: the k-d tree answers them).
 AT_POINTS_FEW = 0.2
 
 

@@ -188,7 +188,7 @@ class System:
 
     def add_rows(self, rows: Callable[[np.ndarray, np.ndarray], None]) -> None:
         """Hand over parameter rows: ``rows(grad, H)`` adds them in place, when
-        :attr:`grad` or :attr:`H` is first read."""
+        ``grad`` or ``H`` is first read."""
         self._rows.append(rows)
         self._sums = None
 
