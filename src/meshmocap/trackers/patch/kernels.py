@@ -472,7 +472,6 @@ def stale_rows(
             for e in range(S):
                 gmoved[e, g] = max(gmoved[e, g], moved[e, p])
     out = np.zeros(m, dtype=np.bool_)
-    mark = np.full(Vm.shape[0], -1, dtype=np.int64)  # mark[v] == t: v a candidate of t
     for t in range(m):
         slack = far[t] - kth[t] - ZERO_EXTENT
         if not slack > 0:
@@ -481,7 +480,6 @@ def stale_rows(
         e = epoch[t]
         y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
         reach = kth[t] * kth[t] + ZERO_EXTENT
-        marked = False
         for g in range(n_g):
             if gmoved[e, g] < slack:
                 continue
@@ -518,11 +516,13 @@ def stale_rows(
                             continue
                         if not np.sqrt(d2) <= kth[t]:
                             continue
-                        if not marked:  # the point's candidates, marked once
-                            for c in range(K):
-                                mark[cand[t, c]] = t
-                            marked = True
-                        if mark[members[s]] != t:  # not a candidate
+                        i = members[s]
+                        known = False
+                        for c in range(K):
+                            if cand[t, c] == i:
+                                known = True
+                                break
+                        if not known:  # a vertex within kth[t] that is not a candidate
                             out[t] = True
                             break
                     if out[t]:

@@ -311,11 +311,6 @@ class System:
         else:
             np.add.at(self.D, k, B)
 
-    def add_joints(self, a: np.ndarray, b: np.ndarray, B: np.ndarray) -> None:
-        """Add 3×3 blocks ``B`` (m, 3, 3) at joint rows ``a`` (m,) and columns ``b`` (m,)."""
-        K = self.pattern.n_joints
-        np.add.at(self.JJ.reshape(K, 3, K, 3), (a, slice(None), b, slice(None)), B)
-
     def add_g(self, ru: np.ndarray, G: np.ndarray) -> None:
         """Add gradient pieces ``G`` (m, a) at offsets ``ru``."""
         idx = ru[:, None] + np.arange(G.shape[1])
