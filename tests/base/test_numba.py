@@ -1,6 +1,11 @@
 """A kernel numba cannot cache (a read-only install without a writable cache folder) is
 defined uncached, with one warning, instead of failing the import."""
 
+import functools
+import os
+import subprocess
+import sys
+
 import numba
 import pytest
 
@@ -56,3 +61,60 @@ def test_a_cacheable_kernel_is_cached_and_other_errors_pass_through(monkeypatch)
     monkeypatch.setattr(kernels.numba, "njit", broken)
     with pytest.raises(RuntimeError, match="something else"):
         kernels.njit(cache=True)(lambda x: x)
+
+
+_KERNEL = """
+from meshmocap._numba import njit
+
+
+@njit(cache=True)
+def double(x):
+    return 2 * x
+"""
+
+_HOLDER = """
+import sys, time
+from meshmocap._numba import _lock_file
+from kernel import double
+
+with _lock_file(double):
+    print("locked", flush=True)
+    sys.stdin.readline()  # the other process is about to call the kernel
+    time.sleep(0.5)  # and waits for this lock
+    double(2)  # compiled here and cached, the lock held
+print(sum(double.stats.cache_misses.values()), sum(double.stats.cache_hits.values()))
+"""
+
+_CALLER = """
+from kernel import double
+
+print("calling", flush=True)
+double(3)
+print(sum(double.stats.cache_misses.values()), sum(double.stats.cache_hits.values()))
+"""
+
+
+@pytest.mark.slow
+def test_a_kernel_another_process_is_compiling_is_loaded_from_its_cache_not_compiled(tmp_path):
+    """One process holds a kernel's lock (as while compiling it); another that calls the
+    kernel meanwhile waits for the lock and then loads what the first cached: the kernel
+    is compiled once (one cache miss in all), not by both."""
+    (tmp_path / "kernel.py").write_text(_KERNEL)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), env.get("PYTHONPATH", "")])
+    run = functools.partial(
+        subprocess.Popen,
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    with run([sys.executable, "-c", _HOLDER]) as holder:
+        assert holder.stdout.readline().strip() == "locked", holder.communicate()[1]
+        with run([sys.executable, "-c", _CALLER]) as caller:
+            assert caller.stdout.readline().strip() == "calling", caller.communicate()[1]
+            held, _ = holder.communicate("go\n", timeout=120)
+            called, err = caller.communicate(timeout=120)
+    assert held.split() == ["1", "0"]  # compiled by the holder
+    assert called.split()[-2:] == ["0", "1"], err  # loaded by the caller: no second compile
