@@ -220,10 +220,11 @@ def row(label: str, k: int, E: np.ndarray, N: np.ndarray, settle: int = 0) -> li
     first fifth's frames from ``settle`` on and the last fifth's ratio to it."""
     d, n, g = split(E, N)
     f, t = fifths(d), fifths(g)
-    out = [label, k, f[0], f[-1], f[-1] / f[0], t[0], t[-1], t[-1] / t[0], float(fifths(n)[-1])]
+    out = [label, k, f[0], f[-1], f"{f[-1] / f[0]:.2f}", t[0], t[-1], f"{t[-1] / t[0]:.2f}"]
+    out.append(float(fifths(n)[-1]))
     if settle:
         later = float(d[settle : max(1, len(d) // 5)].mean())
-        out += [later, f[-1] / later]
+        out += [later, f"{f[-1] / later:.2f}"]
     return out
 
 
