@@ -338,7 +338,7 @@ def test_track_help_states_every_default(capsys):
         ("--n-patches", "default 200"),
         ("--classifier", "default logistic"),
         ("--keep-fraction", "default 1: all"),
-        ("--max-iter", "default 10 for the patch tracker, 20 for articulated_icp"),
+        ("--max-iter", "default 8 for the patch tracker, 20 for articulated_icp"),
     ):
         assert value in text.split(flag, 2)[2].split(" --")[0], flag
     patch, icp = resolved_options("patch"), resolved_options("articulated_icp")

@@ -28,7 +28,7 @@ DEFAULTS = {
     "n_patches": 200,
     "classifier": "logistic",
     "keep_fraction": 1.0,
-    "max_iter": 10,
+    "max_iter": 8,
     "icp_max_iter": 20,
 }
 

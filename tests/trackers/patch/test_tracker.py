@@ -156,6 +156,36 @@ def test_options_are_validated():
         PatchOptions(fast_motion=0)
     with pytest.raises(InputError, match="max_iter must be an integer ≥ 1, found 0"):
         PatchOptions(max_iter=0)
+    with pytest.raises(InputError, match="relaxation must be a number > 0, found 0"):
+        PatchOptions(relaxation=0)
+
+
+@pytest.mark.parametrize(("moved", "relaxed"), [(0.0, 1.7), (0.08, 1.0)])
+def test_steps_after_the_first_are_over_relaxed(walk, monkeypatch, moved, relaxed):
+    """``relaxation``: a slow frame's first Gauss–Newton step is taken as solved, every later
+    one ``relaxation`` times over; a fast frame's (a joint moved 8 cm) all as solved."""
+    from meshmocap.trackers.patch import tracker as module
+
+    cap, t = walk
+    solved, applied = [], []
+    solve, apply = module.System.solve, PatchTracker._apply
+    monkeypatch.setattr(
+        module.System, "solve", lambda s, *a: solved.append(solve(s, *a)) or solved[-1]
+    )
+    monkeypatch.setattr(PatchTracker, "_apply", lambda s, d: applied.append(d) or apply(s, d))
+    opts = PatchOptions(n_patches=120, max_iter=3, tol=0.0, relaxation=1.7, fast_iter_scale=1)
+    tracker = PatchTracker(opts)
+    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
+    R, c, X = tracker.prev
+    X = X.copy()
+    X[5, 0] -= moved  # the last frame 'moved' one joint this far
+    tracker.prev = (R, c, X)
+    tracker.opts = replace(opts, prediction="none")  # keep the fake motion out of the fit
+    assert tracker.step(cap[1]).n_iter == 3
+    assert len(solved) == len(applied) == 3
+    np.testing.assert_array_equal(applied[0], solved[0])
+    for a, s in zip(applied[1:], solved[1:], strict=True):
+        np.testing.assert_allclose(a, relaxed * s, rtol=1e-15, atol=0)
 
 
 @pytest.mark.parametrize(

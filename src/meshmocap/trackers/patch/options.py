@@ -40,6 +40,8 @@ PAPER: dict[str, object] = {
     "prediction": "none",
     "accel_gate": 0.0,
     "fast_iter_scale": 1.0,
+    "relaxation": 1.0,
+    "max_iter": 10,  # the EM's steps as solved need 10 to reach what 8 over-relaxed do
     "coarse_iter": 0,
     "joint_readout": "skeleton",  # the joints of Eq. (8)-(11)
 }
@@ -118,6 +120,16 @@ class PatchOptions:
         Observed points sampled from each hull before classification.
     max_iter : int
         EM iterations per frame (E-step, then one Gauss–Newton step).
+    relaxation : float
+        Over-relaxation of the EM (not in the paper; 1 turns it off): on a frame that is
+        not fast (``fast_motion``), every Gauss–Newton step after the frame's first is
+        taken this many times over. With the correspondences fixed, a step reaches its
+        quadratic model's minimum, but the correspondences then move only part of the way
+        with it (nearest points close a gap a fraction at a time), so the EM creeps
+        towards its fixed point by nearly the same fraction each iteration; a longer step
+        covers more of that way per E-step. A fast frame's steps are taken as solved:
+        over-relaxed there, the steps overshoot onto wrong points (measured:
+        ``docs/patch.rst``).
     tol : float
         Stop a frame's EM early when no patch moves more than this in one step (metres:
         translation plus a 10 cm lever arm times the rotation, radians).
@@ -226,8 +238,9 @@ class PatchOptions:
     outlier: float = 0.5
     max_distance: float | None = 0.1
     max_points: int = 6000
-    max_iter: int = 10
-    fast_iter_scale: float = 2.0
+    max_iter: int = 8
+    relaxation: float = 1.5
+    fast_iter_scale: float = 2.5
     fast_motion: float = 0.05
     tol: float = 2e-4
     sigma0: float = 0.03
@@ -269,6 +282,7 @@ class PatchOptions:
         "max_distance": (Interval(Real, 0, None, closed="neither"), None),
         "max_points": Interval(Integral, 1, None),
         "max_iter": Interval(Integral, 1, None),
+        "relaxation": Interval(Real, 0, None, closed="neither"),
         "fast_iter_scale": Interval(Real, 1, None),
         "fast_motion": Interval(Real, 0, None, closed="neither"),
         "tol": Interval(Real, 0, None),

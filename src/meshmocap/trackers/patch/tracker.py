@@ -369,7 +369,10 @@ class PatchTracker:
         # A fast frame gets more EM iterations: nearest-point correspondences close a gap
         # of several centimetres only a fraction at a time (see ``fast_iter_scale``).
         speed = float(np.linalg.norm(self.X - self.prev[2], axis=1).max())
-        budget = round(o.max_iter * (o.fast_iter_scale if speed > o.fast_motion else 1.0))
+        fast = speed > o.fast_motion
+        budget = round(o.max_iter * (o.fast_iter_scale if fast else 1.0))
+        # over-relaxed steps on slow frames only (``relaxation``)
+        relaxation = 1.0 if fast else o.relaxation
         budget += o.coarse_iter
         self._warm_start(frame, Y, last)
         X_hat = self.X.copy()  # the temporal prior's prediction (TemporalTerm)
@@ -398,6 +401,8 @@ class PatchTracker:
             else:
                 delta = sys.solve(o.damping)
             self._lap("solve")
+            if n_iter > 1:  # over-relaxed after the first step (``relaxation``)
+                delta = relaxation * delta
             self._apply(delta)
             # EM update of σ from the weighted residuals (one Gaussian per correspondence)
             self.sigma = float(np.clip(np.sqrt(values["data"] / 3), o.sigma_min, o.sigma_max))
