@@ -172,6 +172,10 @@ UNTESTED: dict[str, str] = {
         "tokenising for BVH and ASF/AMC: tests/io/test_bvh.py, tests/io/test_asf_amc.py, "
         "tests/io/test_fuzz_loaders.py"
     ),
+    "meshmocap.io._kernels": (
+        "the masks' PNG decoding: tests/geometry/test_silhouette.py (against Pillow), "
+        "signatures in tests/apps/test_kernels.py"
+    ),
     "meshmocap.io.archives": "mesh archives: tests/io/test_meshes.py",
     "meshmocap.io.c3d": "the C3D writer: tests/io/test_exports.py",
     "meshmocap.io.clips": "motion clips: tests/body/test_pose_library.py",

@@ -1,7 +1,9 @@
 """Silhouette rasterisation and PNG mask files."""
 
 import re
+import struct
 import warnings
+import zlib
 
 import numpy as np
 import pytest
@@ -263,3 +265,69 @@ def test_unreadable_masks_raise_one_line_errors(tmp_path):
         write_mask(good, np.eye(4, dtype=bool), bits=16)
     with pytest.raises(InputError, match="booleans or 0/1"):
         write_mask(good, np.full((4, 4), 0.5))
+
+
+def _png(grey: np.ndarray, filters, *, extra: bytes = b"") -> bytes:
+    """An 8-bit grey PNG of ``grey`` with row ``y`` filtered by ``filters[y % 5]`` (PNG's
+    filters computed here, the spec's way), ``extra`` chunks before the image data."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+        )
+
+    h, w = grey.shape
+    g = grey.astype(np.int64)
+    rows = []
+    for y in range(h):
+        f = filters[y % len(filters)]
+        out = [f]
+        for x in range(w):
+            a = g[y, x - 1] if x else 0
+            b = g[y - 1, x] if y else 0
+            c = g[y - 1, x - 1] if x and y else 0
+            p = a + b - c
+            paeth = min((abs(p - a), 0, a), (abs(p - b), 1, b), (abs(p - c), 2, c))[2]
+            pred = (0, a, b, (a + b) // 2, paeth)[f]
+            out.append((g[y, x] - pred) % 256)
+        rows.append(bytes(out))
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    body = chunk(b"IHDR", ihdr) + extra + chunk(b"IDAT", zlib.compress(b"".join(rows)))
+    return b"\x89PNG\r\n\x1a\n" + body + chunk(b"IEND", b"")
+
+
+def test_usual_masks_decode_as_pillow_decodes_them(tmp_path):
+    """The compiled decoding of 8-bit grey PNGs (every filter, grey and binary images)
+    gives Pillow's values, and leaves any other file to Pillow."""
+    from meshmocap.io._kernels import grey8
+
+    rng = np.random.default_rng(3)
+    grey = rng.integers(0, 256, (11, 13)).astype(np.uint8)
+    binary = np.where(rng.random((9, 6)) > 0.5, 255, 0).astype(np.uint8)
+    for image in (grey, binary, binary // 255):
+        for filters in ((0, 1, 2, 3, 4), (4, 3, 2, 1, 0), (2,), (3,), (4,)):
+            data = _png(image, filters)
+            path = tmp_path / "m.png"
+            path.write_bytes(data)
+            with Image.open(path) as img:
+                expect = np.asarray(img)
+            got, top, is_binary = grey8(data, None)
+            assert np.array_equal(got, expect) and top == expect.max(), filters
+            assert is_binary == bool(np.isin(expect, (0, 255)).all())
+            if image is not grey:  # binary: no warning
+                assert np.array_equal(read_mask(path), expect > (0 if top <= 1 else 127))
+    data = _png(grey, (4,))
+    text = struct.pack(">I", 2) + b"tEXt" + b"ab" + struct.pack(">I", zlib.crc32(b"tEXtab"))
+    assert grey8(data, None) is not None and grey8(data, grey.size - 1) is None  # too large
+    for other in (
+        _png(grey, (4,), extra=text),  # another chunk
+        data[:-20],  # cut
+        data[:17] + bytes([data[17] ^ 1]) + data[18:],  # the header's checksum fails
+        data[:45] + bytes([data[45] ^ 1]) + data[46:],  # the image data's fails
+        data.replace(b"IHDR", b"IHDr"),
+    ):
+        assert grey8(other, None) is None
+    path = tmp_path / "text.png"
+    path.write_bytes(_png(binary, (1, 4), extra=text))
+    with Image.open(path) as img:
+        assert np.array_equal(read_mask(path), np.asarray(img) > 127)

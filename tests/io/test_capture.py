@@ -126,3 +126,39 @@ def test_folders_that_are_not_captures_are_refused_in_one_line(small_walk, tmp_p
     (bad / "capture.json").write_text(json.dumps({**meta, "frames": ["a"]}))
     with pytest.raises(FormatError, match="'frames' must be a list of frame numbers"):
         Capture(bad)
+
+
+def test_hull_meshes_read_the_same_whatever_their_integers_width(jump, tmp_path):
+    """The compiled unpacking (native integers of up to 4 bytes) and the array one (any
+    other) give the same vertices and triangles: stored at every width and byte order, and
+    with half-voxel steps too scattered for a table."""
+    hull = Capture(jump.path)[2].hull
+    write_hull(tmp_path / "h.npz", hull)
+    V0, F0 = (a.copy() for a in read_hull_mesh(tmp_path / "h.npz"))
+    with np.load(tmp_path / "h.npz") as z:
+        stored = dict(z)
+    widths = [
+        ("<i2", "u1", "<u2"),
+        ("<i4", "<u2", "<u4"),
+        (">i2", "u1", ">u2"),
+        ("<i8", "<u8", "<u8"),
+    ]
+    for dk, dtop, below in widths:
+        d = {**stored, "mesh_dK": stored["mesh_dK"].astype(dk)}
+        d.update(
+            mesh_dtop=stored["mesh_dtop"].astype(dtop),
+            mesh_below=stored["mesh_below"].astype(below),
+        )
+        np.savez(tmp_path / "w.npz", **d)
+        V, F = read_hull_mesh(tmp_path / "w.npz")
+        assert V.dtype == np.float64 and F.dtype == np.int64, (dk, dtop, below)
+        np.testing.assert_array_equal(V, V0)
+        np.testing.assert_array_equal(F, F0)
+    K = np.array([[0, 0, 0], [1000, 0, 0], [-1000, 1, 1]])  # x's steps scattered
+    d = {**stored, "mesh_dK": K.astype(np.int16), "mesh_dtop": np.array([2], np.uint8)}
+    np.savez(tmp_path / "s.npz", **{**d, "mesh_below": np.array([[2, 1, 0]], np.uint8)})
+    V, F = read_hull_mesh(tmp_path / "s.npz")
+    o, h = stored["origin"], float(stored["voxel_size"])
+    expect = (o + np.cumsum(K, axis=0) / 2 * h).astype(np.float32)
+    np.testing.assert_array_equal(V, expect)
+    np.testing.assert_array_equal(F, [[0, 1, 2]])

@@ -30,6 +30,14 @@ import time
 #: arrays spelled out), by module, in the order the demo first meets them.
 #: ``tests/apps/test_kernels.py`` checks that tracking compiles nothing else.
 KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
+    "meshmocap.io._kernels": {
+        "mesh_extent_kernel": ("int16[:, ::1], int64[::1], int64[::1]",),
+        "mesh_vertices_kernel": (
+            "int16[:, ::1], float32[::1], float32[::1], float32[::1], int64[::1], float64[:, ::1]",
+        ),
+        "mesh_faces_kernel": ("uint8[::1], uint16[:, ::1], int64[:, ::1]",),
+        "unfilter_kernel": ("Array(uint8, 1, 'C', readonly=True), uint8[:, ::1]",),
+    },
     "meshmocap.geometry._mesh_kernels": {
         "normals_at_kernel": ("float64[:, ::1], int64[:, ::1], int64[::1], int64",),
         "fill_kernel": (
@@ -199,10 +207,11 @@ def compile_kernels(modules=None) -> dict[str, float]:
     return out
 
 
-#: The kernel modules every tracking run meets (normals; the articulated body's fits: the
-#: first pose, the checks, the ICP tracker; the first pose's search), and those of each
-#: method's folder.
+#: The kernel modules every tracking run meets (a capture's hull meshes and silhouettes
+#: read; normals; the articulated body's fits: the first pose, the checks, the ICP
+#: tracker; the first pose's search), and those of each method's folder.
 SHARED = (
+    "meshmocap.io._kernels",
     "meshmocap.geometry._mesh_kernels",
     "meshmocap.body._articulated_kernels",
     "meshmocap.estimate.pose._kernels",

@@ -172,6 +172,12 @@ def _unpack_mesh(d: dict, origin: np.ndarray, voxel_size: float) -> tuple[np.nda
     dK, dtop, below = d["mesh_dK"], d["mesh_dtop"], d["mesh_below"]
     if dK.ndim != 2 or dK.shape[1] != 3 or below.ndim != 2 or below.shape != (dtop.size, 3):
         raise ValueError(f"mesh arrays of shapes {dK.shape}, {dtop.shape}, {below.shape}")
+    native = all(a.dtype.isnative for a in (dK, dtop, below))  # as compiled code reads
+    small = {dtop.dtype, below.dtype} <= {np.dtype(t) for t in (np.uint8, np.uint16, np.uint32)}
+    if len(dK) and len(dtop) and native and small and dK.dtype in (np.int16, np.int32):
+        fast = _unpack_compiled(dK, dtop, below, origin, voxel_size)
+        if fast is not None:
+            return fast
     narrow = dK.dtype == np.int16 and len(dK) < 1 << 16  # its sums fit in int32
     K = np.cumsum(dK, axis=0, dtype=np.int32 if narrow else np.int64)
     top = np.cumsum(dtop.ravel(), dtype=np.int64)
@@ -189,6 +195,31 @@ def _unpack_mesh(d: dict, origin: np.ndarray, voxel_size: float) -> tuple[np.nda
             continue
         table = (origin[c] + np.arange(lo, hi + 1) / 2 * voxel_size).astype(np.float32)
         V[:, c] = table[K[:, c] - lo]
+    return V, F
+
+
+def _unpack_compiled(
+    dK: np.ndarray, dtop: np.ndarray, below: np.ndarray, origin: np.ndarray, voxel_size: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`_unpack_mesh`'s vertices and triangles by compiled passes over the stored
+    integers (the same running sums, tables and values, without the intermediate arrays);
+    None where a column's half-voxel steps are scattered (:func:`_unpack_mesh` computes
+    those per vertex)."""
+    from meshmocap.io._kernels import mesh_extent_kernel, mesh_faces_kernel, mesh_vertices_kernel
+
+    dK = np.ascontiguousarray(dK)
+    lo, hi = np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64)
+    mesh_extent_kernel(dK, lo, hi)
+    if np.any(hi - lo > 4 * len(dK)):
+        return None
+    tables = [
+        (origin[c] + np.arange(lo[c], hi[c] + 1) / 2 * voxel_size).astype(np.float32)
+        for c in range(3)
+    ]
+    V = np.empty((len(dK), 3))
+    mesh_vertices_kernel(dK, *tables, lo, V)
+    F = np.empty(below.shape, dtype=np.int64)
+    mesh_faces_kernel(np.ascontiguousarray(dtop.ravel()), np.ascontiguousarray(below), F)
     return V, F
 
 

@@ -55,12 +55,20 @@ def read_mask(path: str | os.PathLike[str], *, shape: tuple[int, int] | None = N
     if not p.is_file():
         what = "is a folder, not a file" if p.is_dir() else "no such file"
         raise MeshmocapFileNotFoundError(f"{path}: {what}")
+    from meshmocap.io._kernels import grey8  # compiled: imported on first use
+
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", Image.DecompressionBombWarning)
-            with Image.open(p) as img:
-                img.load()
-                mask, binary = _threshold(img)
+        # the usual mask (8-bit grey PNG) decoded at once; any other image by Pillow
+        fast = grey8(p.read_bytes(), Image.MAX_IMAGE_PIXELS)
+        if fast is not None:
+            grey, top, binary = fast
+            mask, binary = (grey > 0, True) if top <= 1 else (grey > 127, binary)  # _threshold's
+        else:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", Image.DecompressionBombWarning)
+                with Image.open(p) as img:
+                    img.load()
+                    mask, binary = _threshold(img)
     except (UnidentifiedImageError, Image.DecompressionBombWarning, Image.DecompressionBombError):
         raise FormatError(f"{path}: not a readable image, expected a PNG mask") from None
     except (OSError, SyntaxError, ValueError, TypeError, MemoryError) as e:  # corrupt data
