@@ -52,7 +52,13 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
     check = (
         f"from meshmocap.apps.kernels import uncached_kernels; print(uncached_kernels([{MESH!r}]))"
     )
-    kernels = ["normals_at_kernel", "fill_kernel", "boundary_distance_kernel", "in_image_kernel"]
+    kernels = [
+        "normals_at_kernel",
+        "fill_kernel",
+        "boundary_distance_kernel",
+        "boundary_side_kernel",
+        "in_image_kernel",
+    ]
     assert _python(check, tmp_path) == str([f"{MESH}:{k}" for k in kernels])
     _python(f"from meshmocap.apps.kernels import main; main(['--quiet', {MESH!r}])", tmp_path)
     assert _python(check, tmp_path) == "[]"

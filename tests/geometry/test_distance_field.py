@@ -177,6 +177,33 @@ def test_at_points_looks_further_around_a_few_points_before_building_the_tree():
         assert ("_tree" in lazy.__dict__) == bool(beyond)
 
 
+def test_side_of_answers_as_at_points_values_compared():
+    # near the surface, deep inside, far beyond the box, on the thresholds themselves:
+    # where the signed distance lies, as at_points' values compared, for several bands
+    occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
+    rng = np.random.default_rng(11)
+    lazy = LazyDistanceGrid(occ, origin, h, pad=pad)
+    box = lazy.upper - lazy.origin
+    P = np.concatenate(
+        [
+            lazy.boundary + rng.normal(scale=2 * h, size=lazy.boundary.shape),
+            lazy.origin + rng.uniform(-0.5, 1.5, (2000, 3)) * box,
+            lazy.boundary[:5] + 0.5 * h,
+        ]
+    )
+    sd = LazyDistanceGrid(occ, origin, h, pad=pad).at_points(P)
+    at = [sd[100], sd[200], sd[2000]]  # bands whose ends are values found exactly
+    for below, above in ((-0.04, 0.03), (-np.inf, 0.05), (0.0, 0.0), (-0.2, 0.1), at[:2], at[1:]):
+        low, high = min(below, above), max(below, above)
+        want = np.where(sd > high, 1, np.where(sd < low, -1, 0))
+        got = lazy.side_of(P, low, high)
+        assert got.dtype == np.int8
+        np.testing.assert_array_equal(got, want)
+    assert lazy.side_of(P.reshape(-1, 1, 3), -0.04, 0.03).shape == (len(P), 1)
+    with pytest.raises(InputError, match="expected finite coordinates"):
+        lazy.side_of(np.array([[np.nan, 0.0, 0.0]]), 0.0, 0.0)
+
+
 def test_at_points_is_the_grid_value_at_grid_points_and_close_between():
     occ, origin, h, pad = _blobs(6), np.array([0.1, -0.3, 0.2]), 0.02, 2
     lazy = LazyDistanceGrid(occ, origin, h, pad=pad)

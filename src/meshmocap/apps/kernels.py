@@ -44,6 +44,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, ::1], int64[:, ::1], boolean[::1], boolean, float64, boolean[:, ::1]",
         ),
         "boundary_distance_kernel": ("float64[:, ::1], boolean[:, :, ::1], int64, float64[::1]",),
+        "boundary_side_kernel": (
+            "float64[:, ::1], boolean[:, :, ::1], boolean[::1], float64, float64, float64, "
+            "int64, int8[::1]",
+        ),
         "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
     },
     "meshmocap.body._articulated_kernels": {

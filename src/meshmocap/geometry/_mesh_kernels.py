@@ -221,50 +221,107 @@ def fill_kernel(uv, F, valid, positive, floor, mask):  # pragma: no cover - comp
 
 
 @njit(cache=True, nogil=True)
+def _searchable(g0, g1, g2):  # pragma: no cover - compiled
+    """Whether a point (voxel units) is finite and not far beyond any grid."""
+    if not (np.isfinite(g0) and np.isfinite(g1) and np.isfinite(g2)):
+        return False
+    return max(abs(g0), abs(g1), abs(g2)) <= 1e9
+
+
+@njit(cache=True, nogil=True)
+def _ring_nearest(g0, g1, g2, c0, c1, c2, r, mask, best):  # pragma: no cover - compiled
+    """The least of ``best`` and the squared distances from ``(g0, g1, g2)`` to the voxel
+    centres of ``mask`` on ring ``r`` around voxel ``(c0, c1, c2)`` (those at Chebyshev
+    distance ``r``), summed axis by axis as a k-d tree sums them."""
+    nx, ny, nz = mask.shape
+    for i in range(max(c0 - r, 0), min(c0 + r, nx - 1) + 1):
+        di = abs(i - c0)
+        for j in range(max(c1 - r, 0), min(c1 + r, ny - 1) + 1):
+            dij = max(di, abs(j - c1))
+            if dij == r:  # on the ring: every k
+                k0, k1, step = c2 - r, c2 + r, 1
+            else:  # inside it: its two faces only
+                k0, k1, step = c2 - r, c2 + r, 2 * r
+            k = k0
+            while k <= k1:
+                if 0 <= k < nz and mask[i, j, k]:
+                    a0 = g0 - i
+                    a1 = g1 - j
+                    a2 = g2 - k
+                    d = a0 * a0
+                    d += a1 * a1
+                    d += a2 * a2
+                    if d < best:
+                        best = d
+                if step == 0:
+                    break
+                k += step
+    return best
+
+
+@njit(cache=True, nogil=True)
 def boundary_distance_kernel(g, mask, rings, out):  # pragma: no cover - compiled
     """``out[t]`` ← the distance from ``g[t]`` (voxel units) to the nearest voxel centre
     of ``mask`` (nx, ny, nz) bool (centres at integer coordinates), squared distances
     summed axis by axis as a k-d tree sums them; NaN where the voxels within ``rings``
     rings of the nearest voxel do not settle it (a voxel beyond ring ``r`` is farther than
     ``r + ½``)."""
-    nx, ny, nz = mask.shape
     for t in range(g.shape[0]):
         out[t] = np.nan
         g0, g1, g2 = g[t, 0], g[t, 1], g[t, 2]
-        if not (np.isfinite(g0) and np.isfinite(g1) and np.isfinite(g2)):
+        if not _searchable(g0, g1, g2):
             continue
-        if max(abs(g0), abs(g1), abs(g2)) > 1e9:  # far beyond any grid
-            continue
-        c0 = int(np.floor(g0 + 0.5))
-        c1 = int(np.floor(g1 + 0.5))
-        c2 = int(np.floor(g2 + 0.5))
+        c0, c1, c2 = int(np.floor(g0 + 0.5)), int(np.floor(g1 + 0.5)), int(np.floor(g2 + 0.5))
         best = np.inf
         for r in range(rings + 1):
-            for i in range(max(c0 - r, 0), min(c0 + r, nx - 1) + 1):
-                di = abs(i - c0)
-                for j in range(max(c1 - r, 0), min(c1 + r, ny - 1) + 1):
-                    dij = max(di, abs(j - c1))
-                    if dij == r:  # on the ring: every k
-                        k0, k1, step = c2 - r, c2 + r, 1
-                    else:  # inside it: its two faces only
-                        k0, k1, step = c2 - r, c2 + r, 2 * r
-                    k = k0
-                    while k <= k1:
-                        if 0 <= k < nz and mask[i, j, k]:
-                            a0 = g0 - i
-                            a1 = g1 - j
-                            a2 = g2 - k
-                            d = a0 * a0
-                            d += a1 * a1
-                            d += a2 * a2
-                            if d < best:
-                                best = d
-                        if step == 0:
-                            break
-                        k += step
+            best = _ring_nearest(g0, g1, g2, c0, c1, c2, r, mask, best)
             h = r + 0.5
             if best <= h * h:
                 out[t] = np.sqrt(best)
+                break
+
+
+@njit(cache=True, nogil=True)
+def boundary_side_kernel(g, mask, inside, h, below, above, rings, out):  # pragma: no cover
+    """``out[t]`` ← where the signed distance at ``g[t]`` (voxel units) lies: +1 above
+    ``above``, −1 below ``below``, 0 between (metres), 2 where ``rings`` rings do not tell.
+    The signed distance is :func:`boundary_distance_kernel`'s distance ``e`` to the nearest
+    voxel centre of ``mask`` made ``(−½ − e) h`` where ``inside[t]``, else ``(e − ½) h``
+    (:meth:`~meshmocap.geometry.distance_field.LazyDistanceGrid.at_points`). The same
+    rings are searched, but only until the answer is known: from the nearest centre found
+    so far and the least distance of any centre not looked at yet (``r + ½`` after ring
+    ``r``, less a relative 1e-9 for the rounding of the distances summed), since the signed
+    distance's rounded arithmetic is monotone in ``e``; where the distance is settled, from
+    it, as ``at_points`` compares it."""
+    for t in range(g.shape[0]):
+        out[t] = 2
+        g0, g1, g2 = g[t, 0], g[t, 1], g[t, 2]
+        if not _searchable(g0, g1, g2):
+            continue
+        c0, c1, c2 = int(np.floor(g0 + 0.5)), int(np.floor(g1 + 0.5)), int(np.floor(g2 + 0.5))
+        best = np.inf
+        for r in range(rings + 1):
+            best = _ring_nearest(g0, g1, g2, c0, c1, c2, r, mask, best)
+            bound = r + 0.5
+            if best <= bound * bound:  # settled: the distance itself
+                e = np.sqrt(best)
+                sd = (-0.5 - e) * h if inside[t] else (e - 0.5) * h
+                out[t] = 1 if sd > above else (-1 if sd < below else 0)
+                break
+            far = np.sqrt(best)  # the distance lies between near and far
+            near = bound * (1.0 - 1e-9)
+            if inside[t]:
+                lo, hi = (-0.5 - far) * h, (-0.5 - near) * h
+            else:
+                lo, hi = (near - 0.5) * h, (far - 0.5) * h
+            if lo > above:
+                out[t] = 1
+                break
+            if hi < below:
+                out[t] = -1
+                break
+            if lo >= below and hi <= above:
+                out[t] = 0
                 break
 
 

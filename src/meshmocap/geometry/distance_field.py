@@ -375,8 +375,7 @@ class LazyDistanceGrid(DistanceGrid):
         from meshmocap.geometry._mesh_kernels import boundary_distance_kernel
 
         P, lead = _query_points(points)
-        g = (P.reshape(-1, 3) - (self.origin + self._pad * self._h)) / self._h  # voxel units
-        g = np.ascontiguousarray(g)
+        g, inside = self._voxel_points(P)
         # the voxels around each point first (most points lie within a few of the
         # surface), the k-d tree for the others: the same distances
         e = np.empty(len(g))
@@ -389,12 +388,39 @@ class LazyDistanceGrid(DistanceGrid):
             rest = rest[np.isnan(far)]
         if len(rest):
             e[rest] = self._tree.query(np.ascontiguousarray(g[rest]), k=1)[0]
+        return (np.where(inside, -0.5 - e, e - 0.5) * self._h).reshape(lead)
+
+    def _voxel_points(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``P`` (..., 3) in voxel units, (n, 3) C-ordered, and (n,) whether the voxel
+        holding each point is occupied (False beyond the occupancy)."""
+        g = (P.reshape(-1, 3) - (self.origin + self._pad * self._h)) / self._h
+        g = np.ascontiguousarray(g)
         ijk = np.round(g).astype(np.intp)
         n = self._occ.shape
         ok = np.all((ijk >= 0) & (ijk < np.array(n)), axis=1)
         inside = np.zeros(len(g), dtype=bool)
         inside[ok] = self._occ.reshape(-1)[np.ravel_multi_index(tuple(ijk[ok].T), n)]
-        return (np.where(inside, -0.5 - e, e - 0.5) * self._h).reshape(lead)
+        return g, inside
+
+    def side_of(self, points: np.ndarray, below: float, above: float) -> np.ndarray:
+        """(...,) int8: where the signed distance :meth:`at_points` computes at ``points``
+        (..., 3) lies: +1 above ``above``, −1 below ``below``, 0 between (metres) — the
+        same answers as comparing its values, from voxels looked at only as far around
+        each point as the answer needs (a point deep inside is below a small negative
+        ``below`` long before its nearest surface voxel is found); the points the first
+        :data:`AT_POINTS_FAR_RINGS` rings do not tell are given :meth:`at_points`."""
+        from meshmocap.geometry._mesh_kernels import boundary_side_kernel
+
+        P, lead = _query_points(points)
+        g, inside = self._voxel_points(P)
+        out = np.empty(len(g), dtype=np.int8)
+        low, high = float(below), float(above)
+        boundary_side_kernel(g, self._inner, inside, self._h, low, high, AT_POINTS_FAR_RINGS, out)
+        rest = np.flatnonzero(out == 2)
+        if len(rest):
+            sd = self.at_points(P.reshape(-1, 3)[rest])
+            out[rest] = np.where(sd > high, 1, np.where(sd < low, -1, 0))
+        return out.reshape(lead)
 
     def _cells(self, base: np.ndarray) -> np.ndarray:
         # known is checked per cell, not per corner: 8× fewer flags to read on a lookup

@@ -253,6 +253,7 @@ def fit_quality(
     max_points: int = 4000,
     seed: int = 0,
     sdf: np.ndarray | None = None,
+    sides: np.ndarray | None = None,
 ) -> FitQuality:
     """Score a tracked frame against its observations (module docstring).
 
@@ -279,6 +280,10 @@ def fit_quality(
     sdf : (n,) float64, optional
         The signed distance of the observed solid at ``V``, metres, where the caller has
         it (default: ``field(V)``).
+    sides : (n,) int8, optional
+        Instead of ``sdf``, where it stands at ``V``: +1 more than :data:`OUTSIDE_MARGIN`
+        outside, −1 deeper than :data:`BURIED_DEPTH` inside, 0 between (all this score
+        reads of it: :meth:`~meshmocap.geometry.distance_field.LazyDistanceGrid.side_of`).
 
     Returns
     -------
@@ -287,10 +292,11 @@ def fit_quality(
     limbs = list(LIMB_PARTS)
     if len(P) > max_points:
         P = P[np.random.default_rng(seed).choice(len(P), max_points, replace=False)]
-    if sdf is None:
-        sdf = field(V)
-    outside = limb_shares(labels, sdf > OUTSIDE_MARGIN)
-    buried = limb_shares(labels, sdf < -BURIED_DEPTH)
+    if sides is None:
+        sdf = field(V) if sdf is None else sdf
+        sides = np.where(sdf > OUTSIDE_MARGIN, 1, np.where(sdf < -BURIED_DEPTH, -1, 0))
+    outside = limb_shares(labels, sides > 0)
+    buried = limb_shares(labels, sides < 0)
     d, i = KDTree(np.ascontiguousarray(V)).query(np.ascontiguousarray(P), k=1)
     if cameras and masks is not None and F is not None:
         far = d > SILHOUETTE_DISTANCE  # only these can be unexplained: only they are imaged

@@ -27,8 +27,10 @@ from meshmocap.estimate.recovery.evidence import EVIDENCE, LostRule, lost_limbs,
 from meshmocap.estimate.recovery.limbs import LIMB_ROOTS, LIMBS
 from meshmocap.estimate.recovery.observe import observed
 from meshmocap.estimate.recovery.quality import (
+    BURIED_DEPTH,
     LIMB_PARTS,
     OUTSIDE_LOST,
+    OUTSIDE_MARGIN,
     UNEXPLAINED_LOST,
     UNSEEN_LOST,
     UNSEEN_MARGIN,
@@ -134,7 +136,7 @@ class Recovery:
             cameras=cameras,
             masks=masks,
             seed=int(frame.index),
-            sdf=_signed_distance(field, V),
+            sides=_sides(field, V, -BURIED_DEPTH, OUTSIDE_MARGIN),
         )
 
     def assess(
@@ -155,7 +157,7 @@ class Recovery:
         Vc = self.template.pose(self.coast_pose(R), root).V
         out = np.zeros(len(Vc), dtype=bool)  # only the limbs' vertices are looked at
         out[self._limb_vertices] = (
-            _signed_distance(observed(frame).field, Vc[self._limb_vertices]) > UNSEEN_MARGIN
+            _sides(observed(frame).field, Vc[self._limb_vertices], -np.inf, UNSEEN_MARGIN) > 0
         )
         unseen = {n: v for n, v in limb_shares(self.labels, out).items() if n in self.limb_joints}
         moved = self._limb_moves(V, Vc)
@@ -259,9 +261,13 @@ class Recovery:
         return self.R, self.root
 
 
-def _signed_distance(field, V: np.ndarray) -> np.ndarray:
-    """(n,) the signed distance of the observed solid at ``V`` (n, 3), metres: at the points
-    themselves where the field offers it (a frame's lazy field: one query per vertex instead
-    of every new cell's corners), else looked up."""
-    at = getattr(field, "at_points", None)
-    return at(V) if at is not None else field(V)
+def _sides(field, V: np.ndarray, below: float, above: float) -> np.ndarray:
+    """(n,) int8: where the signed distance of the observed solid at ``V`` (n, 3) lies,
+    metres: +1 above ``above``, −1 below ``below``, 0 between. A frame's lazy field tells
+    it from as few voxels around each vertex as the answer needs (the answers of its
+    distance at the points themselves, ``at_points``); another field is looked up."""
+    side = getattr(field, "side_of", None)
+    if side is not None:
+        return side(V, below, above)
+    sd = field(V)
+    return np.where(sd > above, 1, np.where(sd < below, -1, 0)).astype(np.int8)
