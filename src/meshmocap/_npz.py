@@ -19,6 +19,8 @@ import io
 import math
 import os
 import re
+import struct
+import sys
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -130,19 +132,92 @@ def write_npz(f: IO[bytes], **arrays) -> None:
     ``numpy.savez_compressed``'s: the arrays above :data:`STORED_BYTES` deflated at
     deflate's fastest level (a frame's vertices: 1.5× faster, the file about 5 % larger),
     the others stored, the archive assembled in memory and written at once (one write
-    instead of a few small ones per array)."""
-    buf = io.BytesIO()
+    instead of a few small ones per array). The archive's bytes are those ``zipfile``
+    writes (its local headers, central directory and end record, packed here at once:
+    a frame's ~25 small members cost ``zipfile`` more than their data), each ``.npy``
+    member's those ``numpy.lib.format.write_array`` writes (its header kept per dtype,
+    order and shape)."""
+    members = []
+    for name, value in arrays.items():
+        a = np.asanyarray(value)
+        members.append((f"{name}.npy", _npy_bytes(a), a.nbytes > STORED_BYTES))
+    small = sum(len(data) for _, data, _ in members) < 1 << 30 and len(members) < 1 << 15
+    if small and all(name.isascii() for name, _, _ in members):
+        f.write(_zip_bytes(members))
+        return
+    buf = io.BytesIO()  # a name or a size zipfile writes differently (UTF-8, ZIP64)
     with zipfile.ZipFile(buf, "w") as zf:
-        for name, value in arrays.items():
-            a = np.asanyarray(value)
-            member = io.BytesIO()
-            np.lib.format.write_array(member, a, allow_pickle=False)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            if a.nbytes > STORED_BYTES:
-                zf.writestr(info, member.getbuffer(), zipfile.ZIP_DEFLATED, compresslevel=1)
+        for name, data, deflate in members:
+            info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+            if deflate:
+                zf.writestr(info, data, zipfile.ZIP_DEFLATED, compresslevel=1)
             else:
-                zf.writestr(info, member.getbuffer(), zipfile.ZIP_STORED)
+                zf.writestr(info, data, zipfile.ZIP_STORED)
     f.write(buf.getbuffer())
+
+
+#: ``.npy`` headers written so far, by dtype, order and shape (a track's frames repeat them).
+_HEADERS: dict[tuple, bytes] = {}
+
+
+def _npy_bytes(a: np.ndarray) -> bytes:
+    """The bytes ``numpy.lib.format.write_array`` (no pickles) writes for ``a``."""
+    plain = type(a) is np.ndarray and not a.dtype.hasobject and a.dtype.names is None
+    fortran = a.flags.f_contiguous and not a.flags.c_contiguous
+    key = (a.dtype.str, fortran, a.shape)
+    if not plain or key not in _HEADERS:
+        member = io.BytesIO()
+        np.lib.format.write_array(member, a, allow_pickle=False)
+        raw = member.getvalue()
+        if plain and len(_HEADERS) < 4096:
+            _HEADERS[key] = raw[: len(raw) - a.nbytes]
+        return raw
+    return _HEADERS[key] + a.tobytes(order="F" if fortran else "C")
+
+
+def _zip_bytes(members: list[tuple[str, bytes, bool]]) -> bytes:
+    """The zip archive ``zipfile.ZipFile(..., "w")`` writes of ``members`` (name, data,
+    deflated at level 1 or stored), each dated 1980-01-01 00:00, in a seekable file: each
+    member's local header (version 2.0, no flags, its checksum and sizes), its data, then
+    the central directory (made by Unix, read-write by the owner) and the end record."""
+    dosdate, dostime, made = 1 << 5 | 1, 0, 0 if sys.platform == "win32" else 3
+    local, central = [], []
+    offset = 0
+    for name, data, deflate in members:
+        if deflate:
+            packer = zlib.compressobj(1, zlib.DEFLATED, -15)
+            stored, kind = packer.compress(data) + packer.flush(), 8
+        else:
+            stored, kind = data, 0
+        crc, fname = zlib.crc32(data), name.encode("ascii")
+        sizes = (dostime, dosdate, crc, len(stored), len(data), len(fname))
+        local += [struct.pack("<4s2B4HL2L2H", b"PK\003\004", 20, 0, 0, kind, *sizes, 0), fname]
+        local.append(stored)
+        central.append(
+            struct.pack(
+                "<4s4B4HL2L5H2L",
+                b"PK\001\002",
+                20,
+                made,
+                20,
+                0,
+                0,
+                kind,
+                *sizes,
+                0,
+                0,
+                0,
+                0,
+                0o600 << 16,
+                offset,
+            )
+            + fname
+        )
+        offset += 30 + len(fname) + len(stored)
+    directory = b"".join(central)
+    n = len(members)
+    end = struct.pack("<4s4H2LH", b"PK\005\006", 0, 0, n, n, len(directory), offset, 0)
+    return b"".join(local) + directory + end
 
 
 #: The header ``numpy.save`` writes for a plain array (format 1.0: a numeric, boolean or

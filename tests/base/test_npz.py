@@ -129,3 +129,37 @@ def test_arrays_read_as_numpy_reads_them_whatever_their_header(tmp_path):
     (tmp_path / "cut.npz").write_bytes(raw.getvalue())
     with pytest.raises(FormatError, match=r"cut\.npz: not a readable \.npz test"):
         read_npz(tmp_path / "cut.npz", "test")
+
+
+def test_written_archives_are_the_bytes_zipfile_and_numpy_write():
+    # the archive packed at once: byte for byte what zipfile writes of write_array's
+    # members (deflated above STORED_BYTES), the second time (headers kept) as the first
+    arrays = {
+        "big": RNG.normal(size=(STORED_BYTES // 8 + 1,)),
+        "small": RNG.normal(size=(31, 3, 3)),
+        "fortran": np.asfortranarray(RNG.normal(size=(40, 30))),
+        "strided": RNG.normal(size=(20, 6))[::2, ::3],
+        "big_endian": RNG.normal(size=7).astype(">f4"),
+        "n": 7,
+        "flag": True,
+        "text": np.str_("lost left_arm"),
+        "texts": np.array(["ab", "c"]),
+        "empty": np.zeros((0, 3)),
+        "bytes": RNG.integers(0, 255, (3, 5000), dtype=np.uint8),
+    }
+    want = io.BytesIO()
+    with zipfile.ZipFile(want, "w") as zf:
+        for name, value in arrays.items():
+            a = np.asanyarray(value)
+            member = io.BytesIO()
+            np.lib.format.write_array(member, a, allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            deflate = a.nbytes > STORED_BYTES
+            kind = zipfile.ZIP_DEFLATED if deflate else zipfile.ZIP_STORED
+            zf.writestr(info, member.getbuffer(), kind, compresslevel=1 if deflate else None)
+    for _ in range(2):
+        ours = io.BytesIO()
+        write_npz(ours, **arrays)
+        assert ours.getvalue() == want.getvalue()
+    with pytest.raises(ValueError, match="pickle"):
+        write_npz(io.BytesIO(), objects=np.array([{}], dtype=object))
