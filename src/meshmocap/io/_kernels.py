@@ -89,7 +89,7 @@ def unfilter_kernel(raw, grey):  # pragma: no cover - compiled
     if h == 0 or w == 0:
         return 256
     top = 0
-    binary = True
+    odd = False  # values other than 0 and 255 seen
     for y in range(h):
         s = y * (w + 1)
         f = raw[s]
@@ -100,39 +100,48 @@ def unfilter_kernel(raw, grey):  # pragma: no cover - compiled
             f = 0
         if f == 0:
             for x in range(w):
-                grey[y, x] = raw[s + x]
+                v = np.int64(raw[s + x])
+                grey[y, x] = v
+                top = max(top, v)
+                odd |= (v != 0) & (v != 255)
         elif f == 1:
-            grey[y, 0] = raw[s]
+            v = np.int64(raw[s])
+            grey[y, 0] = v
+            top = max(top, v)
+            odd |= (v != 0) & (v != 255)
             for x in range(1, w):
-                grey[y, x] = (np.int64(raw[s + x]) + np.int64(grey[y, x - 1])) & 255
+                v = (np.int64(raw[s + x]) + v) & 255
+                grey[y, x] = v
+                top = max(top, v)
+                odd |= (v != 0) & (v != 255)
         elif f == 2:
             for x in range(w):
-                grey[y, x] = (np.int64(raw[s + x]) + np.int64(grey[y - 1, x])) & 255
+                v = (np.int64(raw[s + x]) + np.int64(grey[y - 1, x])) & 255
+                grey[y, x] = v
+                top = max(top, v)
+                odd |= (v != 0) & (v != 255)
         else:
+            a = 0
             for x in range(w):
-                a = np.int64(grey[y, x - 1]) if x > 0 else 0
                 b = np.int64(grey[y - 1, x]) if y > 0 else 0
                 r = np.int64(raw[s + x])
                 if f == 3:
-                    v = r + (a + b) // 2
+                    v = (r + (a + b) // 2) & 255
                 else:
                     c = np.int64(grey[y - 1, x - 1]) if x > 0 and y > 0 else 0
                     p = a + b - c
                     pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
                     if pa <= pb and pa <= pc:
-                        v = r + a
+                        v = (r + a) & 255
                     elif pb <= pc:
-                        v = r + b
+                        v = (r + b) & 255
                     else:
-                        v = r + c
-                grey[y, x] = v & 255
-        for x in range(w):
-            v = grey[y, x]
-            if v > top:
-                top = v
-            if v != 0 and v != 255:
-                binary = False
-    return top + 256 if binary else top
+                        v = (r + c) & 255
+                grey[y, x] = v
+                a = v
+                top = max(top, v)
+                odd |= (v != 0) & (v != 255)
+    return top if odd else top + 256
 
 
 @njit(cache=True, nogil=True)

@@ -246,7 +246,7 @@ def _hull_of(d: dict, path) -> VoxelHull:
     n = int(np.prod(shape, dtype=np.int64)) if len(shape) == 3 and 0 < min(shape) < 1 << 20 else -1
     if n < 0 or d["bits"].dtype != np.uint8 or d["bits"].size != -(-n // 8):
         raise FormatError(f"{path}: occupancy of {d['bits'].size} bytes does not fit {shape}")
-    occ = np.unpackbits(d["bits"].ravel(), count=n).astype(bool).reshape(shape)
+    occ = np.unpackbits(d["bits"].ravel(), count=n).view(bool).reshape(shape)  # 0 and 1
     origin, vs = d["origin"], d["voxel_size"]
     if origin.dtype.kind not in "fiu" or vs.dtype.kind not in "fiu" or vs.size != 1:
         raise FormatError(f"{path}: origin and voxel_size must be numbers")
