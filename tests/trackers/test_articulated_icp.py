@@ -21,7 +21,12 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 from meshmocap.io.results import done_frames, read_state
-from meshmocap.trackers.articulated_icp import ArticulatedICP, ICPOptions, data_to_model
+from meshmocap.trackers.articulated_icp import (
+    ArticulatedICP,
+    ICPOptions,
+    data_to_model,
+    relaxation,
+)
 from meshmocap.trackers.driver import track_sequence
 from meshmocap.trackers.options import TrackOptions
 from meshmocap.trackers.registry import make_tracker
@@ -227,6 +232,10 @@ def test_options_are_validated(template, walk):
         ICPOptions(normal_cos=1.0)
     with pytest.raises(InputError, match="fixed_joints"):
         ICPOptions(fixed_joints="LHipJoint")
+    with pytest.raises(InputError, match="extrapolate"):
+        ICPOptions(extrapolate=0.5)
+    with pytest.raises(InputError, match="settle_tol"):
+        ICPOptions(settle_tol=-1e-3)
     with pytest.raises(InputError, match="options must be ICPOptions"):
         ArticulatedICP({"max_iter": 3})
     assert ICPOptions(fixed_joints=["Head"]).fixed_joints == ("Head",)
@@ -278,3 +287,35 @@ def test_held_it_continues_from_the_held_pose_with_its_velocity(walk, template):
     np.testing.assert_array_equal(icp.root, root)
     np.testing.assert_allclose(r.vertices, template.pose(R, root).V)
     assert icp.prev is before
+
+
+def test_relaxation_goes_the_whole_way_along_a_geometric_series():
+    """Steps shrinking by ρ each, taken whole: the next is taken 1 / (1 − ρ) times as long
+    (the series' sum); taken at c, the next step is r = 1 − c (1 − ρ) times the one before
+    and c / (1 − r) is again 1 / (1 − ρ); turning back, or none before, gives 1."""
+    rng = np.random.default_rng(0)
+    m = rng.normal(size=(50, 3))
+    rho = 0.6
+    c, last = relaxation(rho * m, m, 1.0, 10.0)
+    assert c == pytest.approx(1 / (1 - rho)) and last is not m
+    r = 1 - 2.0 * (1 - rho)  # the step before taken at 2
+    assert relaxation(r * m, m, 2.0, 10.0)[0] == pytest.approx(1 / (1 - rho))
+    assert relaxation(rho * m, m, 1.0, 1.5)[0] == 1.5  # at most `longest`
+    assert relaxation(-0.5 * m, m, 1.0, 3.0)[0] == 1.0  # turned back: a whole step
+    assert relaxation(m, None, 1.0, 3.0)[0] == 1.0
+    assert relaxation(rho * m, m, 1.0, 1.0)[0] == 1.0  # off
+
+
+def test_extrapolated_steps_end_near_the_plain_fit_in_fewer_iterations(walk, template):
+    """Over-relaxed steps (and stopping where the steps turn back) take fewer iterations to
+    a pose near the plain iteration's (its joints within 1 cm; measured 15 against 11
+    iterations, 0.3–1.3 mm)."""
+    fits = []
+    for opts in (ICPOptions(), ICPOptions(extrapolate=3.0, settle_tol=2e-3)):
+        icp = ArticulatedICP(opts)
+        icp.init(template, walk[0], walk[0].truth.rotations, walk[0].truth.root)
+        fits.append([icp.step(walk[i]) for i in (1, 2)])
+    plain, fast = fits
+    assert sum(r.n_iter for r in fast) < sum(r.n_iter for r in plain)
+    for a, b in zip(plain, fast, strict=True):
+        assert np.linalg.norm(a.joints - b.joints, axis=1).max() < 0.01

@@ -6,7 +6,8 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
 
 1. warm start from the previous pose, optionally extrapolated at constant velocity
    (``predict``);
-2. iterate (at most ``max_iter`` times, until no model point moves more than ``tol``):
+2. iterate (at most ``max_iter`` times, until no model point moves more than ``tol``;
+   optionally over-relaxed, ``extrapolate`` and ``settle_tol``):
 
    * pose a fixed subset of ``n_model_points`` template vertices (area-weighted sample) and
      their normals;
@@ -66,8 +67,10 @@ from meshmocap.body.articulated import (
     FIXED_JOINTS,
     ArticulatedModel,
     Residual,
+    apply_increment,
     articulated_model,
     articulated_step,
+    limit_step,
     nearest_compatible,
 )
 from meshmocap.body.articulated_system import (
@@ -128,6 +131,16 @@ class ICPOptions:
         and its floor: :mod:`meshmocap.geometry.levenberg_marquardt`).
     predict : bool
         Warm-start by constant-velocity extrapolation of the last two poses (else: the last).
+    extrapolate : float
+        Longest over-relaxed step, as a multiple of the Gauss–Newton step (1: none, the
+        default). Where an iteration's step continues the one before (a slow slide along
+        the fit's flat directions), it is lengthened towards where the sequence of steps
+        would end (:func:`relaxation`). Fewer iterations, but the tracks change: the slide
+        stopped by ``tol`` ends elsewhere (``docs/measurements.rst``).
+    settle_tol : float
+        Also stop (metres) when no model point moves more than this and the step turns
+        back against the one before, as an over-relaxed step's next does where it went past
+        the end of the slide (0: never, the default; plain steps seldom turn back).
     fixed_joints : tuple of str
         Rig joints whose local rotation is not estimated (kept from the first frame); names
         the template's skeleton lacks are ignored.
@@ -149,6 +162,8 @@ class ICPOptions:
     lambda_root: float = 1e-4
     damping: float = DAMPING["icp"].lam
     predict: bool = False
+    extrapolate: float = 1.0
+    settle_tol: float = 0.0
     fixed_joints: tuple[str, ...] = FIXED_JOINTS
     seed: int = 0
 
@@ -168,6 +183,8 @@ class ICPOptions:
         "lambda_root": Interval(Real, 0, None),
         "damping": Interval(Real, 0, None),
         "predict": Boolean(),
+        "extrapolate": Interval(Real, 1, None),
+        "settle_tol": Interval(Real, 0, None),
         "fixed_joints": Strings("joint names"),
         "seed": Interval(Integral, 0, None),
     }
@@ -339,13 +356,14 @@ class ArticulatedICP:
         data_tree = KDTree(Y)
         self._lap("observations")
         energies: dict[str, float] = {}
-        n_iter = 0
+        n_iter, scale, last_move = 0, 1.0, None
         while n_iter < o.max_iter:
             n_iter += 1
             posed = posed_model(self.plan, self.R, self.root)
             H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref, order)
             act = self.active
             self._lap("system")
+            R0, root0 = self.R, self.root
             self.R, self.root, delta = articulated_step(
                 sk,
                 self.R,
@@ -358,8 +376,17 @@ class ArticulatedICP:
             )
             move = point_motion(self.plan, posed, delta)
             self._lap("solve")
-            if np.max(np.einsum("mc,mc->m", move, move)) < o.tol * o.tol:
+            longest = np.max(np.einsum("mc,mc->m", move, move))
+            if longest < o.tol * o.tol:
                 break
+            turned = last_move is not None and np.vdot(move, last_move) < 0.0
+            if turned and longest < o.settle_tol**2:
+                break
+            scale, last_move = relaxation(move, last_move, scale, o.extrapolate)
+            if scale > 1.0:  # the step continues the one before: lengthened
+                self.R, self.root = apply_increment(
+                    sk, R0, root0, limit_step(scale * delta), G=posed.G
+                )
         out = self._result(frame.index, energies, n_iter)
         self._lap("output")
         return out
@@ -404,6 +431,36 @@ class ArticulatedICP:
             total + o.lambda_pose * energies["pose"] + o.lambda_root * energies["root"]
         )
         return H, g, energies
+
+
+def relaxation(
+    move: np.ndarray, last_move: np.ndarray | None, scale: float, longest: float
+) -> tuple[float, np.ndarray]:
+    """The length of an iteration's step, as a multiple of its Gauss–Newton step, where
+    successive steps shrink geometrically along one direction (an over-relaxation; the
+    Aitken extrapolation of that sequence).
+
+    Parameters
+    ----------
+    move : (m, 3) float64, the model points' motion under this iteration's Gauss–Newton
+        step, metres; ``last_move`` the same of the iteration before (None: none)
+    scale : float, the multiple the step before was taken at
+    longest : float, the largest multiple allowed (≥ 1)
+
+    Returns
+    -------
+    The multiple (in [1, longest]) and ``move``, the next call's ``last_move``. If the
+    steps shrink by ρ each when taken whole, a step taken at ``c`` gives the next
+    ``r = 1 − c (1 − ρ)`` times as long; the multiple ``c / (1 − r) = 1 / (1 − ρ)`` goes
+    the whole way (the sum of the steps' series).
+    """
+    if last_move is None or longest <= 1.0:
+        return 1.0, move
+    d = float(np.vdot(last_move, last_move))
+    r = float(np.vdot(move, last_move)) / d if d > 0.0 else 0.0
+    if r >= 1.0:
+        return longest, move
+    return float(np.clip(scale / (1.0 - r), 1.0, longest)), move
 
 
 def data_to_model(
