@@ -8,9 +8,11 @@ keyed by the source file's time stamp, so a fresh install or clone starts withou
 the first command that tracks compiles every kernel it meets (about a minute in all,
 :data:`KERNELS`; ``benchmarks/bench_compile.py`` measures each). :func:`start_compiling`
 compiles them in a child process instead, each with the argument types the library calls
-it with, in the order a command meets them; a kernel the command reaches before the child
-has cached it is compiled by the command as before (the same result, only the time is
-lost). With a warm cache the child only loads them (about a second of its own CPU).
+it with, in the order a command meets them. Each kernel is compiled by one process only
+(a lock file per kernel, ``meshmocap._numba``): a command or worker that reaches a
+kernel the child is compiling waits for it and loads it from the cache, and one it
+reaches first it compiles itself, the child then loading it. With a warm cache the child
+only loads them (about a second of its own CPU).
 
 ``python -m meshmocap.apps.kernels`` compiles them in the foreground and prints the CPU
 seconds each took.
