@@ -93,7 +93,8 @@ def _compile_once(kernel) -> None:
 @contextlib.contextmanager
 def _lock_file(kernel) -> Iterator[None]:
     """Hold ``kernel``'s lock file (``<its cache entry>.lock``) while the block runs; no
-    lock where there is none to take (no ``fcntl``, no writable cache folder)."""
+    lock where there is none to take (no ``fcntl``, no writable cache folder, a file
+    system that refuses locks)."""
     try:
         cache = kernel._cache
         path = os.path.join(cache.cache_path, cache._cache_file._index_name + ".lock")
@@ -109,7 +110,11 @@ def _lock_file(kernel) -> Iterator[None]:
         yield
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # a file system without locks (some network ones): compile unlocked
+            yield
+            return
         _HELD.add(path)
         try:
             yield

@@ -118,3 +118,18 @@ def test_a_kernel_another_process_is_compiling_is_loaded_from_its_cache_not_comp
             called, err = caller.communicate(timeout=120)
     assert held.split() == ["1", "0"]  # compiled by the holder
     assert called.split()[-2:] == ["0", "1"], err  # loaded by the caller: no second compile
+
+
+@pytest.mark.skipif(kernels.fcntl is None, reason="no fcntl: no lock taken")
+def test_a_file_system_that_refuses_locks_compiles_unlocked(monkeypatch):
+    """Where ``flock`` fails (some network file systems) the kernel compiles as numba does."""
+
+    @kernels.njit(cache=True)
+    def triple(x):
+        return 3 * x
+
+    def refuse(fd, op):
+        raise OSError(37, "No locks available")
+
+    monkeypatch.setattr(kernels.fcntl, "flock", refuse)
+    assert triple(2) == 6
