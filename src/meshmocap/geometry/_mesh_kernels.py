@@ -220,6 +220,12 @@ def fill_kernel(uv, F, valid, positive, floor, mask):  # pragma: no cover - comp
                     mask[y, x] = True
 
 
+#: Relative slack taken off the least distance a voxel centre not looked at yet can have
+#: (``r + ½`` after ring ``r``, :func:`boundary_side_kernel`): the rounding of the distances
+#: summed (a few 1e-16 relative) cannot bring one below it.
+RING_BOUND_SLACK = 1e-9
+
+
 @njit(cache=True, nogil=True)
 def _searchable(g0, g1, g2):  # pragma: no cover - compiled
     """Whether a point (voxel units) is finite and not far beyond any grid."""
@@ -290,7 +296,7 @@ def boundary_side_kernel(g, mask, inside, h, below, above, rings, out):  # pragm
     (:meth:`~meshmocap.geometry.distance_field.LazyDistanceGrid.at_points`). The same
     rings are searched, but only until the answer is known: from the nearest centre found
     so far and the least distance of any centre not looked at yet (``r + ½`` after ring
-    ``r``, less a relative 1e-9 for the rounding of the distances summed), since the signed
+    ``r``, less :data:`RING_BOUND_SLACK` for the rounding of the distances summed), since the signed
     distance's rounded arithmetic is monotone in ``e``; where the distance is settled, from
     it, as ``at_points`` compares it."""
     for t in range(g.shape[0]):
@@ -309,7 +315,7 @@ def boundary_side_kernel(g, mask, inside, h, below, above, rings, out):  # pragm
                 out[t] = 1 if sd > above else (-1 if sd < below else 0)
                 break
             far = np.sqrt(best)  # the distance lies between near and far
-            near = bound * (1.0 - 1e-9)
+            near = bound * (1.0 - RING_BOUND_SLACK)
             if inside[t]:
                 lo, hi = (-0.5 - far) * h, (-0.5 - near) * h
             else:
