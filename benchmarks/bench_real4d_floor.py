@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench_real4d import table
 from meshmocap.body.template import load_template
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.io.results import open_tracked_capture, read_track, tracked_template
@@ -239,17 +240,6 @@ def row(label: str, k: int, E: np.ndarray, N: np.ndarray, settle: int = 0) -> li
         later = float(d[settle : max(1, len(d) // 5)].mean())
         out += [later, f"{f[-1] / later:.2f}"]
     return out
-
-
-def table(headers: list[str], rows: list[list]) -> str:
-    cells = [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in r] for r in rows]
-    width = [max(len(h), *(len(r[k]) for r in cells)) for k, h in enumerate(headers)]
-
-    def line(r: list[str]) -> str:
-        return "| " + " | ".join(c.ljust(w) for c, w in zip(r, width, strict=True)) + " |"
-
-    rule = "|" + "|".join("-" * (w + 2) for w in width) + "|"
-    return "\n".join([line(headers), rule, *map(line, cells)])
 
 
 HEADS = ["part", "vertices", "first fifth", "last fifth", "last/first"]

@@ -33,11 +33,16 @@ import time
 #: ``tests/apps/test_kernels.py`` checks that tracking compiles nothing else.
 KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     "meshmocap.io._kernels": {
-        "mesh_extent_kernel": ("int16[:, ::1], int64[::1], int64[::1]",),
-        "mesh_vertices_kernel": (
-            "int16[:, ::1], float32[::1], float32[::1], float32[::1], int64[::1], float64[:, ::1]",
+        "mesh_extent_kernel": tuple(
+            f"{dK}[:, ::1], int64[::1], int64[::1]" for dK in ("int16", "int32")
         ),
-        "mesh_faces_kernel": ("uint8[::1], uint16[:, ::1], int64[:, ::1]",),
+        "mesh_vertices_kernel": tuple(
+            f"{dK}[:, ::1], float32[::1], float32[::1], float32[::1], int64[::1], float64[:, ::1]"
+            for dK in ("int16", "int32")
+        ),
+        "mesh_faces_kernel": tuple(
+            f"uint8[::1], {below}[:, ::1], int64[:, ::1]" for below in ("uint8", "uint16", "uint32")
+        ),
         "unfilter_kernel": ("Array(uint8, 1, 'C', readonly=True), uint8[:, ::1]",),
     },
     "meshmocap.geometry._mesh_kernels": {

@@ -173,7 +173,8 @@ def _unpack_mesh(d: dict, origin: np.ndarray, voxel_size: float) -> tuple[np.nda
     if dK.ndim != 2 or dK.shape[1] != 3 or below.ndim != 2 or below.shape != (dtop.size, 3):
         raise ValueError(f"mesh arrays of shapes {dK.shape}, {dtop.shape}, {below.shape}")
     native = all(a.dtype.isnative for a in (dK, dtop, below))  # as compiled code reads
-    small = {dtop.dtype, below.dtype} <= {np.dtype(t) for t in (np.uint8, np.uint16, np.uint32)}
+    # the types a hull written by write_hull has: those the background compiler compiles
+    small = dtop.dtype == np.uint8 and below.dtype in (np.uint8, np.uint16, np.uint32)
     if len(dK) and len(dtop) and native and small and dK.dtype in (np.int16, np.int32):
         fast = _unpack_compiled(dK, dtop, below, origin, voxel_size)
         if fast is not None:

@@ -160,6 +160,19 @@ def test_options_are_validated():
         PatchOptions(relaxation=0)
 
 
+def _after_motion(t, frame, opts: PatchOptions, moved: float) -> PatchTracker:
+    """A tracker seated on ``frame`` at its true pose, whose last frame 'moved' one joint
+    ``moved`` metres (no prediction: the fake motion stays out of the fit)."""
+    tracker = PatchTracker(opts)
+    tracker.init(t, frame, frame.truth.rotations, frame.truth.root)
+    R, c, X = tracker.prev
+    X = X.copy()
+    X[5, 0] -= moved
+    tracker.prev = (R, c, X)
+    tracker.opts = replace(opts, prediction="none")
+    return tracker
+
+
 @pytest.mark.parametrize(("moved", "relaxed"), [(0.0, 1.7), (0.08, 1.0)])
 def test_steps_after_the_first_are_over_relaxed(walk, monkeypatch, moved, relaxed):
     """``relaxation``: a slow frame's first Gauss–Newton step is taken as solved, every later
@@ -174,13 +187,7 @@ def test_steps_after_the_first_are_over_relaxed(walk, monkeypatch, moved, relaxe
     )
     monkeypatch.setattr(PatchTracker, "_apply", lambda s, d: applied.append(d) or apply(s, d))
     opts = PatchOptions(n_patches=120, max_iter=3, tol=0.0, relaxation=1.7, fast_iter_scale=1)
-    tracker = PatchTracker(opts)
-    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
-    R, c, X = tracker.prev
-    X = X.copy()
-    X[5, 0] -= moved  # the last frame 'moved' one joint this far
-    tracker.prev = (R, c, X)
-    tracker.opts = replace(opts, prediction="none")  # keep the fake motion out of the fit
+    tracker = _after_motion(t, cap[0], opts, moved)
     assert tracker.step(cap[1]).n_iter == 3
     assert len(solved) == len(applied) == 3
     np.testing.assert_array_equal(applied[0], solved[0])
@@ -196,13 +203,7 @@ def test_fast_frames_get_more_iterations(walk, moved, scale, expected):
     ``fast_iter_scale × max_iter`` EM iterations; ``tol=0`` never stops early."""
     cap, t = walk
     opts = PatchOptions(n_patches=120, max_iter=3, tol=0.0, fast_iter_scale=scale)
-    tracker = PatchTracker(opts)
-    tracker.init(t, cap[0], cap[0].truth.rotations, cap[0].truth.root)
-    R, c, X = tracker.prev
-    X = X.copy()
-    X[5, 0] -= moved  # the last frame 'moved' one joint this far
-    tracker.prev = (R, c, X)
-    tracker.opts = replace(opts, prediction="none")  # keep the fake motion out of the fit
+    tracker = _after_motion(t, cap[0], opts, moved)
     assert tracker.step(cap[1]).n_iter == expected
 
 
