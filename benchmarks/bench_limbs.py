@@ -49,11 +49,15 @@ forking workers of its own: ``MESHMOCAP_JOBS=1`` unless set). The
 defaults (12 captures, each trial by one performer in turn, the three trackers, both
 passes, 150 frames) are meant to fit 45 minutes there; the projection says whether they
 do (the performer's body estimate is the largest single stage per capture). ``--quick``:
-3 trials × 60 frames × articulated ICP. Captures and tracks are cached in ``--work``; the
-tables are printed and written to ``--work``/results.md.
+3 trials × 60 frames × articulated ICP. ``--set METHOD.FIELD=VALUE`` (repeatable): a
+field of that method's options dataclass set for every track of it (e.g.
+``articulated_icp.extrapolate=3``; a track cached in ``--work`` with other settings is
+refused, so such a run takes a ``--work`` of its own). Captures and tracks are cached in
+``--work``; the tables are printed and written to ``--work``/results.md.
 
 Run: ``python benchmarks/bench_limbs.py [--quick] [--trials ...] [--methods ...]
-[--passes forward two-way] [--frames 150] [--jobs 2] [--work /tmp/meshmocap-limbs]``.
+[--passes forward two-way] [--frames 150] [--jobs 2] [--set METHOD.FIELD=VALUE ...]
+[--work /tmp/meshmocap-limbs]``.
 """
 
 from __future__ import annotations
@@ -230,6 +234,29 @@ def evidence_of(track_dir: Path, cap, template) -> dict:
     }
 
 
+def tracker_settings(items: list[str]) -> dict[str, dict]:
+    """``--set`` items ``METHOD.FIELD=VALUE`` as method → {field: value}; a value is read
+    as JSON (numbers, true/false, lists) or else kept as a string."""
+    out: dict[str, dict] = {}
+    for item in items:
+        key, eq, value = item.partition("=")
+        method, dot, field = key.partition(".")
+        if not (eq and dot and method and field):
+            raise SystemExit(f"bench_limbs: --set expects METHOD.FIELD=VALUE, found {item!r}")
+        try:
+            parsed = json.loads(value)
+        except ValueError:
+            parsed = value
+        out.setdefault(method, {})[field] = parsed
+    return out
+
+
+def settings_note(settings: dict[str, dict]) -> str:
+    """The ``--set`` options as the results' heading states them ('' where none)."""
+    items = [f"{m}.{k}={v}" for m, kv in settings.items() for k, v in kv.items()]
+    return f"; options {', '.join(items)}" if items else ""
+
+
 def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], dict]:
     """Synthesise one capture and track it by every method, the papers' protocol and the
     default path with each pass; the rows and the CPU seconds per stage."""
@@ -267,7 +294,8 @@ def run_case(trial: str, performer: str, index: int, args) -> tuple[list[dict], 
                     init_options={"exclude_trials": excluded(trial)},
                     start=choice.start,  # as api.track: the body fit's pose is a candidate
                 )
-            tracker = make_tracker(method, template=tracking_body(template).light)  # as tracked
+            light = tracking_body(template).light  # as tracked
+            tracker = make_tracker(method, template=light, **args.set.get(method, {}))
             with _Clock() as c:
                 track = track_sequence(tracker, template, cap, out, opts)
             cost[f"{method} {path} {passes}"] = c.cpu
@@ -480,8 +508,16 @@ def main() -> None:
         action="store_false",
         help="skip the evidence replay and the flags scored on left-out categories",
     )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="METHOD.FIELD=VALUE",
+        help="an option of a method's tracker, e.g. articulated_icp.extrapolate=3",
+    )
     ap.add_argument("--work", default="/tmp/meshmocap-limbs")
     args = ap.parse_args()
+    args.set = tracker_settings(args.set)
     if not (DATA / "mocap" / "cmu" / "library").is_dir():
         print(f"skipped: {DATA / 'mocap' / 'cmu' / 'library'} is absent")
         return
@@ -525,7 +561,8 @@ def main() -> None:
         f"Default path and papers' protocol "
         f"({'quick: ' if args.quick else ''}{len(cases)} captures × "
         f"{', '.join(args.methods)}, passes {', '.join(args.passes)}, ≤ {args.frames} frames "
-        f"at 60 fps, humaneva4), measured {stamp}, load average {load0:.1f}→"
+        f"at 60 fps, humaneva4{settings_note(args.set)}), measured {stamp}, "
+        f"load average {load0:.1f}→"
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, {args.jobs} at once, "
         f"{time.perf_counter() - t0:.0f} s\n\n{table(rows)}\n\n{summary(rows)}\n\n"
         f"{cost_lines(costs, len(cases), 2, len(TRIALS))}"
