@@ -6,8 +6,9 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
 
 1. warm start from the previous pose, optionally extrapolated at constant velocity
    (``predict``);
-2. iterate (at most ``max_iter`` times, until no model point moves more than ``tol``;
-   optionally over-relaxed, ``extrapolate`` and ``settle_tol``):
+2. iterate (at most ``max_iter`` times, until no model point moves more than ``tol``, or
+   than ``settle_tol`` where a step turns back; steps that continue the one before
+   over-relaxed, ``extrapolate``):
 
    * pose a fixed subset of ``n_model_points`` template vertices (area-weighted sample) and
      their normals;
@@ -132,15 +133,15 @@ class ICPOptions:
     predict : bool
         Warm-start by constant-velocity extrapolation of the last two poses (else: the last).
     extrapolate : float
-        Longest over-relaxed step, as a multiple of the Gauss–Newton step (1: none, the
-        default). Where an iteration's step continues the one before (a slow slide along
-        the fit's flat directions), it is lengthened towards where the sequence of steps
-        would end (:func:`relaxation`). Fewer iterations, but the tracks change: the slide
-        stopped by ``tol`` ends elsewhere (``docs/measurements.rst``).
+        Longest over-relaxed step, as a multiple of the Gauss–Newton step (1: none). Where
+        an iteration's step continues the one before (a slow slide along the fit's flat
+        directions), it is lengthened towards where the sequence of steps would end
+        (:func:`relaxation`). With ``settle_tol``, fewer iterations for as accurate a fit:
+        on every ``bench_limbs`` trial (``docs/measurements.rst``, issue 43).
     settle_tol : float
         Also stop (metres) when no model point moves more than this and the step turns
         back against the one before, as an over-relaxed step's next does where it went past
-        the end of the slide (0: never, the default; plain steps seldom turn back).
+        the end of the slide (0: never; plain steps seldom turn back).
     fixed_joints : tuple of str
         Rig joints whose local rotation is not estimated (kept from the first frame); names
         the template's skeleton lacks are ignored.
@@ -162,8 +163,8 @@ class ICPOptions:
     lambda_root: float = 1e-4
     damping: float = DAMPING["icp"].lam
     predict: bool = False
-    extrapolate: float = 1.0
-    settle_tol: float = 0.0
+    extrapolate: float = 3.0
+    settle_tol: float = 2e-3
     fixed_joints: tuple[str, ...] = FIXED_JOINTS
     seed: int = 0
 
