@@ -60,8 +60,9 @@ def test_reasons_and_finiteness():
 
 def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
     """The body the hold fits (held_rest) is the refined surface of the frame next to this
-    one, in the pose the holder held that frame in, put back at rest; none where the
-    refiner's last frame is not next to this one or not the holder's."""
+    one, in the pose the holder held that frame in, put back at rest (its offset from the
+    template's rest surface kept at the holder's share: SkeletonHold.rest_of); none where
+    the refiner's last frame is not next to this one or not the holder's."""
     from meshmocap.body.template import load_template
     from meshmocap.estimate.pose.hold import SkeletonHold
     from meshmocap.geometry.refine import ArapRefiner
@@ -77,7 +78,9 @@ def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
     assert held_rest(holder, refiner, 5) is None  # nothing refined yet
     refiner.last_ = (4, np.zeros_like(X), X)
     holder.last, holder.key = (R, root), 4
-    np.testing.assert_allclose(held_rest(holder, refiner, 5), X - [0.1, 0.0, 0.0], atol=1e-12)
+    rest = held_rest(holder, refiner, 5)  # X at rest, its offset from the template's share
+    share = holder.rest_share * (X - [0.1, 0.0, 0.0] - t.V)
+    np.testing.assert_allclose(rest, t.V + share, atol=1e-12)
     assert held_rest(holder, refiner, 6) is None  # not next to frame 4
     holder.key = 3
     assert held_rest(holder, refiner, 5) is None  # held at another frame

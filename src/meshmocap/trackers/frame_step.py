@@ -281,7 +281,7 @@ def held_rest(
         return None
     if not holder.surface:  # the driver holds with the template's own surface
         return None
-    return holder.unposed(last[2], *holder.last)
+    return holder.rest_of(last[2], *holder.last)
 
 
 def _tracker_pose(recovery: Recovery, r: FrameResult) -> tuple[np.ndarray, np.ndarray] | None:

@@ -63,7 +63,13 @@ def test_the_hold_leaves_the_true_pose_where_it_is(scene):
 
 
 @pytest.mark.parametrize(
-    "kw", [{"iterations": 0}, {"surface_weight": -1.0}, {"lambda_pose": float("nan")}]
+    "kw",
+    [
+        {"iterations": 0},
+        {"surface_weight": -1.0},
+        {"lambda_pose": float("nan")},
+        {"rest_share": 1.5},
+    ],
 )
 def test_bad_options_are_refused_in_one_line(scene, kw):
     with pytest.raises(InputError, match="SkeletonHold") as e:
@@ -77,6 +83,19 @@ def test_unposed_puts_a_posed_surface_back_in_the_rest_pose(scene):
     t, posed, (R, root), _ = scene
     hold = SkeletonHold(t, n_model_points=200, iterations=1)
     np.testing.assert_allclose(hold.unposed(posed.V, R, root), t.V, atol=1e-9)
+
+
+def test_the_rest_surface_keeps_its_share_of_the_offset_from_the_template(scene):
+    """rest_of: a surface held at a skeleton slid 2 cm up inside it goes back to rest 2 cm
+    low by unposed, and by rest_of only its share β of that; β = 1 is unposed itself."""
+    t, posed, (R, root), _ = scene
+    high = root + np.array([0.0, 0.0, 0.02])
+    hold = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=0.7)
+    U = hold.unposed(posed.V, R, high)
+    assert np.linalg.norm(U - t.V, axis=1).mean() > 0.019
+    np.testing.assert_allclose(hold.rest_of(posed.V, R, high) - t.V, 0.7 * (U - t.V), atol=1e-12)
+    whole = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=1.0)
+    np.testing.assert_allclose(whole.rest_of(posed.V, R, high), U, atol=1e-12)
 
 
 def test_a_rest_surface_is_the_body_fitted(scene):

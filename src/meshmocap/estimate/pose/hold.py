@@ -27,7 +27,10 @@ pose by the inverse of each vertex's blended transform
 Far from the template's own pose a skin leaves the body (the template's rig cannot follow
 a real performer's muscles and clothes), and fitted against the observations it slides to
 make up for it; the frame before's surface, where the refinement anchored each vertex to
-its place, is this frame's body one frame of motion away.
+its place, is this frame's body one frame of motion away. Its offset from the template's
+rest surface is kept at a share ``β`` (:meth:`SkeletonHold.rest_of`): that offset also
+holds, the other way round, any slide of the skeleton inside the body on the frame before,
+which the next fit, against the surface alone, would carry on unchanged.
 
 On a clean 4D capture the driver also fits the patch tracker's frame from the last held
 pose, and keeps the fit of lower :meth:`SkeletonHold.cost` (the patches can slide along a
@@ -76,7 +79,12 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.pose.fit import pose_of_vertices
 from meshmocap.geometry.mesh import vertex_normals
 
-__all__ = ["SkeletonHold"]
+__all__ = ["BETA", "SkeletonHold"]
+
+#: The share of the frame before's refined surface's offset from the template kept in the
+#: body the hold fits (:meth:`SkeletonHold.rest_of`); chosen on the crane and the two
+#: synthetic 4D walks (``docs/guide/own_capture.rst``).
+BETA = 0.7
 
 
 class SkeletonHold:
@@ -106,6 +114,9 @@ class SkeletonHold:
     surface : bool
         Whether the driver fits the frame before's refined surface where there is one
         (``rest`` of :meth:`fit`), or always the template's own.
+    rest_share : float
+        ``β`` in [0, 1]: the share of that surface's offset from the template's rest
+        surface kept in the body fitted (:meth:`rest_of`).
 
     Attributes
     ----------
@@ -126,6 +137,7 @@ class SkeletonHold:
         surface_weight: float = 0.0,
         lambda_pose: float = 1e-5,
         surface: bool = True,
+        rest_share: float = BETA,
     ):
         if int(iterations) < 1 or int(n_model_points) < 1 or int(max_points) < 1:
             raise InputError(
@@ -135,6 +147,9 @@ class SkeletonHold:
         for name, v in (("surface_weight", surface_weight), ("lambda_pose", lambda_pose)):
             if not (np.isfinite(v) and v >= 0):
                 raise InputError(f"SkeletonHold: {name} must be ≥ 0, found {v!r}")
+        if not (np.isfinite(rest_share) and 0.0 <= rest_share <= 1.0):
+            raise InputError(f"SkeletonHold: rest_share must be in [0, 1], found {rest_share!r}")
+        self.rest_share = float(rest_share)
         self.template = template
         self.model_ = articulated_model(template, n_points=int(n_model_points), seed=0)
         self.plan_ = moment_plan(self.model_)
@@ -172,6 +187,21 @@ class SkeletonHold:
         B = np.asarray(self.template.weights @ A.reshape(len(A), 12)).reshape(-1, 3, 4)
         X = np.asarray(X, dtype=np.float64)
         return np.linalg.solve(B[:, :, :3], (X - B[:, :, 3])[..., None])[..., 0]
+
+    def rest_of(self, X: np.ndarray, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+        """The rest surface (n, 3) float64 the hold skins for a surface ``X`` (n, 3) held in
+        the pose ``R`` (J, 3, 3), ``root`` (3,) (metres): :meth:`unposed`, its offset ``D``
+        from the template's rest surface ``V`` kept at the share ``rest_share`` ``β``::
+
+            rest = V + β D
+
+        ``D`` holds what the template's rig cannot carry (the performer's clothes and
+        muscles), but also, turned the other way, any slide of the skeleton inside the
+        body: fitted against the surface alone, that skin is held at the same slid pose on
+        the next frame. With ``β`` < 1 a slide is forgotten at that rate frame by frame
+        instead of carried on."""
+        V0 = self.template.V
+        return V0 + self.rest_share * (self.unposed(X, R, root) - V0)
 
     def fit(
         self,
