@@ -154,7 +154,9 @@ class Recovery:
         R, root = self.track_pose(V, start)
         if self.held is None:  # the first frame checked: every limb as tracked
             self.held = R.copy()
-        Vc = self.template.pose(self.coast_pose(R), root).V
+        # posed as last seen (Vc) and in the pose fitted (W, its joints), skinned in one pass
+        both = self.template.pose(np.stack([self.coast_pose(R), R]), np.stack([root, root]))
+        (Vc, W), joints = both.V, both.joints[1]
         out = np.zeros(len(Vc), dtype=bool)  # only the limbs' vertices are looked at
         out[self._limb_vertices] = (
             _sides(observed(frame).field, Vc[self._limb_vertices], -np.inf, UNSEEN_MARGIN) > 0
@@ -173,8 +175,7 @@ class Recovery:
                 self.missing.discard(n)
         # the limbs held as last seen: past the fit quality's own thresholds, or missed
         held = tuple(n for n in LIMB_PARTS if n in q.lost or n in self.missing)
-        joints = forward_kinematics(self.template.skeleton, R, root)[1]
-        evidence = self._evidence(q, V, R, root, joints)
+        evidence = self._evidence(q, V, W, joints)
         self.history = [*self.history[-2:], joints]
         for n, idx in self.limb_joints.items():
             if n not in held:
@@ -191,15 +192,16 @@ class Recovery:
         )
         return self.quality
 
-    def _evidence(self, q: FitQuality, V, R, root, joints) -> np.ndarray:
+    def _evidence(self, q: FitQuality, V, W, joints) -> np.ndarray:
         """(L, E) the frame's evidence (:data:`~meshmocap.estimate.recovery.evidence.EVIDENCE`,
         limbs in :data:`~meshmocap.estimate.recovery.quality.LIMB_PARTS` order): the fit
         quality ``q``, the limbs missed, the RMS distance of the tracked vertices ``V`` from
-        the articulated pose ``(R, root)`` fitted to them, and each limb's joints' motion
-        relative to the pelvis since the last frame assessed (0 on the first)."""
+        ``W``, the template in the articulated pose fitted to them (its joints ``joints``),
+        and each limb's joints' motion relative to the pelvis since the last frame assessed
+        (0 on the first)."""
         n = len(LIMB_PARTS)
         on = self.labels >= 0
-        d2 = np.sum((V - self.template.pose(R, root).V) ** 2, axis=1)
+        d2 = np.sum((V - W) ** 2, axis=1)
         counts = np.maximum(np.bincount(self.labels[on], minlength=n), 1)
         residual = np.sqrt(np.bincount(self.labels[on], d2[on], minlength=n) / counts)
         speed = np.zeros(n)
