@@ -190,9 +190,11 @@ def posed_kernel(R, root, parents, offsets, rest, indptr, cols, w, Xe, N0):  # p
     T = np.empty((J, 3))  # translations of the skinning transforms
     for j in range(J):
         p = parents[j]
-        if p < 0:
-            G[j] = R[j]
-            P[j] = root
+        if p < 0:  # element by element: a slice assignment would compile numba's shape
+            for a in range(3):  # mismatch message, the longest part of this kernel's compile
+                P[j, a] = root[a]
+                for c in range(3):
+                    G[j, a, c] = R[j, a, c]
         else:
             o = offsets[j]
             for a in range(3):
