@@ -71,6 +71,27 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
     assert _python(call, tmp_path) == "(3, 3) 1 0"  # loaded by the call: one hit, no miss
 
 
+def test_the_background_compiler_held_back_compiles_the_named_modules_first(tmp_path):
+    """While :func:`compiling_only` names the first pose's kernels, the background child
+    compiles those and holds the classifier's back (the body's processes have the cores);
+    when the block ends it compiles them too."""
+    pose, softmax = "meshmocap.estimate.pose._kernels", "meshmocap.models._softmax"
+    code = (
+        "import time; from meshmocap.apps import kernels as k\n"
+        f"pose, softmax = {pose!r}, {softmax!r}\n"
+        "p = k.start_compiling([pose, softmax])\n"
+        "with k.compiling_only((pose,)):\n"
+        "    end = time.monotonic() + 300\n"
+        "    while k.uncached_kernels([pose]) and time.monotonic() < end:\n"
+        "        time.sleep(0.1)\n"
+        "    time.sleep(2.0)  # a child not held would compile the classifier's meanwhile\n"
+        "    held = (k.uncached_kernels([pose]), len(k.uncached_kernels([softmax])))\n"
+        "p.wait()\n"
+        "print(held, k.uncached_kernels([pose, softmax]), p.returncode)"
+    )
+    assert _python(code, tmp_path) == "([], 2) [] 0"
+
+
 @pytest.mark.slow
 def test_tracking_compiles_only_the_listed_signatures(synth_capture, tmp_path):
     """Each tracker follows a short walk with the checks on: every signature its kernels

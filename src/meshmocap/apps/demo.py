@@ -33,7 +33,7 @@ from meshmocap.apps.figures.render import render_motion
 from meshmocap.apps.files.evaluation import write_evaluation
 from meshmocap.apps.files.export import export_track
 from meshmocap.apps.files.gait import gait_of, write_gait
-from meshmocap.apps.kernels import start_compiling
+from meshmocap.apps.kernels import compiling_only, start_compiling
 from meshmocap.apps.report.page import (
     Section,
     comparison_table,
@@ -309,12 +309,15 @@ def demo_tracks(
     """
     out = Path(out)
     folders = [out / f"track_{method}" for method in methods]
-    choice = tracking_template(cap, template, folders[0])
-    for folder in folders[1:]:
-        if "template_file" in choice.info:  # each track keeps its template
-            folder.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
-    start = first_start(cap, choice)  # once for every method
+    # the background compiler holds the trackers' kernels back until the body and the
+    # first pose, which use both cores, are done (meshmocap.apps.kernels)
+    with compiling_only():
+        choice = tracking_template(cap, template, folders[0])
+        for folder in folders[1:]:
+            if "template_file" in choice.info:  # each track keeps its template
+                folder.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(folders[0] / SUBJECT_FILE, folder / SUBJECT_FILE)
+        start = first_start(cap, choice)  # once for every method
     jobs = min(job_count(), len(methods))
     # side by side, the trackers' progress lines would mix: the parent says what runs
     progress = show_progress if jobs == 1 else False

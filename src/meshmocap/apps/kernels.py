@@ -12,7 +12,9 @@ it with, in the order a command meets them. Each kernel is compiled by one proce
 (a lock file per kernel, ``meshmocap._numba``): a command or worker that reaches a
 kernel the child is compiling waits for it and loads it from the cache, and one it
 reaches first it compiles itself, the child then loading it. With a warm cache the child
-only loads them (about a second of its own CPU).
+only loads them (about a second of its own CPU). While the performer's body is estimated
+and the first pose found, the child compiles only the kernels those meet
+(:func:`compiling_only`), the trackers' after them: the body's processes have the cores.
 
 ``python -m meshmocap.apps.kernels`` compiles them in the foreground and prints the CPU
 seconds each took.
@@ -21,11 +23,14 @@ seconds each took.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import importlib
 import os
+import select
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 
 #: Every kernel and the argument types it is called with (numba's signature notation:
 #: ``float64[:, ::1]`` a C-contiguous 2D array, ``int64[:]`` any 1D layout; read-only
@@ -199,18 +204,26 @@ def argument_types(signature: str) -> tuple:
     return tuple(sigutils.normalize_signature(f"({signature},)")[0])
 
 
-def compile_kernels(modules=None) -> dict[str, float]:
+def compile_kernels(
+    modules=None, *, before: Callable[[str], None] | None = None
+) -> dict[str, float]:
     """Compile every kernel of :data:`KERNELS` (of ``modules``, default all) with its
     argument types, or load it from numba's cache; returns the CPU seconds each took
     (compiling is single-threaded: on a quiet machine its wall time),
     ``"module:function"`` → s, and ``"module"`` → s for importing each module. A
-    signature the kernel has already costs nothing."""
+    signature the kernel has already costs nothing. ``before``: called with the module's
+    name before each module and kernel (the background child waits there while held
+    back, :func:`compiling_only`)."""
     out = {}
     for name in modules or KERNELS:
+        if before is not None:
+            before(name)
         t0 = time.process_time()
         module = importlib.import_module(name)
         out[name] = time.process_time() - t0
         for function, signatures in KERNELS[name].items():
+            if before is not None:
+                before(name)
             t0 = time.process_time()
             for sig in signatures:
                 getattr(module, function).compile(argument_types(sig))
@@ -284,9 +297,9 @@ def start_compiling(modules=None) -> subprocess.Popen | None:
     todo = [m for m in modules if m in missing]  # in the order a command meets them
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "meshmocap.apps.kernels", "--quiet", *todo],
+            [sys.executable, "-m", "meshmocap.apps.kernels", "--quiet", "--listen", *todo],
             env=env,
-            stdin=subprocess.DEVNULL,
+            stdin=subprocess.PIPE,  # compiling_only's lines
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
@@ -306,6 +319,9 @@ def stop_compiling(proc: subprocess.Popen | None) -> None:
     if proc.poll() is None:
         proc.terminate()
     proc.wait()
+    if proc.stdin is not None:
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
     if proc in _RUNNING:
         _RUNNING.remove(proc)
 
@@ -315,15 +331,75 @@ def _stop_all() -> None:
         stop_compiling(proc)
 
 
+@contextlib.contextmanager
+def compiling_only(modules: tuple[str, ...] = SHARED) -> Iterator[None]:
+    """While the ``with`` block runs, the background compilations this process started
+    (:func:`start_compiling`) compile the kernels of ``modules`` only (default
+    :data:`SHARED`: those estimating the performer's body and finding the first pose
+    meet) and wait before any other module's, so that the block's own processes have the
+    cores; they go on when the block ends. A process of the block that reaches a kernel
+    held back compiles it itself, as without the child."""
+    _tell("only " + " ".join(modules))
+    try:
+        yield
+    finally:
+        _tell("all")
+
+
+def _tell(line: str) -> None:
+    """Send ``line`` to every running background compilation (:func:`_listen` reads it)."""
+    for proc in _RUNNING:
+        if proc.poll() is not None or proc.stdin is None:
+            continue
+        try:
+            proc.stdin.write(f"{line}\n".encode())
+            proc.stdin.flush()
+        except OSError:  # it ended meanwhile: nothing to hold back
+            pass
+
+
+def _listen(fd: int) -> Callable[[str], None]:
+    """The child's side of :func:`compiling_only`: the wait called before each module and
+    kernel, which reads the ``only MODULE...`` and ``all`` lines sent to the file
+    descriptor ``fd`` so far and returns at once for a module allowed, else when ``all``
+    or the end of the input (the parent gone) comes."""
+    only: list = [None]  # the modules allowed; None: every one
+    rest = [b""]  # a line's start, its end not read yet
+
+    def read(block: bool) -> None:
+        while block or select.select([fd], [], [], 0)[0]:
+            data = os.read(fd, 4096)
+            if not data:  # the parent is gone: nothing is held back any more
+                only[0] = None
+                return
+            *lines, rest[0] = (rest[0] + data).split(b"\n")
+            for line in lines:
+                words = line.decode().split()
+                only[0] = set(words[1:]) if words[:1] == ["only"] else None
+            block = False  # what else was sent, without waiting for more
+
+    def wait(module: str) -> None:
+        try:
+            read(block=False)
+            while only[0] is not None and module not in only[0]:
+                read(block=True)
+        except (OSError, ValueError):  # no select on this input (Windows): never held
+            only[0] = None
+
+    return wait
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m meshmocap.apps.kernels [--quiet] [MODULE...]``: compile the kernels (of
-    those modules of :data:`KERNELS`, default all), print the CPU seconds each took
-    (nothing with ``--quiet``)."""
+    """``python -m meshmocap.apps.kernels [--quiet] [--listen] [MODULE...]``: compile the
+    kernels (of those modules of :data:`KERNELS`, default all), print the CPU seconds each
+    took (nothing with ``--quiet``); ``--listen``: held back by lines on the standard
+    input (:func:`compiling_only`)."""
     args = sys.argv[1:] if argv is None else argv
     quiet = "--quiet" in args
     modules = [a for a in args if a in KERNELS]
+    before = _listen(sys.stdin.fileno()) if "--listen" in args else None
     t0 = time.process_time()
-    seconds = compile_kernels(modules)
+    seconds = compile_kernels(modules, before=before)
     if not quiet:
         for name, s in seconds.items():
             print(f"{s:7.2f} s  {'importing ' * (':' not in name)}{name}")
