@@ -30,7 +30,7 @@ from numba.core.compiler_lock import global_compiler_lock
 
 from meshmocap.errors import KernelCacheWarning
 
-__all__ = ["njit"]
+__all__ = ["compiling_elsewhere", "njit"]
 
 _warned: list[bool] = []
 #: The kernels' lock files this process holds (a kernel compiled inside another's
@@ -90,21 +90,48 @@ def _compile_once(kernel) -> None:
     kernel.compile = compile_locked
 
 
-@contextlib.contextmanager
-def _lock_file(kernel) -> Iterator[None]:
-    """Hold ``kernel``'s lock file (``<its cache entry>.lock``) while the block runs; no
-    lock where there is none to take (no ``fcntl``, no writable cache folder, a file
-    system that refuses locks)."""
+def _lock_path(kernel) -> str | None:
+    """``kernel``'s lock file, ``<its cache entry>.lock`` (None where numba's internals
+    changed)."""
     try:
         cache = kernel._cache
-        path = os.path.join(cache.cache_path, cache._cache_file._index_name + ".lock")
-    except AttributeError:  # numba's internals changed: no lock
-        path = None
+        return os.path.join(cache.cache_path, cache._cache_file._index_name + ".lock")
+    except AttributeError:
+        return None
+
+
+def compiling_elsewhere(kernel) -> bool:
+    """Whether another process holds the cached ``kernel``'s lock file now (compiles it or
+    loads it, module docstring); False where there is no lock to look at."""
+    path = _lock_path(kernel)
+    if fcntl is None or path is None or path in _HELD:
+        return False
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except OSError:  # no lock file: never compiled here
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # a file system without locks
+        return False
+    finally:
+        os.close(fd)  # releases the lock if it was taken
+    return False
+
+
+@contextlib.contextmanager
+def _lock_file(kernel) -> Iterator[None]:
+    """Hold ``kernel``'s lock file (:func:`_lock_path`) while the block runs; no lock
+    where there is none to take (no ``fcntl``, no writable cache folder, a file system
+    that refuses locks)."""
+    path = _lock_path(kernel)
     if fcntl is None or path is None or path in _HELD:
         yield
         return
     try:
-        cache._impl.locator.ensure_cache_path()
+        kernel._cache._impl.locator.ensure_cache_path()
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError:
         yield

@@ -13,7 +13,7 @@ import sys
 import pytest
 from numba.core import sigutils
 
-from meshmocap.apps.kernels import KERNELS, SHARED, kernels_of, uncached_kernels
+from meshmocap.apps.kernels import KERNELS, SHARED, compile_kernels, kernels_of, uncached_kernels
 
 MESH = "meshmocap.geometry._mesh_kernels"
 
@@ -69,6 +69,20 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
         "sum(k.stats.cache_misses.values()))"
     )
     assert _python(call, tmp_path) == "(3, 3) 1 0"  # loaded by the call: one hit, no miss
+
+
+def test_a_kernel_another_process_is_compiling_is_left_for_the_end(monkeypatch):
+    """The compiler does not wait for a kernel a worker is compiling: it compiles the next
+    ones meanwhile and loads that one last."""
+    import meshmocap._numba
+
+    pose = "meshmocap.estimate.pose._kernels"
+    busy = "nearest_d2_kernel"
+    monkeypatch.setattr(
+        meshmocap._numba, "compiling_elsewhere", lambda k: k.py_func.__name__ == busy
+    )
+    seconds = compile_kernels([pose])
+    assert list(seconds) == [pose, f"{pose}:nearest_kernel", f"{pose}:{busy}"]
 
 
 def test_the_background_compiler_held_back_compiles_the_named_modules_first(tmp_path):

@@ -120,6 +120,45 @@ def test_a_kernel_another_process_is_compiling_is_loaded_from_its_cache_not_comp
     assert called.split()[-2:] == ["0", "1"], err  # loaded by the caller: no second compile
 
 
+_CHECK = """
+from meshmocap._numba import compiling_elsewhere
+from kernel import double
+
+print(compiling_elsewhere(double))
+"""
+
+
+@pytest.mark.skipif(kernels.fcntl is None, reason="no fcntl: no lock taken")
+def test_a_kernel_another_process_holds_the_lock_of_is_compiling_elsewhere(tmp_path):
+    """While one process holds a kernel's lock, another sees the kernel being compiled
+    elsewhere (the background compiler then compiles the next one meanwhile); once the
+    lock is released, it does not."""
+    (tmp_path / "kernel.py").write_text(_KERNEL)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), env.get("PYTHONPATH", "")])
+
+    def check() -> str:
+        p = subprocess.run(
+            [sys.executable, "-c", _CHECK], env=env, capture_output=True, text=True, timeout=120
+        )
+        assert p.returncode == 0, p.stderr[-2000:]
+        return p.stdout.strip()
+
+    assert check() == "False"  # no lock file yet: never compiled
+    with subprocess.Popen(
+        [sys.executable, "-c", _HOLDER],
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    ) as holder:
+        assert holder.stdout.readline().strip() == "locked", holder.communicate()[1]
+        held = check()
+        holder.communicate("go\n", timeout=120)
+    assert (held, check()) == ("True", "False")
+
+
 @pytest.mark.skipif(kernels.fcntl is None, reason="no fcntl: no lock taken")
 def test_a_file_system_that_refuses_locks_compiles_unlocked(monkeypatch):
     """Where ``flock`` fails (some network file systems) the kernel compiles as numba does."""
