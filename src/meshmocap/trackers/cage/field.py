@@ -44,7 +44,7 @@ def _boundary_buckets(occ, b):  # pragma: no cover - compiled
     bx, by, bz = (nx + b - 1) // b, (ny + b - 1) // b, (nz + b - 1) // b
     count = np.zeros(bx * by * bz + 1, dtype=np.int64)
     m = 0
-    inner = np.zeros(occ.shape, dtype=np.bool_)
+    found = np.empty(nx * ny * nz, dtype=np.int64)  # flat indices, in scan order
     for i in range(nx):
         for j in range(ny):
             for k in range(nz):
@@ -64,20 +64,19 @@ def _boundary_buckets(occ, b):  # pragma: no cover - compiled
                     or not occ[i, j, k - 1]
                     or not occ[i, j, k + 1]
                 ):
-                    inner[i, j, k] = True
+                    found[m] = (i * ny + j) * nz + k
                     count[((i // b) * by + j // b) * bz + k // b + 1] += 1
                     m += 1
     for q in range(bx * by * bz):
         count[q + 1] += count[q]
     fill = count[:-1].copy()
     pts = np.empty((m, 3), dtype=np.int64)
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if inner[i, j, k]:
-                    q = ((i // b) * by + j // b) * bz + k // b
-                    pts[fill[q], 0], pts[fill[q], 1], pts[fill[q], 2] = i, j, k
-                    fill[q] += 1
+    for e in range(m):  # into their buckets, in scan order within each: no second scan
+        f = found[e]
+        i, j, k = f // (ny * nz), (f // nz) % ny, f % nz
+        q = ((i // b) * by + j // b) * bz + k // b
+        pts[fill[q], 0], pts[fill[q], 1], pts[fill[q], 2] = i, j, k
+        fill[q] += 1
     return pts, count, np.array([bx, by, bz], dtype=np.int64)
 
 
