@@ -56,6 +56,11 @@ __all__ = [
     "skinned_points",
 ]
 
+#: Relative margin (of a cell's width) by which a nearest point must lie inside the square
+#: of cells searched to end :func:`silhouette_residuals`' search: a projection's cell is
+#: found by rounding, so one in a farther cell may lie by a hair nearer than its side.
+_EDGE_SLACK = 1e-9
+
 
 @njit(cache=True, nogil=True)
 def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover - compiled
@@ -128,8 +133,17 @@ def silhouette_residuals(P, R, t, K, q, ptr, margin, cap):  # pragma: no cover -
                             d2 = (u[i] - qx) ** 2 + (v[i] - qy) ** 2
                             if d2 < best or (d2 == best and i < bi):
                                 best, bi = d2, i
-                if bi >= 0 and np.sqrt(best) <= ring * cell:
-                    break  # a point in a farther ring lies at least ring · cell away
+                # a point in a farther ring lies beyond the nearest side of the square of
+                # cells searched (at least ring · cell away; by a hair less where rounding
+                # put it in a cell)
+                edge = min(
+                    qx - x0 - (ix - ring) * cell,
+                    (ix + ring + 1) * cell - (qx - x0),
+                    qy - y0 - (iy - ring) * cell,
+                    (iy + ring + 1) * cell - (qy - y0),
+                )
+                if bi >= 0 and np.sqrt(best) < edge - _EDGE_SLACK * cell:
+                    break
             if bi < 0:
                 continue
             d = np.sqrt(best)
