@@ -361,3 +361,84 @@ def in_image_kernel(Xc, cam, ok):  # pragma: no cover - compiled
         u = fx * x + skew * y + cx
         v = fy * y + cy
         ok[i] = depth > 0 and u >= 0 and u <= width and v >= 0 and v <= height
+
+
+@njit(cache=True, nogil=True)
+def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
+    """In place, ``out`` (m,) bool: whether each point of ``Y`` (m, 3) lies farther than
+    ``r`` from every point of ``X`` (n ≥ 1, 3), finite. ``X`` is sorted by cell of a grid
+    over its box, cubic cells of side a little over ``r`` (doubled until there are at most
+    ``max_cells``); a point looks into its cell and the 26 around it, its own first, and
+    stops at the first point surely within ``r``. Squared distances as pykdtree sums them
+    (``(dx² + dy²) + dz²``), so the answer is pykdtree's ``d > r`` of a nearest-neighbour
+    query with ``distance_upper_bound=r`` (a miss: ``d = ∞``)."""
+    n = X.shape[0]
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        lo[a] = X[0, a]
+        hi[a] = X[0, a]
+    for s in range(1, n):
+        for a in range(3):
+            lo[a] = min(lo[a], X[s, a])
+            hi[a] = max(hi[a], X[s, a])
+    cell = r * (1.0 + 1e-6)  # rounding never puts a point within r two cells away
+    dims = np.empty(3, dtype=np.int64)
+    while True:
+        total = 1.0
+        for a in range(3):
+            total *= np.floor((hi[a] - lo[a]) / cell) + 1.0
+        if total <= max_cells:
+            break
+        cell *= 2.0
+    for a in range(3):
+        dims[a] = int(np.floor((hi[a] - lo[a]) / cell)) + 1
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    key = np.empty(n, dtype=np.int64)
+    cstart = np.zeros(nx * ny * nz + 1, dtype=np.int64)
+    for s in range(n):
+        i = min(int(np.floor((X[s, 0] - lo[0]) / cell)), nx - 1)
+        j = min(int(np.floor((X[s, 1] - lo[1]) / cell)), ny - 1)
+        k = min(int(np.floor((X[s, 2] - lo[2]) / cell)), nz - 1)
+        key[s] = (i * ny + j) * nz + k
+        cstart[key[s] + 1] += 1
+    for c in range(nx * ny * nz):
+        cstart[c + 1] += cstart[c]
+    fill = cstart[:-1].copy()
+    Xs = np.empty((n, 3))
+    for s in range(n):  # counting sort by cell
+        u = fill[key[s]]
+        fill[key[s]] += 1
+        for a in range(3):
+            Xs[u, a] = X[s, a]
+    r2 = r * r
+    sure = r2 * (1.0 - 1e-9)  # below this, √ cannot round past r
+    for t in range(Y.shape[0]):
+        y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
+        f0 = (y0 - lo[0]) / cell
+        f1 = (y1 - lo[1]) / cell
+        f2 = (y2 - lo[2]) / cell
+        if not (-1.0 <= f0 < nx + 1.0 and -1.0 <= f1 < ny + 1.0 and -1.0 <= f2 < nz + 1.0):
+            out[t] = True  # no cell of the grid within one cell
+            continue
+        g0, g1, g2 = int(np.floor(f0)), int(np.floor(f1)), int(np.floor(f2))
+        best = np.inf
+        for o in range(27):
+            # o = 0 is the point's own cell, then the 26 around it
+            a = (o + 13) % 27
+            i, j, k = g0 + a // 9 - 1, g1 + (a // 3) % 3 - 1, g2 + a % 3 - 1
+            if i < 0 or i >= nx or j < 0 or j >= ny or k < 0 or k >= nz:
+                continue
+            c = (i * ny + j) * nz + k
+            for s in range(cstart[c], cstart[c + 1]):
+                dx = Xs[s, 0] - y0
+                dy = Xs[s, 1] - y1
+                dz = Xs[s, 2] - y2
+                d2 = (dx * dx + dy * dy) + dz * dz
+                if d2 < best:
+                    best = d2
+                    if best < sure:
+                        break
+            if best < sure:
+                break
+        out[t] = not best < r2 or np.sqrt(best) > r

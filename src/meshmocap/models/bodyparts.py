@@ -60,7 +60,6 @@ from dataclasses import dataclass
 from typing import Literal, get_args
 
 import numpy as np
-from pykdtree.kdtree import KDTree
 from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 from sklearn.svm import SVC
@@ -68,6 +67,7 @@ from sklearn.svm import SVC
 from meshmocap._tolerances import DIVISOR_FLOOR, ROUNDING_SLACK
 from meshmocap._validate import check_choice
 from meshmocap.errors import InputError
+from meshmocap.geometry.nearby import farther_than
 from meshmocap.models._softmax import SoftmaxRegression
 
 Method = Literal["svc", "logistic"]
@@ -313,8 +313,9 @@ class BodyPartClassifier:
         Per-axis standard deviation of the training points, metres (1 where zero).
     n_train_ : int
         Number of training vertices the model saw (after subsampling).
-    tree_ : pykdtree.kdtree.KDTree
-        All the training points given to :meth:`fit` (for ``partition(max_distance=)``).
+    points_ : (n, 3) float64
+        All the training points given to :meth:`fit`, metres (for
+        ``partition(max_distance=)``).
     coef_, intercept_ : (k, 3), (k,) float64
         ``"logistic"`` only: the fitted logits on world coordinates, ``coef_ @ x +
         intercept_`` (``k`` = number of classes, 1 for two), for ``fit(coef_init=)``.
@@ -446,7 +447,7 @@ class BodyPartClassifier:
         self.mean_ = mean
         self.scale_ = scale
         self.n_train_ = len(idx)
-        self.tree_ = KDTree(np.ascontiguousarray(X, dtype=np.float64))
+        self.points_ = np.ascontiguousarray(X, dtype=np.float64)
         return self
 
     # -- prediction -------------------------------------------------------------------------
@@ -594,8 +595,7 @@ def partition(
     kind[p > on_bone] = ON_BONE
     kind[p <= outlier] = OUTLIER
     if max_distance is not None and len(Y):
-        d, _ = classifier.tree_.query(Y, k=1, distance_upper_bound=float(max_distance))
-        kind[d > max_distance] = OUTLIER  # misses come back as inf
+        kind[farther_than(Y, classifier.points_, radius=float(max_distance))] = OUTLIER
 
     keep = kind == NEAR_JOINT
     bone = np.flatnonzero(kind == ON_BONE)
