@@ -123,6 +123,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "boolean[::1], int64[::1], int64[::1], float64[::1], int64[::1], float64[:, ::1], "
             "float64[:, ::1], float64[:, ::1], float64, int64",
         ),
+        "add_plane_blocks": (
+            "float64[:, :, ::1], float64[::1], int64[::1], int64[::1], float64[:, ::1], "
+            "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64",
+        ),
         "add_moment_blocks": (
             "float64[:, :, ::1], float64[::1], float64[::1], float64[:, ::1], "
             "float64[:, :, ::1], float64[:, ::1], float64",

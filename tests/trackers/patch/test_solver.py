@@ -118,6 +118,27 @@ def test_point_to_plane_gradient(setup):
         assert fd == pytest.approx(2 * sys.g[i], rel=1e-5, abs=1e-7)
 
 
+def test_compiled_plane_rows_equal_the_numpy_ones(setup):
+    """The point-to-plane rows of vertices moved by their own patch, formed and summed in
+    one compiled pass (add_plane_vertex_terms, as the data term adds them): the blocks,
+    gradient and value of add_plane_terms on the same rows, to rounding, and symmetric
+    blocks (the gradient of these rows is checked against finite differences above)."""
+    from meshmocap.trackers.patch.solver import add_plane_terms, add_plane_vertex_terms
+
+    m, _, R, c, _, (patch, v, y, w) = setup
+    n = RNG.normal(size=(len(y), 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    V = np.einsum("nij,nj->ni", R[m.labels], m.V0 - m.centres0[m.labels]) + c[m.labels]
+    ref, new = System.empty(normal_pattern(m, 15)), System.empty(normal_pattern(m, 15))
+    q = V[v] - c[patch]
+    e_ref = add_plane_terms(ref, patch, q, n, np.sum(n * (V[v] - y), axis=1), w, 0.7)
+    e_new = add_plane_vertex_terms(new, patch, v, V, c, y, n, w, 0.7)
+    assert e_new == pytest.approx(e_ref, rel=1e-12)
+    assert np.allclose(new.D, ref.D, rtol=1e-10, atol=1e-14 * np.abs(ref.D).max())
+    assert np.allclose(new.g, ref.g, rtol=1e-10, atol=1e-14 * np.abs(ref.g).max())
+    assert np.array_equal(new.D, np.swapaxes(new.D, 1, 2))
+
+
 def test_the_solve_agrees_with_a_direct_solve_on_the_coordinates(setup):
     """The pattern's precomputed order and compressed columns give the step of a direct
     sparse solve of the same equations assembled from coordinates (block by block, with

@@ -204,6 +204,43 @@ def reverse_moments(ok, vert, near, d, labels, V, c, Y, scale, n_p):
 
 
 @njit(cache=True, nogil=True)
+def add_plane_blocks(D, g, patch, vert, V, c, Y, NY, w, weight):
+    """In place, the point-to-plane rows of vertices moved by their own patch
+    (:func:`~meshmocap.trackers.patch.solver.add_plane_vertex_terms`): row ``t`` has
+    ``q = V[vert[t]] − c[k]`` (``k = patch[t]``), the residual ``s = n · (V[vert[t]] −
+    Y[t])`` along ``n = NY[t]`` and the Jacobian row ``J = [q × n, n]``; ``D[k] += weight ·
+    w J Jᵀ`` (D (P, 6, 6)) and ``g[6k:6k + 6] += weight · w s J`` (g (n,)), in one pass
+    without an (m, 6) array. Returns ``Σ w s²`` (before ``weight``)."""
+    value = 0.0
+    J = np.empty(6)
+    B = np.zeros(D.shape)  # the upper triangles of Σ w J Jᵀ
+    for t in range(patch.shape[0]):
+        k = patch[t]
+        v = vert[t]
+        q0, q1, q2 = V[v, 0] - c[k, 0], V[v, 1] - c[k, 1], V[v, 2] - c[k, 2]
+        n0, n1, n2 = NY[t, 0], NY[t, 1], NY[t, 2]
+        st = (n0 * (V[v, 0] - Y[t, 0]) + n1 * (V[v, 1] - Y[t, 1])) + n2 * (V[v, 2] - Y[t, 2])
+        J[0] = q1 * n2 - q2 * n1
+        J[1] = q2 * n0 - q0 * n2
+        J[2] = q0 * n1 - q1 * n0
+        J[3], J[4], J[5] = n0, n1, n2
+        wt = w[t]
+        value += wt * st * st
+        for i in range(6):
+            wj = weight * wt * J[i]
+            g[6 * k + i] += wj * st
+            for j in range(i, 6):
+                B[k, i, j] += wj * J[j]
+    for k in range(D.shape[0]):
+        for i in range(6):
+            D[k, i, i] += B[k, i, i]
+            for j in range(i + 1, 6):
+                D[k, i, j] += B[k, i, j]
+                D[k, j, i] += B[k, i, j]
+    return value
+
+
+@njit(cache=True, nogil=True)
 def add_moment_blocks(D, g, W, s, Q, G, weight):
     """In place: ``D[k] += weight · Σ w A(q)ᵀ A(q)`` (D (P, 6, 6)) for every patch ``k``
     with ``W[k] > 0``, from its moments ``W`` (n_p,), ``s`` (n_p, 3), ``Q`` (n_p, 3, 3)

@@ -48,6 +48,7 @@ from meshmocap.trackers.patch.kernels import (
     add_length_blocks,
     add_moment_blocks,
     add_pair_blocks,
+    add_plane_blocks,
     block_cholesky,
     block_cholesky_solve,
     factor_values,
@@ -579,6 +580,38 @@ def add_plane_terms(
     sys.add_patches(used, weight * blocks[used].reshape(-1, 6, 6), unique=True)
     sys.add_g(6 * patch, weight * WJ * s[:, None])
     return float(np.sum(w * s * s))
+
+
+def add_plane_vertex_terms(
+    sys: System,
+    patch: np.ndarray,
+    vertex: np.ndarray,
+    V: np.ndarray,
+    c: np.ndarray,
+    Y: np.ndarray,
+    n: np.ndarray,
+    w: np.ndarray,
+    weight: float,
+) -> float:
+    """:func:`add_plane_terms` for vertices moved by their own patch, compiled: row ``t``
+    measures vertex ``vertex[t]`` of patch ``patch[t]`` (m,) int, placed at ``V`` (n, 3)
+    (``c`` (P, 3) the patch centres), from ``Y[t]`` (m, 3) along the unit normal ``n[t]``
+    (m, 3), weight ``w[t]`` (m,): ``q = V[vertex] − c[patch]``, ``s = n · (V[vertex] −
+    Y)``, formed in the one pass. Returns the weighted sum ``Σ w s²`` before ``weight``."""
+    return float(
+        add_plane_blocks(
+            sys.D,
+            sys.g,
+            np.ascontiguousarray(patch, dtype=np.int64),
+            np.ascontiguousarray(vertex, dtype=np.int64),
+            np.ascontiguousarray(V, dtype=np.float64),
+            np.ascontiguousarray(c, dtype=np.float64),
+            np.ascontiguousarray(Y, dtype=np.float64),
+            np.ascontiguousarray(n, dtype=np.float64),
+            np.ascontiguousarray(w, dtype=np.float64),
+            float(weight),
+        )
+    )
 
 
 def length_residuals(

@@ -55,8 +55,7 @@ from meshmocap.trackers.patch.solver import (
     System,
     add_bone,
     add_bone_lengths,
-    add_plane_terms,
-    add_point_terms,
+    add_plane_vertex_terms,
     add_rigidity,
     add_vertex_terms,
     bone_joint_blocks,
@@ -220,11 +219,12 @@ class DataTerm(_Weighted):
         patch, v, w, y = k.patch, k.vertex, k.weight, k.point
         wd = max(float(w.sum()), DIVISOR_FLOOR)
         if self.residual == "point_to_plane":  # slide along the surface, with a little pull
-            q = it.V[v] - it.c[patch]  # R_k (v0 − c0_k): v is a vertex of its patch k
-            r = it.V[v] - y
-            s_n = np.sum(k.normal * r, axis=1)
-            e = add_plane_terms(sys, patch, q, k.normal, s_n, w, self.coefficient / wd)
-            add_point_terms(sys, patch, q, r, w, PLANE_POINT_MIX * self.coefficient / wd)
+            e = add_plane_vertex_terms(
+                sys, patch, v, it.V, it.c, y, k.normal, w, self.coefficient / wd
+            )
+            add_vertex_terms(
+                sys, patch, v, it.V, it.c, y, w, PLANE_POINT_MIX * self.coefficient / wd
+            )
             return e / wd
         # Eq. (7) as printed
         return add_vertex_terms(sys, patch, v, it.V, it.c, y, w, self.coefficient / wd) / wd
