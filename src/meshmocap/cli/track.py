@@ -333,7 +333,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=number(1, 100),
         help="patch tracker: iterations of a frame "
         "after a fast one (a joint moved > 5 cm), as a multiple of the usual "
-        "(default 2; 1 keeps every frame's cost the same)",
+        "(default 2.5; 1 keeps every frame's cost the same)",
     )
     k.add_argument(
         "--joint-readout",
