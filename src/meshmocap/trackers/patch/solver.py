@@ -471,6 +471,18 @@ def add_point_terms(
     return float(value)
 
 
+def _vertex_rows(patch, vertex, V, c, Y) -> tuple[np.ndarray, ...]:
+    """The arrays the vertex-row kernels read, contiguous: ``patch``, ``vertex`` int64,
+    ``V``, ``c``, ``Y`` float64 (:func:`add_vertex_terms`)."""
+    return (
+        np.ascontiguousarray(patch, dtype=np.int64),
+        np.ascontiguousarray(vertex, dtype=np.int64),
+        np.ascontiguousarray(V, dtype=np.float64),
+        np.ascontiguousarray(c, dtype=np.float64),
+        np.ascontiguousarray(Y, dtype=np.float64),
+    )
+
+
 def add_vertex_terms(
     sys: System,
     patch: np.ndarray,
@@ -488,13 +500,7 @@ def add_vertex_terms(
     formed in the one pass. Returns the weighted sum before ``weight``."""
     n_p = int(patch.max()) + 1 if len(patch) else 0
     W, s, Q, G, value = vertex_moments(
-        np.ascontiguousarray(patch, dtype=np.int64),
-        np.ascontiguousarray(vertex, dtype=np.int64),
-        np.ascontiguousarray(V, dtype=np.float64),
-        np.ascontiguousarray(c, dtype=np.float64),
-        np.ascontiguousarray(Y, dtype=np.float64),
-        np.ascontiguousarray(w, dtype=np.float64),
-        n_p,
+        *_vertex_rows(patch, vertex, V, c, Y), np.ascontiguousarray(w, dtype=np.float64), n_p
     )
     add_moment_blocks(sys.D, sys.g, W, s, Q, G, float(weight))
     return float(value)
@@ -602,11 +608,7 @@ def add_plane_vertex_terms(
         add_plane_blocks(
             sys.D,
             sys.g,
-            np.ascontiguousarray(patch, dtype=np.int64),
-            np.ascontiguousarray(vertex, dtype=np.int64),
-            np.ascontiguousarray(V, dtype=np.float64),
-            np.ascontiguousarray(c, dtype=np.float64),
-            np.ascontiguousarray(Y, dtype=np.float64),
+            *_vertex_rows(patch, vertex, V, c, Y),
             np.ascontiguousarray(n, dtype=np.float64),
             np.ascontiguousarray(w, dtype=np.float64),
             float(weight),
