@@ -363,6 +363,14 @@ def in_image_kernel(Xc, cam, ok):  # pragma: no cover - compiled
         ok[i] = depth > 0 and u >= 0 and u <= width and v >= 0 and v <= height
 
 
+#: Relative margin by which :func:`farther_kernel`'s cells exceed the radius: rounding
+#: never puts a point within the radius two cells away.
+CELL_MARGIN = 1e-6
+#: Relative slack below the squared radius under which :func:`farther_kernel` takes a
+#: point as surely within the radius: the square root of such a sum cannot round past it.
+SURE_SLACK = 1e-9
+
+
 @njit(cache=True, nogil=True)
 def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
     """In place, ``out`` (m,) bool: whether each point of ``Y`` (m, 3) lies farther than
@@ -382,7 +390,7 @@ def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
         for a in range(3):
             lo[a] = min(lo[a], X[s, a])
             hi[a] = max(hi[a], X[s, a])
-    cell = r * (1.0 + 1e-6)  # rounding never puts a point within r two cells away
+    cell = r * (1.0 + CELL_MARGIN)
     dims = np.empty(3, dtype=np.int64)
     while True:
         total = 1.0
@@ -412,7 +420,7 @@ def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
         for a in range(3):
             Xs[u, a] = X[s, a]
     r2 = r * r
-    sure = r2 * (1.0 - 1e-9)  # below this, √ cannot round past r
+    sure = r2 * (1.0 - SURE_SLACK)
     for t in range(Y.shape[0]):
         y0, y1, y2 = Y[t, 0], Y[t, 1], Y[t, 2]
         f0 = (y0 - lo[0]) / cell
