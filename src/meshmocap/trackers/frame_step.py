@@ -244,22 +244,43 @@ def held(
     clean 4D capture (``holder.surface``), where the tracker's surface is not its own
     articulated fit (the patch cloud, which slides along a loose surface such as a skirt,
     and whose pose then starts the fit far off), the fit is also started from the last held
-    pose and the pose of lower :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is
-    kept."""
+    pose, directly and through the template's own skin (:func:`_last_pose_fits`), and the
+    pose of lowest :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is kept."""
     rest = held_rest(holder, refiner, index)
     R, root = holder.start(r.vertices, *holder.last)
     R, root = holder.fit(*frame.points, r.vertices, R, root, rest=rest)
     if holder.surface and not _own_pose(r, holder):  # a clean 4D capture's slid surface
-        R2, root2 = holder.fit(*frame.points, r.vertices, *holder.last, rest=rest)
-        if holder.cost(*frame.points, R2, root2, rest=rest) < holder.cost(
-            *frame.points, R, root, rest=rest
-        ):
-            R, root = R2, root2
+        R, root = _lowest_cost(
+            holder, frame, [(R, root), *_last_pose_fits(holder, frame, r, rest)], rest
+        )
     holder.last, holder.key = (R, root), index
     h = tracker.hold(frame, R, root)
     if not is_finite_result(h):
         raise FitError("non-finite joints or vertices after holding the skeleton")
     return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
+
+
+def _last_pose_fits(
+    holder: SkeletonHold, frame, r: FrameResult, rest: np.ndarray | None
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The held fits of ``frame`` started from the last held pose: one of the body
+    ``rest`` (n, 3) directly, and one first fitted with the template's own skin, as
+    articulated ICP's step fits it, then with ``rest`` from there (the skin that the rig
+    carries is fitted before the body's own offsets, which can pull a fit along the
+    surface). Each a pose (R (J, 3, 3), root (3,))."""
+    pts = frame.points
+    direct = holder.fit(*pts, r.vertices, *holder.last, rest=rest)
+    skin = holder.fit(*pts, r.vertices, *holder.last)
+    return [direct, holder.fit(*pts, r.vertices, *skin, rest=rest)]
+
+
+def _lowest_cost(
+    holder: SkeletonHold, frame, fits: list[tuple[np.ndarray, np.ndarray]], rest
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pose of ``fits`` of lowest :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost`
+    against ``frame``'s observed points (the first of equal ones)."""
+    costs = [holder.cost(*frame.points, R, root, rest=rest) for R, root in fits]
+    return fits[int(np.argmin(costs))]
 
 
 def _own_pose(r: FrameResult, holder: SkeletonHold) -> bool:
