@@ -244,7 +244,7 @@ def held(
     clean 4D capture (``holder.surface``), where the tracker's surface is not its own
     articulated fit (the patch cloud, which slides along a loose surface such as a skirt,
     and whose pose then starts the fit far off), the fit is also started from the last held
-    pose, directly and through the template's own skin (:func:`_last_pose_fits`), and the
+    pose, directly and through the template's own skin (``_last_pose_fits``), and the
     pose of lowest :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is kept."""
     rest = held_rest(holder, refiner, index)
     R, root = holder.start(r.vertices, *holder.last)
