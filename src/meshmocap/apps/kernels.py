@@ -61,7 +61,9 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "int64, int8[::1]",
         ),
         "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
-        "farther_kernel": ("float64[:, ::1], float64[:, ::1], float64, float64, boolean[::1]",),
+        "farther_kernel": (
+            "float64[:, ::1], float64[:, ::1], float64, boolean, float64, boolean[::1]",
+        ),
     },
     "meshmocap.body._articulated_kernels": {
         "posed_kernel": (

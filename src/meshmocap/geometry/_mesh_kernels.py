@@ -372,14 +372,16 @@ SURE_SLACK = 1e-9
 
 
 @njit(cache=True, nogil=True)
-def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
+def farther_kernel(Y, X, r, bounded, max_cells, out):  # pragma: no cover - compiled
     """In place, ``out`` (m,) bool: whether each point of ``Y`` (m, 3) lies farther than
     ``r`` from every point of ``X`` (n ≥ 1, 3), finite. ``X`` is sorted by cell of a grid
     over its box, cubic cells of side a little over ``r`` (doubled until there are at most
     ``max_cells``); a point looks into its cell and the 26 around it, its own first, and
     stops at the first point surely within ``r``. Squared distances as pykdtree sums them
     (``(dx² + dy²) + dz²``), so the answer is pykdtree's ``d > r`` of a nearest-neighbour
-    query with ``distance_upper_bound=r`` (a miss: ``d = ∞``)."""
+    query: with ``distance_upper_bound=r`` where ``bounded`` (its bound is strict on the
+    squared distance; a miss: ``d = ∞``), of an unbounded one (``d``, the square root of
+    the least squared distance) otherwise."""
     n = X.shape[0]
     lo = np.empty(3)
     hi = np.empty(3)
@@ -449,4 +451,4 @@ def farther_kernel(Y, X, r, max_cells, out):  # pragma: no cover - compiled
                         break
             if best < sure:
                 break
-        out[t] = not best < r2 or np.sqrt(best) > r
+        out[t] = (bounded and not best < r2) or np.sqrt(best) > r

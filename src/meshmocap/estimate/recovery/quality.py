@@ -37,6 +37,7 @@ from pykdtree.kdtree import KDTree
 from meshmocap.body.template import Template
 from meshmocap.geometry.camera import Camera, project
 from meshmocap.geometry.distance_field import DistanceGrid
+from meshmocap.geometry.nearby import farther_than
 from meshmocap.geometry.silhouette import covered_pixels
 
 __all__ = [
@@ -300,13 +301,18 @@ def fit_quality(
         sides = np.where(sdf > OUTSIDE_MARGIN, 1, np.where(sdf < -BURIED_DEPTH, -1, 0))
     outside = limb_shares(labels, sides > 0)
     buried = limb_shares(labels, sides < 0)
-    d, i = KDTree(np.ascontiguousarray(V)).query(np.ascontiguousarray(P), k=1)
+    # the points far from every tracked vertex (pykdtree's unbounded d > r: the answers of
+    # its nearest distances), then the nearest vertex of the unexplained ones alone
     if cameras and masks is not None and F is not None:
-        far = d > SILHOUETTE_DISTANCE  # only these can be unexplained: only they are imaged
+        # only the points this far can be unexplained: only they are imaged
+        far = farther_than(P, V, radius=SILHOUETTE_DISTANCE, at_radius="near")
         far[far] = uncovered_points(V, F, P[far], cameras, masks)
     else:
-        far = d > UNEXPLAINED_DISTANCE
-    near = labels[np.asarray(i, dtype=np.int64)[far]]
+        far = farther_than(P, V, radius=UNEXPLAINED_DISTANCE, at_radius="near")
+    near = np.zeros(0, dtype=np.int64)
+    if far.any():
+        tree = KDTree(np.ascontiguousarray(V))
+        near = labels[np.asarray(tree.query(np.ascontiguousarray(P[far]), k=1)[1], dtype=np.int64)]
     near = _elsewhere(near, V, labels, P[far])
     votes = np.bincount(near[near >= 0], minlength=len(limbs)) / max(len(P), 1)
     unexplained = {n: float(votes[k]) for k, n in enumerate(limbs)}
