@@ -331,3 +331,63 @@ def test_usual_masks_decode_as_pillow_decodes_them(tmp_path):
     path.write_bytes(_png(binary, (1, 4), extra=text))
     with Image.open(path) as img:
         assert np.array_equal(read_mask(path), np.asarray(img) > 127)
+
+
+def _zlib_inflated(stream: bytes, size: int) -> bytes | None:
+    """What the mask reader asked of zlib: exactly ``size`` bytes, the stream's end, nothing
+    after it (None otherwise)."""
+    z = zlib.decompressobj()
+    try:
+        raw = z.decompress(stream, size + 1)
+    except zlib.error:
+        return None
+    ok = len(raw) == size and z.eof and not z.unused_data and not z.unconsumed_tail
+    return raw if ok else None
+
+
+def test_the_compiled_inflate_answers_as_zlib():
+    """Streams of every block kind (stored, fixed and dynamic codes; runs, rows, noise, as
+    each of zlib's strategies writes them), asked for their size, one byte more or less,
+    and damaged (a bit flipped, a byte replaced, cut, a byte after the end), and a stream
+    with a preset dictionary: the same bytes or the same refusal as zlib's; the intact
+    streams decoded by the kernel itself."""
+    from meshmocap.io._kernels import inflate_kernel, inflated
+
+    rng = np.random.default_rng(11)
+    mask = np.zeros((60, 81), dtype=np.uint8)
+    mask[10:50, 20:45] = 255
+    sources = [
+        bytes(3000),
+        rng.integers(0, 256, 2000, dtype=np.uint8).tobytes(),
+        np.repeat(rng.integers(0, 3, 80, dtype=np.uint8) * 127, rng.integers(1, 300, 80)).tobytes(),
+        np.c_[np.zeros(60, np.uint8), mask].tobytes(),  # a mask's rows, filter bytes first
+        b"",
+    ]
+    strategies = (zlib.Z_DEFAULT_STRATEGY, zlib.Z_FILTERED, zlib.Z_HUFFMAN_ONLY, zlib.Z_RLE)
+    decoded = streams = 0
+    for raw in sources:
+        for level, strategy in [(0, 0), (1, 0), (6, 0), (9, 0), *((6, s) for s in strategies)]:
+            for fixed in (False, True):
+                c = zlib.compressobj(
+                    level, zlib.DEFLATED, 15, 9, zlib.Z_FIXED if fixed else strategy
+                )
+                stream = c.compress(raw) + c.flush()
+                out = np.empty(len(raw), dtype=np.uint8)
+                decoded += inflate_kernel(np.frombuffer(stream, dtype=np.uint8), out) >= 0
+                streams += 1
+                damaged = [stream, stream[:-1], stream + b"\0", stream[: len(stream) // 2]]
+                for _ in range(6):
+                    b = bytearray(stream)
+                    i = int(rng.integers(2, len(b)))
+                    b[i] = b[i] ^ (1 << int(rng.integers(0, 8))) if rng.random() < 0.5 else 0xFF
+                    damaged.append(bytes(b))
+                for s in damaged:
+                    for size in {len(raw), len(raw) + 1, max(len(raw) - 1, 0)}:
+                        got = inflated(s, size)
+                        expect = _zlib_inflated(s, size)
+                        assert (got is None) == (expect is None)
+                        assert got is None or got.tobytes() == expect
+    assert decoded == streams  # every intact stream by the kernel
+    c = zlib.compressobj(6, zlib.DEFLATED, 15, 9, zlib.Z_DEFAULT_STRATEGY, zdict=b"\0" * 64)
+    stream = c.compress(bytes(100)) + c.flush()
+    assert inflated(stream, 100) is None and _zlib_inflated(stream, 100) is None

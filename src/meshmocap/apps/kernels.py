@@ -48,7 +48,11 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "mesh_faces_kernel": tuple(
             f"uint8[::1], {below}[:, ::1], int64[:, ::1]" for below in ("uint8", "uint16", "uint32")
         ),
-        "unfilter_kernel": ("Array(uint8, 1, 'C', readonly=True), uint8[:, ::1]",),
+        "inflate_kernel": ("Array(uint8, 1, 'C', readonly=True), uint8[::1]",),
+        "unfilter_kernel": (
+            "uint8[::1], uint8[:, ::1]",
+            "Array(uint8, 1, 'C', readonly=True), uint8[:, ::1]",
+        ),
     },
     "meshmocap.geometry._mesh_kernels": {
         "normals_at_kernel": ("float64[:, ::1], int64[:, ::1], int64[::1], int64",),
