@@ -147,3 +147,60 @@ def test_a_clean_4d_hold_also_starts_from_the_last_held_pose():
     # measured 4.5 and 4.8 mm (from the last pose alone 2.7: a fit continued past it lowers
     # the cost by sliding along the surface, which the cost cannot see)
     assert error[0] < error[1]
+
+
+def test_posed_body_skins_a_rest_surface_with_the_template_s_weights():
+    """posed_body: the template's own rest surface gives the template's skin; another rest
+    surface is skinned with the same weights (a rest offset moves with its vertex's blended
+    transform)."""
+    from meshmocap.body.procedural import procedural_motion
+    from meshmocap.body.template import load_template
+    from meshmocap.estimate.pose.hold import SkeletonHold
+    from meshmocap.trackers.frame_step import posed_body
+
+    t = load_template("neutral_5k")
+    m = procedural_motion("walk", t, duration=0.2, fps=30.0)
+    R, root = m.rotations[3], m.root_positions[3]
+    np.testing.assert_allclose(posed_body(t, t.V, R, root), t.pose(R, root).V, atol=1e-12)
+    rest = t.V + np.array([0.0, 0.0, 0.01])  # the whole body 1 cm up at rest
+    back = SkeletonHold(t, n_model_points=100).unposed(posed_body(t, rest, R, root), R, root)
+    np.testing.assert_allclose(back, rest, atol=1e-9)
+
+
+class _HeldOnto(_Held):
+    """A :class:`_Held` that records the body it is moved onto (``surface``)."""
+
+    def hold(self, frame, R, root, *, surface=None):
+        self.surface = surface
+        return super().hold(frame, R, root)
+
+
+def test_a_clean_4d_hold_places_a_patch_cloud_on_the_body_it_fitted():
+    """Where the hold fits the frame before's refined surface (held_rest), a tracker
+    without a pose of its own (a patch cloud) is moved onto that body skinned in the held
+    pose (posed_body), not onto the template's skin; without it, onto the skin as before."""
+    from meshmocap.body.procedural import procedural_motion
+    from meshmocap.body.template import load_template
+    from meshmocap.estimate.pose.hold import SkeletonHold
+    from meshmocap.geometry.mesh import vertex_normals
+    from meshmocap.geometry.refine import ArapRefiner
+    from meshmocap.trackers.frame_step import held, held_rest, posed_body
+
+    t = load_template("neutral_5k")
+    m = procedural_motion("walk", t, duration=0.3, fps=30.0)
+    R, root = m.rotations[5], m.root_positions[5]
+    posed = t.pose(R, root)
+    frame = type("Frame", (), {"index": 5, "points": (posed.V, vertex_normals(posed.V, t.F))})()
+    r = FrameResult(5, posed.eval_joints, posed.V, state={"R": np.zeros((7, 3, 3))})
+    holder = SkeletonHold(t, n_model_points=400, iterations=2)
+    refiner = ArapRefiner(t.V, t.F, iterations=1)
+    X = t.pose(m.rotations[4], m.root_positions[4]).V + [0.0, 0.0, 0.005]  # frame 4 refined
+    refiner.last_ = (4, np.zeros_like(X), X)
+    holder.last, holder.key = (m.rotations[4], m.root_positions[4]), 4
+    rest = held_rest(holder, refiner, 5)
+    tracker = _HeldOnto(t, posed.V)
+    held(tracker, holder, frame, r, refiner=refiner, index=5)
+    np.testing.assert_allclose(tracker.surface, posed_body(t, rest, *holder.last), atol=1e-12)
+    holder.key = 3  # no body from the frame before: the template's skin
+    held(tracker, holder, frame, r, refiner=refiner, index=5)
+    assert tracker.surface is None

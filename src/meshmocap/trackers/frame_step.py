@@ -19,6 +19,9 @@ from dataclasses import replace
 import numpy as np
 
 from meshmocap._timing import StageTimer, touched
+from meshmocap.body.skeleton import forward_kinematics
+from meshmocap.body.skinning import linear_blend_skinning, skinning_transforms
+from meshmocap.body.template import Template
 from meshmocap.errors import FitError, FormatError, MeshError, MeshmocapFileNotFoundError
 from meshmocap.estimate.pose.hold import SkeletonHold
 from meshmocap.estimate.recovery.observe import observed
@@ -249,15 +252,28 @@ def held(
     rest = held_rest(holder, refiner, index)
     R, root = holder.start(r.vertices, *holder.last)
     R, root = holder.fit(*frame.points, r.vertices, R, root, rest=rest)
+    body = None
     if holder.surface and not _own_pose(r, holder):  # a clean 4D capture's slid surface
         R, root = _lowest_cost(
             holder, frame, [(R, root), *_last_pose_fits(holder, frame, r, rest)], rest
         )
+        if rest is not None:  # the patches onto the body fitted, not the template's skin
+            body = posed_body(holder.template, rest, R, root)
     holder.last, holder.key = (R, root), index
-    h = tracker.hold(frame, R, root)
+    h = tracker.hold(frame, R, root) if body is None else tracker.hold(frame, R, root, surface=body)
     if not is_finite_result(h):
         raise FitError("non-finite joints or vertices after holding the skeleton")
     return replace(r, joints=h.joints, vertices=h.vertices, state={**r.state, **h.state})
+
+
+def posed_body(template: Template, rest: np.ndarray, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """The rest surface ``rest`` (n, 3) skinned with ``template``'s weights in the pose
+    ``R`` (J, 3, 3), ``root`` (3,): (n, 3) float64, metres (the body
+    :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.fit` fits with ``rest``)."""
+    sk = template.skeleton
+    G, P = forward_kinematics(sk, np.asarray(R, dtype=np.float64), root)
+    A = skinning_transforms(G, P, sk.rest_positions)
+    return linear_blend_skinning(np.asarray(rest, dtype=np.float64), template.weights, A)
 
 
 def _last_pose_fits(

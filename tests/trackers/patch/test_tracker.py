@@ -403,3 +403,21 @@ def test_observations_sample_the_points_with_their_normals(walk, max_points):
         pick = np.random.default_rng([0, 2]).choice(len(P), max_points, replace=False)
     np.testing.assert_array_equal(Y, P[pick])
     np.testing.assert_array_equal(N, NP[pick])
+
+
+def test_hold_places_the_patches_on_the_surface_given(walk):
+    """``hold`` fits the patches to the template posed by the held pose, or (``surface``)
+    to another body in that pose: the output then follows that body, and the joints stay
+    the skeleton's."""
+    cap, t = walk
+    tracker = PatchTracker(PatchOptions(n_patches=120))
+    f0, f1 = cap[0], cap[1]
+    tracker.init(t, f0, f0.truth.rotations, f0.truth.root)
+    R, root = f1.truth.rotations, f1.truth.root
+    posed = t.pose(R, root)
+    skin = tracker.hold(f1, R, root).vertices
+    body = posed.V + [0.0, 0.0, 0.01]  # another body in the same pose: 1 cm higher
+    held = tracker.hold(f1, R, root, surface=body)
+    near = [np.linalg.norm(V - body, axis=1).mean() for V in (held.vertices, skin)]
+    assert near[0] < 0.3 * near[1]  # the patches follow the body given, not the skin
+    np.testing.assert_array_equal(held.state["X"], posed.eval_joints)

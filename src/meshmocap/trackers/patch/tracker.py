@@ -191,12 +191,24 @@ class PatchTracker:
         self._place(self.template.pose(R, root))
         return self._result(frame.index, {}, 0)
 
-    def hold(self, frame: CaptureFrame, R: np.ndarray, root: np.ndarray) -> FrameResult:
+    def hold(
+        self,
+        frame: CaptureFrame,
+        R: np.ndarray,
+        root: np.ndarray,
+        *,
+        surface: np.ndarray | None = None,
+    ) -> FrameResult:
         """Move the patches and joints onto the template posed by ``R``, ``root`` (the pose
         the driver held against the observations, :mod:`meshmocap.estimate.pose.hold`),
-        keeping the motion's history (velocity, σ, the classifier's last fit)."""
+        keeping the motion's history (velocity, σ, the classifier's last fit).
+
+        ``surface``: (n, 3) float64, metres, the body the hold fitted in that pose (on a
+        clean 4D capture the frame before's refined surface at rest, skinned), which the
+        patches are fitted to instead of the template's own skin; the joints stay the
+        skeleton's."""
         posed = self.template.pose(R, root)
-        self.R, self.c = fit_patches(self.model, posed.V)
+        self.R, self.c = fit_patches(self.model, posed.V if surface is None else surface)
         self.X = posed.eval_joints.copy()
         return self._result(frame.index, {}, 0)
 
