@@ -61,15 +61,16 @@ def test_reasons_and_finiteness():
 def test_the_hold_fits_the_frame_before_s_refined_surface_put_back_at_rest():
     """The body the hold fits (held_rest) is the refined surface of the frame next to this
     one, in the pose the holder held that frame in, put back at rest (its offset from the
-    template's rest surface kept at the holder's share: SkeletonHold.rest_of); none where
-    the refiner's last frame is not next to this one or not the holder's."""
+    template's rest surface kept at the holder's share: SkeletonHold.rest_of, here without
+    the parts' translations taken out); none where the refiner's last frame is not next to
+    this one or not the holder's."""
     from meshmocap.body.template import load_template
     from meshmocap.estimate.pose.hold import SkeletonHold
     from meshmocap.geometry.refine import ArapRefiner
     from meshmocap.trackers.frame_step import held_rest
 
     t = load_template("neutral_5k")
-    holder = SkeletonHold(t, n_model_points=100, iterations=1)
+    holder = SkeletonHold(t, n_model_points=100, iterations=1, rigid_reach=None)
     refiner = ArapRefiner(t.V, t.F, iterations=1)
     rng = np.random.default_rng(0)
     R = np.tile(np.eye(3), (t.skeleton.n_joints, 1, 1))

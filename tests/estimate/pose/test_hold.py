@@ -9,7 +9,7 @@ import pytest
 from meshmocap.body.procedural import procedural_motion
 from meshmocap.body.template import load_template
 from meshmocap.errors import InputError
-from meshmocap.estimate.pose.hold import SkeletonHold
+from meshmocap.estimate.pose.hold import SkeletonHold, rigid_part_translations
 from meshmocap.geometry.mesh import vertex_normals
 from meshmocap.geometry.rotations import so3_exp
 
@@ -69,6 +69,7 @@ def test_the_hold_leaves_the_true_pose_where_it_is(scene):
         {"surface_weight": -1.0},
         {"lambda_pose": float("nan")},
         {"rest_share": 1.5},
+        {"rigid_reach": 0.0},
     ],
 )
 def test_bad_options_are_refused_in_one_line(scene, kw):
@@ -90,12 +91,60 @@ def test_the_rest_surface_keeps_its_share_of_the_offset_from_the_template(scene)
     low by unposed, and by rest_of only its share β of that; β = 1 is unposed itself."""
     t, posed, (R, root), _ = scene
     high = root + np.array([0.0, 0.0, 0.02])
-    hold = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=0.7)
+    hold = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=0.7, rigid_reach=None)
     U = hold.unposed(posed.V, R, high)
     assert np.linalg.norm(U - t.V, axis=1).mean() > 0.019
     np.testing.assert_allclose(hold.rest_of(posed.V, R, high) - t.V, 0.7 * (U - t.V), atol=1e-12)
-    whole = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=1.0)
+    whole = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=1.0, rigid_reach=None)
     np.testing.assert_allclose(whole.rest_of(posed.V, R, high), U, atol=1e-12)
+
+
+def test_a_slide_the_parts_carry_as_a_whole_is_taken_out_of_the_rest_surface(scene):
+    """rest_of with rigid_reach: the same surface held 2 cm too high goes back to the
+    template's own rest surface (every part's skin translated as a whole: 14 mm off on
+    average without rigid_reach, 0.08 mm with it; at most 2.7 mm where a vertex blends parts
+    turned apart), while vertices pushed 4 cm out on their own (a loose skin hung off the
+    left thigh) keep their share of their whole offset."""
+    t, posed, (R, root), _ = scene
+    high = root + np.array([0.0, 0.0, 0.02])
+    hold = SkeletonHold(t, n_model_points=200, iterations=1, rest_share=0.7, rigid_reach=0.01)
+    sk = t.skeleton
+    top = np.asarray(t.weights.argmax(axis=1)).ravel()
+    loose = np.flatnonzero(top == sk.index("LeftUpLeg"))[::3]
+    others = np.setdiff1d(np.arange(t.n_vertices), loose)
+    X = posed.V.copy()
+    X[loose] += 0.04 * vertex_normals(posed.V, t.F)[loose]
+    for surface in (posed.V, X):
+        rest = hold.rest_of(surface, R, high)
+        off = np.linalg.norm(rest[others] - t.V[others], axis=1)
+        assert off.mean() < 2e-4 and off.max() < 3e-3  # the slide taken out
+    U = hold.unposed(X, R, high)
+    np.testing.assert_allclose(rest[loose] - t.V[loose], 0.7 * (U - t.V)[loose], atol=1e-12)
+
+
+def test_rigid_part_translations_are_the_parts_own_on_the_rigid_vertices():
+    """Offsets that are each part's translation blended by the weights come back whole;
+    a vertex far from its parts' translation is left out (zero) and does not bend theirs."""
+    rng = np.random.default_rng(0)
+    W = rng.random((300, 4))
+    W[W < 0.6] = 0.0
+    W[np.arange(300), rng.integers(0, 4, 300)] += 1.0
+    W /= W.sum(axis=1, keepdims=True)
+    T = rng.normal(scale=0.01, size=(4, 3))
+    D = W @ T
+    np.testing.assert_allclose(rigid_part_translations(D, W, reach=0.005), D, atol=1e-12)
+    D[:10] += 0.05
+    out = rigid_part_translations(D, W, reach=0.005)
+    np.testing.assert_array_equal(out[:10], 0.0)
+    np.testing.assert_allclose(out[10:], (W @ T)[10:], atol=1e-12)
+
+
+def test_rigid_part_translations_refuses_bad_input_in_one_line():
+    with pytest.raises(InputError, match="rigid_part_translations: D must be") as e:
+        rigid_part_translations(np.zeros((5, 3)), np.ones((4, 2)), reach=0.01)
+    assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="reach must be > 0"):
+        rigid_part_translations(np.zeros((4, 3)), np.ones((4, 2)), reach=0.0)
 
 
 def test_a_rest_surface_is_the_body_fitted(scene):

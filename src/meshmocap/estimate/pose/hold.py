@@ -30,7 +30,12 @@ make up for it; the frame before's surface, where the refinement anchored each v
 its place, is this frame's body one frame of motion away. Its offset from the template's
 rest surface is kept at a share ``β`` (:meth:`SkeletonHold.rest_of`): that offset also
 holds, the other way round, any slide of the skeleton inside the body on the frame before,
-which the next fit, against the surface alone, would carry on unchanged.
+which the next fit, against the surface alone, would carry on unchanged. Before that share
+is taken, each part's own translation is taken out of the offset where the part's skin
+moved rigidly with it (:func:`rigid_part_translations`): a skeleton slid along a limb
+leaves the limb's skin translated as a whole, which the fit would otherwise hold on to,
+while a skin hung off a bone that does not follow it (a skirt's cone on the thighs) keeps
+its offset.
 
 On a clean 4D capture the driver also fits the patch tracker's frame from the last held
 pose, and keeps the fit of lower :meth:`SkeletonHold.cost` (the patches can slide along a
@@ -56,6 +61,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 from pykdtree.kdtree import KDTree
 
 from meshmocap.body.articulated import (
@@ -79,12 +85,46 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.pose.fit import pose_of_vertices
 from meshmocap.geometry.mesh import vertex_normals
 
-__all__ = ["BETA", "SkeletonHold"]
+__all__ = ["BETA", "RIGID_REACH", "SkeletonHold", "rigid_part_translations"]
 
 #: The share of the frame before's refined surface's offset from the template kept in the
 #: body the hold fits (:meth:`SkeletonHold.rest_of`); chosen on the crane and the two
 #: synthetic 4D walks (``docs/guide/own_capture.rst``).
 BETA = 0.7
+
+#: Metres: a vertex whose offset from the template lies within this of its parts'
+#: translation is taken as moving rigidly with its part (:func:`rigid_part_translations`);
+#: chosen on the crane and the two synthetic 4D walks (``docs/guide/own_capture.rst``).
+RIGID_REACH = 0.01
+
+
+def rigid_part_translations(D: np.ndarray, W, *, reach: float) -> np.ndarray:
+    """The share of a rest surface's offset that each body part's translation carries, on
+    the vertices that moved rigidly with their part.
+
+    ``D`` (n, 3) float64: per vertex, a rest surface's offset from the template's (metres);
+    ``W`` (n, J) sparse or dense: the template's skinning weights. The parts'
+    translations ``t`` (J, 3) are the least-squares fit of ``D ≈ W t`` (each vertex
+    blending its joints' translations by its weights), first over all the vertices, then
+    again over those within ``reach`` (metres) of the first fit; the vertices within reach
+    of the second are the rigid ones. Returns (n, 3) float64: ``W t`` on the rigid
+    vertices, zero on the others (their offset is their own: a loose skin, a skirt)."""
+    W = sp.csr_matrix(W, dtype=np.float64)
+    D = np.asarray(D, dtype=np.float64)
+    if D.shape != (W.shape[0], 3):
+        raise InputError(
+            f"rigid_part_translations: D must be ({W.shape[0]}, 3) like W's rows, found {D.shape}"
+        )
+    if not (np.isfinite(reach) and reach > 0):
+        raise InputError(f"rigid_part_translations: reach must be > 0, found {reach!r}")
+    rigid = np.ones(len(D), dtype=bool)
+    for _ in range(2):
+        Wr = W[rigid]
+        # the normal equations; their least-norm solution (a part with no vertex: t = 0)
+        t = np.linalg.lstsq((Wr.T @ Wr).toarray(), Wr.T @ D[rigid], rcond=None)[0]  # (J, 3)
+        moved = W @ t
+        rigid = np.linalg.norm(D - moved, axis=1) < reach
+    return np.where(rigid[:, None], moved, 0.0)
 
 
 class SkeletonHold:
@@ -117,6 +157,9 @@ class SkeletonHold:
     rest_share : float
         ``β`` in [0, 1]: the share of that surface's offset from the template's rest
         surface kept in the body fitted (:meth:`rest_of`).
+    rigid_reach : float or None
+        Metres: the parts' translations are taken out of that offset on the vertices
+        within this of them (:func:`rigid_part_translations`); None keeps the whole offset.
 
     Attributes
     ----------
@@ -138,6 +181,7 @@ class SkeletonHold:
         lambda_pose: float = 1e-5,
         surface: bool = True,
         rest_share: float = BETA,
+        rigid_reach: float | None = RIGID_REACH,
     ):
         if int(iterations) < 1 or int(n_model_points) < 1 or int(max_points) < 1:
             raise InputError(
@@ -149,7 +193,12 @@ class SkeletonHold:
                 raise InputError(f"SkeletonHold: {name} must be ≥ 0, found {v!r}")
         if not (np.isfinite(rest_share) and 0.0 <= rest_share <= 1.0):
             raise InputError(f"SkeletonHold: rest_share must be in [0, 1], found {rest_share!r}")
+        if rigid_reach is not None and not (np.isfinite(rigid_reach) and rigid_reach > 0):
+            raise InputError(
+                f"SkeletonHold: rigid_reach must be > 0 or None, found {rigid_reach!r}"
+            )
         self.rest_share = float(rest_share)
+        self.rigid_reach = None if rigid_reach is None else float(rigid_reach)
         self.template = template
         self.model_ = articulated_model(template, n_points=int(n_model_points), seed=0)
         self.plan_ = moment_plan(self.model_)
@@ -191,17 +240,24 @@ class SkeletonHold:
     def rest_of(self, X: np.ndarray, R: np.ndarray, root: np.ndarray) -> np.ndarray:
         """The rest surface (n, 3) float64 the hold skins for a surface ``X`` (n, 3) held in
         the pose ``R`` (J, 3, 3), ``root`` (3,) (metres): :meth:`unposed`, its offset ``D``
-        from the template's rest surface ``V`` kept at the share ``rest_share`` ``β``::
+        from the template's rest surface ``V`` less the parts' translations ``T`` on the
+        vertices that moved rigidly with their part (:func:`rigid_part_translations`,
+        within ``rigid_reach``; none where it is None), kept at the share ``rest_share``
+        ``β``::
 
-            rest = V + β D
+            rest = V + β (D − T)
 
         ``D`` holds what the template's rig cannot carry (the performer's clothes and
         muscles), but also, turned the other way, any slide of the skeleton inside the
         body: fitted against the surface alone, that skin is held at the same slid pose on
-        the next frame. With ``β`` < 1 a slide is forgotten at that rate frame by frame
-        instead of carried on."""
+        the next frame. A part's skin slid as a whole (``T``) is taken out; with ``β`` < 1
+        the rest of a slide is forgotten at that rate frame by frame instead of carried
+        on."""
         V0 = self.template.V
-        return V0 + self.rest_share * (self.unposed(X, R, root) - V0)
+        D = self.unposed(X, R, root) - V0
+        if self.rigid_reach is not None:
+            D = D - rigid_part_translations(D, self.template.weights, reach=self.rigid_reach)
+        return V0 + self.rest_share * D
 
     def fit(
         self,
