@@ -16,8 +16,8 @@ copies of the byte before or of the row above, which ``zlib`` writes a byte at a
 (~0.5 ms a 640 × 480 mask). :func:`inflate_kernel` decodes such a stream itself (RFC 1950
 and 1951, the way ``zlib`` reads them: the same rules for the Huffman codes it accepts)
 and writes each copy as one block; its output counts only with the stream's own Adler-32
-checksum matching, and anything it does not decode to the end is inflated by ``zlib`` as
-before (:func:`inflated`)."""
+checksum matching (:func:`kernel_inflated`), and anything it does not decode to the end, or
+a stream mostly of literals, is inflated by ``zlib`` as before (:func:`inflated`)."""
 
 from __future__ import annotations
 
@@ -32,6 +32,7 @@ __all__ = [
     "grey8",
     "inflate_kernel",
     "inflated",
+    "kernel_inflated",
     "mesh_extent_kernel",
     "mesh_faces_kernel",
     "mesh_vertices_kernel",
@@ -85,16 +86,23 @@ def grey8(data: bytes, max_pixels: int | None) -> tuple[np.ndarray, int, bool] |
     return grey, int(top & 255), bool(top >> 8)
 
 
+#: Bytes out per byte in below which :func:`inflated` leaves a stream to ``zlib`` at once:
+#: :func:`inflate_kernel` reads its codes a bit at a time, slower than ``zlib``'s tables
+#: where most of the output is literals (a hull file's mesh, 3–15 to one: 2.5–7.5 times
+#: slower), faster where it is long copies (a mask, 150–330 to one: 4 times faster).
+KERNEL_RATIO = 64
+
+
 def inflated(stream: bytes, size: int) -> np.ndarray | None:
     """(size,) uint8: the zlib ``stream`` (RFC 1950) inflated, when it holds exactly
     ``size`` bytes and nothing follows it; None otherwise (a damaged stream included).
-    Decoded by :func:`inflate_kernel` where it can, its checksum verified; anything else
-    by ``zlib``, as ``zlib.decompressobj`` answers (the same bytes, the same refusals)."""
-    data = np.frombuffer(stream, dtype=np.uint8)
-    out = np.empty(size, dtype=np.uint8)
-    end = inflate_kernel(data, out)
-    if end >= 0 and end + 4 == len(stream) and zlib.adler32(out) == _adler(stream, end):
-        return out
+    Decoded by :func:`kernel_inflated` where it can and the stream inflates
+    :data:`KERNEL_RATIO`-fold or more; anything else by ``zlib``, as
+    ``zlib.decompressobj`` answers (the same bytes, the same refusals)."""
+    if size >= KERNEL_RATIO * len(stream):
+        out = kernel_inflated(stream, size)
+        if out is not None:
+            return out
     z = zlib.decompressobj()
     try:
         raw = z.decompress(stream, size + 1)
@@ -103,6 +111,17 @@ def inflated(stream: bytes, size: int) -> np.ndarray | None:
     if len(raw) != size or not z.eof or z.unused_data or z.unconsumed_tail:
         return None
     return np.frombuffer(raw, dtype=np.uint8)
+
+
+def kernel_inflated(stream: bytes, size: int) -> np.ndarray | None:
+    """(size,) uint8: the zlib ``stream`` inflated by :func:`inflate_kernel`, where it
+    decodes the stream to its end, exactly ``size`` bytes, with nothing after its checksum
+    and the checksum (Adler-32) that of the bytes; None where it cannot tell."""
+    out = np.empty(size, dtype=np.uint8)
+    end = inflate_kernel(np.frombuffer(stream, dtype=np.uint8), out)
+    if end >= 0 and end + 4 == len(stream) and zlib.adler32(out) == _adler(stream, end):
+        return out
+    return None
 
 
 def _adler(stream: bytes, end: int) -> int:
