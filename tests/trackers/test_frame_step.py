@@ -179,7 +179,9 @@ class _HeldOnto(_Held):
 def test_a_clean_4d_hold_places_a_patch_cloud_on_the_body_it_fitted():
     """Where the hold fits the frame before's refined surface (held_rest), a tracker
     without a pose of its own (a patch cloud) is moved onto that body skinned in the held
-    pose (posed_body), not onto the template's skin; without it, onto the skin as before."""
+    pose (posed_body), with the parts' translations the fit's body leaves out (the frame
+    before 5 mm above the skin: there too), not onto the template's skin; without it, onto
+    the skin as before."""
     from meshmocap.body.procedural import procedural_motion
     from meshmocap.body.template import load_template
     from meshmocap.estimate.pose.hold import SkeletonHold
@@ -198,10 +200,12 @@ def test_a_clean_4d_hold_places_a_patch_cloud_on_the_body_it_fitted():
     X = t.pose(m.rotations[4], m.root_positions[4]).V + [0.0, 0.0, 0.005]  # frame 4 refined
     refiner.last_ = (4, np.zeros_like(X), X)
     holder.last, holder.key = (m.rotations[4], m.root_positions[4]), 4
-    rest = held_rest(holder, refiner, 5)
+    whole = held_rest(holder, refiner, 5, rigid=False)
+    fitted = held_rest(holder, refiner, 5)  # the 5 mm taken out: the template's own
+    assert np.abs(whole - fitted)[:, 2].mean() > 0.003
     tracker = _HeldOnto(t, posed.V)
     held(tracker, holder, frame, r, refiner=refiner, index=5)
-    np.testing.assert_allclose(tracker.surface, posed_body(t, rest, *holder.last), atol=1e-12)
+    np.testing.assert_allclose(tracker.surface, posed_body(t, whole, *holder.last), atol=1e-12)
     holder.key = 3  # no body from the frame before: the template's skin
     held(tracker, holder, frame, r, refiner=refiner, index=5)
     assert tracker.surface is None

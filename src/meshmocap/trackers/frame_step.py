@@ -247,8 +247,10 @@ def held(
     clean 4D capture (``holder.surface``), where the tracker's surface is not its own
     articulated fit (the patch cloud, which slides along a loose surface such as a skirt,
     and whose pose then starts the fit far off), the fit is also started from the last held
-    pose, directly and through the template's own skin (``_last_pose_fits``), and the
-    pose of lowest :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is kept."""
+    pose, directly and through the template's own skin (``_last_pose_fits``), the pose of
+    lowest :meth:`~meshmocap.estimate.pose.hold.SkeletonHold.cost` is kept, and the
+    tracker is placed on that body in the held pose with its parts' own translations
+    (``held_rest(..., rigid=False)``), which the fit leaves out."""
     rest = held_rest(holder, refiner, index)
     R, root = holder.start(r.vertices, *holder.last)
     R, root = holder.fit(*frame.points, r.vertices, R, root, rest=rest)
@@ -257,8 +259,10 @@ def held(
         R, root = _lowest_cost(
             holder, frame, [(R, root), *_last_pose_fits(holder, frame, r, rest)], rest
         )
-        if rest is not None:  # the patches onto the body fitted, not the template's skin
-            body = posed_body(holder.template, rest, R, root)
+        if rest is not None:  # the patches onto the body fitted, not the template's skin,
+            # with the parts' own translations the fit's body leaves out (their place on it)
+            whole = held_rest(holder, refiner, index, rigid=False)
+            body = posed_body(holder.template, whole, R, root)
     holder.last, holder.key = (R, root), index
     h = tracker.hold(frame, R, root) if body is None else tracker.hold(frame, R, root, surface=body)
     if not is_finite_result(h):
@@ -307,18 +311,23 @@ def _own_pose(r: FrameResult, holder: SkeletonHold) -> bool:
 
 
 def held_rest(
-    holder: SkeletonHold, refiner: SurfaceRefiner | ArapRefiner | None, index: int | None
+    holder: SkeletonHold,
+    refiner: SurfaceRefiner | ArapRefiner | None,
+    index: int | None,
+    *,
+    rigid: bool = True,
 ) -> np.ndarray | None:
     """The rest surface (n, 3) the frame ``index``'s held pose skins: the refined surface
     of the frame next to it (``index ± 1``, the refiner's last, an
     :class:`~meshmocap.geometry.refine.ArapRefiner`'s) in the pose the holder held it in,
-    put back in the rest pose; None where there is none (the template's own surface)."""
+    put back in the rest pose (:meth:`~meshmocap.estimate.pose.hold.SkeletonHold.rest_of`,
+    ``rigid`` passed on); None where there is none (the template's own surface)."""
     last = getattr(refiner, "last_", None)
     if index is None or last is None or holder.key != last[0] or abs(index - last[0]) != 1:
         return None
     if not holder.surface:  # the driver holds with the template's own surface
         return None
-    return holder.rest_of(last[2], *holder.last)
+    return holder.rest_of(last[2], *holder.last, rigid=rigid)
 
 
 def _tracker_pose(recovery: Recovery, r: FrameResult) -> tuple[np.ndarray, np.ndarray] | None:

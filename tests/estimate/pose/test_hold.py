@@ -120,6 +120,8 @@ def test_a_slide_the_parts_carry_as_a_whole_is_taken_out_of_the_rest_surface(sce
         assert off.mean() < 2e-4 and off.max() < 3e-3  # the slide taken out
     U = hold.unposed(X, R, high)
     np.testing.assert_allclose(rest[loose] - t.V[loose], 0.7 * (U - t.V)[loose], atol=1e-12)
+    whole = hold.rest_of(X, R, high, rigid=False)  # the translations kept: V + β D
+    np.testing.assert_allclose(whole - t.V, 0.7 * (U - t.V), atol=1e-12)
 
 
 def test_rigid_part_translations_are_the_parts_own_on_the_rigid_vertices():

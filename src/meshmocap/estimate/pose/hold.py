@@ -237,7 +237,9 @@ class SkeletonHold:
         X = np.asarray(X, dtype=np.float64)
         return np.linalg.solve(B[:, :, :3], (X - B[:, :, 3])[..., None])[..., 0]
 
-    def rest_of(self, X: np.ndarray, R: np.ndarray, root: np.ndarray) -> np.ndarray:
+    def rest_of(
+        self, X: np.ndarray, R: np.ndarray, root: np.ndarray, *, rigid: bool = True
+    ) -> np.ndarray:
         """The rest surface (n, 3) float64 the hold skins for a surface ``X`` (n, 3) held in
         the pose ``R`` (J, 3, 3), ``root`` (3,) (metres): :meth:`unposed`, its offset ``D``
         from the template's rest surface ``V`` less the parts' translations ``T`` on the
@@ -252,10 +254,11 @@ class SkeletonHold:
         body: fitted against the surface alone, that skin is held at the same slid pose on
         the next frame. A part's skin slid as a whole (``T``) is taken out; with ``β`` < 1
         the rest of a slide is forgotten at that rate frame by frame instead of carried
-        on."""
+        on. ``rigid=False``: ``T`` is kept (``V + β D``, the body the patches are placed on:
+        :func:`~meshmocap.trackers.frame_step.held`)."""
         V0 = self.template.V
         D = self.unposed(X, R, root) - V0
-        if self.rigid_reach is not None:
+        if rigid and self.rigid_reach is not None:
             D = D - rigid_part_translations(D, self.template.weights, reach=self.rigid_reach)
         return V0 + self.rest_share * D
 
