@@ -343,12 +343,11 @@ def unfilter_kernel(raw, grey):  # pragma: no cover - compiled
     """Unfilter the inflated rows ``raw`` ((h (w + 1),) uint8: each row's filter type,
     then its bytes) into ``grey`` (h, w) uint8 (PNG's five filters for one byte a pixel:
     none, sub, up, average, Paeth). Returns the largest value, plus 256 where every value
-    is 0 or 255; −1 for a filter type above 4."""
+    is 0 or 255; −1 for a filter type above 4. The rows first (a mask's, none and up, are
+    copies and sums that vectorise), then the values' largest and kinds in one pass."""
     h, w = grey.shape
     if h == 0 or w == 0:
         return 256
-    top = 0
-    odd = False  # values other than 0 and 255 seen
     for y in range(h):
         s = y * (w + 1)
         f = raw[s]
@@ -359,26 +358,16 @@ def unfilter_kernel(raw, grey):  # pragma: no cover - compiled
             f = 0
         if f == 0:
             for x in range(w):
-                v = np.int64(raw[s + x])
-                grey[y, x] = v
-                top = max(top, v)
-                odd |= (v != 0) & (v != 255)
+                grey[y, x] = raw[s + x]
         elif f == 1:
             v = np.int64(raw[s])
             grey[y, 0] = v
-            top = max(top, v)
-            odd |= (v != 0) & (v != 255)
             for x in range(1, w):
                 v = (np.int64(raw[s + x]) + v) & 255
                 grey[y, x] = v
-                top = max(top, v)
-                odd |= (v != 0) & (v != 255)
         elif f == 2:
             for x in range(w):
-                v = (np.int64(raw[s + x]) + np.int64(grey[y - 1, x])) & 255
-                grey[y, x] = v
-                top = max(top, v)
-                odd |= (v != 0) & (v != 255)
+                grey[y, x] = (np.int64(raw[s + x]) + np.int64(grey[y - 1, x])) & 255
         else:
             a = 0
             for x in range(w):
@@ -398,9 +387,14 @@ def unfilter_kernel(raw, grey):  # pragma: no cover - compiled
                         v = (r + c) & 255
                 grey[y, x] = v
                 a = v
-                top = max(top, v)
-                odd |= (v != 0) & (v != 255)
-    return top if odd else top + 256
+    top = np.uint8(0)
+    odd = 0  # values other than 0 and 255: 1…254, which less one are below 254
+    for y in range(h):
+        for x in range(w):
+            v = grey[y, x]
+            top = max(top, v)
+            odd += np.uint8(v - np.uint8(1)) < np.uint8(254)
+    return np.int64(top) if odd else np.int64(top) + 256
 
 
 @njit(cache=True, nogil=True)
