@@ -175,10 +175,12 @@ def covered_pixels(
     pixels = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
     out = np.zeros(len(pixels), dtype=bool)
     H, W = int(shape[0]), int(shape[1])
-    rows, where = np.unique(pixels[:, 1], return_inverse=True)
-    if len(rows) > _FEW_ROWS:  # most of the image's rows: filling it whole is cheaper
+    seen = np.zeros(H, dtype=bool)  # the rows holding a pixel, counted without sorting
+    seen[pixels[:, 1]] = True
+    if np.count_nonzero(seen) > _FEW_ROWS:  # most of the image's rows: filling it whole is cheaper
         mask = fill_triangles(uv, F, shape, valid=valid, orientation=orientation)
         return mask[pixels[:, 1], pixels[:, 0]]
+    rows, where = np.unique(pixels[:, 1], return_inverse=True)
     prep = _prepare(uv, F, H, W, valid, orientation, rows=rows)
     if prep is None or len(pixels) == 0:
         return out
