@@ -37,12 +37,14 @@ leaves the limb's skin translated as a whole, which the fit would otherwise hold
 while a skin hung off a bone that does not follow it (a skirt's cone on the thighs) keeps
 its offset.
 
-On a clean 4D capture the driver also fits the patch tracker's frame from the last held
-pose, and keeps the fit of lower :meth:`SkeletonHold.cost` (the patches can slide along a
-loose surface, a skirt, far enough that a fit started from their pose does not come back).
-The tracking driver then moves the tracker onto the held pose (its ``hold`` method: the
-patch tracker re-places its patches on the posed template, keeping its velocity;
-articulated ICP takes the pose as its own).
+On a clean 4D capture the driver fits the patch tracker's frame from three starts: the
+pose of the patches' surface, the last held pose, and the last held pose fitted first with
+the template's own skin (as articulated ICP's step fits it), and keeps the fit of lowest
+:meth:`SkeletonHold.cost` (the patches can slide along a loose surface, a skirt, far
+enough that a fit started from their pose does not come back). The tracking driver then
+moves the tracker onto the held pose (its ``hold`` method: the patch tracker re-places its
+patches on the body the hold fitted, skinned in the held pose with each part's own
+translation kept, keeping its velocity; articulated ICP takes the pose as its own).
 
 Units: metres and radians, world frame Z up.
 
