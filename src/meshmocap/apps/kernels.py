@@ -191,10 +191,14 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     "meshmocap.trackers.cage.field": {
         "_boundary_buckets": ("Array(boolean, 3, 'C', readonly=True), int64",),
-        "_nearest": ("int64, int64, int64, int64[:, ::1], int64[::1], int64[::1], int64",),
-        "_evaluate": (
-            "int64, float64[::1], boolean[::1], Array(boolean, 3, 'C', readonly=True), "
-            "int64[:, ::1], int64[::1], int64[::1], int64, int64[::1], int64, int64, float64",
+        "_nearest_cell": (
+            "int64, int64, int64, int64, boolean[::1], int64[::1], int64[:, ::1], int64[::1], "
+            "int64[::1], int64",
+        ),
+        "_evaluate_cell": (
+            "int64, boolean[::1], float64[::1], boolean[::1], "
+            "Array(boolean, 3, 'C', readonly=True), int64[:, ::1], int64[::1], int64[::1], "
+            "int64, int64[::1], int64, int64, float64",
         ),
         "_lookup": (
             "float64[:, ::1], float64[::1], float64, int64[::1], float64[::1], boolean[::1], "

@@ -44,6 +44,27 @@ def test_values_gradients_and_boundary_equal_lazy_distance_grid(pad, stride):
     np.testing.assert_array_equal(b(P), vb)
 
 
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_lookups_one_at_a_time_meet_every_mix_of_known_corners(stride):
+    """Points looked up one by one, near the surface and far off: a cell's corners are
+    partly known from its neighbours' lookups (a new corner alone, or 2 to 8 new ones found
+    in one pass over the buckets); every value and gradient is LazyDistanceGrid's."""
+    rng = np.random.default_rng(10 + stride)
+    occ, origin, h = _blob(rng), np.array([0.3, -1.2, 0.05]), 0.01
+    a = LazyDistanceGrid(occ, origin, h, pad=4, stride=stride)
+    b = HullDistanceField(occ, origin, h, pad=4, stride=stride)
+    centre = origin + h * np.array(occ.shape) / 2
+    scale = rng.choice([0.01, 0.05, 0.2], size=400)
+    P = centre + scale[:, None] * rng.normal(size=(400, 3))
+    inside = np.all((a.origin <= P) & (a.upper >= P), axis=1)
+    for p in P[inside]:
+        va, ga = a.value_and_gradient(p[None])
+        vb, gb = b.value_and_gradient(p[None])
+        np.testing.assert_array_equal(vb, va)
+        np.testing.assert_array_equal(gb, ga)
+    assert b.n_evaluated == a.n_evaluated
+
+
 def test_bad_input_is_one_line():
     occ = np.zeros((4, 4, 4), dtype=bool)
     with pytest.raises(InputError, match=r"non-empty 3-D occupancy.*found shape"):

@@ -5,12 +5,12 @@ The values are those of :class:`~meshmocap.geometry.distance_field.LazyDistanceG
 (signed distance, metres, to the centres of the hull's inner-boundary voxels, minus half
 a voxel; negative inside), on the same grid (``pad`` voxels around the occupancy,
 ``stride`` voxels apart), and lookups interpolate them the same way (trilinear, distance
-to the box added outside it). Only the search differs: a grid point's nearest boundary
-voxel is found in buckets of ``bucket`` voxels, ring by ring, inside the compiled lookup,
-instead of by a k-d tree between numpy calls; the tracker looks up a few hundred points
-tens of times a frame, where the calls' overhead and the tree's cache misses were most of
-the cost. The nearest distance is unique, so the values are bit-identical
-(``tests/trackers/cage/test_field.py``).
+to the box added outside it). Only the search differs: the nearest boundary voxels of a
+grid cell's new corners are found together, in buckets of ``bucket`` voxels, ring by
+ring, inside the compiled lookup, instead of by a k-d tree between numpy calls; the
+tracker looks up a few hundred points tens of times a frame, where the calls' overhead and
+the tree's cache misses were most of the cost. The nearest distance is unique, so the
+values are bit-identical (``tests/trackers/cage/test_field.py``).
 
 Frames and units: world frame, metres; grid indices ``(x, y, z)`` as the occupancy's.
 
@@ -80,28 +80,45 @@ def _boundary_buckets(occ, b):  # pragma: no cover - compiled
     return pts, count, np.array([bx, by, bz], dtype=np.int64)
 
 
-#: Squared voxel distances start above any a grid holds (:func:`_nearest`).
+#: Squared voxel distances start above any a grid holds (:func:`_nearest_cell`).
 _NONE = 1 << 62
 
 
 @njit(cache=True, nogil=True)
-def _nearest(x, y, z, pts, start, bshape, b):  # pragma: no cover - compiled
-    """Squared distance (voxels²) from voxel ``(x, y, z)`` (any integers) to the nearest
-    boundary voxel: buckets ring by ring (Chebyshev distance ``r`` from the query's bucket)
-    until every unvisited bucket lies farther than the best so far. ``pts`` (3, m): the
-    boundary voxels' coordinates, one row per axis (a bucket's scan is then a vectorised
-    minimum of integers, exact)."""
+def _nearest_cell(x, y, z, s, need, best, pts, start, bshape, b):  # pragma: no cover - compiled
+    """Squared distances (voxels²) from the 8 corners ``(x + i s, y + j s, z + k s)`` of a
+    grid cell (``i, j, k`` in {0, 1}, corner ``4 i + 2 j + k``; any integers) to their
+    nearest boundary voxels, for the corners where ``need`` holds, into ``best`` (8,) int64
+    (:data:`_NONE` where there is no boundary voxel): one pass over the buckets, ring by
+    ring (Chebyshev distance ``r`` from corner 0's bucket), for all of them (a lookup's
+    new corners come 4 to 8 to a cell, and their own searches would visit nearly the same
+    buckets), until every unvisited bucket lies farther from each corner than its best
+    so far. ``pts`` (3, m): the boundary voxels' coordinates, one row per axis. The
+    minima are exact (integers): the same whichever corners are searched together."""
     bx, by, bz = bshape[0], bshape[1], bshape[2]
-    qx, qy, qz = x // b, y // b, z // b  # floor division: buckets of points outside too
+    qx, qy, qz = x // b, y // b, z // b  # the rings are centred on corner 0's bucket
     px, py, pz = pts[0], pts[1], pts[2]
-    best = _NONE
-    # the rings needed at most: to the far corner of the bucket grid
+    # each corner's best so far; -1 for a corner not searched (never above a bound: done)
+    b0 = _NONE if need[0] else -1
+    b1 = _NONE if need[1] else -1
+    b2 = _NONE if need[2] else -1
+    b3 = _NONE if need[3] else -1
+    b4 = _NONE if need[4] else -1
+    b5 = _NONE if need[5] else -1
+    b6 = _NONE if need[6] else -1
+    b7 = _NONE if need[7] else -1
     far = max(abs(qx), abs(qx - bx + 1), abs(qy), abs(qy - by + 1), abs(qz), abs(qz - bz + 1))
     for r in range(far + 1):
         for i in range(max(qx - r, 0), min(qx + r, bx - 1) + 1):
             ei = abs(i - qx) == r
+            lx0 = max(i * b - x, 0, x - i * b - b + 1)
+            lx1 = max(i * b - x - s, 0, x + s - i * b - b + 1)
+            lx0, lx1 = lx0 * lx0, lx1 * lx1
             for j in range(max(qy - r, 0), min(qy + r, by - 1) + 1):
                 ej = ei or abs(j - qy) == r
+                ly0 = max(j * b - y, 0, y - j * b - b + 1)
+                ly1 = max(j * b - y - s, 0, y + s - j * b - b + 1)
+                ly0, ly1 = ly0 * ly0, ly1 * ly1
                 kk0, kk1 = max(qz - r, 0), min(qz + r, bz - 1)
                 k = kk0
                 while k <= kk1:
@@ -111,42 +128,72 @@ def _nearest(x, y, z, pts, start, bshape, b):  # pragma: no cover - compiled
                         if s0 == s1:  # an empty bucket (most of them)
                             k += 1
                             continue
-                        # skip a bucket whose box lies no nearer than the best so far
-                        lo = max(i * b - x, 0, x - i * b - b + 1)
-                        box = lo * lo
-                        lo = max(j * b - y, 0, y - j * b - b + 1)
-                        box += lo * lo
-                        lo = max(k * b - z, 0, z - k * b - b + 1)
-                        box += lo * lo
-                        if box >= best:
+                        # skip a bucket whose box lies no nearer to any corner than that
+                        # corner's best so far
+                        lz0 = max(k * b - z, 0, z - k * b - b + 1)
+                        lz1 = max(k * b - z - s, 0, z + s - k * b - b + 1)
+                        lz0, lz1 = lz0 * lz0, lz1 * lz1
+                        if (
+                            lx0 + ly0 + lz0 >= b0
+                            and lx0 + ly0 + lz1 >= b1
+                            and lx0 + ly1 + lz0 >= b2
+                            and lx0 + ly1 + lz1 >= b3
+                            and lx1 + ly0 + lz0 >= b4
+                            and lx1 + ly0 + lz1 >= b5
+                            and lx1 + ly1 + lz0 >= b6
+                            and lx1 + ly1 + lz1 >= b7
+                        ):
                             k += 1
                             continue
                         for o in range(s0, s1):
                             dx, dy, dz = px[o] - x, py[o] - y, pz[o] - z
-                            best = min(best, dx * dx + dy * dy + dz * dz)
+                            ax0, ay0, az0 = dx * dx, dy * dy, dz * dz
+                            dx, dy, dz = dx - s, dy - s, dz - s
+                            ax1, ay1, az1 = dx * dx, dy * dy, dz * dz
+                            b0 = min(b0, ax0 + ay0 + az0)
+                            b1 = min(b1, ax0 + ay0 + az1)
+                            b2 = min(b2, ax0 + ay1 + az0)
+                            b3 = min(b3, ax0 + ay1 + az1)
+                            b4 = min(b4, ax1 + ay0 + az0)
+                            b5 = min(b5, ax1 + ay0 + az1)
+                            b6 = min(b6, ax1 + ay1 + az0)
+                            b7 = min(b7, ax1 + ay1 + az1)
                         k += 1
                     else:  # inside the ring: only its two z faces remain
                         k = qz + r if qz + r <= kk1 else kk1 + 1
-        # an unvisited boundary voxel lies in a bucket r + 1 rings away: ≥ r b + 1 voxels
-        if best <= (r * b + 1) ** 2:
+        # an unvisited boundary voxel lies in a bucket r + 1 rings from corner 0's: ≥ r b + 1
+        # voxels from corner 0 along some axis, ≥ r b + 1 − s from any corner
+        lim = r * b + 1 - s
+        if lim > 0 and max(b0, b1, b2, b3, b4, b5, b6, b7) <= lim * lim:
             break
-    return float(best) if best < _NONE else np.inf
+    best[0], best[1], best[2], best[3] = b0, b1, b2, b3
+    best[4], best[5], best[6], best[7] = b4, b5, b6, b7
 
 
 @njit(cache=True, nogil=True)
-def _evaluate(g, flat, known, occ, pts, start, bshape, b, shape, pad, stride, h):
-    """Compute the grid value at flat index ``g`` (LazyDistanceGrid's) into ``flat``."""
+def _evaluate_cell(base, need, flat, known, occ, pts, start, bshape, b, shape, pad, stride, h):
+    """Compute the grid values of the corners ``need`` (8,) bool of the cell whose corner 0
+    has flat index ``base`` into ``flat`` (LazyDistanceGrid's values: the distance to the
+    nearest boundary voxel's centre, minus half a voxel, negative inside; metres) and mark
+    them ``known``."""
     syz = shape[1] * shape[2]
-    a, rest = g // syz, g % syz
+    a, rest = base // syz, base % syz
     x = a * stride - pad
     y = (rest // shape[2]) * stride - pad
     z = (rest % shape[2]) * stride - pad
-    e = np.sqrt(_nearest(x, y, z, pts, start, bshape, b))
+    best = np.empty(8, dtype=np.int64)
+    _nearest_cell(x, y, z, stride, need, best, pts, start, bshape, b)
     nx, ny, nz = occ.shape
-    inside = 0 <= x < nx and 0 <= y < ny and 0 <= z < nz and occ[x, y, z]
-    v = (-0.5 - e if inside else e - 0.5) * h
-    flat[g] = v
-    known[g] = True
+    for c in range(8):
+        if not need[c]:
+            continue
+        dx, dy, dz = c >> 2, (c >> 1) & 1, c & 1
+        cx, cy, cz = x + dx * stride, y + dy * stride, z + dz * stride
+        e = np.sqrt(float(best[c]) if best[c] < _NONE else np.inf)
+        inside = 0 <= cx < nx and 0 <= cy < ny and 0 <= cz < nz and occ[cx, cy, cz]
+        g = base + dx * syz + dy * shape[2] + dz
+        flat[g] = (-0.5 - e if inside else e - 0.5) * h
+        known[g] = True
 
 
 @njit(cache=True, nogil=True)
@@ -165,6 +212,7 @@ def _lookup(P, origin, spacing, shape, flat, known, occ, pts, start, bshape, b, 
     i0 = np.empty(3, dtype=np.int64)
     out = np.zeros(3, dtype=np.bool_)
     c8 = np.empty(8)
+    need = np.empty(8, dtype=np.bool_)
     for p in range(n):
         off2 = 0.0
         for a in range(3):
@@ -176,13 +224,19 @@ def _lookup(P, origin, spacing, shape, flat, known, occ, pts, start, bshape, b, 
             o = P[p, a] - (origin[a] + c * spacing)
             off2 += o * o
         base = i0[0] * s0 + i0[1] * s1 + i0[2]
+        unknown = 0
         for corner in range(8):
             dx, dy, dz = corner >> 2, (corner >> 1) & 1, corner & 1
-            g = base + dx * s0 + dy * s1 + dz
-            if not known[g]:
-                new += 1
-                _evaluate(g, flat, known, occ, pts, start, bshape, b, shape, pad, stride, h)
-            c8[corner] = flat[g]
+            need[corner] = not known[base + dx * s0 + dy * s1 + dz]
+            unknown += need[corner]
+        if unknown:  # the cell's new corners, in one search
+            new += unknown
+            _evaluate_cell(
+                base, need, flat, known, occ, pts, start, bshape, b, shape, pad, stride, h
+            )
+        for corner in range(8):
+            dx, dy, dz = corner >> 2, (corner >> 1) & 1, corner & 1
+            c8[corner] = flat[base + dx * s0 + dy * s1 + dz]
         fx, fy, fz = fr[0], fr[1], fr[2]
         # along z at (x, y) = 00 01 10 11, then y, then x: DistanceGrid._lookup's order
         d00, d01, d10, d11 = c8[1] - c8[0], c8[3] - c8[2], c8[5] - c8[4], c8[7] - c8[6]
@@ -265,7 +319,7 @@ class HullDistanceField:
         self.origin = origin - k * h
         self.spacing = np.full(3, m * h)
         self._pts, self._start, self._bshape = _boundary_buckets(occ, _BUCKET)
-        self._axes = np.ascontiguousarray(self._pts.T)  # (3, m): _nearest's layout
+        self._axes = np.ascontiguousarray(self._pts.T)  # (3, m): _nearest_cell's layout
         self._origin0 = origin
         size = int(np.prod(self.shape))
         self._known = np.zeros(size, dtype=np.bool_)
