@@ -68,6 +68,12 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
         "farther_kernel": (
             "float64[:, ::1], float64[:, ::1], float64, boolean, float64, boolean[::1]",
         ),
+        "point_tree_kernel": ("float64[:, ::1], float64[:, ::1], int64",),
+        "agreeing_kernel": (
+            "float64[:, ::1], float64[:, ::1], int64[::1], int64[::1], int64[::1], int64[::1], "
+            "int64[::1], float64[::1], int64[::1], int64, float64[:, ::1], float64[:, ::1], "
+            "int64[::1], int64, float64, float64",
+        ),
     },
     "meshmocap.body._articulated_kernels": {
         "posed_kernel": (

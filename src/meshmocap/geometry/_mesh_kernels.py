@@ -452,3 +452,189 @@ def farther_kernel(Y, X, r, bounded, max_cells, out):  # pragma: no cover - comp
             if best < sure:
                 break
         out[t] = (bounded and not best < r2) or np.sqrt(best) > r
+
+
+#: Relative slack under which :func:`agreeing_kernel` still searches a box whose lower bound
+#: on the squared distance, summed over the splits, reaches the search's bound: rounding in
+#: that sum never prunes a point that lies within it.
+PRUNE_SLACK = 1e-9
+
+
+@njit(cache=True, nogil=True)
+def point_tree_kernel(X, N, leaf_size):  # pragma: no cover - compiled
+    """The k-d tree of :func:`~meshmocap.geometry.point_tree.point_tree` over ``X`` (n ≥ 1,
+    3) with normals ``N`` (n, 3): a node's points split at the middle of their box's widest
+    side until at most ``leaf_size`` are left (or they cannot be split). Returns the points
+    and normals in tree order, ``order`` (n,) (the input index of each), ``rank`` (n,) (its
+    inverse), per node ``start``, ``stop`` (its points' range), ``dim`` (the split's axis,
+    −1 at a leaf), ``split`` (its value), ``left`` (the first child, the second after it)
+    and the tree's depth."""
+    n = X.shape[0]
+    order = np.arange(n)
+    start = np.empty(2 * n, dtype=np.int64)
+    stop = np.empty(2 * n, dtype=np.int64)
+    dim = np.full(2 * n, -1, dtype=np.int64)
+    split = np.zeros(2 * n)
+    left = np.full(2 * n, -1, dtype=np.int64)
+    level = np.zeros(2 * n, dtype=np.int64)
+    start[0], stop[0] = 0, n
+    stack = np.empty(2 * n, dtype=np.int64)
+    stack[0] = 0
+    sp, nodes, depth = 1, 1, 0
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        a, b = start[node], stop[node]
+        depth = max(depth, level[node])
+        if b - a <= leaf_size:
+            continue
+        lo0, lo1, lo2 = X[order[a], 0], X[order[a], 1], X[order[a], 2]
+        hi0, hi1, hi2 = lo0, lo1, lo2
+        for s in range(a + 1, b):
+            p = order[s]
+            lo0, hi0 = min(lo0, X[p, 0]), max(hi0, X[p, 0])
+            lo1, hi1 = min(lo1, X[p, 1]), max(hi1, X[p, 1])
+            lo2, hi2 = min(lo2, X[p, 2]), max(hi2, X[p, 2])
+        d, extent, mid = 0, hi0 - lo0, 0.5 * (lo0 + hi0)
+        if hi1 - lo1 > extent:
+            d, extent, mid = 1, hi1 - lo1, 0.5 * (lo1 + hi1)
+        if hi2 - lo2 > extent:
+            d, extent, mid = 2, hi2 - lo2, 0.5 * (lo2 + hi2)
+        i, j = a, b - 1
+        while i <= j:  # those below the middle first
+            if X[order[i], d] < mid:
+                i += 1
+            else:
+                order[i], order[j] = order[j], order[i]
+                j -= 1
+        if i <= a or i >= b:  # one point repeated, or a box one rounding step wide
+            continue
+        child = nodes
+        nodes += 2
+        start[child], stop[child] = a, i
+        start[child + 1], stop[child + 1] = i, b
+        level[child] = level[child + 1] = level[node] + 1
+        dim[node], split[node], left[node] = d, mid, child
+        stack[sp] = child
+        stack[sp + 1] = child + 1
+        sp += 2
+    Xs = np.empty((n, 3))
+    Ns = np.empty((n, 3))
+    rank = np.empty(n, dtype=np.int64)
+    for s in range(n):
+        p = order[s]
+        rank[p] = s
+        for c in range(3):
+            Xs[s, c] = X[p, c]
+            Ns[s, c] = N[p, c]
+    return (
+        Xs,
+        Ns,
+        order,
+        rank,
+        start[:nodes].copy(),
+        stop[:nodes].copy(),
+        dim[:nodes].copy(),
+        split[:nodes].copy(),
+        left[:nodes].copy(),
+        depth,
+    )
+
+
+@njit(cache=True, nogil=True)
+def agreeing_kernel(
+    Xs,
+    Ns,
+    order,
+    rank,
+    start,
+    stop,
+    dim,
+    split,
+    left,
+    depth,
+    Q,
+    NQ,
+    hint,
+    k,
+    max_distance,
+    normal_cos,
+):  # pragma: no cover - compiled
+    """``partner`` (q,) int64, per query point ``Q[t]`` (normal ``NQ[t]``): the point of
+    :func:`~meshmocap.geometry.point_tree.nearest_agreeing` (its input index, ``order`` of
+    its tree position), −1 where none. One depth-first search per query, nearer child
+    first, that keeps the ``k`` nearest points within ``max_distance`` in order of distance
+    and prunes every box farther than the ``k``-th of them or the nearest agreeing one
+    found (the answer cannot lie beyond either). ``hint[t]`` (an input index, ``rank`` its
+    tree position; −1: none), a guess such as the previous answer: where it agrees, it
+    bounds the search from the start. Squared distances as pykdtree sums them
+    (``(dx² + dy²) + dz²``), a point within the bound where that sum is below
+    ``max_distance²``."""
+    m = Q.shape[0]
+    partner = np.full(m, -1, dtype=np.int64)
+    best_d = np.empty(k)
+    best_s = np.empty(k, dtype=np.int64)
+    stack = np.empty(depth + 2, dtype=np.int64)
+    stack_d = np.empty(depth + 2)
+    stack_off = np.empty((depth + 2, 3))
+    keep = 1.0 - PRUNE_SLACK
+    r2 = max_distance * max_distance
+    for t in range(m):
+        q0, q1, q2 = Q[t, 0], Q[t, 1], Q[t, 2]
+        n0, n1, n2 = NQ[t, 0], NQ[t, 1], NQ[t, 2]
+        count, bound, agreeing, skip = 0, r2, np.inf, -1
+        if hint[t] >= 0:  # the guess, where it still agrees: the bound from the start
+            s = rank[hint[t]]
+            dx, dy, dz = Xs[s, 0] - q0, Xs[s, 1] - q1, Xs[s, 2] - q2
+            d2 = (dx * dx + dy * dy) + dz * dz
+            if d2 < r2 and (Ns[s, 0] * n0 + Ns[s, 1] * n1) + Ns[s, 2] * n2 > normal_cos:
+                best_d[0], best_s[0], count, bound, agreeing, skip = d2, s, 1, d2, d2, s
+        stack[0], stack_d[0] = 0, 0.0
+        stack_off[0, 0] = stack_off[0, 1] = stack_off[0, 2] = 0.0
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            node, rd = stack[sp], stack_d[sp]
+            if rd * keep >= bound:
+                continue
+            o0, o1, o2 = stack_off[sp, 0], stack_off[sp, 1], stack_off[sp, 2]
+            while dim[node] >= 0:  # down to the leaf on the query's side, the far sides kept
+                d = dim[node]
+                qd = q0 if d == 0 else (q1 if d == 1 else q2)
+                od = o0 if d == 0 else (o1 if d == 1 else o2)
+                diff = qd - split[node]
+                near, far = (
+                    (left[node], left[node] + 1) if diff < 0 else (left[node] + 1, left[node])
+                )
+                far_d = rd - od * od + diff * diff
+                if far_d * keep < bound:
+                    stack[sp], stack_d[sp] = far, far_d
+                    stack_off[sp, 0], stack_off[sp, 1], stack_off[sp, 2] = o0, o1, o2
+                    stack_off[sp, d] = diff
+                    sp += 1
+                node = near
+            for s in range(start[node], stop[node]):
+                if s == skip:
+                    continue
+                dx, dy, dz = Xs[s, 0] - q0, Xs[s, 1] - q1, Xs[s, 2] - q2
+                d2 = (dx * dx + dy * dy) + dz * dz
+                if not d2 < bound:
+                    continue
+                u = count if count < k else k - 1  # insert in order of distance
+                while u > 0 and best_d[u - 1] > d2:
+                    if u < k:
+                        best_d[u], best_s[u] = best_d[u - 1], best_s[u - 1]
+                    u -= 1
+                best_d[u], best_s[u] = d2, s
+                count = min(count + 1, k)
+                if d2 < agreeing and (Ns[s, 0] * n0 + Ns[s, 1] * n1) + Ns[s, 2] * n2 > normal_cos:
+                    agreeing = d2
+                bound = min(agreeing, r2)
+                if count == k:
+                    bound = min(bound, best_d[k - 1])
+        for u in range(count):  # the first that agrees among the k nearest
+            s = best_s[u]
+            if (Ns[s, 0] * n0 + Ns[s, 1] * n1) + Ns[s, 2] * n2 > normal_cos:
+                partner[t] = order[s]
+                break
+    return partner

@@ -12,11 +12,12 @@ frame alternates closest-point correspondences with a pose update. Here, per fra
 
    * pose a fixed subset of ``n_model_points`` template vertices (area-weighted sample) and
      their normals;
-   * correspondences with the observed hull points (pykdtree): each model point's nearest
-     *compatible* observed point (model→data) and, with ``correspondences="both"``, each
-     observed point's nearest compatible model point (data→model). Compatible: closer than
-     ``max_distance`` and normals agreeing (``n_model · n_data > normal_cos``), the nearest
-     such among ``k_neighbours`` candidates;
+   * correspondences with the observed hull points (k-d trees,
+     :mod:`meshmocap.geometry.point_tree`): each model point's nearest *compatible* observed
+     point (model→data) and, with ``correspondences="both"``, each observed point's nearest
+     compatible model point (data→model). Compatible: closer than ``max_distance`` and
+     normals agreeing (``n_model · n_data > normal_cos``), the nearest such among
+     ``k_neighbours`` candidates; each search starts from the iteration before's pairs;
    * one Levenberg–Marquardt-damped Gauss–Newton step
      (:func:`~meshmocap.body.articulated.articulated_step`, shared by every articulated fit)
      on the pose Θ = (root translation t, a rotation increment ω_j per free joint) for
@@ -61,7 +62,6 @@ from numbers import Integral, Real
 from typing import ClassVar, Literal, get_args
 
 import numpy as np
-from pykdtree.kdtree import KDTree
 
 from meshmocap._validate import Boolean, Constraint, Interval, Options, Strings, check_options
 from meshmocap.body.articulated import (
@@ -72,7 +72,6 @@ from meshmocap.body.articulated import (
     articulated_model,
     articulated_step,
     limit_step,
-    nearest_compatible,
 )
 from meshmocap.body.articulated_system import (
     moment_plan,
@@ -87,6 +86,7 @@ from meshmocap.errors import FitError, InputError
 from meshmocap.estimate.recovery.observe import frame_points
 from meshmocap.geometry.levenberg_marquardt import DAMPING
 from meshmocap.geometry.mesh import vertex_normals_at
+from meshmocap.geometry.point_tree import PointTree, nearest_agreeing, point_tree
 from meshmocap.io.capture import CaptureFrame
 from meshmocap.io.results import FrameResult
 
@@ -354,14 +354,18 @@ class ArticulatedICP:
             self.root = 2 * self.root - rp
         self.prev = last
         R_ref, root_ref = last  # the regulariser pulls towards the previous pose
-        data_tree = KDTree(Y)
+        data_tree = point_tree(Y, NY)
+        # each iteration's pairs, the next one's guesses (the points move little between)
+        matches = (None, None)
         self._lap("observations")
         energies: dict[str, float] = {}
         n_iter, scale, last_move = 0, 1.0, None
         while n_iter < o.max_iter:
             n_iter += 1
             posed = posed_model(self.plan, self.R, self.root)
-            H, g, energies = self._normal_equations(posed, data_tree, Y, NY, R_ref, root_ref, order)
+            H, g, energies, matches = self._normal_equations(
+                posed, data_tree, Y, NY, R_ref, root_ref, order, matches
+            )
             act = self.active
             self._lap("system")
             R0, root0 = self.R, self.root
@@ -392,16 +396,21 @@ class ArticulatedICP:
         self._lap("output")
         return out
 
-    def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref, order):
-        """Gauss–Newton system ``H δ = −g`` at the current pose, and the energy terms."""
+    def _normal_equations(self, posed, data_tree, Y, NY, R_ref, root_ref, order, matches):
+        """Gauss–Newton system ``H δ = −g`` at the current pose, the energy terms, and each
+        model point's observed point and each observed point's model point (−1: none; the
+        last iteration's, ``matches``, the searches' guesses)."""
         o = self.opts
         v, nv = posed.v, posed.n
         cand = dict(k=o.k_neighbours, max_distance=o.max_distance, normal_cos=o.normal_cos)
-        i, k = nearest_compatible(data_tree, NY, v, nv, **cand)  # model → data
-        parts = [(i, k, 1.0, "model_to_data")]
+        to_data = nearest_agreeing(data_tree, v, nv, hint=matches[0], **cand)  # model → data
+        i = np.flatnonzero(to_data >= 0)
+        parts = [(i, to_data[i], 1.0, "model_to_data")]
+        to_model = matches[1]
         if o.correspondences == "both":
-            k2, i2 = data_to_model(KDTree(v), nv, *order, **cand)
-            parts.append((i2, k2, o.data_to_model_weight, "data_to_model"))
+            to_model = data_to_model(point_tree(v, nv), *order, hint=matches[1], **cand)
+            k2 = np.flatnonzero(to_model >= 0)
+            parts.append((to_model[k2], k2, o.data_to_model_weight, "data_to_model"))
         self._lap("correspondences")
         if not any(len(p[0]) for p in parts):
             raise FitError("no compatible correspondences")
@@ -431,7 +440,7 @@ class ArticulatedICP:
         energies["total"] = (
             total + o.lambda_pose * energies["pose"] + o.lambda_root * energies["root"]
         )
-        return H, g, energies
+        return H, g, energies, (to_data, to_model)
 
 
 def relaxation(
@@ -465,8 +474,7 @@ def relaxation(
 
 
 def data_to_model(
-    tree: KDTree,
-    nv: np.ndarray,
+    tree: PointTree,
     perm: np.ndarray,
     Yo: np.ndarray,
     NYo: np.ndarray,
@@ -474,28 +482,30 @@ def data_to_model(
     k: int,
     max_distance: float,
     normal_cos: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each observed point's nearest compatible model point
-    (:func:`~meshmocap.body.articulated.nearest_compatible`), the observed points searched
+    hint: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each observed point's nearest agreeing model point
+    (:func:`~meshmocap.geometry.point_tree.nearest_agreeing`), the observed points searched
     in another order than their own: the frame's (a mesh's vertex order, spatially
     coherent, which a k-d tree answers faster than the random order of the sample).
 
     Parameters
     ----------
-    tree : KDTree of the model points (m, 3); ``nv`` (m, 3) float64 their unit normals
+    tree : PointTree of the model points (m, 3) and their unit normals
     perm : (p,) int64, a permutation of the observed points
     Yo, NYo : (p, 3) float64, the observed points (metres) and unit normals in that order
         (``Y[perm]``, ``NY[perm]``)
-    k, max_distance, normal_cos : as for ``nearest_compatible``
+    k, max_distance, normal_cos : as for ``nearest_agreeing``
+    hint : (p,) int64, optional, a guess of each observed point's model point in their own
+        order (−1: none)
 
     Returns
     -------
-    The pairs ``nearest_compatible(tree, nv, Y, NY, ...)`` gives, in its order: the indices
-    (int64) of the observed points that found one and of their model points.
+    (p,) int64, each observed point's model point in their own order (−1: none), as
+    ``nearest_agreeing(tree, Y, NY, ...)`` gives it.
     """
     cand = dict(k=k, max_distance=max_distance, normal_cos=normal_cos)
-    queries, partner = nearest_compatible(tree, nv, Yo, NYo, **cand)
-    found = np.full(len(perm), -1, dtype=np.int64)
-    found[perm[queries]] = partner
-    i = np.flatnonzero(found >= 0)
-    return i, found[i]
+    found = np.empty(len(perm), dtype=np.int64)
+    guess = None if hint is None else hint[perm]
+    found[perm] = nearest_agreeing(tree, Yo, NYo, hint=guess, **cand)
+    return found
