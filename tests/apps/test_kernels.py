@@ -59,6 +59,8 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
         "boundary_side_kernel",
         "in_image_kernel",
         "farther_kernel",
+        "point_tree_kernel",
+        "agreeing_kernel",
     ]
     assert _python(check, tmp_path) == str([f"{MESH}:{k}" for k in kernels])
     _python(f"from meshmocap.apps.kernels import main; main(['--quiet', {MESH!r}])", tmp_path)

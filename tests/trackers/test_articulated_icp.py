@@ -142,9 +142,11 @@ def tracked(walk, template, tmp_path_factory):
 
 
 def testdata_to_model_pairs_searched_in_another_order_are_the_same(template):
-    """The observed points searched in the frame's own order: the pairs of a search in the
-    sample's order, in that order."""
+    """The observed points searched in the frame's own order, with or without guesses: the
+    pairs pykdtree's search in the sample's order gives, in that order."""
     from pykdtree.kdtree import KDTree
+
+    from meshmocap.geometry.point_tree import point_tree
 
     rng = np.random.default_rng(2)
     v = template.V[rng.choice(template.n_vertices, 300, replace=False)]
@@ -153,11 +155,15 @@ def testdata_to_model_pairs_searched_in_another_order_are_the_same(template):
     Y = template.V[pick] + rng.normal(scale=0.01, size=(1000, 3))
     NY = vertex_normals(template.V, template.F)[pick]
     cand = dict(k=8, max_distance=0.1, normal_cos=0.3)
-    want = nearest_compatible(KDTree(v), nv, Y, NY, **cand)
+    queries, partner = nearest_compatible(KDTree(v), nv, Y, NY, **cand)
+    want = np.full(len(Y), -1)
+    want[queries] = partner
     perm = np.argsort(pick)
-    got = data_to_model(KDTree(v), nv, perm, np.ascontiguousarray(Y[perm]), NY[perm], **cand)
-    assert 100 < len(want[0]) < 1000
-    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    order = (perm, np.ascontiguousarray(Y[perm]), NY[perm])
+    assert 100 < len(queries) < 1000
+    for hint in (None, want, rng.integers(-1, len(v), len(Y))):
+        got = data_to_model(point_tree(v, nv), *order, hint=hint, **cand)
+        assert np.array_equal(got, want)
 
 
 def test_articulated_icp_follows_a_walk(walk, tracked, template):
