@@ -57,6 +57,7 @@ def test_a_compiled_kernel_is_cached_for_the_next_process(tmp_path):
         "fill_kernel",
         "boundary_distance_kernel",
         "boundary_side_kernel",
+        "occupied_kernel",
         "in_image_kernel",
         "farther_kernel",
         "point_tree_kernel",

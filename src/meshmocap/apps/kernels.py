@@ -64,6 +64,10 @@ KERNELS: dict[str, dict[str, tuple[str, ...]]] = {
             "float64[:, ::1], boolean[:, :, ::1], boolean[::1], float64, float64, float64, "
             "int64, int8[::1]",
         ),
+        "occupied_kernel": (  # a capture's occupancy is read-only, one of your own may not be
+            "float64[:, ::1], Array(boolean, 3, 'C', readonly=True), boolean[::1]",
+            "float64[:, ::1], boolean[:, :, ::1], boolean[::1]",
+        ),
         "in_image_kernel": ("float64[:, ::1], float64[::1], boolean[::1]",),
         "farther_kernel": (
             "float64[:, ::1], float64[:, ::1], float64, boolean, float64, boolean[::1]",

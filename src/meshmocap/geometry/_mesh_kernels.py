@@ -332,6 +332,17 @@ def boundary_side_kernel(g, mask, inside, h, below, above, rings, out):  # pragm
 
 
 @njit(cache=True, nogil=True)
+def occupied_kernel(g, occ, out):  # pragma: no cover - compiled
+    """In place, ``out`` (n,) bool: whether ``occ`` (a, b, c) bool holds the voxel of each
+    point ``g`` (n, 3) (voxel units: the voxel of its coordinates rounded half to even, as
+    ``np.round``), False beyond the grid."""
+    n0, n1, n2 = occ.shape
+    for t in range(g.shape[0]):
+        i, j, k = np.rint(g[t, 0]), np.rint(g[t, 1]), np.rint(g[t, 2])
+        out[t] = (0 <= i < n0 and 0 <= j < n1 and 0 <= k < n2) and occ[int(i), int(j), int(k)]
+
+
+@njit(cache=True, nogil=True)
 def in_image_kernel(Xc, cam, ok):  # pragma: no cover - compiled
     """In place, ``ok`` (n,) bool and-ed with whether a camera sees each point
     (:func:`~meshmocap.geometry.camera.in_view`): camera-frame points ``Xc`` (n, 3)

@@ -393,13 +393,12 @@ class LazyDistanceGrid(DistanceGrid):
     def _voxel_points(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``P`` (..., 3) in voxel units, (n, 3) C-ordered, and (n,) whether the voxel
         holding each point is occupied (False beyond the occupancy)."""
+        from meshmocap.geometry._mesh_kernels import occupied_kernel
+
         g = (P.reshape(-1, 3) - (self.origin + self._pad * self._h)) / self._h
         g = np.ascontiguousarray(g)
-        ijk = np.round(g).astype(np.intp)
-        n = self._occ.shape
-        ok = np.all((ijk >= 0) & (ijk < np.array(n)), axis=1)
-        inside = np.zeros(len(g), dtype=bool)
-        inside[ok] = self._occ.reshape(-1)[np.ravel_multi_index(tuple(ijk[ok].T), n)]
+        inside = np.empty(len(g), dtype=bool)
+        occupied_kernel(g, np.ascontiguousarray(self._occ, dtype=bool), inside)
         return g, inside
 
     def side_of(self, points: np.ndarray, below: float, above: float) -> np.ndarray:
