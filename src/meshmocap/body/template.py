@@ -19,12 +19,20 @@ joint_parents                  (J,) int      parent index, −1 for the root
 joint_positions                (J, 3) float  rest joint positions (world-aligned rest frames)
 end_positions                  (J, 3) float  rest position of each bone's tail
 weights_data/indices/indptr    CSR parts     (n, J) skinning weights, rows sum to 1
+weights_exact                  bool          optional: the weights are read back as stored
 part_labels                    (n,) int      evaluation-joint index (0..14) of each vertex
 eval_names                     (K,) str      evaluation joints (15: pelvis ... right_ankle)
 eval_parents                   (K,) int      evaluation skeleton tree
 eval_rest_positions            (K, 3) float  rest positions of evaluation joints
 eval_weights                   (K, J) float  rig weights carrying each evaluation joint
 =============================  ============  ===============================================
+
+A file without ``weights_exact`` (the bundled templates store float32 weights) has its rows
+renormalised on reading, as every file was read before the key existed (so a kept
+``subject.npz`` tracks as it did). :func:`save_template` writes the weights as the template
+holds them with ``weights_exact``: a template saved and read back is the same template, to
+the bit and in the same storage order, however often it goes round (an estimated body
+cached for a capture and read back by the next track or the next run).
 """
 
 from __future__ import annotations
@@ -261,9 +269,13 @@ def _from_arrays(d: dict[str, np.ndarray]) -> Template:
         (d["weights_data"].astype(np.float64), d["weights_indices"], d["weights_indptr"]),
         shape=(len(V), len(names)),
     )
-    rows = np.asarray(W.sum(axis=1)).ravel()
-    if np.all(rows > 0):  # exact partition of unity in float64 (files may store float32)
-        W = sp.csr_matrix(sp.diags(1.0 / rows) @ W)
+    if not bool(d.get("weights_exact", False)):
+        # a partition of unity in float64 (files may store float32); the product reorders
+        # each row's entries and rescales them by an ulp, so it is not repeated on files
+        # that hold the exact weights (module docstring)
+        rows = np.asarray(W.sum(axis=1)).ravel()
+        if np.all(rows > 0):
+            W = sp.csr_matrix(sp.diags(1.0 / rows) @ W)
     ev = EvalSkeleton(
         tuple(str(s) for s in d["eval_names"]),
         d["eval_parents"].astype(np.int64),
@@ -299,9 +311,10 @@ def save_template(path: str | os.PathLike, t: Template) -> Path:
         joint_parents=sk.parents.astype(np.int32),
         joint_positions=P,
         end_positions=P + sk.end_offsets,
-        weights_data=W.data,
+        weights_data=W.data.astype(np.float64),
         weights_indices=W.indices.astype(np.int32),
         weights_indptr=W.indptr.astype(np.int32),
+        weights_exact=np.bool_(True),
         part_labels=t.part_labels.astype(np.int8),
         eval_names=np.array(ev.names),
         eval_parents=ev.parents.astype(np.int32),

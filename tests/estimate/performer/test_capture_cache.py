@@ -63,6 +63,12 @@ def test_the_body_is_estimated_once_per_capture_and_options(walk, tmp_path, monk
     b = tt.tracking_template(cap, "auto", tmp_path / "track_b")  # another track: cached
     assert len(calls) == 1 and (tmp_path / "track_b" / tt.SUBJECT_FILE).is_file()
     np.testing.assert_array_equal(a.template.V, b.template.V)
+    # the cached body read back is the estimated one to the bit: the same weights in the
+    # same storage order, the same file beside either track
+    for part in ("data", "indices", "indptr"):
+        assert np.array_equal(getattr(a.template.weights, part), getattr(b.template.weights, part))
+    fa, fb = (np.load(tmp_path / f / tt.SUBJECT_FILE) for f in ("track_a", "track_b"))
+    assert fa.files == fb.files and all(np.array_equal(fa[k], fb[k]) for k in fa.files)
     est = cc.cached_subject(cap, kind="auto", estimate=_counting(calls))
     assert len(calls) == 1 and est.notes == {"a": 1.5} and est.frames == (0,)
     assert est.rms == 0.002 and est.z.shape == (3,) and est.R.shape == (1, 31, 3, 3)

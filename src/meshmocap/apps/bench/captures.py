@@ -244,7 +244,8 @@ def mesh_template(capture: Capture, *, cache: str | os.PathLike | None = None) -
     rigged by :func:`~meshmocap.body.autorig.rig_mesh` (reference ``neutral``), so its rest
     pose is frame 0 and every tracker starts there (identity rotations at the rest root).
     Named after its sequence and frame (``crane_frame0``); read from / written to ``cache``
-    (a ``.npz``) when given."""
+    (a ``.npz``) when given, and then returned as read back from it, as every later run
+    reads it (the bone tails round to other ulps through the file)."""
     from meshmocap.body.autorig import rig_mesh
     from meshmocap.body.template import save_template
     from meshmocap.io.meshes import MeshSequence
@@ -258,5 +259,5 @@ def mesh_template(capture: Capture, *, cache: str | os.PathLike | None = None) -
     t = rig_mesh(V, F, name=f"{sequence}_frame{capture.indices[0]}")
     if cache is not None:
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
-        save_template(cache, t)
+        return load_template(save_template(cache, t))
     return t
